@@ -1,0 +1,12 @@
+//! shimmy firmware for the STM32F405RG (Cortex-M4F).
+//!
+//! The decisions live in `shimmy-core`; this crate holds the board glue. The runtime module
+//! (logger, panic and fault handling, exit) exists only on the target, so `cargo test
+//! --workspace` on the host never needs the thumbv7em toolchain.
+#![cfg_attr(target_os = "none", no_std)]
+
+#[cfg(target_os = "none")]
+pub mod runtime;
+
+/// Firmware identification logged at boot.
+pub const BANNER: &str = concat!("shimmy-firmware ", env!("CARGO_PKG_VERSION"));

@@ -1,0 +1,113 @@
+//! Flash and RAM use of a firmware ELF, read from its section headers.
+
+use object::{Object, ObjectSection, SectionFlags};
+use std::fmt;
+use std::path::Path;
+
+/// STM32F405RG memory map (must match `memory.x`).
+const FLASH: (u64, u64) = (0x0800_0000, 1024 * 1024);
+const RAM: (u64, u64) = (0x2000_0000, 128 * 1024);
+
+pub struct MemoryReport {
+    name: String,
+    /// (section, address, size, counts in flash, counts in RAM)
+    sections: Vec<(String, u64, u64, bool, bool)>,
+}
+
+impl MemoryReport {
+    pub fn read(path: &Path) -> Result<Self, String> {
+        let data = std::fs::read(path).map_err(|e| format!("read {}: {e}", path.display()))?;
+        let file = object::File::parse(&*data).map_err(|e| format!("parse ELF: {e}"))?;
+        let mut sections = Vec::new();
+        for s in file.sections() {
+            let alloc = matches!(s.flags(), SectionFlags::Elf { sh_flags } if sh_flags & u64::from(object::elf::SHF_ALLOC) != 0);
+            if !alloc || s.size() == 0 {
+                continue;
+            }
+            let name = s.name().unwrap_or("?").to_string();
+            let in_flash = within(s.address(), FLASH);
+            let in_ram = within(s.address(), RAM);
+            // Initialised data lives in RAM and is copied there from flash at boot.
+            let loaded_from_flash = in_ram && name == ".data";
+            sections.push((
+                name,
+                s.address(),
+                s.size(),
+                in_flash || loaded_from_flash,
+                in_ram,
+            ));
+        }
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        Ok(MemoryReport { name, sections })
+    }
+
+    pub fn flash_bytes(&self) -> u64 {
+        self.sections.iter().filter(|s| s.3).map(|s| s.2).sum()
+    }
+
+    /// Statically allocated RAM (data + bss + uninit); the stack takes what is left.
+    pub fn ram_bytes(&self) -> u64 {
+        self.sections.iter().filter(|s| s.4).map(|s| s.2).sum()
+    }
+
+    pub fn one_line(&self) -> String {
+        format!(
+            "flash {} B, static RAM {} B",
+            self.flash_bytes(),
+            self.ram_bytes()
+        )
+    }
+
+    pub fn check_fits(&self) -> Result<(), String> {
+        if self.flash_bytes() > FLASH.1 || self.ram_bytes() > RAM.1 {
+            return Err(format!(
+                "{} does not fit the STM32F405RG: {}",
+                self.name,
+                self.one_line()
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn within(addr: u64, (origin, len): (u64, u64)) -> bool {
+    addr >= origin && addr < origin + len
+}
+
+impl fmt::Display for MemoryReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "memory use of {}", self.name)?;
+        writeln!(
+            f,
+            "  {:<16} {:>12} {:>10}  region",
+            "section", "address", "bytes"
+        )?;
+        for (name, addr, size, flash, ram) in &self.sections {
+            let region = match (flash, ram) {
+                (true, true) => "RAM (+ flash image)",
+                (true, false) => "flash",
+                (false, true) => "RAM",
+                _ => "-",
+            };
+            writeln!(f, "  {name:<16} {addr:#012x} {size:>10}  {region}")?;
+        }
+        let pct = |used: u64, total: u64| 100.0 * used as f64 / total as f64;
+        writeln!(
+            f,
+            "  flash {:>8} B of {} KiB ({:.1} %)",
+            self.flash_bytes(),
+            FLASH.1 / 1024,
+            pct(self.flash_bytes(), FLASH.1)
+        )?;
+        write!(
+            f,
+            "  RAM   {:>8} B of {} KiB ({:.1} %) static; the stack uses the rest",
+            self.ram_bytes(),
+            RAM.1 / 1024,
+            pct(self.ram_bytes(), RAM.1)
+        )
+    }
+}

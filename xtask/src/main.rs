@@ -1,0 +1,264 @@
+//! Project automation. `cargo xtask test` is the one test command (CI runs exactly it).
+//!
+//! ```text
+//! cargo xtask test               host tests, fmt, clippy (host + target), firmware build + size,
+//!                                on-target tests under QEMU (and proof that a failing one fails)
+//! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
+//!                                printing its decoded defmt log
+//! cargo xtask size               release firmware build and its flash/RAM table
+//! ```
+//!
+//! Missing system tools are installed when this runs as root with apt (qemu-system-arm) or
+//! rustup (the thumbv7em target); otherwise it stops and says what to install.
+
+mod elf;
+mod qemu;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+use std::time::Instant;
+
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+const FIRMWARE: &str = "shimmy-firmware";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("test") => test(),
+        Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
+        Some("size") => size(),
+        _ => {
+            eprintln!("usage: cargo xtask <test | qemu [BIN] | size>");
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Step = Result<String, String>;
+type StepFn = fn() -> Step;
+
+/// Runs every check, keeps going after a failure so the summary shows all of them, and fails
+/// if any failed.
+fn test() -> Result<(), String> {
+    ensure_thumb_target()?;
+    qemu::ensure_installed()?;
+    let steps: Vec<(&str, StepFn)> = vec![
+        ("cargo fmt --check", || {
+            cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
+        }),
+        ("clippy (host, all targets)", || {
+            cargo(&[
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--",
+                "-D",
+                "warnings",
+            ])
+            .map(|_| String::new())
+        }),
+        ("clippy (firmware, thumbv7em)", clippy_firmware),
+        ("host tests (cargo test --workspace)", || {
+            cargo(&["test", "--workspace"]).map(|_| String::new())
+        }),
+        ("firmware release build + size", || {
+            let elf = build_firmware(FIRMWARE, &[])?;
+            let report = elf::MemoryReport::read(&elf)?;
+            println!("{report}");
+            report.check_fits()?;
+            Ok(report.one_line())
+        }),
+        ("on-target tests (QEMU netduinoplus2)", on_target_tests),
+        (
+            "a failing on-target test fails the run",
+            on_target_failure_is_caught,
+        ),
+        ("firmware boots under QEMU", || {
+            let elf = build_firmware(FIRMWARE, &["qemu"])?;
+            let run = qemu::run(&elf)?;
+            run.print();
+            run.expect_success()?;
+            Ok(format!("{} log lines", run.log.len()))
+        }),
+    ];
+
+    let mut results = Vec::new();
+    for (name, step) in steps {
+        println!("\n==> {name}");
+        let start = Instant::now();
+        let outcome = step();
+        let secs = start.elapsed().as_secs_f64();
+        if let Err(e) = &outcome {
+            eprintln!("FAILED: {name}: {e}");
+        }
+        results.push((name, outcome, secs));
+    }
+
+    println!("\n==> summary");
+    for (name, outcome, secs) in &results {
+        match outcome {
+            Ok(detail) => println!("  ok    {name:<42} {secs:>6.1} s  {detail}"),
+            Err(e) => println!("  FAIL  {name:<42} {secs:>6.1} s  {e}"),
+        }
+    }
+    let failed = results.iter().filter(|r| r.1.is_err()).count();
+    println!("xtask: {} passed, {failed} failed", results.len() - failed);
+    if failed == 0 {
+        Ok(())
+    } else {
+        Err(format!("{failed} step(s) failed"))
+    }
+}
+
+fn clippy_firmware() -> Step {
+    for features in ["", "qemu,deliberate-failure"] {
+        let mut args = vec!["clippy", "-p", FIRMWARE, "--target", TARGET, "--bins"];
+        if !features.is_empty() {
+            args.extend(["--features", features]);
+        }
+        args.extend(["--", "-D", "warnings"]);
+        cargo(&args)?;
+    }
+    Ok(String::new())
+}
+
+fn on_target_tests() -> Step {
+    let elf = build_firmware("target-tests", &["qemu"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    let summary = run
+        .log
+        .iter()
+        .rev()
+        .find(|l| l.contains(" passed, "))
+        .ok_or("the harness printed no summary line")?;
+    if !summary.contains(" passed, 0 failed") {
+        return Err(format!("unexpected summary: {summary}"));
+    }
+    Ok(summary.trim_start_matches("INFO ").to_string())
+}
+
+/// The harness must turn a failing assertion into a failed run: build it with one test that
+/// fails on purpose and demand a non-zero exit that names the failure.
+fn on_target_failure_is_caught() -> Step {
+    let elf = build_firmware("target-tests", &["qemu", "deliberate-failure"])?;
+    let run = qemu::run(&elf)?;
+    if run.success() {
+        run.print();
+        return Err("the deliberately failing on-target test did not fail the run".into());
+    }
+    if !run
+        .log
+        .iter()
+        .any(|l| l.contains("panic") && l.contains("deliberate"))
+    {
+        run.print();
+        return Err("the run failed, but not with the deliberate assertion".into());
+    }
+    Ok(format!(
+        "exit status {:?}, panic message decoded",
+        run.status
+    ))
+}
+
+fn size() -> Result<(), String> {
+    ensure_thumb_target()?;
+    let elf = build_firmware(FIRMWARE, &[])?;
+    let report = elf::MemoryReport::read(&elf)?;
+    println!("{report}");
+    report.check_fits()
+}
+
+fn run_in_qemu(bin: &str) -> Result<(), String> {
+    ensure_thumb_target()?;
+    qemu::ensure_installed()?;
+    let elf = build_firmware(bin, &["qemu"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()
+}
+
+/// Builds a firmware binary in release mode for the target and copies the ELF to a name that
+/// records its features, so builds with different features never overwrite each other.
+fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
+    let features = features.join(",");
+    let mut args = vec![
+        "build",
+        "--release",
+        "-p",
+        FIRMWARE,
+        "--target",
+        TARGET,
+        "--bin",
+        bin,
+    ];
+    if !features.is_empty() {
+        args.extend(["--features", &features]);
+    }
+    cargo(&args)?;
+    let built = root().join("target").join(TARGET).join("release").join(bin);
+    let dir = root().join("target").join("xtask");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
+    let tag = if features.is_empty() {
+        "board".to_string()
+    } else {
+        features.replace(',', "+")
+    };
+    let copy = dir.join(format!("{bin}.{tag}.elf"));
+    std::fs::copy(&built, &copy).map_err(|e| format!("copy {}: {e}", built.display()))?;
+    Ok(copy)
+}
+
+fn cargo(args: &[&str]) -> Result<(), String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    run(Command::new(cargo).args(args).current_dir(root()))
+}
+
+fn run(cmd: &mut Command) -> Result<(), String> {
+    let shown = format!("{cmd:?}");
+    let status = cmd
+        .status()
+        .map_err(|e| format!("cannot start {shown}: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{shown} exited with {status}"))
+    }
+}
+
+/// The workspace root (xtask lives one level below it).
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default()
+}
+
+/// The thumbv7em standard library must be installed; rust-toolchain.toml names it, and
+/// `rustup target add` fetches it where rustup did not.
+fn ensure_thumb_target() -> Result<(), String> {
+    let out = Command::new("rustc")
+        .args(["--print", "target-libdir", "--target", TARGET])
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("cannot run rustc: {e}"))?;
+    let libdir = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    if out.status.success() && Path::new(&libdir).is_dir() {
+        return Ok(());
+    }
+    println!("xtask: installing the {TARGET} standard library with rustup");
+    run(Command::new("rustup")
+        .args(["target", "add", TARGET])
+        .current_dir(root()))
+    .map_err(|e| {
+        format!("{e}\nInstall it by hand: rustup target add {TARGET} (in the repository root)")
+    })
+}

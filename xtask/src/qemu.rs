@@ -1,0 +1,160 @@
+//! Running a firmware ELF under QEMU (`netduinoplus2`, an STM32F405) with semihosting, always
+//! inside a timeout, and decoding its defmt log with the table from the same ELF.
+
+use std::io::Read;
+use std::path::Path;
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+const QEMU: &str = "qemu-system-arm";
+/// Far longer than any of our images needs; a hung image is killed and the run fails.
+const TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Installs qemu-system-arm with apt when it is missing and we are root; otherwise explains.
+pub fn ensure_installed() -> Result<(), String> {
+    if Command::new(QEMU)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+    {
+        return Ok(());
+    }
+    let is_root = Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    let hint = "install it with: apt-get install qemu-system-arm (Debian/Ubuntu)";
+    if !is_root {
+        return Err(format!("{QEMU} is missing and this is not root; {hint}"));
+    }
+    println!("xtask: installing {QEMU} with apt-get");
+    let apt = |args: &[&str]| {
+        Command::new("apt-get")
+            .args(args)
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", "qemu-system-arm"]) {
+        Ok(())
+    } else {
+        Err(format!("apt-get could not install {QEMU}; {hint}"))
+    }
+}
+
+/// What a QEMU run produced.
+pub struct Run {
+    /// QEMU's exit status (the semihosting exit code of the image).
+    pub status: ExitStatus,
+    /// Decoded defmt log, one line per frame, prefixed with its level.
+    pub log: Vec<String>,
+    /// Whatever QEMU itself printed on stderr.
+    pub stderr: String,
+}
+
+impl Run {
+    pub fn success(&self) -> bool {
+        self.status.success()
+    }
+
+    pub fn print(&self) {
+        for line in &self.log {
+            println!("  | {line}");
+        }
+        if !self.stderr.trim().is_empty() {
+            eprintln!("  qemu stderr: {}", self.stderr.trim());
+        }
+    }
+
+    pub fn expect_success(&self) -> Result<(), String> {
+        if self.success() {
+            Ok(())
+        } else {
+            Err(format!("the image exited with {}", self.status))
+        }
+    }
+}
+
+/// Runs `elf` to completion (semihosting exit) or until the timeout, then decodes its log.
+pub fn run(elf: &Path) -> Result<Run, String> {
+    let elf_bytes = std::fs::read(elf).map_err(|e| format!("read {}: {e}", elf.display()))?;
+    let mut child = Command::new(QEMU)
+        .args(["-machine", "netduinoplus2", "-cpu", "cortex-m4"])
+        .args(["-display", "none", "-monitor", "none", "-serial", "none"])
+        .args(["-semihosting-config", "enable=on,target=native"])
+        .arg("-kernel")
+        .arg(elf)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start {QEMU}: {e}"))?;
+
+    // Drain both pipes on threads so a chatty image cannot block on a full pipe.
+    let mut stdout = child.stdout.take().ok_or("no stdout pipe")?;
+    let mut stderr = child.stderr.take().ok_or("no stderr pipe")?;
+    let out_thread = std::thread::spawn(move || {
+        let mut buf = Vec::new();
+        let _ = stdout.read_to_end(&mut buf);
+        buf
+    });
+    let err_thread = std::thread::spawn(move || {
+        let mut buf = String::new();
+        let _ = stderr.read_to_string(&mut buf);
+        buf
+    });
+
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
+            break status;
+        }
+        if start.elapsed() > TIMEOUT {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!(
+                "{} did not exit within {TIMEOUT:?} (hung?)",
+                elf.display()
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let raw = out_thread.join().map_err(|_| "stdout reader panicked")?;
+    let stderr = err_thread.join().map_err(|_| "stderr reader panicked")?;
+    let log = decode_defmt(&elf_bytes, &raw)?;
+    Ok(Run {
+        status,
+        log,
+        stderr,
+    })
+}
+
+/// Decodes a defmt byte stream with the table of the ELF that produced it.
+pub fn decode_defmt(elf: &[u8], stream: &[u8]) -> Result<Vec<String>, String> {
+    let table = defmt_decoder::Table::parse(elf)
+        .map_err(|e| format!("defmt table: {e}"))?
+        .ok_or("the ELF has no defmt table")?;
+    let mut decoder = table.new_stream_decoder();
+    decoder.received(stream);
+    let mut lines = Vec::new();
+    loop {
+        match decoder.decode() {
+            Ok(frame) => {
+                let level = frame
+                    .level()
+                    .map(|l| l.as_str().to_uppercase())
+                    .unwrap_or_default();
+                lines.push(format!("{level} {}", frame.display_message()));
+            }
+            Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
+            Err(defmt_decoder::DecodeError::Malformed) => {
+                if table.encoding().can_recover() {
+                    lines.push("(malformed defmt frame skipped)".into());
+                } else {
+                    return Err("malformed defmt frame".into());
+                }
+            }
+        }
+    }
+    Ok(lines)
+}
