@@ -10,6 +10,7 @@
 #[macro_use]
 mod fmt;
 
+pub mod mr_damper;
 pub mod params;
 
 /// Crate version, reported by the firmware at boot and by the simulator in its reports.

@@ -1,2 +1,4 @@
-//! shimmy-sim: the std host simulator around `shimmy-core`.
-pub use shimmy_core as core_lib;
+//! shimmy-sim: the std host simulator around `shimmy-core`: parameter files, the nonlinear
+//! plant, studies (stability, bifurcation, ...) and their reports.
+
+pub mod paramfile;

@@ -1,14 +1,42 @@
 //! `shimmy-sim`: the simulator's command-line tool.
-use shimmy_core::params::{Param, ParamSet};
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use shimmy_core::params::Param;
+use shimmy_sim::paramfile;
 
-fn main() {
-    // TODO(issue 3/7): the simulator proper. Until then print the named parameter sets.
-    println!("shimmy-sim {}: parameter sets", shimmy_core::VERSION);
-    for set in ParamSet::ALL {
-        let p = set.params();
-        println!("[{}]", set.name());
-        for q in Param::ALL {
-            println!("  {:<6} = {:>12.6} {}", q.name(), p.get(q), q.unit());
-        }
+/// Shimmy simulator: the 4-DOF solid-axle steering plant with an MR damper, in the loop with
+/// the firmware's own control and estimation code.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print and validate a parameter set (a name: nominal, gentle, hard; or a TOML file).
+    Params {
+        /// Named set or TOML file (`base = "nominal"` plus `[overrides]` by field name).
+        #[arg(default_value = "nominal")]
+        params: String,
+    },
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::Params { params }) => print_params(&params),
+        // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
+        None => print_params("nominal"),
     }
+}
+
+fn print_params(spec: &str) -> Result<()> {
+    let p = paramfile::load(spec)?;
+    println!("parameter set `{spec}` (valid)");
+    for q in Param::ALL {
+        println!("  {:<6} = {:>14.6} {}", q.name(), p.get(q), q.unit());
+    }
+    Ok(())
 }
