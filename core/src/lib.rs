@@ -10,6 +10,7 @@
 #[macro_use]
 mod fmt;
 
+pub mod control;
 pub mod mr_damper;
 pub mod params;
 
