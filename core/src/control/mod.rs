@@ -272,7 +272,8 @@ impl Controller {
                         p.smc.k_radps2,
                     ),
                     ControllerKind::Asmc => (
-                        smc::smc_force_n(nom, &p.smc, s, c.rate_hp_radps, self.gain.get()),
+                        smc::smc_force_n(nom, &p.smc, s, c.rate_hp_radps, self.gain.get())
+                            * smc::quiet_weight(s, p.asmc.dead_zone_radps),
                         self.gain.get(),
                     ),
                     _ => (p.skyhook_ns_per_m * nom.l_t_m * c.rate_hp_radps, 0.0),
@@ -291,7 +292,8 @@ impl Controller {
         flags.saturated |= lim.clamped && target > p.limits.i_max_a;
         let force = force.unwrap_or_else(|| p.mr.force_n(lim.current_a, v_d));
         if self.kind == ControllerKind::Asmc {
-            let freeze = flags.clipped || flags.saturated || flags.slew_limited || gated;
+            let limited = flags.clipped || flags.saturated || flags.slew_limited;
+            let freeze = gated || (p.asmc.anti_windup && limited);
             flags.adapting = self.gain.update(&p.asmc, s, dt, freeze);
         }
         ControlOutput {

@@ -264,7 +264,8 @@ pub fn fit(samples: &[FitSample], sm: Smoothing) -> Option<BinghamFit> {
     if samples.is_empty() {
         return None;
     }
-    let cost = |ln_v0: f64| fit_linear(samples, libm::exp(ln_v0), sm).map_or(f64::INFINITY, |r| r.1);
+    let cost =
+        |ln_v0: f64| fit_linear(samples, libm::exp(ln_v0), sm).map_or(f64::INFINITY, |r| r.1);
     // Coarse log scan of v0 in [1e-4, 1] m/s, then golden section around the best point.
     let (lo, hi, n) = (libm::log(1e-4), libm::log(1.0), 41);
     let step = (hi - lo) / (n - 1) as f64;
