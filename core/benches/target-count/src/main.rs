@@ -8,14 +8,20 @@
 //! ```
 //!
 //! With -icount every instruction advances virtual time by the same amount, so SysTick ticks are
-//! proportional to instructions; the block of 200 NOPs calibrates ticks per instruction.
-//! Instructions per step = (step ticks) / (calibration ticks / 200).
+//! proportional to instructions; a call of 200 NOPs (202 instructions) calibrates ticks per instruction.
+//! Instructions per step = (step ticks) / (calibration ticks / 202).
 #![no_std]
 #![no_main]
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use shimmy_core::control::{ControlInput, ControlParams, Controller, ControllerKind};
+
+/// 200 NOPs plus the call and return: 202 instructions.
+#[inline(never)]
+fn nops() {
+    unsafe { core::arch::asm!(".rept 200", "nop", ".endr") }
+}
 
 fn ticks(start: u32) -> u32 { start.wrapping_sub(SYST::get_current()) & 0x00FF_FFFF }
 
@@ -28,7 +34,7 @@ fn main() -> ! {
     cp.SYST.enable_counter();
     // calibration: 200 nops
     let t0 = SYST::get_current();
-    unsafe { core::arch::asm!(".rept 200", "nop", ".endr"); }
+    nops();
     let cal = ticks(t0);
     let t0 = SYST::get_current();
     let empty = ticks(t0);
@@ -47,9 +53,9 @@ fn main() -> ! {
             core::hint::black_box(o);
             worst = worst.max(dt); sum += dt;
         }
-        let per_insn = (cal - empty) as f32 / 200.0;
+        let per_insn = (cal - empty) as f32 / 202.0;
         hprintln!(
-            "{}: mean {} instructions, worst {} (ticks: mean {}, worst {}; 200 nops = {} ticks)",
+            "{}: mean {} instructions, worst {} (ticks: mean {}, worst {}; 202 instructions = {} ticks)",
             kind.name(),
             (sum / n) as f32 / per_insn,
             worst as f32 / per_insn,
