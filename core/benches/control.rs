@@ -25,7 +25,11 @@ fn shimmy_inputs(n: usize) -> Vec<ControlInput> {
 
 fn bench(c: &mut Criterion) {
     let inputs = shimmy_inputs(1000);
-    for kind in [ControllerKind::Asmc, ControllerKind::Smc, ControllerKind::PassiveOff] {
+    for kind in [
+        ControllerKind::Asmc,
+        ControllerKind::Smc,
+        ControllerKind::PassiveOff,
+    ] {
         let mut ctl = Controller::new(kind, ControlParams::default());
         for i in &inputs {
             ctl.step(i); // warm up: filters and gain in their running state

@@ -8,15 +8,18 @@
 //!   z = exp(s T) with s the roots of s^2 + 2 zeta w_b s + w_b^2 (w_b = 2 pi f_b). For f << f_b
 //!   the rate estimate behaves like a 2nd-order low-pass of the true derivative,
 //!   rate_hat / (j w psi) ~ w_b^2 / (s^2 + 2 zeta w_b s + w_b^2), i.e. a phase lag of about
-//!   atan(2 zeta (f/f_b) / (1 - (f/f_b)^2)). With the defaults (f_b = 60 Hz, zeta = 0.8) that is
-//!   6.1 deg at 5 Hz, 9.8 deg at 8 Hz and 12.3 deg at 10 Hz, gain within 0.3 % of 1 (the exact
-//!   discrete values are computed by [`RateObserver::response`] and checked in the tests against
-//!   time-domain runs). A 60 Hz observer keeps encoder quantisation noise on the rate to about
-//!   0.02 rad/s rms (14-bit encoders), well under the adaptation dead zone.
+//!   atan(2 zeta (f/f_b) / (1 - (f/f_b)^2)). Defaults: bandwidth f_b = 60 Hz, zeta = 0.8. The
+//!   exact discrete response ([`RateObserver::response`], checked against time-domain runs in
+//!   the tests) lags the true derivative by 6.8 deg at 5 Hz, 11.0 deg at 8 Hz and 13.7 deg at
+//!   10 Hz with gain 0.998 / 0.995 / 0.992 (the continuous formula gives 6.1 / 9.8 / 12.3 deg;
+//!   the rest is about half a sample of delay). With +-1 LSB noise on each 14-bit encoder the
+//!   sliding variable built from it has 0.026 rad/s rms noise (measured in the controller tests),
+//!   under the adaptation dead zone.
 //! * the **shimmy path**: psi and its rate through identical 2nd-order Butterworth high-passes
 //!   (bilinear, pre-warped) at `split_hz` (default 1.5 Hz). It rejects the driver's slow steering
-//!   (0.3 Hz is attenuated by (0.3/1.5)^2 = 1/25) and passes the 3-20 Hz shimmy band (8 Hz: gain
-//!   0.9995, phase lead 15.4 deg, which partly cancels the observer's 9.8 deg lag on the rate).
+//!   (0.3 Hz is attenuated by (0.3/1.5)^2 = 1/25) and passes the 3-20 Hz shimmy band (gain 0.970
+//!   / 0.996 / 0.9994 / 0.9997 at 3 / 5 / 8 / 10 Hz, phase lead 43 / 25 / 15.4 / 12.2 deg; on the
+//!   rate the lead partly cancels the observer's lag: net +4.4 deg at 8 Hz).
 //!   Because the filter is linear and time-invariant the filtered rate is the rate of the filtered
 //!   angle; the controllers use only this path so the damper does not fight intentional steering.
 //! * the **slow path**: psi through a 2nd-order Butterworth low-pass at the same corner (the

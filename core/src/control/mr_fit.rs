@@ -109,7 +109,7 @@ pub fn simulate_sine(
     let mut n = 0;
     for k in 0..total {
         let t = k as f64 * h;
-        if k >= start && (k - start) % every == 0 {
+        if k >= start && (k - start).is_multiple_of(every) {
             if let Some(slot) = out.get_mut(n) {
                 let (_, _, force) = f(t, s.y, s.z);
                 *slot = FitSample {
@@ -210,10 +210,11 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
         }
         a.swap(col, piv);
         b.swap(col, piv);
+        let pivot_row = a[col];
         for r in col + 1..4 {
-            let m = a[r][col] / a[col][col];
-            for c in col..4 {
-                a[r][c] -= m * a[col][c];
+            let m = a[r][col] / pivot_row[col];
+            for (arc, pc) in a[r].iter_mut().zip(pivot_row.iter()).skip(col) {
+                *arc -= m * pc;
             }
             b[r] -= m * b[col];
         }
@@ -221,8 +222,8 @@ fn solve4(mut a: [[f64; 4]; 4], mut b: [f64; 4]) -> Option<[f64; 4]> {
     let mut x = [0.0; 4];
     for r in (0..4).rev() {
         let mut acc = b[r];
-        for c in r + 1..4 {
-            acc -= a[r][c] * x[c];
+        for (arc, xc) in a[r].iter().zip(x.iter()).skip(r + 1) {
+            acc -= arc * xc;
         }
         x[r] = acc / a[r][r];
     }

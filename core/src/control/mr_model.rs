@@ -20,6 +20,9 @@
 //! F_des v <= 0 the minimum current is commanded), then solves the model (linear in I) and
 //! clips the current to [0, I_max]. Non-finite inputs give 0 A (the clip takes NaN as "cannot").
 
+// NaN must take the "no" branch of these comparisons, hence `!(x > 0.0)` style.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 /// Parameters of the invertible model. Units in the names.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MrModel {

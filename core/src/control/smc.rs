@@ -6,7 +6,9 @@
 //! Adding the two wheel equations of the reference plant, the in-phase wheel yaw
 //! psi = (psi_L + psi_R)/2 obeys
 //!
+//! ```text
 //! I_k psi'' = -c_k psi' - (l_t/2) F_d + tau_u,
+//! ```
 //!
 //! where the track-rod terms cancel (they act on psi_L - psi_R) and everything the firmware does
 //! not know well or cannot measure is lumped into tau_u: tyre aligning and lateral-force moments
@@ -24,7 +26,9 @@
 //! s' = psi'' + lambda psi' = (-c_k psi' - (l_t/2) F_d + tau_u)/I_k + lambda psi'.
 //! Requiring s' = -K sat(s/phi) for tau_u = 0 gives the desired damper force
 //!
+//! ```text
 //! F_des = (2 I_k / l_t) [ (lambda - c_k/I_k) psi_hp' + K sat(s/phi) ],
+//! ```
 //!
 //! an equivalent-control part (a viscous force on the shimmy-band rate) plus the switching part;
 //! sat is the boundary layer of width phi that removes chattering. Outside the layer
@@ -36,9 +40,11 @@
 //! The bound on tau_u is not known and a large fixed K spends current when nothing happens, so
 //! K adapts:
 //!
+//! ```text
 //! K' = gamma (|s| - s_dz)_+ [growth, frozen while the actuator is saturated or semi-actively
 //!      clipped, or below the speed gate] - sigma (K - K_min) [leakage],
 //! K projected onto [K_min, K_max].
+//! ```
 //!
 //! The dead zone s_dz sits above the noise floor of s (+-1 LSB noise on each 14-bit encoder
 //! through the observer gives 0.026 rad/s rms, measured in the tests), so sensor noise alone
@@ -56,13 +62,20 @@
 //! V = s^2/2 + (K - K*)^2/(2 gamma). Outside the boundary layer and the dead zone, while the
 //! damper delivers F_des (not clipped, not saturated):
 //!
+//! ```text
 //! V' = s (tau_u/I_k - K sgn s) + (K - K*)(|s| - s_dz - (sigma/gamma)(K - K_min))
 //!    <= -eta |s| - (K - K*) s_dz - (sigma/gamma)(K - K*)(K - K_min)
 //!    <= -eta |s| - (sigma/(2 gamma)) (K - K*)^2 + (sigma/(2 gamma)) (K* - K_min)^2 + K* s_dz,
+//! ```
 //!
 //! using -(K - K*)(K - K_min) <= -(K - K*)^2/2 + (K* - K_min)^2/2 and K >= 0. V' < 0 outside
-//! the compact set { eta |s| + (sigma/(2 gamma))(K - K*)^2 <= (sigma/(2 gamma))(K* - K_min)^2
-//! + K* s_dz }, so (s, K) are **uniformly ultimately bounded**: s ends up in a band whose width
+//! the compact set
+//!
+//! ```text
+//! { eta |s| + (sigma/(2 gamma))(K - K*)^2 <= (sigma/(2 gamma))(K* - K_min)^2 + K* s_dz },
+//! ```
+//!
+//! so (s, K) are **uniformly ultimately bounded**: s ends up in a band whose width
 //! grows with sigma (leakage) and s_dz (dead zone); without leakage (sigma = 0) this would be
 //! s -> layer, but then K could only grow (drift under noise and disturbances: the reason for
 //! sigma). The projection onto [K_min, K_max] only removes terms of the right sign (standard
@@ -79,6 +92,9 @@
 //! whenever the damper authority suffices (|tau_u| within what the clipped, saturated force can
 //! counter over a cycle), and "never worse than passive at 0 A" otherwise. The closed-loop tests
 //! check both on a stand-in plant; the 4-DOF comparison is in the simulator.
+
+// NaN must take the "no" branch of these comparisons, hence `!(x > 0.0)` style.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 /// Nominal plant data the controllers use (f32 copies of the nominal parameter set).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -184,7 +200,7 @@ pub fn sat(x: f32) -> f32 {
         1.0
     } else if x < -1.0 {
         -1.0
-    } else if x == x {
+    } else if !x.is_nan() {
         x
     } else {
         0.0
