@@ -34,7 +34,7 @@ impl Default for CurrentLimits {
     fn default() -> Self {
         CurrentLimits {
             i_min_a: 0.0,
-            i_max_a: 2.0,
+            i_max_a: super::mr_model::MrModel::FITTED.i_max_a,
             slew_a_per_s: 2000.0,
         }
     }

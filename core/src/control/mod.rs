@@ -14,6 +14,24 @@
 //! Inf, angles beyond [`ControlParams::psi_limit_rad`], dt outside (0, 0.1] s) leave the filters
 //! untouched and command [`ControlParams::fallback_current_a`] (a passive-on fail-safe).
 //! The adaptive-SMC stability argument is in [`smc`].
+//!
+//! Use from a simulator or the firmware (one step per 1 ms sample):
+//!
+//! ```
+//! use shimmy_core::control::{ControlInput, ControlParams, Controller, ControllerKind};
+//! let mut ctl = Controller::new(ControllerKind::Asmc, ControlParams::default());
+//! let out = ctl.step(&ControlInput {
+//!     t_s: 0.0,
+//!     dt_s: 1e-3,
+//!     psi_l_rad: 0.001,
+//!     psi_r_rad: 0.001,
+//!     speed_mps: 20.0,
+//!     coil_current_a: None,
+//! });
+//! assert!(out.current_cmd_a >= 0.0 && out.current_cmd_a <= 2.0);
+//! // out.current_cmd_a goes to the coil (simulator: the Spencer model's u_cmd;
+//! // firmware: actuator::CoilDriver::drive, with the measured coil current if there is one).
+//! ```
 
 pub mod actuator;
 pub mod conditioning;
@@ -95,6 +113,18 @@ pub struct ControlParams {
     pub min_speed_mps: f32,
     /// Encoder angles beyond +-this are invalid [rad].
     pub psi_limit_rad: f32,
+}
+
+impl ControlParams {
+    /// The defaults with the nominal plant data (I_k, c_k, l_t) taken from `plant` (e.g. a
+    /// vehicle with another steering arm). Studies of model error keep the defaults and change
+    /// the simulated plant instead.
+    pub fn with_nominal(plant: &crate::params::PlantParams) -> Self {
+        ControlParams {
+            nominal: NominalPlant::from_params(plant),
+            ..ControlParams::default()
+        }
+    }
 }
 
 impl Default for ControlParams {

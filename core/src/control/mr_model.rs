@@ -79,7 +79,8 @@ impl MrModel {
         c_a_ns_per_m: 186.7,
         c_b_ns_per_m_a: 430.0,
         v0_mps: 0.03143,
-        i_max_a: 2.0,
+        // The damper's rated coil input (1 V per A in the Spencer model).
+        i_max_a: crate::mr_damper::SpencerParams::automotive().u_max as f32,
     };
 
     /// S(v / v0) = x / sqrt(1 + x^2).

@@ -280,9 +280,11 @@ fn asmc_stays_quiet_on_sensor_noise_and_the_dead_zone_is_needed() {
     // Without the dead zone the noise pumps K up.
     let mut p0 = p;
     p0.asmc.dead_zone_radps = 0.0;
-    let (_, _, k0) = run_noise(p0, 3.0);
-    println!("K without dead zone {k0:.3}");
+    let (_, i0, k0) = run_noise(p0, 3.0);
+    println!("without dead zone / quiet zone: K {k0:.3}, mean current {i0:.3} A");
     assert!(k0 > 4.0 * k.max(0.25), "K without dead zone {k0}");
+    // ... and without the quiet zone the viscous part keeps current on the coil for noise.
+    assert!(i0 > 0.1, "{i0}");
 }
 
 #[test]
