@@ -252,9 +252,13 @@ fn noise(seed: u64) -> impl FnMut() -> f64 {
 /// Straight running with realistic 14-bit encoders: +-1 LSB uniform noise on each encoder
 /// (independent), then quantisation. Returns (rms of s, mean current, final K).
 fn run_noise(p: ControlParams, secs: f64) -> (f64, f64, f32) {
+    run_noise_kind(ControllerKind::Asmc, p, secs)
+}
+
+fn run_noise_kind(kind: ControllerKind, p: ControlParams, secs: f64) -> (f64, f64, f32) {
     let lsb = 2.0 * PI / 16384.0;
     let (mut nl, mut nr) = (noise(7), noise(11));
-    let mut c = Controller::new(ControllerKind::Asmc, p);
+    let mut c = Controller::new(kind, p);
     let n = (secs * 1000.0) as usize;
     let (mut ss, mut isum) = (0.0, 0.0);
     for _ in 0..n {
@@ -285,6 +289,11 @@ fn asmc_stays_quiet_on_sensor_noise_and_the_dead_zone_is_needed() {
     assert!(k0 > 4.0 * k.max(0.25), "K without dead zone {k0}");
     // ... and without the quiet zone the viscous part keeps current on the coil for noise.
     assert!(i0 > 0.1, "{i0}");
+    // The fixed-gain SMC has neither: its switching term acts on noise at near-zero stroke
+    // rates, where the inverse needs a large current for any force.
+    let (_, i_smc, _) = run_noise_kind(ControllerKind::Smc, p, 3.0);
+    println!("fixed-gain SMC on noise: mean current {i_smc:.3} A");
+    assert!(i_smc > 0.1 && i_smc > 100.0 * i_mean, "{i_smc}");
 }
 
 #[test]
