@@ -585,3 +585,28 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn switching_the_law_at_run_time_keeps_the_state() {
+    // A simulator or the firmware switches laws between steps: the conditioning keeps running
+    // (no start-up transient) and the adaptive gain keeps its value.
+    let p = ControlParams::default();
+    let sig = |k: usize| 0.01 * (2.0 * PI * 6.0 * k as f64 / 1000.0).sin();
+    let mut a = Controller::new(ControllerKind::Asmc, p);
+    let mut b = Controller::new(ControllerKind::Asmc, p);
+    for k in 0..500 {
+        a.step(&input(quantise(sig(k)), 1e-3));
+        b.step(&input(quantise(sig(k)), 1e-3));
+    }
+    let k_before = a.adaptive_gain();
+    a.set_kind(ControllerKind::Smc);
+    assert_eq!(a.kind(), ControllerKind::Smc);
+    let oa = a.step(&input(quantise(sig(500)), 1e-3));
+    let ob = b.step(&input(quantise(sig(500)), 1e-3));
+    assert_eq!(oa.conditioned, ob.conditioned);
+    assert_eq!(a.adaptive_gain(), k_before);
+    a.set_kind(ControllerKind::Asmc);
+    assert_eq!(a.adaptive_gain(), k_before);
+    a.reset();
+    assert_eq!(a.adaptive_gain(), p.asmc.k_init_radps2);
+}
