@@ -10,6 +10,8 @@
 #[macro_use]
 mod fmt;
 
+pub mod estimator;
+pub mod monitor;
 pub mod mr_damper;
 pub mod params;
 
