@@ -107,7 +107,7 @@ impl Default for EstimatorConfig {
             wheel_order_regressors: true,
             bias_regressor: true,
             damper_input_regressor: false,
-            lambda_fast: 0.99,
+            lambda_fast: 0.995,
             lambda_slow: 0.998,
             p0: 100.0,
             trace_max: Some(1.0e5),

@@ -13,8 +13,8 @@
 
 use super::real::Real;
 
-/// Largest regressor dimension (6 AR + sin + cos + bias + damper input).
-pub const N_MAX: usize = 10;
+/// Largest regressor dimension (8 AR + sin + cos + bias + damper input).
+pub const N_MAX: usize = 12;
 
 /// Why an RLS update was refused (the state is unchanged in every case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

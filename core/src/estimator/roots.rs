@@ -8,7 +8,7 @@
 //! (nalgebra's Schur decomposition of the companion matrix) checks it in the tests.
 
 /// Largest AR order supported.
-pub const MAX_ORDER: usize = 6;
+pub const MAX_ORDER: usize = 8;
 
 /// A complex number (f64), just what the root finder needs.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
