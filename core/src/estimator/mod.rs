@@ -46,7 +46,7 @@ pub struct EstimatorConfig {
     pub aa_stop_hz: f32,
     /// Anti-alias stop-band attenuation, dB.
     pub aa_atten_db: f32,
-    /// AR order p, 2..=6.
+    /// AR order p, 2..=8 (4-6 intended; 6 is the tested default).
     pub ar_order: u8,
     /// Include cos/sin wheel-order regressors.
     pub wheel_order_regressors: bool,
@@ -114,7 +114,7 @@ impl Default for EstimatorConfig {
             signal_scale_rad: 1.0e-3,
             freeze_enabled: true,
             min_excitation_rms_rad: 5.0e-5,
-            excitation_tau_s: 1.0,
+            excitation_tau_s: 0.3,
             freeze_reset_s: 5.0,
             highpass_hz: 1.0,
             amplitude_tau_s: 0.3,
@@ -134,7 +134,7 @@ impl Default for EstimatorConfig {
 /// Invalid configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConfigError {
-    /// ar_order outside 2..=6.
+    /// ar_order outside 2..=8.
     ArOrder,
     /// A forgetting factor outside (0, 1).
     Lambda,

@@ -313,7 +313,7 @@ mod tests {
         let mut roots = [C64::default(); MAX_ORDER];
         assert_eq!(aberth(&c, &mut roots, false, 1), Err(RootError::NoConvergence));
         assert_eq!(aberth(&[f64::NAN; 4], &mut roots, false, 100), Err(RootError::NonFinite));
-        assert_eq!(aberth(&[0.0; 7], &mut roots, false, 100), Err(RootError::BadOrder));
+        assert_eq!(aberth(&[0.0; MAX_ORDER + 1], &mut roots, false, 100), Err(RootError::BadOrder));
     }
 
     #[test]
