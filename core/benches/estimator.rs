@@ -72,10 +72,13 @@ fn bench(c: &mut Criterion) {
     // full estimator: cost per 1 kHz input sample (amortised over the decimated steps)
     let mut est = MarginEstimator::<f32>::new(EstimatorConfig::default()).unwrap();
     let mut n = 0usize;
-    let mut sample = |n: usize| Sample {
+    let sample = |n: usize| Sample {
         psi_l_rad: 1e-3 * signal(n),
         psi_r_rad: 1e-3 * signal(n + 7),
-        wheel: WheelOrder::Speed { speed_mps: 20.0, radius_m: 0.5 },
+        wheel: WheelOrder::Speed {
+            speed_mps: 20.0,
+            radius_m: 0.5,
+        },
         damper_cmd: 0.0,
     };
     for _ in 0..20_000 {

@@ -181,7 +181,8 @@ impl<const N: usize> Monitor<N> {
         {
             return Level::ApproachingCritical;
         }
-        if lt(slow, pick(p.zeta_low_on, p.zeta_low_off)) || lt(dv, pick(p.dv_low_on_mps, p.dv_low_off_mps))
+        if lt(slow, pick(p.zeta_low_on, p.zeta_low_off))
+            || lt(dv, pick(p.dv_low_on_mps, p.dv_low_off_mps))
         {
             return Level::MarginLow;
         }
@@ -216,7 +217,11 @@ impl<const N: usize> Monitor<N> {
 
     fn log(&mut self, prev: Level, inp: &MonitorInput<'_>) {
         let t = inp.t_s;
-        let amp = if inp.amplitude_rad.is_finite() { inp.amplitude_rad } else { 0.0 };
+        let amp = if inp.amplitude_rad.is_finite() {
+            inp.amplitude_rad
+        } else {
+            0.0
+        };
         if prev == Level::Normal && self.level > Level::Normal {
             self.open = Some(Event {
                 start_s: t,
@@ -280,29 +285,54 @@ mod tests {
         let mut t = 0.0;
         let mut step = |m: &mut Monitor<4>, r: &MarginReport, amp: f32, dt: f32| {
             t += dt;
-            m.update(&MonitorInput { t_s: t, amplitude_rad: amp, report: r })
+            m.update(&MonitorInput {
+                t_s: t,
+                amplitude_rad: amp,
+                report: r,
+            })
         };
-        assert_eq!(step(&mut m, &report(0.08, 0.08, Some(20.0)), 0.0, 0.01), Level::Normal);
+        assert_eq!(
+            step(&mut m, &report(0.08, 0.08, Some(20.0)), 0.0, 0.01),
+            Level::Normal
+        );
         // slow zeta 0.039 < 0.04 -> MarginLow at once
-        assert_eq!(step(&mut m, &report(0.039, 0.06, Some(20.0)), 0.0, 0.01), Level::MarginLow);
+        assert_eq!(
+            step(&mut m, &report(0.039, 0.06, Some(20.0)), 0.0, 0.01),
+            Level::MarginLow
+        );
         // 0.045 is between on (0.04) and off (0.05): stays MarginLow for ever
         for _ in 0..500 {
-            assert_eq!(step(&mut m, &report(0.045, 0.06, Some(20.0)), 0.0, 0.01), Level::MarginLow);
+            assert_eq!(
+                step(&mut m, &report(0.045, 0.06, Some(20.0)), 0.0, 0.01),
+                Level::MarginLow
+            );
         }
         // above off: leaves only after the 1 s dwell
         for _ in 0..99 {
-            assert_eq!(step(&mut m, &report(0.06, 0.06, Some(20.0)), 0.0, 0.01), Level::MarginLow);
+            assert_eq!(
+                step(&mut m, &report(0.06, 0.06, Some(20.0)), 0.0, 0.01),
+                Level::MarginLow
+            );
         }
         for _ in 0..3 {
             step(&mut m, &report(0.06, 0.06, Some(20.0)), 0.0, 0.01);
         }
         assert_eq!(m.level(), Level::Normal);
         // speed margin below 2 m/s -> ApproachingCritical; amplitude -> ShimmyPresent
-        assert_eq!(step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.0, 0.01), Level::ApproachingCritical);
-        assert_eq!(step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.02, 0.01), Level::ShimmyPresent);
+        assert_eq!(
+            step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.0, 0.01),
+            Level::ApproachingCritical
+        );
+        assert_eq!(
+            step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.02, 0.01),
+            Level::ShimmyPresent
+        );
         // amplitude 0.007 is between off (0.005) and on: stays
         for _ in 0..300 {
-            assert_eq!(step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.007, 0.01), Level::ShimmyPresent);
+            assert_eq!(
+                step(&mut m, &report(0.06, 0.06, Some(1.5)), 0.007, 0.01),
+                Level::ShimmyPresent
+            );
         }
         // amplitude gone, margin still critical -> falls back to ApproachingCritical after dwell
         for _ in 0..120 {
@@ -314,7 +344,14 @@ mod tests {
         inv.data_valid = false;
         inv.fast_valid = false;
         let mut m2 = Monitor::<4>::new(MonitorParams::default());
-        assert_eq!(m2.update(&MonitorInput { t_s: 0.0, amplitude_rad: 0.0, report: &inv }), Level::Normal);
+        assert_eq!(
+            m2.update(&MonitorInput {
+                t_s: 0.0,
+                amplitude_rad: 0.0,
+                report: &inv
+            }),
+            Level::Normal
+        );
     }
 
     #[test]
@@ -325,17 +362,29 @@ mod tests {
             // 2 s quiet, then 3 s shimmy with a peak of 0.02 + ep * 0.01
             for _ in 0..200 {
                 t += 0.01;
-                m.update(&MonitorInput { t_s: t, amplitude_rad: 0.0, report: &report(0.08, 0.08, Some(20.0)) });
+                m.update(&MonitorInput {
+                    t_s: t,
+                    amplitude_rad: 0.0,
+                    report: &report(0.08, 0.08, Some(20.0)),
+                });
             }
             for k in 0..300 {
                 t += 0.01;
                 let amp = (0.02 + ep as f32 * 0.01) * (1.0 - ((k as f32 - 150.0) / 150.0).abs());
-                m.update(&MonitorInput { t_s: t, amplitude_rad: amp, report: &report(0.08, 0.08, Some(20.0)) });
+                m.update(&MonitorInput {
+                    t_s: t,
+                    amplitude_rad: amp,
+                    report: &report(0.08, 0.08, Some(20.0)),
+                });
             }
         }
         for _ in 0..200 {
             t += 0.01;
-            m.update(&MonitorInput { t_s: t, amplitude_rad: 0.0, report: &report(0.08, 0.08, Some(20.0)) });
+            m.update(&MonitorInput {
+                t_s: t,
+                amplitude_rad: 0.0,
+                report: &report(0.08, 0.08, Some(20.0)),
+            });
         }
         let ev: Vec<Event> = m.events().copied().collect();
         assert_eq!(ev.len(), 2);
@@ -352,7 +401,12 @@ mod tests {
             // below 0.005 at 1.5 + 1.5 (1 - 0.005 / a), then the 1 s dwell
             let t_on = 1.5 * 0.01 / a;
             let t_off = 1.5 + 1.5 * (1.0 - 0.005 / a) + 1.0;
-            assert!((e.duration_s - (t_off - t_on)).abs() < 0.05, "dur {} vs {}", e.duration_s, t_off - t_on);
+            assert!(
+                (e.duration_s - (t_off - t_on)).abs() < 0.05,
+                "dur {} vs {}",
+                e.duration_s,
+                t_off - t_on
+            );
         }
     }
 
@@ -361,10 +415,18 @@ mod tests {
         let mut m = Monitor::<4>::new(MonitorParams::default());
         let r = report(f32::NAN, f32::NAN, Some(f32::NAN));
         for k in 0..100 {
-            let lvl = m.update(&MonitorInput { t_s: k as f32 * 0.01, amplitude_rad: f32::NAN, report: &r });
+            let lvl = m.update(&MonitorInput {
+                t_s: k as f32 * 0.01,
+                amplitude_rad: f32::NAN,
+                report: &r,
+            });
             assert_eq!(lvl, Level::Normal);
         }
-        m.update(&MonitorInput { t_s: f32::NAN, amplitude_rad: 1.0, report: &r });
+        m.update(&MonitorInput {
+            t_s: f32::NAN,
+            amplitude_rad: 1.0,
+            report: &r,
+        });
         assert_eq!(m.level(), Level::Normal);
         assert_eq!(m.events().count(), 0);
     }

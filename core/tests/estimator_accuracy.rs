@@ -28,7 +28,10 @@ struct Case {
 }
 
 fn runs() -> u64 {
-    std::env::var("SHIMMY_MC_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(30)
+    std::env::var("SHIMMY_MC_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(30)
 }
 
 fn check(cases: &[Case]) {
@@ -37,11 +40,24 @@ fn check(cases: &[Case]) {
     let t_eff = 2.0 / ((1.0 - cfg.lambda_slow as f64) * fs);
     let mut failures = Vec::new();
     for (ci, c) in cases.iter().enumerate() {
-        let sc = Scenario { modes: c.modes.clone(), snr_db: c.snr_db, y_rms_rad: 2e-3, line: None, give_phase: false };
+        let sc = Scenario {
+            modes: c.modes.clone(),
+            snr_db: c.snr_db,
+            y_rms_rad: 2e-3,
+            line: None,
+            give_phase: false,
+        };
         let (mut zs, mut zf, mut fr) = (Vec::new(), Vec::new(), Vec::new());
         let mut invalid = 0;
         for seed in 0..runs() {
-            let outs = collect::<f32>(cfg, &sc, 1000 * ci as u64 + seed, 30.0 + 10.0 * t_eff, 30.0, t_eff);
+            let outs = collect::<f32>(
+                cfg,
+                &sc,
+                1000 * ci as u64 + seed,
+                30.0 + 10.0 * t_eff,
+                30.0,
+                t_eff,
+            );
             for o in outs {
                 if o.slow.valid {
                     zs.push(o.slow.zeta as f64);
@@ -70,10 +86,18 @@ fn check(cases: &[Case]) {
             failures.push(format!("case {ci}: too many invalid estimates ({invalid})"));
         }
         if (ms - t.zeta).abs() > c.bias_tol * bs {
-            failures.push(format!("case {ci}: bias {:.3} b > {} b", (ms - t.zeta) / bs, c.bias_tol));
+            failures.push(format!(
+                "case {ci}: bias {:.3} b > {} b",
+                (ms - t.zeta) / bs,
+                c.bias_tol
+            ));
         }
         if ss > c.spread_tol * bs {
-            failures.push(format!("case {ci}: spread {:.3} b > {} b", ss / bs, c.spread_tol));
+            failures.push(format!(
+                "case {ci}: spread {:.3} b > {} b",
+                ss / bs,
+                c.spread_tol
+            ));
         }
         // frequency: the damped frequency, within a tenth of a bound-equivalent (0.1 Hz)
         if (mfr - fd).abs() > 0.1 {
@@ -84,7 +108,11 @@ fn check(cases: &[Case]) {
 }
 
 fn m(zeta: f64, f_hz: f64) -> ModeSpec {
-    ModeSpec { zeta, f_hz, gain: 1.0 }
+    ModeSpec {
+        zeta,
+        f_hz,
+        gain: 1.0,
+    }
 }
 
 #[test]
@@ -95,11 +123,41 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
     // - zeta = 0.1 at 18 Hz: spread 1.59 b (the bound is the light-damping asymptote and the
     //   18 Hz pole is only 5.5 samples per cycle at 100 Hz); tolerance 1.75 b.
     check(&[
-        Case { modes: vec![m(0.01, 5.0)], snr_db: 40.0, target: m(0.01, 5.0), bias_tol: 0.45, spread_tol: 1.5 },
-        Case { modes: vec![m(0.05, 8.0)], snr_db: 10.0, target: m(0.05, 8.0), bias_tol: 0.25, spread_tol: 1.5 },
-        Case { modes: vec![m(0.02, 12.0)], snr_db: 30.0, target: m(0.02, 12.0), bias_tol: 0.25, spread_tol: 1.5 },
-        Case { modes: vec![m(0.1, 18.0)], snr_db: 20.0, target: m(0.1, 18.0), bias_tol: 0.25, spread_tol: 1.75 },
-        Case { modes: vec![m(0.01, 18.0)], snr_db: 10.0, target: m(0.01, 18.0), bias_tol: 0.45, spread_tol: 1.5 },
+        Case {
+            modes: vec![m(0.01, 5.0)],
+            snr_db: 40.0,
+            target: m(0.01, 5.0),
+            bias_tol: 0.45,
+            spread_tol: 1.5,
+        },
+        Case {
+            modes: vec![m(0.05, 8.0)],
+            snr_db: 10.0,
+            target: m(0.05, 8.0),
+            bias_tol: 0.25,
+            spread_tol: 1.5,
+        },
+        Case {
+            modes: vec![m(0.02, 12.0)],
+            snr_db: 30.0,
+            target: m(0.02, 12.0),
+            bias_tol: 0.25,
+            spread_tol: 1.5,
+        },
+        Case {
+            modes: vec![m(0.1, 18.0)],
+            snr_db: 20.0,
+            target: m(0.1, 18.0),
+            bias_tol: 0.25,
+            spread_tol: 1.75,
+        },
+        Case {
+            modes: vec![m(0.01, 18.0)],
+            snr_db: 10.0,
+            target: m(0.01, 18.0),
+            bias_tol: 0.45,
+            spread_tol: 1.5,
+        },
     ]);
 }
 
@@ -107,8 +165,18 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
 fn two_mode_ambient_bias_and_spread_within_bound() {
     // Second mode weakly observed in the in-phase yaw (output gain 0.2, ~4 % of the variance);
     // the estimator must report the least-damped mode in the band.
-    let w = |zeta, f_hz| ModeSpec { zeta, f_hz, gain: 0.2 };
-    check(&[Case { modes: vec![m(0.04, 16.0), w(0.1, 5.0)], snr_db: 30.0, target: m(0.04, 16.0), bias_tol: 0.25, spread_tol: 1.5 }]);
+    let w = |zeta, f_hz| ModeSpec {
+        zeta,
+        f_hz,
+        gain: 0.2,
+    };
+    check(&[Case {
+        modes: vec![m(0.04, 16.0), w(0.1, 5.0)],
+        snr_db: 30.0,
+        target: m(0.04, 16.0),
+        bias_tol: 0.25,
+        spread_tol: 1.5,
+    }]);
 }
 
 /// KNOWN LIMITATION, kept as a test so it stays visible: a second in-band mode with a
@@ -121,7 +189,13 @@ fn two_mode_ambient_bias_and_spread_within_bound() {
 #[test]
 fn two_mode_equal_participation_is_a_known_limitation() {
     let cfg = EstimatorConfig::default();
-    let sc = Scenario { modes: vec![m(0.03, 8.0), m(0.08, 15.0)], snr_db: 20.0, y_rms_rad: 2e-3, line: None, give_phase: false };
+    let sc = Scenario {
+        modes: vec![m(0.03, 8.0), m(0.08, 15.0)],
+        snr_db: 20.0,
+        y_rms_rad: 2e-3,
+        line: None,
+        give_phase: false,
+    };
     let mut z = Vec::new();
     for seed in 0..5 {
         for o in collect::<f32>(cfg, &sc, 77 + seed, 80.0, 30.0, 10.0) {
@@ -130,6 +204,9 @@ fn two_mode_equal_participation_is_a_known_limitation() {
     }
     let (mz, _) = mean_sd(&z);
     let b = bound(0.03, 8.0, cfg.lambda_slow as f64, 100.0);
-    println!("two equal modes: mean zeta {mz:.4} (true 0.03), bias {:.1} b", (mz - 0.03) / b);
+    println!(
+        "two equal modes: mean zeta {mz:.4} (true 0.03), bias {:.1} b",
+        (mz - 0.03) / b
+    );
     assert!((mz - 0.03) / b > 2.0);
 }

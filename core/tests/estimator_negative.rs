@@ -7,7 +7,13 @@ use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, Real, WheelOrder}
 
 /// Slow-instance estimates (every 10 s after 30 s) over `runs` runs; the wheel reference is
 /// replaced by the speed + radius form when `speed_radius` is given.
-fn slow_zetas<T: Real>(cfg: EstimatorConfig, sc: &Scenario, runs: u64, secs: f64, speed_radius: Option<(f32, f32)>) -> (Vec<f64>, Vec<f64>) {
+fn slow_zetas<T: Real>(
+    cfg: EstimatorConfig,
+    sc: &Scenario,
+    runs: u64,
+    secs: f64,
+    speed_radius: Option<(f32, f32)>,
+) -> (Vec<f64>, Vec<f64>) {
     let (mut z, mut f) = (Vec::new(), Vec::new());
     for seed in 0..runs {
         let mut est = MarginEstimator::<T>::new(cfg).unwrap();
@@ -16,7 +22,10 @@ fn slow_zetas<T: Real>(cfg: EstimatorConfig, sc: &Scenario, runs: u64, secs: f64
         for k in 0..(secs * FS) as usize {
             let mut s = run.sample();
             if let Some((v, r)) = speed_radius {
-                s.wheel = WheelOrder::Speed { speed_mps: v, radius_m: r };
+                s.wheel = WheelOrder::Speed {
+                    speed_mps: v,
+                    radius_m: r,
+                };
             }
             if let Some(o) = est.push(&s) {
                 if k as f64 / FS >= next {
@@ -43,9 +52,22 @@ fn wheel_order_regressors_are_needed_for_a_forced_line() {
     let radius = 0.5f32;
     let f_w = 9.0f64;
     let speed = (f_w * PI2 * radius as f64) as f32;
-    let sc = Scenario { modes: vec![ModeSpec { zeta: 0.05, f_hz: 8.0, gain: 1.0 }], snr_db: 20.0, y_rms_rad: 2e-3, line: Some((f_w, 2.0)), give_phase: false };
+    let sc = Scenario {
+        modes: vec![ModeSpec {
+            zeta: 0.05,
+            f_hz: 8.0,
+            gain: 1.0,
+        }],
+        snr_db: 20.0,
+        y_rms_rad: 2e-3,
+        line: Some((f_w, 2.0)),
+        give_phase: false,
+    };
     let with = EstimatorConfig::default();
-    let without = EstimatorConfig { wheel_order_regressors: false, ..with };
+    let without = EstimatorConfig {
+        wheel_order_regressors: false,
+        ..with
+    };
     let b = bound(0.05, 8.0, with.lambda_slow as f64, 100.0);
     let (zw, fw) = slow_zetas::<f32>(with, &sc, 8, 130.0, Some((speed, radius)));
     let (zn, fnn) = slow_zetas::<f32>(without, &sc, 8, 130.0, None);
@@ -60,7 +82,10 @@ fn wheel_order_regressors_are_needed_for_a_forced_line() {
     // without: biased toward zero by more than one bound, and significantly so (> 5 standard
     // errors of the mean)
     let se = sn / (zn.len() as f64).sqrt();
-    assert!(mn < 0.05 - b && mn < 0.05 - 5.0 * se, "without regressors mean zeta {mn} (se {se})");
+    assert!(
+        mn < 0.05 - b && mn < 0.05 - 5.0 * se,
+        "without regressors mean zeta {mn} (se {se})"
+    );
 }
 
 /// Coefficient rounding alone: AR(4) polynomials of an exactly discretised (zeta, f) mode plus a
@@ -117,8 +142,21 @@ fn f32_coefficient_rounding_ruins_ar4_at_1khz_but_not_at_100hz() {
 /// same data where the decimated AR(4) f32 estimator passes. 4 runs x 70 s.
 #[test]
 fn ar4_fitted_at_1khz_in_f32_fails_where_decimated_passes() {
-    let sc = Scenario { modes: vec![ModeSpec { zeta: 0.05, f_hz: 8.0, gain: 1.0 }], snr_db: 40.0, y_rms_rad: 2e-3, line: None, give_phase: false };
-    let dec = EstimatorConfig { ar_order: 4, ..EstimatorConfig::default() };
+    let sc = Scenario {
+        modes: vec![ModeSpec {
+            zeta: 0.05,
+            f_hz: 8.0,
+            gain: 1.0,
+        }],
+        snr_db: 40.0,
+        y_rms_rad: 2e-3,
+        line: None,
+        give_phase: false,
+    };
+    let dec = EstimatorConfig {
+        ar_order: 4,
+        ..EstimatorConfig::default()
+    };
     // same effective memory: 1 - lambda scales with the rate
     let full = EstimatorConfig {
         decimation: 1,
@@ -127,11 +165,29 @@ fn ar4_fitted_at_1khz_in_f32_fails_where_decimated_passes() {
         ..dec
     };
     let b = bound(0.05, 8.0, dec.lambda_slow as f64, 100.0);
-    let rms_err = |z: &[f64]| (z.iter().map(|v| if v.is_finite() { (v - 0.05).powi(2) } else { 1.0 }).sum::<f64>() / z.len() as f64).sqrt();
+    let rms_err = |z: &[f64]| {
+        (z.iter()
+            .map(|v| {
+                if v.is_finite() {
+                    (v - 0.05).powi(2)
+                } else {
+                    1.0
+                }
+            })
+            .sum::<f64>()
+            / z.len() as f64)
+            .sqrt()
+    };
     let (zd, _) = slow_zetas::<f32>(dec, &sc, 4, 70.0, None);
     let (zf, _) = slow_zetas::<f32>(full, &sc, 4, 70.0, None);
     let (ed, ef) = (rms_err(&zd), rms_err(&zf));
     println!("AR(4) f32: decimated rms error {:.4} ({:.2} b), 1 kHz rms error {:.4} ({:.2} b); 1 kHz values {:?}", ed, ed / b, ef, ef / b, &zf[..zf.len().min(8)]);
-    assert!(ed < 1.5 * b, "decimated estimator should be within the bound: {ed}");
-    assert!(ef > 3.0 * b, "1 kHz f32 estimator unexpectedly accurate: {ef}");
+    assert!(
+        ed < 1.5 * b,
+        "decimated estimator should be within the bound: {ed}"
+    );
+    assert!(
+        ef > 3.0 * b,
+        "1 kHz f32 estimator unexpectedly accurate: {ef}"
+    );
 }

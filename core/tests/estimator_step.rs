@@ -14,9 +14,23 @@ fn damping_step_detected_within_1_5_s_median_with_at_most_1_percent_false_time()
     let cfg = EstimatorConfig::default();
     let b = bound(0.08, 8.0, cfg.lambda_fast as f64, 100.0);
     let thr = (0.08 - 2.326 * b) as f32;
-    let before = vec![ModeSpec { zeta: 0.08, f_hz: 8.0, gain: 1.0 }];
-    let after = vec![ModeSpec { zeta: 0.02, f_hz: 8.0, gain: 1.0 }];
-    let sc = Scenario { modes: before, snr_db: 20.0, y_rms_rad: 2e-3, line: None, give_phase: false };
+    let before = vec![ModeSpec {
+        zeta: 0.08,
+        f_hz: 8.0,
+        gain: 1.0,
+    }];
+    let after = vec![ModeSpec {
+        zeta: 0.02,
+        f_hz: 8.0,
+        gain: 1.0,
+    }];
+    let sc = Scenario {
+        modes: before,
+        snr_db: 20.0,
+        y_rms_rad: 2e-3,
+        line: None,
+        give_phase: false,
+    };
     let t_step = 60.0;
     let (mut delays, mut flagged, mut prior) = (Vec::new(), 0usize, 0usize);
     for seed in 0..30 {
@@ -43,8 +57,15 @@ fn damping_step_detected_within_1_5_s_median_with_at_most_1_percent_false_time()
     }
     let frac = flagged as f64 / prior as f64;
     let med = median(&mut delays);
-    println!("threshold {thr:.4}, median delay {med:.2} s, max {:.2} s, prior time flagged {:.2} %", delays.last().unwrap(), 100.0 * frac);
+    println!(
+        "threshold {thr:.4}, median delay {med:.2} s, max {:.2} s, prior time flagged {:.2} %",
+        delays.last().unwrap(),
+        100.0 * frac
+    );
     assert!(med <= 1.5, "median delay {med}");
     assert!(frac <= 0.01, "flagged {frac}");
-    assert!(delays.iter().all(|d| d.is_finite()), "a step was never detected: {delays:?}");
+    assert!(
+        delays.iter().all(|d| d.is_finite()),
+        "a step was never detected: {delays:?}"
+    );
 }

@@ -82,7 +82,10 @@ impl<T: Real> AntiAliasFilter<T> {
         for (i, sec) in sections.iter_mut().enumerate() {
             let th = core::f64::consts::PI * (2 * i + 1) as f64 / (2.0 * n);
             // Chebyshev-I pole, its reciprocal (scaled to ws) is the Chebyshev-II pole.
-            let (pr, pi) = (-libm::sinh(mu) * libm::sin(th), libm::cosh(mu) * libm::cos(th));
+            let (pr, pi) = (
+                -libm::sinh(mu) * libm::sin(th),
+                libm::cosh(mu) * libm::cos(th),
+            );
             let m2 = pr * pr + pi * pi;
             let (qr, qi) = (ws * pr / m2, -ws * pi / m2);
             let a1 = -2.0 * qr; // s^2 + a1 s + a0
@@ -244,7 +247,11 @@ mod tests {
             assert!((g - c).abs() < 1e-6 * (1.0 + c.abs()), "f={fr}: {g} vs {c}");
         }
         // flat up to the top of the shimmy band, >= 60 dB wherever content folds into it
-        assert!(f.gain_db(20.0).abs() < 0.001, "passband at 20 Hz: {}", f.gain_db(20.0));
+        assert!(
+            f.gain_db(20.0).abs() < 0.001,
+            "passband at 20 Hz: {}",
+            f.gain_db(20.0)
+        );
         let worst_stop = (0..=4200)
             .map(|k| 80.0 + k as f64 * 0.1)
             .map(|fr| f.gain_db(fr))
@@ -271,7 +278,10 @@ mod tests {
             let exact = AntiAliasFilter::<f64>::design(80.0, 60.0, 1000.0)
                 .unwrap()
                 .gain_db(fr);
-            assert!((db - exact).abs() < 0.5, "f={fr}: measured {db} dB, design {exact} dB");
+            assert!(
+                (db - exact).abs() < 0.5,
+                "f={fr}: measured {db} dB, design {exact} dB"
+            );
         }
     }
 

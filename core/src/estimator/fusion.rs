@@ -217,8 +217,8 @@ impl Fusion {
         // consistency with hysteresis in time
         if data_valid {
             let sigma = r.sigma_zeta_data.max(1e-6);
-            let mismatch = libm::fabsf(r.zeta_data - m.zeta as f32)
-                > self.params.mismatch_sigmas * sigma;
+            let mismatch =
+                libm::fabsf(r.zeta_data - m.zeta as f32) > self.params.mismatch_sigmas * sigma;
             if mismatch {
                 self.agree_since_s = None;
                 let since = *self.mismatch_since_s.get_or_insert(t);
@@ -267,14 +267,31 @@ mod tests {
             valid: true,
         };
         // data margin 0.04/0.004 = 10 m/s, model margin 25-20 = 5 m/s -> model, ttc 5/0.5 = 10 s
-        let r = f.update(&FusionInput { t_s: 0.0, speed_mps: 20.0, accel_mps2: 0.5, fast: &e, slow: &e, model: Some(&m) });
+        let r = f.update(&FusionInput {
+            t_s: 0.0,
+            speed_mps: 20.0,
+            accel_mps2: 0.5,
+            fast: &e,
+            slow: &e,
+            model: Some(&m),
+        });
         assert_eq!(r.margin_source, MarginSource::Model);
         assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
         assert!((r.time_to_critical_s.unwrap() - 10.0).abs() < 1e-4);
         assert!(r.valid && r.model_consistent);
         // no onset from the model -> data margin, decelerating -> no time to critical
-        let m2 = ModelMargin { v_crit_onset_mps: None, ..m };
-        let r = f.update(&FusionInput { t_s: 0.1, speed_mps: 20.0, accel_mps2: -0.5, fast: &e, slow: &e, model: Some(&m2) });
+        let m2 = ModelMargin {
+            v_crit_onset_mps: None,
+            ..m
+        };
+        let r = f.update(&FusionInput {
+            t_s: 0.1,
+            speed_mps: 20.0,
+            accel_mps2: -0.5,
+            fast: &e,
+            slow: &e,
+            model: Some(&m2),
+        });
         assert_eq!(r.margin_source, MarginSource::Data);
         assert!((r.speed_margin_mps.unwrap() - 10.0).abs() < 1e-4);
         assert_eq!(r.time_to_critical_s, None);
@@ -283,12 +300,25 @@ mod tests {
     #[test]
     fn mismatch_flag_needs_sustained_disagreement_and_clears_with_hysteresis() {
         let mut f = Fusion::new(FusionParams::default());
-        let m = ModelMargin { zeta: 0.08, freq_hz: 8.0, dzeta_dv_per_mps: -0.004, v_crit_onset_mps: None, valid: true };
+        let m = ModelMargin {
+            zeta: 0.08,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.004,
+            v_crit_onset_mps: None,
+            valid: true,
+        };
         let bad = est(0.02, 0.01); // 6 sigma off
         let good = est(0.075, 0.01);
         let mut t = 0.0f32;
-        let mut step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
-            f.update(&FusionInput { t_s: t, speed_mps: 20.0, accel_mps2: 0.0, fast: e, slow: e, model: Some(&m) })
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
+            f.update(&FusionInput {
+                t_s: t,
+                speed_mps: 20.0,
+                accel_mps2: 0.0,
+                fast: e,
+                slow: e,
+                model: Some(&m),
+            })
         };
         // a 2 s excursion does not trip the 3 s hold
         while t < 2.0 {
@@ -318,15 +348,54 @@ mod tests {
     #[test]
     fn nan_inputs_give_no_nan_outputs() {
         let mut f = Fusion::new(FusionParams::default());
-        let e = ModeEstimate { zeta: f32::NAN, sigma_zeta: f32::NAN, freq_hz: f32::NAN, ..est(0.0, 0.0) };
-        let m = ModelMargin { zeta: f64::NAN, freq_hz: f64::NAN, dzeta_dv_per_mps: f64::NAN, v_crit_onset_mps: Some(f64::NAN), valid: true };
-        let r = f.update(&FusionInput { t_s: f32::NAN, speed_mps: f32::NAN, accel_mps2: f32::INFINITY, fast: &e, slow: &e, model: Some(&m) });
-        for v in [r.t_s, r.speed_mps, r.zeta_data, r.sigma_zeta_data, r.zeta_fast, r.sigma_zeta_fast, r.freq_hz] {
+        let e = ModeEstimate {
+            zeta: f32::NAN,
+            sigma_zeta: f32::NAN,
+            freq_hz: f32::NAN,
+            ..est(0.0, 0.0)
+        };
+        let m = ModelMargin {
+            zeta: f64::NAN,
+            freq_hz: f64::NAN,
+            dzeta_dv_per_mps: f64::NAN,
+            v_crit_onset_mps: Some(f64::NAN),
+            valid: true,
+        };
+        let r = f.update(&FusionInput {
+            t_s: f32::NAN,
+            speed_mps: f32::NAN,
+            accel_mps2: f32::INFINITY,
+            fast: &e,
+            slow: &e,
+            model: Some(&m),
+        });
+        for v in [
+            r.t_s,
+            r.speed_mps,
+            r.zeta_data,
+            r.sigma_zeta_data,
+            r.zeta_fast,
+            r.sigma_zeta_fast,
+            r.freq_hz,
+        ] {
             assert!(v.is_finite());
         }
         assert_eq!(r.zeta_model, None);
-        let m2 = ModelMargin { zeta: 0.05, freq_hz: 8.0, dzeta_dv_per_mps: -0.01, v_crit_onset_mps: Some(f64::NAN), valid: true };
-        let r = f.update(&FusionInput { t_s: 1.0, speed_mps: 10.0, accel_mps2: 1.0, fast: &e, slow: &e, model: Some(&m2) });
+        let m2 = ModelMargin {
+            zeta: 0.05,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.01,
+            v_crit_onset_mps: Some(f64::NAN),
+            valid: true,
+        };
+        let r = f.update(&FusionInput {
+            t_s: 1.0,
+            speed_mps: 10.0,
+            accel_mps2: 1.0,
+            fast: &e,
+            slow: &e,
+            model: Some(&m2),
+        });
         assert!(r.speed_margin_mps.is_none_or(f32::is_finite));
         assert!(r.time_to_critical_s.is_none_or(f32::is_finite));
     }

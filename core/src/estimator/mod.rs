@@ -327,8 +327,13 @@ impl<T: Real> MarginEstimator<T> {
             return Err(ConfigError::Range);
         }
         let fs_in = cfg.input_rate_hz as f64;
-        let dec_y = Decimator::new(fs_in, cfg.decimation, cfg.aa_stop_hz as f64, cfg.aa_atten_db as f64)
-            .ok_or(ConfigError::Decimation)?;
+        let dec_y = Decimator::new(
+            fs_in,
+            cfg.decimation,
+            cfg.aa_stop_hz as f64,
+            cfg.aa_atten_db as f64,
+        )
+        .ok_or(ConfigError::Decimation)?;
         let dec_u = dec_y;
         let fs_dec = fs_in / cfg.decimation as f64;
         if cfg.band_hi_hz as f64 >= 0.5 * fs_dec {
@@ -479,7 +484,7 @@ impl<T: Real> MarginEstimator<T> {
                             self.phase += two_pi;
                         }
                     }
-                    if !(self.phase.abs() <= pi) {
+                    if !self.phase.is_finite() || self.phase.abs() > pi {
                         self.phase = T::ZERO;
                     }
                 }
@@ -560,9 +565,25 @@ impl<T: Real> MarginEstimator<T> {
                 }
             }
             let every = self.cfg.slow_roots_every.max(1) as u32;
-            Self::extract(&self.cfg, self.fs_dec_hz, p, &self.fast, &mut self.tr_fast, frozen, &mut self.counters);
-            if self.step_count % every == 0 {
-                Self::extract(&self.cfg, self.fs_dec_hz, p, &self.slow, &mut self.tr_slow, frozen, &mut self.counters);
+            Self::extract(
+                &self.cfg,
+                self.fs_dec_hz,
+                p,
+                &self.fast,
+                &mut self.tr_fast,
+                frozen,
+                &mut self.counters,
+            );
+            if self.step_count.is_multiple_of(every) {
+                Self::extract(
+                    &self.cfg,
+                    self.fs_dec_hz,
+                    p,
+                    &self.slow,
+                    &mut self.tr_slow,
+                    frozen,
+                    &mut self.counters,
+                );
             }
             self.out.fast = self.tr_fast.est;
             self.out.slow = self.tr_slow.est;
@@ -633,7 +654,11 @@ impl<T: Real> MarginEstimator<T> {
         tr.est.valid = status == EstimateStatus::Ok
             && tr.est.zeta.is_finite()
             && tr.est.sigma_zeta.is_finite();
-        if !(tr.est.zeta.is_finite() && tr.est.sigma_zeta.is_finite() && tr.est.freq_hz.is_finite() && tr.est.wn_hz.is_finite()) {
+        if !(tr.est.zeta.is_finite()
+            && tr.est.sigma_zeta.is_finite()
+            && tr.est.freq_hz.is_finite()
+            && tr.est.wn_hz.is_finite())
+        {
             tr.est = ModeEstimate::default();
             tr.est.status = EstimateStatus::RootFailure;
         }

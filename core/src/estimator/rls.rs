@@ -63,7 +63,11 @@ impl<T: Real> Rls<T> {
     pub fn reset_covariance(&mut self) {
         for (i, row) in self.p.iter_mut().enumerate() {
             for (j, v) in row.iter_mut().enumerate() {
-                *v = if i == j && i < self.n { self.p0 } else { T::ZERO };
+                *v = if i == j && i < self.n {
+                    self.p0
+                } else {
+                    T::ZERO
+                };
             }
         }
         self.updates = 0;
@@ -149,8 +153,8 @@ impl<T: Real> Rls<T> {
     /// One-step prediction theta' phi.
     pub fn predict(&self, phi: &[T; N_MAX]) -> T {
         let mut yhat = T::ZERO;
-        for i in 0..self.n {
-            yhat += self.theta[i] * phi[i];
+        for (th, ph) in self.theta.iter().zip(phi.iter()).take(self.n) {
+            yhat += *th * *ph;
         }
         yhat
     }
@@ -256,7 +260,12 @@ mod tests {
         }
         let th = a.lu().solve(&b).unwrap();
         for i in 0..n {
-            assert!((rls.theta()[i] - th[i]).abs() < 1e-6, "{i}: {} vs {}", rls.theta()[i], th[i]);
+            assert!(
+                (rls.theta()[i] - th[i]).abs() < 1e-6,
+                "{i}: {} vs {}",
+                rls.theta()[i],
+                th[i]
+            );
         }
         assert_eq!(rls.asymmetry(), 0.0);
     }
@@ -271,7 +280,10 @@ mod tests {
         phi[1] = f32::NAN;
         assert_eq!(rls.update(&phi, 1.0), Err(RlsError::NonFiniteInput));
         phi[1] = 0.0;
-        assert_eq!(rls.update(&phi, f32::INFINITY), Err(RlsError::NonFiniteInput));
+        assert_eq!(
+            rls.update(&phi, f32::INFINITY),
+            Err(RlsError::NonFiniteInput)
+        );
         assert_eq!(*rls.theta(), before);
     }
 
@@ -288,6 +300,10 @@ mod tests {
         for _ in 0..100 {
             let _ = unbounded.update(&phi, 0.0);
         }
-        assert!(unbounded.trace() > 1e5, "without the bound P winds up: {}", unbounded.trace());
+        assert!(
+            unbounded.trace() > 1e5,
+            "without the bound P winds up: {}",
+            unbounded.trace()
+        );
     }
 }

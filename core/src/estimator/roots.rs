@@ -175,12 +175,12 @@ pub struct Mode {
 /// s = ln(z) fs. Returns `None` for |z| ~ 0 (s -> -inf) or a real pole.
 pub fn mode_of_root(z: C64, fs_hz: f64) -> Option<Mode> {
     let r = z.abs();
-    if !(r > 1e-9) || !r.is_finite() {
+    if r.is_nan() || r <= 1e-9 || !r.is_finite() {
         return None;
     }
     let sr = libm::log(r) * fs_hz;
     let si = libm::atan2(z.im, z.re) * fs_hz;
-    if !(si > 0.0) {
+    if si.is_nan() || si <= 0.0 {
         return None;
     }
     let mag = libm::hypot(sr, si);
@@ -269,7 +269,9 @@ mod tests {
         // Pole sets like a decimated mode meter sees: pairs near the unit circle + real poles.
         let mut seed = 12345u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..200 {
@@ -311,9 +313,18 @@ mod tests {
         assert!(warm <= 2 && warm <= cold, "warm {warm}, cold {cold}");
         // One sweep is not enough from a cold start: must report, not hang.
         let mut roots = [C64::default(); MAX_ORDER];
-        assert_eq!(aberth(&c, &mut roots, false, 1), Err(RootError::NoConvergence));
-        assert_eq!(aberth(&[f64::NAN; 4], &mut roots, false, 100), Err(RootError::NonFinite));
-        assert_eq!(aberth(&[0.0; MAX_ORDER + 1], &mut roots, false, 100), Err(RootError::BadOrder));
+        assert_eq!(
+            aberth(&c, &mut roots, false, 1),
+            Err(RootError::NoConvergence)
+        );
+        assert_eq!(
+            aberth(&[f64::NAN; 4], &mut roots, false, 100),
+            Err(RootError::NonFinite)
+        );
+        assert_eq!(
+            aberth(&[0.0; MAX_ORDER + 1], &mut roots, false, 100),
+            Err(RootError::BadOrder)
+        );
     }
 
     #[test]

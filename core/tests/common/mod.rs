@@ -8,7 +8,9 @@ use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Real, Sample, WheelOrder};
+use shimmy_core::estimator::{
+    EstimatorConfig, MarginEstimator, MeterOutput, Real, Sample, WheelOrder,
+};
 
 pub const FS: f64 = 1000.0;
 pub const PI2: f64 = 2.0 * std::f64::consts::PI;
@@ -57,7 +59,11 @@ impl Truth {
         assert!(!modes.is_empty() && modes.len() <= 2);
         let mut all = modes.to_vec();
         if all.len() == 1 {
-            all.push(ModeSpec { zeta: 0.5, f_hz: 10.0, gain: 0.0 });
+            all.push(ModeSpec {
+                zeta: 0.5,
+                f_hz: 10.0,
+                gain: 0.0,
+            });
         }
         let n = 4;
         let mut a = DMatrix::<f64>::zeros(n, n);
@@ -142,7 +148,15 @@ impl<'a> Run<'a> {
         let noise_var = sc.y_rms_rad.powi(2) / 10f64.powf(sc.snr_db / 10.0);
         let noise_sd = (2.0 * noise_var).sqrt();
         let line_phase0 = rng.random::<f64>() * PI2;
-        Self { sc, truth, rng, scale, noise_sd, t: 0.0, line_phase0 }
+        Self {
+            sc,
+            truth,
+            rng,
+            scale,
+            noise_sd,
+            t: 0.0,
+            line_phase0,
+        }
     }
 
     /// Next 1 kHz sample.
@@ -153,7 +167,9 @@ impl<'a> Run<'a> {
             let ph = PI2 * f * self.t;
             y += a * self.sc.y_rms_rad * (ph + self.line_phase0).sin();
             if self.sc.give_phase {
-                wheel = WheelOrder::Phase { phase_rad: (ph % PI2) as f32 };
+                wheel = WheelOrder::Phase {
+                    phase_rad: (ph % PI2) as f32,
+                };
             }
         }
         let n1: f64 = self.rng.sample(StandardNormal);
@@ -211,5 +227,9 @@ pub fn mean_sd(v: &[f64]) -> (f64, f64) {
 pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
     let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }
