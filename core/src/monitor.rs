@@ -98,6 +98,8 @@ pub struct Event {
     pub worst: Level,
     /// Duration, s (grows while the episode is open).
     pub duration_s: f32,
+    /// Time spent in `ShimmyPresent` during the episode, s.
+    pub shimmy_s: f32,
     /// The episode is still open.
     pub open: bool,
 }
@@ -122,6 +124,7 @@ pub struct Monitor<const N: usize> {
     events: heapless::Deque<Event, N>,
     dropped: u32,
     open: Option<Event>,
+    last_t: f32,
 }
 
 fn lt(x: Option<f32>, th: f32) -> bool {
@@ -138,6 +141,7 @@ impl<const N: usize> Monitor<N> {
             events: heapless::Deque::new(),
             dropped: 0,
             open: None,
+            last_t: 0.0,
         }
     }
 
@@ -216,6 +220,8 @@ impl<const N: usize> Monitor<N> {
     }
 
     fn log(&mut self, prev: Level, inp: &MonitorInput<'_>) {
+        let last_t = self.last_t;
+        self.last_t = inp.t_s;
         let t = inp.t_s;
         let amp = if inp.amplitude_rad.is_finite() {
             inp.amplitude_rad
@@ -230,10 +236,14 @@ impl<const N: usize> Monitor<N> {
                 peak_amplitude_rad: amp,
                 worst: self.level,
                 duration_s: 0.0,
+                shimmy_s: 0.0,
                 open: true,
             });
         }
         if let Some(ev) = self.open.as_mut() {
+            if prev == Level::ShimmyPresent {
+                ev.shimmy_s += (t - last_t).max(0.0);
+            }
             ev.duration_s = t - ev.start_s;
             if self.level > ev.worst {
                 ev.worst = self.level;
