@@ -338,4 +338,31 @@ mod tests {
         assert!((m.wn_hz - f).abs() < 1e-12);
         assert!(mode_of_root(C64::new(z.re, -z.im), fs).is_none());
     }
+
+    #[test]
+    fn selection_prefers_least_damped_in_band_and_tracks_continuity() {
+        let fs = 100.0;
+        let root = |zeta: f64, f: f64| {
+            let w = 2.0 * core::f64::consts::PI * f;
+            let s = Complex::new(-zeta * w, w * (1.0 - zeta * zeta).sqrt());
+            let z = (s / fs).exp();
+            C64::new(z.re, z.im)
+        };
+        let roots = [
+            root(0.05, 8.0),
+            root(0.04, 12.0),
+            root(0.001, 25.0),
+            root(0.01, 2.0),
+        ];
+        // out-of-band poles (25 Hz, 2 Hz) are ignored even though they are less damped
+        let m = select_mode(&roots, fs, 3.0, 20.0, None, 1.0, 0.02).unwrap();
+        assert!((m.wn_hz - 12.0).abs() < 1e-9);
+        // continuity: last frequency 8 Hz and 0.05 within 0.02 of 0.04 -> keep tracking 8 Hz
+        let m = select_mode(&roots, fs, 3.0, 20.0, Some(8.1), 1.0, 0.02).unwrap();
+        assert!((m.wn_hz - 8.0).abs() < 1e-9);
+        // ... but not when the other pair is clearly less damped
+        let m = select_mode(&roots, fs, 3.0, 20.0, Some(8.1), 1.0, 0.005).unwrap();
+        assert!((m.wn_hz - 12.0).abs() < 1e-9);
+        assert!(select_mode(&roots[2..], fs, 3.0, 20.0, None, 1.0, 0.02).is_none());
+    }
 }
