@@ -674,3 +674,54 @@ impl<T: Real> MarginEstimator<T> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_is_validated_and_state_is_small() {
+        let ok = EstimatorConfig::default();
+        assert!(MarginEstimator::<f32>::new(ok).is_ok());
+        let bad = |c: EstimatorConfig| MarginEstimator::<f32>::new(c).err();
+        assert_eq!(
+            bad(EstimatorConfig { ar_order: 1, ..ok }),
+            Some(ConfigError::ArOrder)
+        );
+        assert_eq!(
+            bad(EstimatorConfig { ar_order: 9, ..ok }),
+            Some(ConfigError::ArOrder)
+        );
+        assert_eq!(
+            bad(EstimatorConfig {
+                lambda_fast: 1.0,
+                ..ok
+            }),
+            Some(ConfigError::Lambda)
+        );
+        assert_eq!(
+            bad(EstimatorConfig {
+                decimation: 0,
+                ..ok
+            }),
+            Some(ConfigError::Decimation)
+        );
+        assert_eq!(
+            bad(EstimatorConfig {
+                band_hi_hz: 60.0,
+                ..ok
+            }),
+            Some(ConfigError::Range)
+        );
+        assert_eq!(
+            bad(EstimatorConfig {
+                signal_scale_rad: f32::NAN,
+                ..ok
+            }),
+            Some(ConfigError::Range)
+        );
+        // RAM budget on the target (128 KiB SRAM): the whole f32 mode meter
+        let bytes = core::mem::size_of::<MarginEstimator<f32>>();
+        assert!(bytes < 4096, "MarginEstimator<f32> is {bytes} bytes");
+    }
+}
