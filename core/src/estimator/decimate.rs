@@ -6,11 +6,12 @@
 //! after decimation to f_out, input content at f folds to |f - m f_out|, so the stop band starts
 //! at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB attenuation there
 //! and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band. The pass band is
-//! maximally flat: -0.0002 dB at 20 Hz, about -3 dB near 54 Hz. A flat pass band up to the output
-//! Nyquist matters for the mode meter: a Butterworth cut at 30 Hz leaves a deep spectral null
-//! between 30 and 50 Hz that a low-order AR model cannot represent, and it biased the 8 Hz
-//! damping by +0.035 (0.05 -> 0.085) in a test run; with this filter the bias is gone (see the
-//! accuracy tests). `AntiAliasFilter::gain_db` evaluates the implemented response and a unit
+//! maximally flat: < 1e-5 dB down at 20 Hz, -0.009 dB at 40 Hz, -0.65 dB at 50 Hz, -3 dB at
+//! ~54.6 Hz. A flat pass band up to the output Nyquist matters for the mode meter: an 8th-order
+//! Butterworth cut at 30 Hz (the first design) leaves a deep spectral roll-off between 30 and
+//! 50 Hz that a low-order AR model cannot represent; in an exploratory run (AR(6), 100 Hz) it
+//! biased the 8 Hz damping by +0.035 (0.05 -> 0.085) and the 18 Hz one by -0.05; with this
+//! filter the bias is within the accuracy-test tolerances. `AntiAliasFilter::gain_db` evaluates the implemented response and a unit
 //! test checks it against the closed-form Chebyshev-II magnitude.
 
 use super::real::Real;
