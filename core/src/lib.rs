@@ -11,6 +11,8 @@
 mod fmt;
 
 pub mod control;
+pub mod estimator;
+pub mod monitor;
 pub mod mr_damper;
 pub mod params;
 

@@ -1,0 +1,402 @@
+//! Fusion of the data-driven damping (level) with the model-based slope and critical speed:
+//! "data for the level, model for the slope".
+//!
+//! - speed margin dV = min(dV_data, dV_model), dV_data = max(zeta_hat, 0) / |dzeta/dV|_model,
+//!   dV_model = max(V_crit,model - V, 0) (only when the model reports an onset speed above V);
+//! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
+//!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
+//! - model consistency: |zeta_hat - zeta_model| > k sigma_zeta (k = 3) held for
+//!   `mismatch_hold_s` sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
+//!
+//! The model-based quantities are plain inputs ([`ModelMargin`]) computed by the plant/eigen
+//! code elsewhere.
+
+use super::ModeEstimate;
+
+/// Model-based quantities at the current operating point (f64: the model path).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct ModelMargin {
+    /// Damping ratio of the model's least-damped shimmy mode.
+    pub zeta: f64,
+    /// Its damped frequency, Hz.
+    pub freq_hz: f64,
+    /// Slope d zeta / dV at the current speed, 1/(m/s).
+    pub dzeta_dv_per_mps: f64,
+    /// Onset (Hopf) speed of the linear model above the current speed, if any, m/s.
+    pub v_crit_onset_mps: Option<f64>,
+    /// The model computation succeeded and is current.
+    pub valid: bool,
+}
+
+/// Fusion parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusionParams {
+    /// Mismatch threshold in sigmas (3).
+    pub mismatch_sigmas: f32,
+    /// Mismatch must persist this long to raise the flag, s.
+    pub mismatch_hold_s: f32,
+    /// Agreement must persist this long to clear the flag, s.
+    pub mismatch_release_s: f32,
+    /// Slopes smaller than this (|dzeta/dV|) give no data-based margin, 1/(m/s).
+    pub min_slope_per_mps: f32,
+    /// Accelerations smaller than this give no time-to-critical, m/s^2.
+    pub min_accel_mps2: f32,
+}
+
+impl Default for FusionParams {
+    fn default() -> Self {
+        Self {
+            mismatch_sigmas: 3.0,
+            mismatch_hold_s: 3.0,
+            mismatch_release_s: 3.0,
+            min_slope_per_mps: 1.0e-5,
+            min_accel_mps2: 0.05,
+        }
+    }
+}
+
+/// Which estimate limits the speed margin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum MarginSource {
+    /// No margin available.
+    #[default]
+    None,
+    /// zeta_hat / |dzeta/dV|.
+    Data,
+    /// V_crit,model - V.
+    Model,
+}
+
+/// Inputs of one fusion step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusionInput<'a> {
+    /// Time, s.
+    pub t_s: f32,
+    /// Vehicle speed, m/s.
+    pub speed_mps: f32,
+    /// Vehicle acceleration, m/s^2.
+    pub accel_mps2: f32,
+    /// Fast (warning) data estimate.
+    pub fast: &'a ModeEstimate,
+    /// Slow (margin) data estimate.
+    pub slow: &'a ModeEstimate,
+    /// Model margin, if available.
+    pub model: Option<&'a ModelMargin>,
+}
+
+/// The fused margin report. No field is ever NaN; absent quantities are `None`.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct MarginReport {
+    /// Time, s.
+    pub t_s: f32,
+    /// Speed, m/s.
+    pub speed_mps: f32,
+    /// Data damping (slow instance, for the margin).
+    pub zeta_data: f32,
+    /// Its sigma.
+    pub sigma_zeta_data: f32,
+    /// Data damping (fast instance, for warnings).
+    pub zeta_fast: f32,
+    /// Its sigma.
+    pub sigma_zeta_fast: f32,
+    /// Data mode frequency (slow), Hz.
+    pub freq_hz: f32,
+    /// Model damping.
+    pub zeta_model: Option<f32>,
+    /// Model frequency, Hz.
+    pub freq_model_hz: Option<f32>,
+    /// Speed margin, m/s.
+    pub speed_margin_mps: Option<f32>,
+    /// Which one limits it.
+    pub margin_source: MarginSource,
+    /// Time to the critical speed at the current acceleration, s.
+    pub time_to_critical_s: Option<f32>,
+    /// False when data and model disagree by > k sigma for a sustained time.
+    pub model_consistent: bool,
+    /// The slow data estimate is valid.
+    pub data_valid: bool,
+    /// The fast data estimate is valid.
+    pub fast_valid: bool,
+    /// The report carries a usable margin (data valid and a valid model).
+    pub valid: bool,
+}
+
+/// Fusion state (mismatch timer).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fusion {
+    params: FusionParams,
+    mismatch_since_s: Option<f32>,
+    agree_since_s: Option<f32>,
+    consistent: bool,
+}
+
+fn finite_or(v: f32, d: f32) -> f32 {
+    if v.is_finite() {
+        v
+    } else {
+        d
+    }
+}
+
+impl Fusion {
+    /// New fusion with the given parameters.
+    pub fn new(params: FusionParams) -> Self {
+        Self {
+            params,
+            mismatch_since_s: None,
+            agree_since_s: None,
+            consistent: true,
+        }
+    }
+
+    /// Parameters.
+    pub fn params(&self) -> &FusionParams {
+        &self.params
+    }
+
+    /// One fusion step (any rate; typically every decimated sample or 10 Hz).
+    pub fn update(&mut self, inp: &FusionInput<'_>) -> MarginReport {
+        let t = finite_or(inp.t_s, 0.0);
+        let v = finite_or(inp.speed_mps, 0.0);
+        let a = finite_or(inp.accel_mps2, 0.0);
+        let data_valid = inp.slow.valid;
+        let model = inp
+            .model
+            .filter(|m| m.valid && m.zeta.is_finite() && m.dzeta_dv_per_mps.is_finite());
+
+        let mut r = MarginReport {
+            t_s: t,
+            speed_mps: v,
+            zeta_data: finite_or(inp.slow.zeta, 0.0),
+            sigma_zeta_data: finite_or(inp.slow.sigma_zeta, 0.0),
+            zeta_fast: finite_or(inp.fast.zeta, 0.0),
+            sigma_zeta_fast: finite_or(inp.fast.sigma_zeta, 0.0),
+            freq_hz: finite_or(inp.slow.freq_hz, 0.0),
+            data_valid,
+            fast_valid: inp.fast.valid,
+            ..MarginReport::default()
+        };
+
+        let Some(m) = model else {
+            // No model: no margin, consistency unknown (kept at its last value).
+            r.model_consistent = self.consistent;
+            return r;
+        };
+        r.zeta_model = Some(m.zeta as f32);
+        r.freq_model_hz = m.freq_hz.is_finite().then_some(m.freq_hz as f32);
+
+        let slope = m.dzeta_dv_per_mps;
+        let mut best: Option<(f32, MarginSource)> = None;
+        if data_valid && libm::fabs(slope) >= self.params.min_slope_per_mps as f64 {
+            let dv = (r.zeta_data.max(0.0) as f64 / libm::fabs(slope)) as f32;
+            if dv.is_finite() {
+                best = Some((dv, MarginSource::Data));
+            }
+        }
+        if let Some(vc) = m.v_crit_onset_mps.filter(|x| x.is_finite()) {
+            let dv = (vc - v as f64).max(0.0) as f32;
+            if best.is_none_or(|(b, _)| dv < b) {
+                best = Some((dv, MarginSource::Model));
+            }
+        }
+        if let Some((dv, src)) = best {
+            r.speed_margin_mps = Some(dv);
+            r.margin_source = src;
+            // direction of decreasing damping: +1 (faster) when the slope is negative
+            let dir = if src == MarginSource::Model || slope < 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
+            let closing = a * dir;
+            if closing > self.params.min_accel_mps2 {
+                r.time_to_critical_s = Some(dv / closing);
+            }
+        }
+
+        // consistency with hysteresis in time
+        if data_valid {
+            let sigma = r.sigma_zeta_data.max(1e-6);
+            let mismatch =
+                libm::fabsf(r.zeta_data - m.zeta as f32) > self.params.mismatch_sigmas * sigma;
+            if mismatch {
+                self.agree_since_s = None;
+                let since = *self.mismatch_since_s.get_or_insert(t);
+                if t - since >= self.params.mismatch_hold_s {
+                    self.consistent = false;
+                }
+            } else {
+                self.mismatch_since_s = None;
+                let since = *self.agree_since_s.get_or_insert(t);
+                if t - since >= self.params.mismatch_release_s {
+                    self.consistent = true;
+                }
+            }
+        }
+        r.model_consistent = self.consistent;
+        r.valid = data_valid && r.speed_margin_mps.is_some();
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimator::EstimateStatus;
+
+    fn est(zeta: f32, sigma: f32) -> ModeEstimate {
+        ModeEstimate {
+            zeta,
+            sigma_zeta: sigma,
+            freq_hz: 8.0,
+            wn_hz: 8.0,
+            valid: true,
+            status: EstimateStatus::Ok,
+        }
+    }
+
+    #[test]
+    fn margin_is_min_of_data_and_model() {
+        let mut f = Fusion::new(FusionParams::default());
+        let e = est(0.04, 0.01);
+        let m = ModelMargin {
+            zeta: 0.045,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.004,
+            v_crit_onset_mps: Some(25.0),
+            valid: true,
+        };
+        // data margin 0.04/0.004 = 10 m/s, model margin 25-20 = 5 m/s -> model, ttc 5/0.5 = 10 s
+        let r = f.update(&FusionInput {
+            t_s: 0.0,
+            speed_mps: 20.0,
+            accel_mps2: 0.5,
+            fast: &e,
+            slow: &e,
+            model: Some(&m),
+        });
+        assert_eq!(r.margin_source, MarginSource::Model);
+        assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
+        assert!((r.time_to_critical_s.unwrap() - 10.0).abs() < 1e-4);
+        assert!(r.valid && r.model_consistent);
+        // no onset from the model -> data margin, decelerating -> no time to critical
+        let m2 = ModelMargin {
+            v_crit_onset_mps: None,
+            ..m
+        };
+        let r = f.update(&FusionInput {
+            t_s: 0.1,
+            speed_mps: 20.0,
+            accel_mps2: -0.5,
+            fast: &e,
+            slow: &e,
+            model: Some(&m2),
+        });
+        assert_eq!(r.margin_source, MarginSource::Data);
+        assert!((r.speed_margin_mps.unwrap() - 10.0).abs() < 1e-4);
+        assert_eq!(r.time_to_critical_s, None);
+    }
+
+    #[test]
+    fn mismatch_flag_needs_sustained_disagreement_and_clears_with_hysteresis() {
+        let mut f = Fusion::new(FusionParams::default());
+        let m = ModelMargin {
+            zeta: 0.08,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.004,
+            v_crit_onset_mps: None,
+            valid: true,
+        };
+        let bad = est(0.02, 0.01); // 6 sigma off
+        let good = est(0.075, 0.01);
+        let mut t = 0.0f32;
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
+            f.update(&FusionInput {
+                t_s: t,
+                speed_mps: 20.0,
+                accel_mps2: 0.0,
+                fast: e,
+                slow: e,
+                model: Some(&m),
+            })
+        };
+        // a 2 s excursion does not trip the 3 s hold
+        while t < 2.0 {
+            assert!(step(&mut f, &bad, t).model_consistent);
+            t += 0.01;
+        }
+        assert!(step(&mut f, &good, t).model_consistent);
+        let t0 = t;
+        while t < t0 + 3.5 {
+            step(&mut f, &bad, t);
+            t += 0.01;
+        }
+        assert!(!step(&mut f, &bad, t).model_consistent);
+        // a short agreement does not clear it
+        let t1 = t;
+        while t < t1 + 1.0 {
+            assert!(!step(&mut f, &good, t).model_consistent);
+            t += 0.01;
+        }
+        while t < t1 + 4.5 {
+            step(&mut f, &good, t);
+            t += 0.01;
+        }
+        assert!(step(&mut f, &good, t).model_consistent);
+    }
+
+    #[test]
+    fn nan_inputs_give_no_nan_outputs() {
+        let mut f = Fusion::new(FusionParams::default());
+        let e = ModeEstimate {
+            zeta: f32::NAN,
+            sigma_zeta: f32::NAN,
+            freq_hz: f32::NAN,
+            ..est(0.0, 0.0)
+        };
+        let m = ModelMargin {
+            zeta: f64::NAN,
+            freq_hz: f64::NAN,
+            dzeta_dv_per_mps: f64::NAN,
+            v_crit_onset_mps: Some(f64::NAN),
+            valid: true,
+        };
+        let r = f.update(&FusionInput {
+            t_s: f32::NAN,
+            speed_mps: f32::NAN,
+            accel_mps2: f32::INFINITY,
+            fast: &e,
+            slow: &e,
+            model: Some(&m),
+        });
+        for v in [
+            r.t_s,
+            r.speed_mps,
+            r.zeta_data,
+            r.sigma_zeta_data,
+            r.zeta_fast,
+            r.sigma_zeta_fast,
+            r.freq_hz,
+        ] {
+            assert!(v.is_finite());
+        }
+        assert_eq!(r.zeta_model, None);
+        let m2 = ModelMargin {
+            zeta: 0.05,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.01,
+            v_crit_onset_mps: Some(f64::NAN),
+            valid: true,
+        };
+        let r = f.update(&FusionInput {
+            t_s: 1.0,
+            speed_mps: 10.0,
+            accel_mps2: 1.0,
+            fast: &e,
+            slow: &e,
+            model: Some(&m2),
+        });
+        assert!(r.speed_margin_mps.is_none_or(f32::is_finite));
+        assert!(r.time_to_critical_s.is_none_or(f32::is_finite));
+    }
+}
