@@ -2,3 +2,7 @@
 //! plant, studies (stability, bifurcation, ...) and their reports.
 
 pub mod paramfile;
+pub mod bifurcation;
+pub mod disturbance;
+pub mod integrator;
+pub mod plant;
