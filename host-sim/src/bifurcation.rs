@@ -203,14 +203,21 @@ pub struct BifurcationRow {
 
 /// Runs the study in parallel over speeds (both starts per speed).
 pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRow>> {
-    anyhow::ensure!(o.step_kmh > 0.0 && o.v_max_kmh >= o.v_min_kmh, "bad speed grid");
+    anyhow::ensure!(
+        o.step_kmh > 0.0 && o.v_max_kmh >= o.v_min_kmh,
+        "bad speed grid"
+    );
     let n = ((o.v_max_kmh - o.v_min_kmh) / o.step_kmh + 1e-9).floor() as usize + 1;
-    let speeds: Vec<f64> = (0..n).map(|k| o.v_min_kmh + k as f64 * o.step_kmh).collect();
+    let speeds: Vec<f64> = (0..n)
+        .map(|k| o.v_min_kmh + k as f64 * o.step_kmh)
+        .collect();
     let bar = if progress {
         let b = ProgressBar::new(2 * n as u64);
         b.set_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} runs  {elapsed_precise} (eta {eta})")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} runs  {elapsed_precise} (eta {eta})",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
         b
     } else {
@@ -316,7 +323,10 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
 }
 
 /// First and last grid speed where `pred` holds, if any.
-pub fn window(rows: &[BifurcationRow], pred: impl Fn(&BifurcationRow) -> bool) -> Option<(f64, f64)> {
+pub fn window(
+    rows: &[BifurcationRow],
+    pred: impl Fn(&BifurcationRow) -> bool,
+) -> Option<(f64, f64)> {
     let hits: Vec<f64> = rows.iter().filter(|r| pred(r)).map(|r| r.v_kmh).collect();
     Some((*hits.first()?, *hits.last()?))
 }
@@ -358,7 +368,10 @@ fn plot(path: &Path, rows: &[BifurcationRow], o: &BifurcationOptions, damper: &s
         * 1.1;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("Wheel-yaw limit-cycle amplitude vs speed (`{}`, {damper})", o.params_name),
+            format!(
+                "Wheel-yaw limit-cycle amplitude vs speed (`{}`, {damper})",
+                o.params_name
+            ),
             ("sans-serif", 22),
         )
         .margin(15)
@@ -385,7 +398,9 @@ fn plot(path: &Path, rows: &[BifurcationRow], o: &BifurcationOptions, damper: &s
         chart
             .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
             .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
         let marker = if small { 4 } else { 6 };
         chart.draw_series(pts.iter().map(|&(x, y)| {
             if small {

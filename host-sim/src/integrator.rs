@@ -118,7 +118,13 @@ impl<const N: usize> Dopri5<N> {
 
     /// Integrates `y` from `t0` to `t0 + dt` with `f(t, y, dy)`. The step size is adapted to the
     /// tolerances and carried over to the next call.
-    pub fn integrate<F>(&mut self, f: &mut F, t0: f64, y: &mut [f64; N], dt: f64) -> Result<(), IntegrateError>
+    pub fn integrate<F>(
+        &mut self,
+        f: &mut F,
+        t0: f64,
+        y: &mut [f64; N],
+        dt: f64,
+    ) -> Result<(), IntegrateError>
     where
         F: FnMut(f64, &[f64; N], &mut [f64; N]),
     {
@@ -130,7 +136,8 @@ impl<const N: usize> Dopri5<N> {
         if self.h <= 0.0 {
             self.h = self.initial_step(y, &k1, dt);
         }
-        let (mut k2, mut k3, mut k4, mut k5, mut k6, mut k7) = ([0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N]);
+        let (mut k2, mut k3, mut k4, mut k5, mut k6, mut k7) =
+            ([0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N]);
         let mut yt = [0.0; N];
         let mut y_new = [0.0; N];
         // PI controller constants (Hairer's DOPRI5 defaults).
@@ -167,18 +174,21 @@ impl<const N: usize> Dopri5<N> {
             }
             f(t + C5 * h, &yt, &mut k5);
             for i in 0..N {
-                yt[i] = y[i] + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
+                yt[i] = y[i]
+                    + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
             }
             let t_new = if last { t_end } else { t + h };
             f(t_new, &yt, &mut k6);
             for i in 0..N {
-                y_new[i] = y[i] + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
+                y_new[i] = y[i]
+                    + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
             }
             f(t_new, &y_new, &mut k7);
             self.stats.evaluations += 6;
             let mut err2 = 0.0;
             for i in 0..N {
-                let e = h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+                let e = h
+                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
                 let sc = self.atol[i] + self.rtol * y[i].abs().max(y_new[i].abs());
                 err2 += (e / sc) * (e / sc);
             }

@@ -424,7 +424,10 @@ impl Trace {
         for n in STATE_NAMES {
             write!(w, ",{n}")?;
         }
-        writeln!(w, ",damper_force_n,current_cmd_a,speed_mps,driver_torque_nm")?;
+        writeln!(
+            w,
+            ",damper_force_n,current_cmd_a,speed_mps,driver_torque_nm"
+        )?;
         for k in 0..self.t_s.len() {
             write!(w, "{}", self.t_s[k])?;
             for v in &self.x[k] {
@@ -433,7 +436,10 @@ impl Trace {
             writeln!(
                 w,
                 ",{},{},{},{}",
-                self.damper_force_n[k], self.current_cmd_a[k], self.speed_mps[k], self.driver_torque_nm[k]
+                self.damper_force_n[k],
+                self.current_cmd_a[k],
+                self.speed_mps[k],
+                self.driver_torque_nm[k]
             )?;
         }
         w.flush()
@@ -503,13 +509,17 @@ pub fn eigenvalues(a: &DMatrix<f64>) -> Option<Vec<(f64, f64)>> {
     Some(ev.iter().map(|c| (c.re, c.im)).collect())
 }
 
+/// Eigenvalues `(re [1/s], im [rad/s])` of the FD Jacobian at `v_mps`.
+pub fn fd_eigenvalues(params: &PlantParams, v_mps: f64) -> Option<Vec<(f64, f64)>> {
+    let j = jacobian_fd(params, v_mps);
+    eigenvalues(&DMatrix::from_column_slice(N_PLANT, N_PLANT, j.as_slice()))
+}
+
 /// The least-damped oscillatory eigenvalue (largest real part among those with imaginary part
 /// > 1 rad/s) of the FD Jacobian at `v_mps`: `(re [1/s], im [rad/s])`.
 pub fn least_damped_mode(params: &PlantParams, v_mps: f64) -> Option<(f64, f64)> {
-    let j = jacobian_fd(params, v_mps);
-    let d = DMatrix::from_column_slice(N_PLANT, N_PLANT, j.as_slice());
-    let ev = eigenvalues(&d)?;
-    ev.into_iter()
+    fd_eigenvalues(params, v_mps)?
+        .into_iter()
         .filter(|&(_, im)| im > 1.0)
         .max_by(|a, b| a.0.total_cmp(&b.0))
 }
@@ -545,7 +555,11 @@ mod tests {
             ((9, 9), -v / p.sigma),
         ];
         for ((r, c), want) in checks {
-            assert!(close(j[(r, c)], want), "J[{r},{c}] = {} vs {want}", j[(r, c)]);
+            assert!(
+                close(j[(r, c)], want),
+                "J[{r},{c}] = {} vs {want}",
+                j[(r, c)]
+            );
         }
         assert_eq!(j[(8, 1)], 0.0);
         assert_eq!(j[(5, 3)], 0.0);
