@@ -199,6 +199,9 @@ pub struct BifurcationRow {
     pub small: RunSummary,
     /// From the large start.
     pub large: RunSummary,
+    /// Real part [1/s] of the least-damped oscillatory eigenvalue of the FD Jacobian at this
+    /// speed (no damper, linear tyres): the linear prediction to compare with.
+    pub eig_re_per_s: f64,
 }
 
 /// Runs the study in parallel over speeds (both starts per speed).
@@ -259,7 +262,10 @@ pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRo
         .iter()
         .enumerate()
         .map(|(i, &v)| {
+            let eig_re_per_s =
+                crate::plant::least_damped_mode(&o.params, kmh_to_mps(v)).map_or(f64::NAN, |e| e.0);
             Ok(BifurcationRow {
+                eig_re_per_s,
                 v_kmh: v,
                 small: small[i].context("missing run")?,
                 large: large[i].context("missing run")?,
@@ -283,23 +289,26 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
         o.params_name, o.duration_s, o.window_s
     );
     println!(
-        "{:>8} | {:>10} {:>9} | {:>10} {:>9}",
+        "{:>8} | {:>10} {:>9} | {:>10} {:>9} | {:>14}",
         "V km/h",
         format!("{}deg amp", o.small_deg),
         "trend",
         format!("{}deg amp", o.large_deg),
-        "trend"
+        "trend",
+        "eig re 1/s (*)"
     );
     for r in &rows {
         println!(
-            "{:>8.1} | {:>10.4} {:>9} | {:>10.4} {:>9}",
+            "{:>8.1} | {:>10.4} {:>9} | {:>10.4} {:>9} | {:>14.4}",
             r.v_kmh,
             r.small.amp_end_rad.to_degrees(),
             r.small.trend.name(),
             r.large.amp_end_rad.to_degrees(),
-            r.large.trend.name()
+            r.large.trend.name(),
+            r.eig_re_per_s
         );
     }
+    println!("amplitudes in deg; (*) least-damped eigenvalue of the FD Jacobian, no damper");
     if let Some((lo, hi)) = window(&rows, |r| r.small.shimmies()) {
         println!("small disturbances end in shimmy from {lo} to {hi} km/h (grid points)");
     } else {
@@ -335,12 +344,12 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
     writeln!(
         w,
-        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend"
+        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_no_damper_per_s"
     )?;
     for r in rows {
         writeln!(
             w,
-            "{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{}",
             r.v_kmh,
             r.small.psi0_rad.to_degrees(),
             r.small.amp_end_rad.to_degrees(),
@@ -349,7 +358,8 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
             r.large.psi0_rad.to_degrees(),
             r.large.amp_end_rad.to_degrees(),
             r.large.amp_prev_rad.to_degrees(),
-            r.large.trend.name()
+            r.large.trend.name(),
+            r.eig_re_per_s
         )?;
     }
     w.flush()?;
@@ -482,4 +492,51 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         window_s: a.window_s,
         out: a.out.clone(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peak_fit_recovers_a_damped_sine() {
+        let (sigma, w) = (-0.7, 2.0 * std::f64::consts::PI * 6.3);
+        let dt = 1e-3;
+        let s: Vec<f64> = (0..3000)
+            .map(|k| {
+                let t = k as f64 * dt;
+                (sigma * t).exp() * (w * t + 0.3).sin()
+            })
+            .collect();
+        let (r, om) = fit_growth(&peaks(0.0, dt, &s)).expect("fit");
+        // Peaks of e^{st} sin(wt) are spaced exactly 2 pi / w and decay by e^{s T}: the fit is
+        // exact up to the parabolic refinement (~1e-5 here).
+        assert!((r - sigma).abs() < 1e-3 * sigma.abs(), "{r}");
+        assert!((om - w).abs() < 1e-4 * w, "{om}");
+    }
+
+    #[test]
+    fn command_writes_table_csv_and_png() {
+        let out = std::env::temp_dir().join(format!("shimmy-bif-{}", std::process::id()));
+        let o = BifurcationOptions {
+            params: PlantParams::nominal(),
+            params_name: "nominal".into(),
+            damper: DamperSetting::Off,
+            v_min_kmh: 10.0,
+            v_max_kmh: 60.0,
+            step_kmh: 25.0,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 2.0,
+            window_s: 0.5,
+            out: out.clone(),
+        };
+        run(&o).expect("run");
+        let csv = std::fs::read_to_string(out.join("bifurcation.csv")).expect("csv");
+        assert!(csv.starts_with("v_kmh,small_start_deg,small_amp_deg"));
+        assert_eq!(csv.lines().count(), 1 + 3);
+        let png = std::fs::read(out.join("bifurcation.png")).expect("png");
+        assert_eq!(&png[1..4], b"PNG");
+        std::fs::remove_dir_all(&out).ok();
+    }
 }
