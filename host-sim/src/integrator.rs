@@ -93,6 +93,7 @@ pub struct Dopri5<const N: usize> {
     pub h_min: f64,
     h: f64,
     err_old: f64,
+    k_last: [f64; N],
     /// Running totals.
     pub stats: StepStats,
 }
@@ -107,6 +108,7 @@ impl<const N: usize> Dopri5<N> {
             h_min: 1e-12,
             h: 0.0,
             err_old: 1e-4,
+            k_last: [0.0; N],
             stats: StepStats::default(),
         }
     }
@@ -128,11 +130,33 @@ impl<const N: usize> Dopri5<N> {
     where
         F: FnMut(f64, &[f64; N], &mut [f64; N]),
     {
+        self.integrate_fsal(f, t0, y, dt, false)
+    }
+
+    /// As [`integrate`](Self::integrate); with `reuse_derivative` the derivative at the start is
+    /// taken from the end of the previous call (first-same-as-last across calls). Only valid when
+    /// `f` and `y` are exactly those the previous call ended with (same held input, state not
+    /// modified in between): the caller guarantees it.
+    pub fn integrate_fsal<F>(
+        &mut self,
+        f: &mut F,
+        t0: f64,
+        y: &mut [f64; N],
+        dt: f64,
+        reuse_derivative: bool,
+    ) -> Result<(), IntegrateError>
+    where
+        F: FnMut(f64, &[f64; N], &mut [f64; N]),
+    {
         let t_end = t0 + dt;
         let mut t = t0;
         let mut k1 = [0.0; N];
-        f(t, y, &mut k1);
-        self.stats.evaluations += 1;
+        if reuse_derivative && self.h > 0.0 {
+            k1 = self.k_last;
+        } else {
+            f(t, y, &mut k1);
+            self.stats.evaluations += 1;
+        }
         if self.h <= 0.0 {
             self.h = self.initial_step(y, &k1, dt);
         }
@@ -224,6 +248,7 @@ impl<const N: usize> Dopri5<N> {
                 last_rejected = true;
             }
         }
+        self.k_last = k1;
         if y.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
