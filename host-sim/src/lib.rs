@@ -1,4 +1,8 @@
 //! shimmy-sim: the std host simulator around `shimmy-core`: parameter files, the nonlinear
 //! plant, studies (stability, bifurcation, ...) and their reports.
 
+pub mod bifurcation;
+pub mod disturbance;
+pub mod integrator;
 pub mod paramfile;
+pub mod plant;

@@ -21,12 +21,16 @@ enum Command {
         #[arg(default_value = "nominal")]
         params: String,
     },
+    /// Time-domain bifurcation diagram of the nonlinear plant: limit-cycle amplitude vs speed
+    /// from a small and a large initial wheel-yaw disturbance (table, CSV, PNG).
+    Bifurcation(shimmy_sim::bifurcation::BifurcationArgs),
 }
 
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Params { params }) => print_params(&params),
+        Some(Command::Bifurcation(args)) => shimmy_sim::bifurcation::command(&args),
         // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
         None => print_params("nominal"),
     }

@@ -1,0 +1,542 @@
+//! Time-domain bifurcation study of the nonlinear plant: for each speed, runs from a small and a
+//! large initial wheel-yaw disturbance and measures the settled oscillation amplitude (peak
+//! |psi_L| over the last window) and whether it still grows or decays. Also the peak-tracking
+//! analysis used to compare time-domain growth rates with eigenvalues.
+
+use crate::disturbance::initial_yaw;
+use crate::integrator::IntegrateError;
+use crate::plant::{idx, Damper, Inputs, Plant, Simulator};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use shimmy_core::mr_damper::SpencerParams;
+use shimmy_core::params::{kmh_to_mps, PlantParams};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Control period of the runs [s] (inputs held per period, as in closed loop).
+pub const DT_S: f64 = 1e-3;
+
+/// What a run's oscillation does at its end.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Trend {
+    /// Amplitude in the last window > 1.02 x the window before.
+    Growing,
+    /// Amplitude in the last window < 0.98 x the window before.
+    Decaying,
+    /// Within +-2 %: a settled limit cycle (or rest).
+    Steady,
+}
+
+impl Trend {
+    /// Label for tables and CSV.
+    pub fn name(self) -> &'static str {
+        match self {
+            Trend::Growing => "growing",
+            Trend::Decaying => "decaying",
+            Trend::Steady => "steady",
+        }
+    }
+}
+
+/// Result of one run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunSummary {
+    /// Speed [m/s].
+    pub v_mps: f64,
+    /// Initial in-phase wheel yaw [rad].
+    pub psi0_rad: f64,
+    /// Peak |psi_L| over the last window [rad].
+    pub amp_end_rad: f64,
+    /// Peak |psi_L| over the window before it [rad].
+    pub amp_prev_rad: f64,
+    /// Classification of the end.
+    pub trend: Trend,
+}
+
+impl RunSummary {
+    /// Shimmy at the end of the run: an oscillation that is not dying out and is larger than
+    /// 1e-4 rad (0.006 deg; below the default small start of 0.05 deg = 8.7e-4 rad).
+    pub fn shimmies(&self) -> bool {
+        self.trend != Trend::Decaying && self.amp_end_rad > 1e-4
+    }
+}
+
+/// The damper configuration of a study.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DamperSetting {
+    /// No damper (F_d = 0).
+    Off,
+    /// The MR damper with a constant coil current [A].
+    Current(f64),
+}
+
+impl DamperSetting {
+    fn plant(self, params: &PlantParams) -> (Plant, f64) {
+        match self {
+            DamperSetting::Off => (Plant::new(*params, Damper::None), 0.0),
+            DamperSetting::Current(i) => (
+                Plant::new(*params, Damper::Mr(SpencerParams::steering())),
+                i,
+            ),
+        }
+    }
+}
+
+/// Runs the plant at constant speed `v_mps` from an in-phase wheel-yaw start `psi0_rad` for
+/// `duration_s` and summarises the last two windows of `window_s`.
+pub fn run_speed(
+    params: &PlantParams,
+    damper: DamperSetting,
+    v_mps: f64,
+    psi0_rad: f64,
+    duration_s: f64,
+    window_s: f64,
+) -> Result<RunSummary, IntegrateError> {
+    let (plant, current) = damper.plant(params);
+    let mut sim = Simulator::new(plant, initial_yaw(psi0_rad));
+    let u = Inputs {
+        current_cmd_a: current,
+        speed_mps: v_mps,
+        ..Inputs::default()
+    };
+    let n = (duration_s / DT_S).round() as usize;
+    let w = (window_s / DT_S).round() as usize;
+    let (mut amp_end, mut amp_prev) = (0.0f64, 0.0f64);
+    for k in 0..n {
+        sim.advance(DT_S, &u)?;
+        let a = sim.state()[idx::PSI_L].abs();
+        if k + w >= n {
+            amp_end = amp_end.max(a);
+        } else if k + 2 * w >= n {
+            amp_prev = amp_prev.max(a);
+        }
+    }
+    let trend = if amp_end > 1.02 * amp_prev {
+        Trend::Growing
+    } else if amp_end < 0.98 * amp_prev {
+        Trend::Decaying
+    } else {
+        Trend::Steady
+    };
+    Ok(RunSummary {
+        v_mps,
+        psi0_rad,
+        amp_end_rad: amp_end,
+        amp_prev_rad: amp_prev,
+        trend,
+    })
+}
+
+/// Local maxima of a uniformly sampled signal, refined by a parabola through the three samples
+/// around each: `(time [s], value)`.
+pub fn peaks(t0_s: f64, dt_s: f64, s: &[f64]) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    for k in 1..s.len().saturating_sub(1) {
+        let (a, b, c) = (s[k - 1], s[k], s[k + 1]);
+        if b > a && b >= c {
+            let den = a - 2.0 * b + c;
+            let off = if den != 0.0 { 0.5 * (a - c) / den } else { 0.0 };
+            let val = b - 0.25 * (a - c) * off;
+            out.push((t0_s + (k as f64 + off) * dt_s, val));
+        }
+    }
+    out
+}
+
+/// Growth rate [1/s] and angular frequency [rad/s] from successive positive peaks: least-squares
+/// line through ln(peak) over time, and the mean peak spacing. `None` with fewer than 3 peaks.
+pub fn fit_growth(pk: &[(f64, f64)]) -> Option<(f64, f64)> {
+    if pk.len() < 3 || pk.iter().any(|p| p.1 <= 0.0) {
+        return None;
+    }
+    let n = pk.len() as f64;
+    let mt = pk.iter().map(|p| p.0).sum::<f64>() / n;
+    let ml = pk.iter().map(|p| p.1.ln()).sum::<f64>() / n;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for p in pk {
+        sxy += (p.0 - mt) * (p.1.ln() - ml);
+        sxx += (p.0 - mt) * (p.0 - mt);
+    }
+    let rate = sxy / sxx;
+    let period = (pk[pk.len() - 1].0 - pk[0].0) / (n - 1.0);
+    Some((rate, 2.0 * std::f64::consts::PI / period))
+}
+
+/// Options of the `bifurcation` command.
+#[derive(Clone, Debug)]
+pub struct BifurcationOptions {
+    /// Parameter set.
+    pub params: PlantParams,
+    /// Name of the parameter set (for titles).
+    pub params_name: String,
+    /// Damper setting.
+    pub damper: DamperSetting,
+    /// Speed grid [km/h].
+    pub v_min_kmh: f64,
+    /// Speed grid [km/h].
+    pub v_max_kmh: f64,
+    /// Speed grid [km/h].
+    pub step_kmh: f64,
+    /// Small start [deg].
+    pub small_deg: f64,
+    /// Large start [deg].
+    pub large_deg: f64,
+    /// Run length [s].
+    pub duration_s: f64,
+    /// Measurement window [s].
+    pub window_s: f64,
+    /// Output directory.
+    pub out: PathBuf,
+}
+
+/// One row of the study.
+#[derive(Clone, Copy, Debug)]
+pub struct BifurcationRow {
+    /// Speed [km/h].
+    pub v_kmh: f64,
+    /// From the small start.
+    pub small: RunSummary,
+    /// From the large start.
+    pub large: RunSummary,
+    /// Real part [1/s] of the least-damped oscillatory eigenvalue of the FD Jacobian at this
+    /// speed (no damper, linear tyres): the linear prediction to compare with.
+    pub eig_re_per_s: f64,
+}
+
+/// Runs the study in parallel over speeds (both starts per speed).
+pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRow>> {
+    anyhow::ensure!(
+        o.step_kmh > 0.0 && o.v_max_kmh >= o.v_min_kmh,
+        "bad speed grid"
+    );
+    let n = ((o.v_max_kmh - o.v_min_kmh) / o.step_kmh + 1e-9).floor() as usize + 1;
+    let speeds: Vec<f64> = (0..n)
+        .map(|k| o.v_min_kmh + k as f64 * o.step_kmh)
+        .collect();
+    let bar = if progress {
+        let b = ProgressBar::new(2 * n as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{bar:40} {pos}/{len} runs  {elapsed_precise} (eta {eta})",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let jobs: Vec<(usize, f64, f64)> = speeds
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &v)| [(i, v, o.small_deg), (i, v, o.large_deg)])
+        .collect();
+    let results: Vec<Result<(usize, RunSummary)>> = jobs
+        .par_iter()
+        .map(|&(i, v_kmh, deg)| {
+            let r = run_speed(
+                &o.params,
+                o.damper,
+                kmh_to_mps(v_kmh),
+                deg.to_radians(),
+                o.duration_s,
+                o.window_s,
+            )
+            .with_context(|| format!("run at {v_kmh} km/h from {deg} deg"))?;
+            bar.inc(1);
+            Ok((i, r))
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut small = vec![None; n];
+    let mut large = vec![None; n];
+    for r in results {
+        let (i, s) = r?;
+        if (s.psi0_rad - o.small_deg.to_radians()).abs() < 1e-15 {
+            small[i] = Some(s);
+        } else {
+            large[i] = Some(s);
+        }
+    }
+    speeds
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            let eig_re_per_s =
+                crate::plant::least_damped_mode(&o.params, kmh_to_mps(v)).map_or(f64::NAN, |e| e.0);
+            Ok(BifurcationRow {
+                eig_re_per_s,
+                v_kmh: v,
+                small: small[i].context("missing run")?,
+                large: large[i].context("missing run")?,
+            })
+        })
+        .collect()
+}
+
+/// The `bifurcation` command: sweep, table, CSV, PNG.
+pub fn run(o: &BifurcationOptions) -> Result<()> {
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let t0 = std::time::Instant::now();
+    let rows = sweep(o, true)?;
+    let wall = t0.elapsed().as_secs_f64();
+    let damper = match o.damper {
+        DamperSetting::Off => "no damper".to_string(),
+        DamperSetting::Current(i) => format!("MR damper at {i} A"),
+    };
+    println!(
+        "bifurcation: `{}`, {damper}; {} s runs, amplitude = peak |psi_L| over the last {} s",
+        o.params_name, o.duration_s, o.window_s
+    );
+    println!(
+        "{:>8} | {:>10} {:>9} | {:>10} {:>9} | {:>14}",
+        "V km/h",
+        format!("{}deg amp", o.small_deg),
+        "trend",
+        format!("{}deg amp", o.large_deg),
+        "trend",
+        "eig re 1/s (*)"
+    );
+    for r in &rows {
+        println!(
+            "{:>8.1} | {:>10.4} {:>9} | {:>10.4} {:>9} | {:>14.4}",
+            r.v_kmh,
+            r.small.amp_end_rad.to_degrees(),
+            r.small.trend.name(),
+            r.large.amp_end_rad.to_degrees(),
+            r.large.trend.name(),
+            r.eig_re_per_s
+        );
+    }
+    println!("amplitudes in deg; (*) least-damped eigenvalue of the FD Jacobian, no damper");
+    if let Some((lo, hi)) = window(&rows, |r| r.small.shimmies()) {
+        println!("small disturbances end in shimmy from {lo} to {hi} km/h (grid points)");
+    } else {
+        println!("small disturbances decay at every speed of the grid");
+    }
+    if let Some((lo, hi)) = window(&rows, |r| r.large.shimmies()) {
+        println!("large disturbances end in shimmy from {lo} to {hi} km/h (grid points)");
+    }
+    let simulated = 2.0 * rows.len() as f64 * o.duration_s;
+    println!(
+        "{} runs, {simulated:.0} s simulated in {wall:.1} s wall ({:.0}x real time over all cores)",
+        2 * rows.len(),
+        simulated / wall
+    );
+    let csv = o.out.join("bifurcation.csv");
+    write_csv(&csv, &rows)?;
+    let png = o.out.join("bifurcation.png");
+    plot(&png, &rows, o, &damper)?;
+    println!("wrote {} and {}", csv.display(), png.display());
+    Ok(())
+}
+
+/// First and last grid speed where `pred` holds, if any.
+pub fn window(
+    rows: &[BifurcationRow],
+    pred: impl Fn(&BifurcationRow) -> bool,
+) -> Option<(f64, f64)> {
+    let hits: Vec<f64> = rows.iter().filter(|r| pred(r)).map(|r| r.v_kmh).collect();
+    Some((*hits.first()?, *hits.last()?))
+}
+
+fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    writeln!(
+        w,
+        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_no_damper_per_s"
+    )?;
+    for r in rows {
+        writeln!(
+            w,
+            "{},{},{},{},{},{},{},{},{},{}",
+            r.v_kmh,
+            r.small.psi0_rad.to_degrees(),
+            r.small.amp_end_rad.to_degrees(),
+            r.small.amp_prev_rad.to_degrees(),
+            r.small.trend.name(),
+            r.large.psi0_rad.to_degrees(),
+            r.large.amp_end_rad.to_degrees(),
+            r.large.amp_prev_rad.to_degrees(),
+            r.large.trend.name(),
+            r.eig_re_per_s
+        )?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+fn plot(path: &Path, rows: &[BifurcationRow], o: &BifurcationOptions, damper: &str) -> Result<()> {
+    use plotters::prelude::*;
+    let root = BitMapBackend::new(path, (1000, 620)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let y_max = rows
+        .iter()
+        .map(|r| r.small.amp_end_rad.max(r.large.amp_end_rad).to_degrees())
+        .fold(0.0f64, f64::max)
+        .max(o.large_deg)
+        * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "Wheel-yaw limit-cycle amplitude vs speed (`{}`, {damper})",
+                o.params_name
+            ),
+            ("sans-serif", 22),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(o.v_min_kmh..o.v_max_kmh, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("speed V [km/h]")
+        .y_desc(format!("peak |psi_L| over last {} s [deg]", o.window_s))
+        .draw()?;
+    let series = [
+        (format!("start {} deg", o.small_deg), BLUE, true),
+        (format!("start {} deg", o.large_deg), RED, false),
+    ];
+    for (label, color, small) in series {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| {
+                let s = if small { r.small } else { r.large };
+                (r.v_kmh, s.amp_end_rad.to_degrees())
+            })
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        let marker = if small { 4 } else { 6 };
+        chart.draw_series(pts.iter().map(|&(x, y)| {
+            if small {
+                Circle::new((x, y), marker, color.filled()).into_dyn()
+            } else {
+                Cross::new((x, y), marker, color.stroke_width(2)).into_dyn()
+            }
+        }))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// Command-line arguments of `shimmy-sim bifurcation`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct BifurcationArgs {
+    /// Named parameter set or TOML file.
+    #[arg(long, default_value = "nominal")]
+    pub params: String,
+    /// Fit the MR damper and hold this coil current [A]; without it there is no damper (F_d = 0).
+    #[arg(long)]
+    pub damper_current: Option<f64>,
+    /// Lowest speed [km/h].
+    #[arg(long, default_value_t = 5.0)]
+    pub v_min_kmh: f64,
+    /// Highest speed [km/h].
+    #[arg(long, default_value_t = 130.0)]
+    pub v_max_kmh: f64,
+    /// Speed step [km/h].
+    #[arg(long, default_value_t = 2.5)]
+    pub step_kmh: f64,
+    /// Small initial in-phase wheel yaw [deg].
+    #[arg(long, default_value_t = 0.05)]
+    pub small_deg: f64,
+    /// Large initial in-phase wheel yaw [deg].
+    #[arg(long, default_value_t = 3.0)]
+    pub large_deg: f64,
+    /// Length of each run [s].
+    #[arg(long, default_value_t = 40.0)]
+    pub duration_s: f64,
+    /// Amplitude window at the end of each run [s] (the trend compares it with the one before).
+    #[arg(long, default_value_t = 3.0)]
+    pub window_s: f64,
+    /// Output directory.
+    #[arg(long, default_value = "out/bifurcation")]
+    pub out: PathBuf,
+}
+
+/// Entry point of `shimmy-sim bifurcation`.
+pub fn command(a: &BifurcationArgs) -> Result<()> {
+    let params = crate::paramfile::load(&a.params)?;
+    anyhow::ensure!(
+        a.duration_s >= 2.0 * a.window_s && a.window_s > 0.0,
+        "--duration-s must be at least twice --window-s"
+    );
+    let damper = match a.damper_current {
+        None => DamperSetting::Off,
+        Some(i) => {
+            anyhow::ensure!(i.is_finite() && i >= 0.0, "--damper-current must be >= 0 A");
+            DamperSetting::Current(i)
+        }
+    };
+    run(&BifurcationOptions {
+        params,
+        params_name: a.params.clone(),
+        damper,
+        v_min_kmh: a.v_min_kmh,
+        v_max_kmh: a.v_max_kmh,
+        step_kmh: a.step_kmh,
+        small_deg: a.small_deg,
+        large_deg: a.large_deg,
+        duration_s: a.duration_s,
+        window_s: a.window_s,
+        out: a.out.clone(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peak_fit_recovers_a_damped_sine() {
+        let (sigma, w) = (-0.7, 2.0 * std::f64::consts::PI * 6.3);
+        let dt = 1e-3;
+        let s: Vec<f64> = (0..3000)
+            .map(|k| {
+                let t = k as f64 * dt;
+                (sigma * t).exp() * (w * t + 0.3).sin()
+            })
+            .collect();
+        let (r, om) = fit_growth(&peaks(0.0, dt, &s)).expect("fit");
+        // Peaks of e^{st} sin(wt) are spaced exactly 2 pi / w and decay by e^{s T}: the fit is
+        // exact up to the parabolic refinement (~1e-5 here).
+        assert!((r - sigma).abs() < 1e-3 * sigma.abs(), "{r}");
+        assert!((om - w).abs() < 1e-4 * w, "{om}");
+    }
+
+    #[test]
+    fn command_writes_table_csv_and_png() {
+        let out = std::env::temp_dir().join(format!("shimmy-bif-{}", std::process::id()));
+        let o = BifurcationOptions {
+            params: PlantParams::nominal(),
+            params_name: "nominal".into(),
+            damper: DamperSetting::Off,
+            v_min_kmh: 10.0,
+            v_max_kmh: 60.0,
+            step_kmh: 25.0,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 2.0,
+            window_s: 0.5,
+            out: out.clone(),
+        };
+        run(&o).expect("run");
+        let csv = std::fs::read_to_string(out.join("bifurcation.csv")).expect("csv");
+        assert!(csv.starts_with("v_kmh,small_start_deg,small_amp_deg"));
+        assert_eq!(csv.lines().count(), 1 + 3);
+        let png = std::fs::read(out.join("bifurcation.png")).expect("png");
+        assert_eq!(&png[1..4], b"PNG");
+        std::fs::remove_dir_all(&out).ok();
+    }
+}
