@@ -61,12 +61,15 @@ pub fn eigenvalues_bounded(
     if !(eps.is_finite() && eps > 0.0) {
         return Err(EigenError::NonFinite);
     }
-    if a.iter().any(|v| !v.is_finite() || libm::fabs(*v) > MAX_ABS_ENTRY) {
+    if a.iter()
+        .any(|v| !v.is_finite() || libm::fabs(*v) > MAX_ABS_ENTRY)
+    {
         return Err(EigenError::NonFinite);
     }
     let mut m = *a;
     let _scaling = nalgebra::linalg::balancing::balance_parlett_reinsch(&mut m);
-    let schur = nalgebra::linalg::Schur::try_new(m, eps, max_niter).ok_or(EigenError::NotConverged)?;
+    let schur =
+        nalgebra::linalg::Schur::try_new(m, eps, max_niter).ok_or(EigenError::NotConverged)?;
     let vals = schur.complex_eigenvalues();
     let mut out = [Complex::new(0.0, 0.0); N_STATES];
     for (o, v) in out.iter_mut().zip(vals.iter()) {
@@ -124,7 +127,8 @@ pub fn is_oscillatory(s: Complex<f64>) -> bool {
 
 /// Largest real part over all eigenvalues [1/s].
 pub fn max_real_part(vals: &Eigenvalues) -> f64 {
-    vals.iter().fold(f64::NEG_INFINITY, |m, v| if v.re > m { v.re } else { m })
+    vals.iter()
+        .fold(f64::NEG_INFINITY, |m, v| if v.re > m { v.re } else { m })
 }
 
 /// The oscillatory mode with the largest real part (the one that crosses at a Hopf point).
@@ -205,17 +209,14 @@ fn inverse_iteration(
         v = v.map(|c| c.conj());
     }
     // Phase normalisation: largest entry real positive.
-    let (imax, _) = v
-        .iter()
-        .enumerate()
-        .fold((0, -1.0), |(bi, bn), (i, c)| {
-            let n = cabs(*c);
-            if n > bn {
-                (i, n)
-            } else {
-                (bi, bn)
-            }
-        });
+    let (imax, _) = v.iter().enumerate().fold((0, -1.0), |(bi, bn), (i, c)| {
+        let n = cabs(*c);
+        if n > bn {
+            (i, n)
+        } else {
+            (bi, bn)
+        }
+    });
     let pivot = v[imax];
     let pn = cabs(pivot);
     if pn > 0.0 {
@@ -294,7 +295,11 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
     let wheel_amp = cabs(v[PSI_L]).max(cabs(v[PSI_R]));
     let disp = wheel_amp.max(cabs(v[PHI])).max(cabs(v[THETA_SW]) / i_s);
     let tyre = cabs(v[A_L]).max(cabs(v[A_R]));
-    let tyre_ratio = if disp > 0.0 { tyre / disp } else { f64::INFINITY };
+    let tyre_ratio = if disp > 0.0 {
+        tyre / disp
+    } else {
+        f64::INFINITY
+    };
     let steering_wheel_ratio = if wheel_amp > 0.0 {
         cabs(v[THETA_SW]) / (i_s * wheel_amp)
     } else {

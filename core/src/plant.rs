@@ -129,7 +129,11 @@ pub fn second_order(p: &PlantParams, v_mps: f64, c_damper_nspm: f64) -> SecondOr
 ///
 /// Rows 0..4 are the kinematic identities `q' = dq`; rows 4..8 are `M^-1 (-K q - C dq + G a)`;
 /// rows 8..10 are the tyre lag `sigma a_i' = V (psi_i - a_i) + e dpsi_i - h_r dphi`.
-pub fn linearise(p: &PlantParams, v_mps: f64, c_damper_nspm: f64) -> SMatrix<f64, N_STATES, N_STATES> {
+pub fn linearise(
+    p: &PlantParams,
+    v_mps: f64,
+    c_damper_nspm: f64,
+) -> SMatrix<f64, N_STATES, N_STATES> {
     let so = second_order(p, v_mps, c_damper_nspm);
     let mut a = SMatrix::<f64, N_STATES, N_STATES>::zeros();
     for i in 0..N_DOF {
