@@ -147,6 +147,18 @@ pub fn select_mode(
     }
 }
 
+/// The selected mode of A(V) with a viscous damper `c_damper_nspm`.
+pub fn mode_at(
+    p: &PlantParams,
+    v_mps: f64,
+    c_damper_nspm: f64,
+    select: ModeSelect,
+) -> Result<Mode, EigenError> {
+    let a = linearise(p, v_mps, c_damper_nspm);
+    let vals = eigen::eigenvalues(&a)?;
+    select_mode(p, &a, &vals, select)
+}
+
 /// Summary of the modes at one speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ModeSummary {

@@ -69,11 +69,23 @@ pub fn mr_equivalent_viscous(p: &SpencerParams, current_a: f64, freq_hz: f64, am
             // Classic RK4 from t - dt to t on (y, z); u stays at the commanded current.
             let t0 = t - dt;
             let k1 = deriv(t0, &s);
-            let s2 = SpencerState { y: s.y + 0.5 * dt * k1.0, z: s.z + 0.5 * dt * k1.1, ..s };
+            let s2 = SpencerState {
+                y: s.y + 0.5 * dt * k1.0,
+                z: s.z + 0.5 * dt * k1.1,
+                ..s
+            };
             let k2 = deriv(t0 + 0.5 * dt, &s2);
-            let s3 = SpencerState { y: s.y + 0.5 * dt * k2.0, z: s.z + 0.5 * dt * k2.1, ..s };
+            let s3 = SpencerState {
+                y: s.y + 0.5 * dt * k2.0,
+                z: s.z + 0.5 * dt * k2.1,
+                ..s
+            };
             let k3 = deriv(t0 + 0.5 * dt, &s3);
-            let s4 = SpencerState { y: s.y + dt * k3.0, z: s.z + dt * k3.1, ..s };
+            let s4 = SpencerState {
+                y: s.y + dt * k3.0,
+                z: s.z + dt * k3.1,
+                ..s
+            };
             let k4 = deriv(t, &s4);
             s.y += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
             s.z += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
@@ -109,8 +121,10 @@ mod tests {
     fn mr_equivalent_grows_with_current_and_exceeds_the_viscous_floor() {
         let p = SpencerParams::steering();
         let amp = stroke_amplitude_m(0.197, REF_WHEEL_YAW_AMPL_RAD);
-        let c: Vec<f64> =
-            [0.0, 0.5, 1.0, 2.0].iter().map(|&i| mr_equivalent_viscous(&p, i, 6.5, amp)).collect();
+        let c: Vec<f64> = [0.0, 0.5, 1.0, 2.0]
+            .iter()
+            .map(|&i| mr_equivalent_viscous(&p, i, 6.5, amp))
+            .collect();
         for w in c.windows(2) {
             assert!(w[1] > w[0], "{c:?}");
         }
@@ -118,6 +132,10 @@ mod tests {
         // the fully-yielded limit only loosely; check the order of magnitude against the
         // series dashpot c0 c1 / (c0 + c1) at zero current (~ N s/m, positive, finite).
         let series = p.c0a * p.c1a / (p.c0a + p.c1a);
-        assert!(c[0] > 0.5 * series && c[0].is_finite(), "{} vs {series}", c[0]);
+        assert!(
+            c[0] > 0.5 * series && c[0].is_finite(),
+            "{} vs {series}",
+            c[0]
+        );
     }
 }

@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use shimmy_core::eigen::ModeShape;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
-use shimmy_core::stability::{self, Crossings, ModeSummary, DEFAULT_TOL_MPS};
+use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_TOL_MPS};
 
 use crate::damper_equiv;
 use crate::paramfile;
@@ -70,9 +70,9 @@ pub struct DamperEquivalent {
 }
 
 /// Energy-equivalent viscous coefficient of the MR damper at `current_a`, evaluated at the
-/// frequency of the critical (max Re) oscillatory mode at the speed where the damper-free growth
-/// rate is largest in [v_min, v_max]; the frequency is updated once with the damper in place
-/// (a two-pass fixed point: the mode frequency moves little with c).
+/// frequency of the shimmy (in-phase wheel-yaw) mode at the speed where the damper-free growth
+/// rate of the critical mode is largest in [v_min, v_max]; the frequency is updated once with
+/// the damper in place (a two-pass fixed point: the mode frequency moves little with c).
 pub fn damper_equivalent(
     p: &PlantParams,
     current_a: f64,
@@ -93,17 +93,22 @@ pub fn damper_equivalent(
             v_ref = v;
         }
     }
-    let mut freq = stability::critical_mode_at(p, v_ref, 0.0)
+    let mut freq = stability::mode_at(p, v_ref, 0.0, ModeSelect::Shimmy)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?
         .freq_hz;
     let mut c = damper_equiv::mr_equivalent_viscous(&sp, current_a, freq, amp);
     for _ in 0..1 {
-        freq = stability::critical_mode_at(p, v_ref, c)
+        freq = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy)
             .map_err(|e| anyhow::anyhow!("{e:?}"))?
             .freq_hz;
         c = damper_equiv::mr_equivalent_viscous(&sp, current_a, freq, amp);
     }
-    Ok(DamperEquivalent { current_a, freq_hz: freq, stroke_amp_m: amp, c_eq_nspm: c })
+    Ok(DamperEquivalent {
+        current_a,
+        freq_hz: freq,
+        stroke_amp_m: amp,
+        c_eq_nspm: c,
+    })
 }
 
 fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<Vec<ModeSummary>> {
@@ -131,7 +136,10 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
             (d.c_eq_nspm, Some(d))
         }
     };
-    println!("stability of straight running: parameter set `{}`", args.params);
+    println!(
+        "stability of straight running: parameter set `{}`",
+        args.params
+    );
     match damper {
         None => println!("damper: none (F_d = 0)"),
         Some(d) => println!(
@@ -157,7 +165,7 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
 
     println!();
     println!(
-        "{:>7} | {:>10} | {:>9} {:>8} {:<20} | {:>9} {:>8} {:<20}",
+        "{:>7} | {:>10} | {:>9} {:>8} {:<20} | {:>9} {:>8} {:<20} | {:>11} {:>8}",
         "V km/h",
         "max Re 1/s",
         "crit zeta",
@@ -165,7 +173,9 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
         "critical mode",
         "min zeta",
         "f Hz",
-        "least-damped mode"
+        "least-damped mode",
+        "shimmy zeta",
+        "f Hz"
     );
     for r in &rows {
         let kmh = mps_to_kmh(r.v_mps);
@@ -173,8 +183,9 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
             continue;
         }
         let crit_shape = shape_of_critical(&p, r.v_mps, c);
+        let shimmy = stability::mode_at(&p, r.v_mps, c, ModeSelect::Shimmy).ok();
         println!(
-            "{:>7.1} | {:>10.4} | {:>9.4} {:>8.3} {:<20} | {:>9.4} {:>8.3} {:<20}",
+            "{:>7.1} | {:>10.4} | {:>9.4} {:>8.3} {:<20} | {:>9.4} {:>8.3} {:<20} | {:>11} {:>8}",
             kmh,
             r.max_re,
             r.critical.zeta,
@@ -182,7 +193,9 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
             crit_shape.name(),
             r.least_damped.zeta,
             r.least_damped.freq_hz,
-            r.least_damped_shape.shape.name()
+            r.least_damped_shape.shape.name(),
+            shimmy.map_or("-".into(), |m| format!("{:.4}", m.zeta)),
+            shimmy.map_or("-".into(), |m| format!("{:.3}", m.freq_hz))
         );
     }
     println!();
@@ -195,7 +208,12 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
     write_crossings_csv(&ccsv, &crossings)?;
     let png = args.out.join("stability.png");
     plot(&png, &rows, &crossings, &args.params, c)?;
-    println!("wrote {}, {}, {}", csv.display(), ccsv.display(), png.display());
+    println!(
+        "wrote {}, {}, {}",
+        csv.display(),
+        ccsv.display(),
+        png.display()
+    );
     Ok(())
 }
 
@@ -225,8 +243,12 @@ fn print_crossings(crossings: &Crossings, v_min_kmh: f64, v_max_kmh: f64) {
             if x.converged { "" } else { " (NOT converged)" }
         );
     }
-    let on = crossings.iter().find(|x| x.kind == stability::CrossingKind::Onset);
-    let off = crossings.iter().find(|x| x.kind == stability::CrossingKind::Offset);
+    let on = crossings
+        .iter()
+        .find(|x| x.kind == stability::CrossingKind::Onset);
+    let off = crossings
+        .iter()
+        .find(|x| x.kind == stability::CrossingKind::Offset);
     match (on, off) {
         (Some(a), Some(b)) => println!(
             "Hopf window: {:.2} .. {:.2} km/h ({:.2} km/h wide)",
@@ -247,12 +269,13 @@ fn write_sweep_csv(path: &Path, p: &PlantParams, c: f64, rows: &[ModeSummary]) -
     writeln!(
         f,
         "speed_kmh,speed_mps,max_re_1ps,crit_re_1ps,crit_zeta,crit_freq_hz,crit_shape,\
-         least_zeta,least_freq_hz,least_re_1ps,least_shape,c_damper_nspm"
+         least_zeta,least_freq_hz,least_re_1ps,least_shape,shimmy_zeta,shimmy_freq_hz,c_damper_nspm"
     )?;
     for r in rows {
+        let shimmy = stability::mode_at(p, r.v_mps, c, ModeSelect::Shimmy).ok();
         writeln!(
             f,
-            "{:.6},{:.6},{:.9},{:.9},{:.9},{:.6},{},{:.9},{:.6},{:.9},{},{:.3}",
+            "{:.6},{:.6},{:.9},{:.9},{:.9},{:.6},{},{:.9},{:.6},{:.9},{},{},{},{:.3}",
             mps_to_kmh(r.v_mps),
             r.v_mps,
             r.max_re,
@@ -264,6 +287,8 @@ fn write_sweep_csv(path: &Path, p: &PlantParams, c: f64, rows: &[ModeSummary]) -
             r.least_damped.freq_hz,
             r.least_damped.re,
             r.least_damped_shape.shape.name(),
+            shimmy.map_or(String::new(), |m| format!("{:.9}", m.zeta)),
+            shimmy.map_or(String::new(), |m| format!("{:.6}", m.freq_hz)),
             c
         )?;
     }
@@ -272,7 +297,10 @@ fn write_sweep_csv(path: &Path, p: &PlantParams, c: f64, rows: &[ModeSummary]) -
 
 fn write_crossings_csv(path: &Path, crossings: &Crossings) -> Result<()> {
     let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    writeln!(f, "kind,speed_kmh,speed_mps,freq_hz,shape,bracket_mps,converged")?;
+    writeln!(
+        f,
+        "kind,speed_kmh,speed_mps,freq_hz,shape,bracket_mps,converged"
+    )?;
     for x in crossings {
         writeln!(
             f,
@@ -289,7 +317,13 @@ fn write_crossings_csv(path: &Path, crossings: &Crossings) -> Result<()> {
     Ok(())
 }
 
-fn plot(path: &Path, rows: &[ModeSummary], crossings: &Crossings, name: &str, c: f64) -> Result<()> {
+fn plot(
+    path: &Path,
+    rows: &[ModeSummary],
+    crossings: &Crossings,
+    name: &str,
+    c: f64,
+) -> Result<()> {
     let root = BitMapBackend::new(path, (1000, 800)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(400);
@@ -297,7 +331,9 @@ fn plot(path: &Path, rows: &[ModeSummary], crossings: &Crossings, name: &str, c:
     panel(
         &top,
         &xs,
-        &format!("{name}, c_damper = {c:.1} N s/m: max Re lambda [1/s] (oscillatory: line; all: dots)"),
+        &format!(
+            "{name}, c_damper = {c:.1} N s/m: max Re lambda [1/s] (oscillatory: line; all: dots)"
+        ),
         &rows.iter().map(|r| r.critical.re).collect::<Vec<_>>(),
         &rows.iter().map(|r| r.max_re).collect::<Vec<_>>(),
         crossings,
@@ -323,8 +359,16 @@ fn panel(
     crossings: &Crossings,
 ) -> Result<()> {
     let (x0, x1) = (xs[0], xs[xs.len() - 1]);
-    let lo = main.iter().chain(second).cloned().fold(f64::INFINITY, f64::min);
-    let hi = main.iter().chain(second).cloned().fold(f64::NEG_INFINITY, f64::max);
+    let lo = main
+        .iter()
+        .chain(second)
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    let hi = main
+        .iter()
+        .chain(second)
+        .cloned()
+        .fold(f64::NEG_INFINITY, f64::max);
     let pad = 0.05 * (hi - lo).max(1e-6);
     let (lo, hi) = (lo.min(0.0) - pad, hi.max(0.0) + pad);
     let mut chart = ChartBuilder::on(area)
@@ -334,7 +378,10 @@ fn panel(
         .y_label_area_size(60)
         .build_cartesian_2d(x0..x1, lo..hi)?;
     chart.configure_mesh().x_desc("speed [km/h]").draw()?;
-    chart.draw_series(LineSeries::new(xs.iter().cloned().zip(main.iter().cloned()), &BLUE))?;
+    chart.draw_series(LineSeries::new(
+        xs.iter().cloned().zip(main.iter().cloned()),
+        &BLUE,
+    ))?;
     chart.draw_series(
         xs.iter()
             .cloned()
@@ -344,7 +391,11 @@ fn panel(
     chart.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], &BLACK))?;
     for xc in crossings {
         let k = mps_to_kmh(xc.speed_mps);
-        let col = if xc.kind == stability::CrossingKind::Onset { MAGENTA } else { GREEN };
+        let col = if xc.kind == stability::CrossingKind::Onset {
+            MAGENTA
+        } else {
+            GREEN
+        };
         chart.draw_series(LineSeries::new([(k, lo), (k, hi)], col.stroke_width(2)))?;
         chart.draw_series(std::iter::once(Text::new(
             format!("{} {:.2} km/h {:.2} Hz", xc.kind.name(), k, xc.freq_hz),
@@ -389,7 +440,9 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
     )
     .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let on = xs.iter().find(|x| x.kind == stability::CrossingKind::Onset);
-    let off = xs.iter().find(|x| x.kind == stability::CrossingKind::Offset);
+    let off = xs
+        .iter()
+        .find(|x| x.kind == stability::CrossingKind::Offset);
     Ok((
         on.map(|x| mps_to_kmh(x.speed_mps)),
         off.map(|x| mps_to_kmh(x.speed_mps)),

@@ -56,7 +56,10 @@ fn eigenvalues_agree_with_faer_for_every_named_set() {
     for set in ParamSet::ALL {
         for c in [0.0, 2000.0] {
             let (worst, at) = worst_relative_error(set, c);
-            println!("{} c={c}: worst relative error {worst:.2e} at {at} km/h", set.name());
+            println!(
+                "{} c={c}: worst relative error {worst:.2e} at {at} km/h",
+                set.name()
+            );
             assert!(worst < 1e-9, "{} c={c}: {worst:e} at {at} km/h", set.name());
         }
     }
