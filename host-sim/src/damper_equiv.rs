@@ -128,14 +128,28 @@ mod tests {
         for w in c.windows(2) {
             assert!(w[1] > w[0], "{c:?}");
         }
-        // The dashpots alone (c0 and c1 in series) give a lower bound on the dissipation in
-        // the fully-yielded limit only loosely; check the order of magnitude against the
-        // series dashpot c0 c1 / (c0 + c1) at zero current (~ N s/m, positive, finite).
-        let series = p.c0a * p.c1a / (p.c0a + p.c1a);
-        assert!(
-            c[0] > 0.5 * series && c[0].is_finite(),
-            "{} vs {series}",
-            c[0]
-        );
+        assert!(c[0] > 0.0 && c[0].is_finite());
+    }
+
+    #[test]
+    fn linear_limit_of_the_spencer_model_matches_its_closed_form() {
+        // With the Bouc-Wen element switched off (alpha = 0) the Spencer model is linear:
+        // c1 in series with (c0 parallel k0), plus the accumulator spring k1. Phasors give
+        // c_eq = c1 Re[(j w c0 + k0) / (j w (c0 + c1) + k0)] (k1 stores no energy). This checks
+        // the RK4 integration of the model, the stroke and the energy quadrature together.
+        let p = SpencerParams { alpha_a: 0.0, alpha_b: 0.0, ..SpencerParams::steering() };
+        for (i_a, f_hz) in [(0.0, 6.5), (1.0, 3.0), (2.0, 12.0)] {
+            let (_, c0, c1) = p.coefficients(i_a);
+            let w = 2.0 * std::f64::consts::PI * f_hz;
+            // (k0 + j w c0) / (k0 + j w (c0 + c1)), real part.
+            let (ar, ai, br, bi) = (p.k0, w * c0, p.k0, w * (c0 + c1));
+            let re = (ar * br + ai * bi) / (br * br + bi * bi);
+            let want = c1 * re;
+            let got = mr_equivalent_viscous(&p, i_a, f_hz, 2e-3);
+            // Tolerance 1e-6 relative (measured 3e-8 worst): the start-up transient of y decays
+            // slowly (k0/(c0+c1) ~ 0.2 1/s) but is almost constant over a cycle, so its force
+            // does next to no work on the closed stroke cycle; RK4 error is ~1e-12.
+            assert!((got - want).abs() < 1e-6 * want, "I={i_a} f={f_hz}: {got} vs {want}");
+        }
     }
 }
