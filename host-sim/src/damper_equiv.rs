@@ -137,7 +137,11 @@ mod tests {
         // c1 in series with (c0 parallel k0), plus the accumulator spring k1. Phasors give
         // c_eq = c1 Re[(j w c0 + k0) / (j w (c0 + c1) + k0)] (k1 stores no energy). This checks
         // the RK4 integration of the model, the stroke and the energy quadrature together.
-        let p = SpencerParams { alpha_a: 0.0, alpha_b: 0.0, ..SpencerParams::steering() };
+        let p = SpencerParams {
+            alpha_a: 0.0,
+            alpha_b: 0.0,
+            ..SpencerParams::steering()
+        };
         for (i_a, f_hz) in [(0.0, 6.5), (1.0, 3.0), (2.0, 12.0)] {
             let (_, c0, c1) = p.coefficients(i_a);
             let w = 2.0 * std::f64::consts::PI * f_hz;
@@ -149,7 +153,10 @@ mod tests {
             // Tolerance 1e-6 relative (measured 3e-8 worst): the start-up transient of y decays
             // slowly (k0/(c0+c1) ~ 0.2 1/s) but is almost constant over a cycle, so its force
             // does next to no work on the closed stroke cycle; RK4 error is ~1e-12.
-            assert!((got - want).abs() < 1e-6 * want, "I={i_a} f={f_hz}: {got} vs {want}");
+            assert!(
+                (got - want).abs() < 1e-6 * want,
+                "I={i_a} f={f_hz}: {got} vs {want}"
+            );
         }
     }
 }
