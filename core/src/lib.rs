@@ -11,10 +11,13 @@
 mod fmt;
 
 pub mod control;
+pub mod eigen;
 pub mod estimator;
 pub mod monitor;
 pub mod mr_damper;
 pub mod params;
+pub mod plant;
+pub mod stability;
 
 /// Crate version, reported by the firmware at boot and by the simulator in its reports.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -2,7 +2,9 @@
 //! plant, studies (stability, bifurcation, ...) and their reports.
 
 pub mod bifurcation;
+pub mod damper_equiv;
 pub mod disturbance;
 pub mod integrator;
 pub mod paramfile;
 pub mod plant;
+pub mod stability_cmd;

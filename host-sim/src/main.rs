@@ -24,6 +24,11 @@ enum Command {
     /// Time-domain bifurcation diagram of the nonlinear plant: limit-cycle amplitude vs speed
     /// from a small and a large initial wheel-yaw disturbance (table, CSV, PNG).
     Bifurcation(shimmy_sim::bifurcation::BifurcationArgs),
+    /// Eigenvalues of the linearised plant vs speed: least-damped mode table, Hopf crossings,
+    /// CSV and PNG (optionally with the MR damper as an equivalent viscous damper).
+    Stability(shimmy_sim::stability_cmd::StabilityArgs),
+    /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
+    Sensitivity(shimmy_sim::stability_cmd::SensitivityArgs),
 }
 
 fn main() -> Result<()> {
@@ -31,6 +36,8 @@ fn main() -> Result<()> {
     match cli.command {
         Some(Command::Params { params }) => print_params(&params),
         Some(Command::Bifurcation(args)) => shimmy_sim::bifurcation::command(&args),
+        Some(Command::Stability(a)) => shimmy_sim::stability_cmd::run_stability(&a),
+        Some(Command::Sensitivity(a)) => shimmy_sim::stability_cmd::run_sensitivity(&a),
         // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
         None => print_params("nominal"),
     }

@@ -1,0 +1,50 @@
+//! Cost of the model-based margin path: `linearise` + bounded eigen-solve, the least-damped
+//! summary, dzeta/dV, and one warm-started `critical_speed_near` update.
+use criterion::{criterion_group, criterion_main, Criterion};
+use shimmy_core::params::ParamSet;
+use shimmy_core::stability::{self, ModeSelect};
+use shimmy_core::{eigen, plant};
+use std::hint::black_box;
+
+fn bench(c: &mut Criterion) {
+    let p = ParamSet::Nominal.params();
+    c.bench_function("linearise", |b| {
+        b.iter(|| plant::linearise(black_box(&p), black_box(20.0), black_box(0.0)))
+    });
+    c.bench_function("linearise+eigenvalues", |b| {
+        b.iter(|| eigen::eigenvalues(&plant::linearise(black_box(&p), black_box(20.0), 0.0)))
+    });
+    c.bench_function("mode_summary (eig + shape)", |b| {
+        b.iter(|| stability::mode_summary(black_box(&p), black_box(20.0), 0.0))
+    });
+    c.bench_function("dzeta_dv (critical)", |b| {
+        b.iter(|| stability::dzeta_dv(black_box(&p), black_box(20.0), 0.0, ModeSelect::Critical))
+    });
+    let onset = stability::critical_speed_near(&p, 0.0, 5.0, None, 60)
+        .expect("nominal has an onset")
+        .speed_mps;
+    c.bench_function("critical_speed_near warm (hint +0.05 m/s)", |b| {
+        b.iter(|| {
+            stability::critical_speed_near(
+                black_box(&p),
+                0.0,
+                black_box(8.0),
+                Some(black_box(onset + 0.05)),
+                20,
+            )
+        })
+    });
+    c.bench_function("critical_speed_near cold (from 5 m/s)", |b| {
+        b.iter(|| stability::critical_speed_near(black_box(&p), 0.0, black_box(5.0), None, 60))
+    });
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default()
+        .measurement_time(std::time::Duration::from_secs(2))
+        .warm_up_time(std::time::Duration::from_millis(500))
+        .sample_size(20);
+    targets = bench
+}
+criterion_main!(benches);

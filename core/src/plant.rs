@@ -1,0 +1,273 @@
+//! Linearised 4-DOF solid-axle steering plant with tyre lag (`shared/reference-plant.md`).
+//!
+//! State vector (10), indices are the named constants below:
+//! `x = [psi_L, psi_R, phi, theta_sw, dpsi_L, dpsi_R, dphi, dtheta_sw, a_L, a_R]`.
+//!
+//! Sign conventions (as in the reference document):
+//! - `psi_L`, `psi_R`: wheel yaw about the kingpins, positive = steer left [rad];
+//! - `phi`: axle roll (tramp), positive = left wheel up [rad];
+//! - `theta_sw`: steering-wheel angle, positive turns the wheels left through `i_s` [rad];
+//! - `a_L`, `a_R`: lagged slip angles [rad]; tyre force `F_i = C_a a_i` [N];
+//! - `F_d`: damper force along the track rod [N], positive when it resists a positive stroke rate
+//!   `v_d = (l_t/2)(dpsi_L + dpsi_R)`; it enters both wheel equations as `-(l_t/2) F_d`;
+//! - `T_driver`: driver torque at the steering wheel [N m], positive in the `theta_sw` sense;
+//! - gyroscopic coupling `H = I_p V / R` [N m s]: `-H dphi` in both wheel equations and
+//!   `+H (dpsi_L + dpsi_R)` in the roll equation (a skew-symmetric pair: no net power).
+//!
+//! The linearisation is exact for the linear-tyre model about straight running; a viscous damper
+//! `F_d = c v_d` adds `c l_t^2/4` to the four (psi_L, psi_R) entries of the damping matrix.
+//!
+//! Everything here is `no_std`, allocation-free and cheap (a few hundred flops).
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::params::PlantParams;
+
+/// Number of states of the linear model.
+pub const N_STATES: usize = 10;
+/// Number of mechanical degrees of freedom.
+pub const N_DOF: usize = 4;
+
+/// Left wheel yaw angle psi_L [rad].
+pub const PSI_L: usize = 0;
+/// Right wheel yaw angle psi_R [rad].
+pub const PSI_R: usize = 1;
+/// Axle roll (tramp) angle phi [rad].
+pub const PHI: usize = 2;
+/// Steering-wheel angle theta_sw [rad].
+pub const THETA_SW: usize = 3;
+/// Left wheel yaw rate dpsi_L [rad/s].
+pub const DPSI_L: usize = 4;
+/// Right wheel yaw rate dpsi_R [rad/s].
+pub const DPSI_R: usize = 5;
+/// Axle roll rate dphi [rad/s].
+pub const DPHI: usize = 6;
+/// Steering-wheel rate dtheta_sw [rad/s].
+pub const DTHETA_SW: usize = 7;
+/// Left lagged slip angle a_L [rad].
+pub const A_L: usize = 8;
+/// Right lagged slip angle a_R [rad].
+pub const A_R: usize = 9;
+
+/// Short names of the states, for tables and CSV headers.
+pub const STATE_NAMES: [&str; N_STATES] = [
+    "psi_L_rad",
+    "psi_R_rad",
+    "phi_rad",
+    "theta_sw_rad",
+    "dpsi_L_radps",
+    "dpsi_R_radps",
+    "dphi_radps",
+    "dtheta_sw_radps",
+    "a_L_rad",
+    "a_R_rad",
+];
+
+/// The second-order mechanical part of the linear model:
+/// `M q'' + C q' + K q = G a + b_d F_d + b_t T_driver` with `q = [psi_L, psi_R, phi, theta_sw]`,
+/// and the tyre-lag equations `sigma a' = V (S q - a) + E q' ` written out in [`linearise`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SecondOrder {
+    /// Mass matrix M = diag(I_k, I_k, I_phi, J_sw) [kg m^2].
+    pub m: SMatrix<f64, N_DOF, N_DOF>,
+    /// Damping matrix C incl. the gyroscopic (skew) part and the viscous damper [N m s/rad].
+    pub c: SMatrix<f64, N_DOF, N_DOF>,
+    /// Stiffness matrix K (symmetric) [N m/rad].
+    pub k: SMatrix<f64, N_DOF, N_DOF>,
+    /// Generalised tyre forces per unit lagged slip angle, columns (a_L, a_R) [N m/rad].
+    pub g: SMatrix<f64, N_DOF, 2>,
+}
+
+/// Mass, damping (with gyroscopic coupling at speed `v_mps` and a viscous track-rod damper
+/// `c_damper_nspm` [N s/m]) and stiffness matrices of the mechanical subsystem.
+pub fn second_order(p: &PlantParams, v_mps: f64, c_damper_nspm: f64) -> SecondOrder {
+    let h = p.spin_momentum(v_mps);
+    let cd = c_damper_nspm * p.l_t * p.l_t / 4.0;
+    let kd_is = p.k_d / p.i_s;
+    let lever = p.e + p.t_p;
+
+    let mut m = SMatrix::<f64, N_DOF, N_DOF>::zeros();
+    m[(0, 0)] = p.i_k;
+    m[(1, 1)] = p.i_k;
+    m[(2, 2)] = p.i_phi;
+    m[(3, 3)] = p.j_sw;
+
+    let mut c = SMatrix::<f64, N_DOF, N_DOF>::zeros();
+    c[(0, 0)] = p.c_k + cd;
+    c[(0, 1)] = cd;
+    c[(1, 0)] = cd;
+    c[(1, 1)] = p.c_k + cd;
+    c[(2, 2)] = p.c_phi;
+    c[(3, 3)] = p.c_sw;
+    // Gyroscopic: -H dphi in both wheel rows, +H (dpsi_L + dpsi_R) in the roll row.
+    c[(0, 2)] = h;
+    c[(1, 2)] = h;
+    c[(2, 0)] = -h;
+    c[(2, 1)] = -h;
+
+    let mut k = SMatrix::<f64, N_DOF, N_DOF>::zeros();
+    k[(0, 0)] = p.k_tr + p.k_d;
+    k[(0, 1)] = -p.k_tr;
+    k[(1, 0)] = -p.k_tr;
+    k[(1, 1)] = p.k_tr;
+    k[(0, 3)] = -kd_is;
+    k[(3, 0)] = -kd_is;
+    k[(2, 2)] = p.k_phi;
+    k[(3, 3)] = kd_is / p.i_s;
+
+    let mut g = SMatrix::<f64, N_DOF, 2>::zeros();
+    g[(0, 0)] = -lever * p.c_a;
+    g[(1, 1)] = -lever * p.c_a;
+    g[(2, 0)] = p.h_r * p.c_a;
+    g[(2, 1)] = p.h_r * p.c_a;
+
+    SecondOrder { m, c, k, g }
+}
+
+/// State matrix A(V) of the linear model at forward speed `v_mps` [m/s] with a viscous
+/// track-rod damper of coefficient `c_damper_nspm` [N s/m] (0 = no damper force).
+///
+/// Rows 0..4 are the kinematic identities `q' = dq`; rows 4..8 are `M^-1 (-K q - C dq + G a)`;
+/// rows 8..10 are the tyre lag `sigma a_i' = V (psi_i - a_i) + e dpsi_i - h_r dphi`.
+pub fn linearise(
+    p: &PlantParams,
+    v_mps: f64,
+    c_damper_nspm: f64,
+) -> SMatrix<f64, N_STATES, N_STATES> {
+    let so = second_order(p, v_mps, c_damper_nspm);
+    let mut a = SMatrix::<f64, N_STATES, N_STATES>::zeros();
+    for i in 0..N_DOF {
+        a[(i, N_DOF + i)] = 1.0;
+    }
+    for i in 0..N_DOF {
+        // M is diagonal: row i of M^-1 is 1/M_ii.
+        let inv_m = 1.0 / so.m[(i, i)];
+        for j in 0..N_DOF {
+            a[(N_DOF + i, j)] = -so.k[(i, j)] * inv_m;
+            a[(N_DOF + i, N_DOF + j)] = -so.c[(i, j)] * inv_m;
+        }
+        a[(N_DOF + i, A_L)] = so.g[(i, 0)] * inv_m;
+        a[(N_DOF + i, A_R)] = so.g[(i, 1)] * inv_m;
+    }
+    let inv_sigma = 1.0 / p.sigma;
+    for (row, psi, dpsi) in [(A_L, PSI_L, DPSI_L), (A_R, PSI_R, DPSI_R)] {
+        a[(row, psi)] = v_mps * inv_sigma;
+        a[(row, row)] = -v_mps * inv_sigma;
+        a[(row, dpsi)] = p.e * inv_sigma;
+        a[(row, DPHI)] = -p.h_r * inv_sigma;
+    }
+    a
+}
+
+/// dA/dV: the derivative of [`linearise`] with respect to the speed (gyroscopic terms and the
+/// tyre-lag rows are the only speed-dependent entries; A is affine in V).
+pub fn dlinearise_dv(p: &PlantParams) -> SMatrix<f64, N_STATES, N_STATES> {
+    let dh = p.i_p / p.r;
+    let mut d = SMatrix::<f64, N_STATES, N_STATES>::zeros();
+    d[(DPSI_L, DPHI)] = -dh / p.i_k;
+    d[(DPSI_R, DPHI)] = -dh / p.i_k;
+    d[(DPHI, DPSI_L)] = dh / p.i_phi;
+    d[(DPHI, DPSI_R)] = dh / p.i_phi;
+    let inv_sigma = 1.0 / p.sigma;
+    d[(A_L, PSI_L)] = inv_sigma;
+    d[(A_L, A_L)] = -inv_sigma;
+    d[(A_R, PSI_R)] = inv_sigma;
+    d[(A_R, A_R)] = -inv_sigma;
+    d
+}
+
+/// Column of dx/dt per unit damper force F_d [N] (positive resisting a positive stroke rate).
+pub fn damper_force_input(p: &PlantParams) -> SVector<f64, N_STATES> {
+    let mut b = SVector::<f64, N_STATES>::zeros();
+    b[DPSI_L] = -(p.l_t / 2.0) / p.i_k;
+    b[DPSI_R] = -(p.l_t / 2.0) / p.i_k;
+    b
+}
+
+/// Column of dx/dt per unit driver torque T_driver [N m] at the steering wheel.
+pub fn driver_torque_input(p: &PlantParams) -> SVector<f64, N_STATES> {
+    let mut b = SVector::<f64, N_STATES>::zeros();
+    b[DTHETA_SW] = 1.0 / p.j_sw;
+    b
+}
+
+/// Damper stroke x_d = (l_t/2)(psi_L + psi_R) [m] of a state.
+pub fn damper_stroke_m(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
+    (p.l_t / 2.0) * (x[PSI_L] + x[PSI_R])
+}
+
+/// Damper stroke rate v_d = (l_t/2)(dpsi_L + dpsi_R) [m/s] of a state.
+pub fn damper_stroke_rate_mps(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
+    (p.l_t / 2.0) * (x[DPSI_L] + x[DPSI_R])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::ParamSet;
+
+    #[test]
+    fn kinematic_rows_are_identity_blocks_and_v0_has_no_tyre_stiffness() {
+        let p = ParamSet::Nominal.params();
+        let a = linearise(&p, 0.0, 0.0);
+        for i in 0..N_DOF {
+            for j in 0..N_STATES {
+                let want = if j == N_DOF + i { 1.0 } else { 0.0 };
+                assert_eq!(a[(i, j)], want, "row {i} col {j}");
+            }
+        }
+        // At V = 0 the tyre rows have no V/sigma terms and there is no gyroscopic coupling.
+        assert_eq!(a[(A_L, PSI_L)], 0.0);
+        assert_eq!(a[(A_L, A_L)], 0.0);
+        assert_eq!(a[(DPSI_L, DPHI)], 0.0);
+        assert_eq!(a[(DPHI, DPSI_L)], 0.0);
+        assert_eq!(a[(A_L, DPSI_L)], p.e / p.sigma);
+    }
+
+    #[test]
+    fn a_is_affine_in_speed_with_the_stated_derivative() {
+        let p = ParamSet::Hard.params();
+        let a0 = linearise(&p, 10.0, 500.0);
+        let a1 = linearise(&p, 13.0, 500.0);
+        let d = dlinearise_dv(&p);
+        let err = (a1 - a0 - d * 3.0).amax();
+        assert!(err < 1e-9, "{err}");
+    }
+
+    #[test]
+    fn second_order_structure_matches_the_reference_equations() {
+        let p = ParamSet::Nominal.params();
+        let v = 20.0;
+        let so = second_order(&p, v, 0.0);
+        // K symmetric, gyroscopic part skew.
+        assert_eq!(so.k, so.k.transpose());
+        let h = p.i_p * v / p.r;
+        assert_eq!(so.c[(0, 2)], h);
+        assert_eq!(so.c[(2, 0)], -h);
+        // The in-phase rigid steering motion (psi_L = psi_R = theta_sw / i_s) has no mechanical
+        // stiffness: only the tyres hold it.
+        let q = nalgebra::Vector4::new(1.0, 1.0, 0.0, p.i_s);
+        assert!((so.k * q).amax() < 1e-9);
+    }
+
+    #[test]
+    fn viscous_damper_adds_c_lt2_over_4_to_the_four_wheel_entries() {
+        let p = ParamSet::Nominal.params();
+        let c = 1234.0;
+        let d = second_order(&p, 15.0, c).c - second_order(&p, 15.0, 0.0).c;
+        let want = c * p.l_t * p.l_t / 4.0;
+        for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+            assert!((d[(i, j)] - want).abs() < 1e-12 * want);
+        }
+        assert!((d.abs().sum() - 4.0 * want).abs() < 1e-12 * want);
+        // Same as feeding F_d = c v_d through the damper input column.
+        let a_c = linearise(&p, 15.0, c);
+        let a_0 = linearise(&p, 15.0, 0.0);
+        let b = damper_force_input(&p);
+        let mut x = SVector::<f64, N_STATES>::zeros();
+        x[DPSI_L] = 0.3;
+        x[DPSI_R] = -0.1;
+        let via_input = a_0 * x + b * (c * damper_stroke_rate_mps(&p, &x));
+        assert!((a_c * x - via_input).amax() < 1e-9);
+    }
+}
