@@ -5,8 +5,14 @@
 //! --workspace` on the host never needs the thumbv7em toolchain.
 #![cfg_attr(target_os = "none", no_std)]
 
+pub mod drivers;
+
 #[cfg(target_os = "none")]
 pub mod runtime;
 
 /// Firmware identification logged at boot.
 pub const BANNER: &str = concat!("shimmy-firmware ", env!("CARGO_PKG_VERSION"));
+
+// The device crate provides the interrupt vector table (and RTIC's `device`).
+#[cfg(target_os = "none")]
+pub use stm32f4xx_hal as hal;

@@ -27,6 +27,15 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
         Some("size") => size(),
+        Some("qemu-icount") => {
+            let bin = args.get(1).map(String::as_str).unwrap_or(FIRMWARE);
+            (|| {
+                let elf = build_firmware(bin, &["qemu"])?;
+                let run = qemu::run_with(&elf, &["-icount", "shift=0"])?;
+                run.print();
+                run.expect_success()
+            })()
+        }
         _ => {
             eprintln!("usage: cargo xtask <test | qemu [BIN] | size>");
             return ExitCode::from(2);

@@ -77,11 +77,18 @@ impl Run {
 
 /// Runs `elf` to completion (semihosting exit) or until the timeout, then decodes its log.
 pub fn run(elf: &Path) -> Result<Run, String> {
+    run_with(elf, &[])
+}
+
+/// [`run`] with extra QEMU arguments (e.g. `-icount shift=0` for deterministic instruction
+/// counting).
+pub fn run_with(elf: &Path, extra: &[&str]) -> Result<Run, String> {
     let elf_bytes = std::fs::read(elf).map_err(|e| format!("read {}: {e}", elf.display()))?;
     let mut child = Command::new(QEMU)
         .args(["-machine", "netduinoplus2", "-cpu", "cortex-m4"])
         .args(["-display", "none", "-monitor", "none", "-serial", "none"])
         .args(["-semihosting-config", "enable=on,target=native"])
+        .args(extra)
         .arg("-kernel")
         .arg(elf)
         .stdin(Stdio::null())
