@@ -5,7 +5,10 @@
 //! --workspace` on the host never needs the thumbv7em toolchain.
 #![cfg_attr(target_os = "none", no_std)]
 
+pub mod control;
 pub mod drivers;
+pub mod sensors;
+pub mod sim;
 
 #[cfg(target_os = "none")]
 pub mod runtime;
