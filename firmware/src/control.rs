@@ -137,17 +137,18 @@ impl Health {
         *c = c.saturating_add(1);
     }
 
-    /// Records the timing of one step: `entry_ticks` and `exit_ticks` are the period timer's
-    /// counter at entry and exit, `wrapped` says whether the timer's update event fired again
-    /// before the exit (the step ran into the next period).
-    pub fn record_timing(&mut self, entry_ticks: u32, exit_ticks: u32, wrapped: bool) {
-        self.max_latency_ticks = self.max_latency_ticks.max(entry_ticks);
-        let dur = exit_ticks.saturating_sub(entry_ticks);
-        self.max_step_ticks = self.max_step_ticks.max(dur);
-        if entry_ticks > LATE_START_TICKS {
+    /// Records the timing of one step: `latency_ticks` from the period start to the step's
+    /// entry, `duration_ticks` from entry to exit, `wrapped`: the timer's update event fired
+    /// again before the exit (the step ran into the next period).
+    pub fn record_timing(&mut self, latency_ticks: u32, duration_ticks: u32, wrapped: bool) {
+        self.max_latency_ticks = self.max_latency_ticks.max(latency_ticks);
+        if !wrapped {
+            self.max_step_ticks = self.max_step_ticks.max(duration_ticks);
+        }
+        if latency_ticks > LATE_START_TICKS {
             self.late_starts = self.late_starts.saturating_add(1);
         }
-        if wrapped || exit_ticks < entry_ticks {
+        if wrapped {
             self.overruns = self.overruns.saturating_add(1);
         }
     }
@@ -273,9 +274,9 @@ mod tests {
     #[test]
     fn timing_counters() {
         let mut h = Health::default();
-        h.record_timing(3, 50, false);
+        h.record_timing(3, 47, false);
         assert_eq!((h.late_starts, h.overruns), (0, 0));
-        h.record_timing(LATE_START_TICKS + 1, 400, false);
+        h.record_timing(LATE_START_TICKS + 1, 299, false);
         assert_eq!((h.late_starts, h.overruns), (1, 0));
         h.record_timing(5, 20, true);
         assert_eq!(h.overruns, 1);

@@ -11,7 +11,13 @@ pub mod sensors;
 pub mod sim;
 
 #[cfg(target_os = "none")]
+pub mod board;
+#[cfg(target_os = "none")]
+pub mod periph;
+#[cfg(target_os = "none")]
 pub mod runtime;
+#[cfg(target_os = "none")]
+pub mod stack;
 
 /// Firmware identification logged at boot.
 pub const BANNER: &str = concat!("shimmy-firmware ", env!("CARGO_PKG_VERSION"));

@@ -89,9 +89,9 @@ fn test() -> Result<(), String> {
             "a failing on-target test fails the run",
             on_target_failure_is_caught,
         ),
-        ("firmware boots under QEMU", || {
+        ("firmware app under QEMU (RTIC, simulated sensors)", || {
             let elf = build_firmware(FIRMWARE, &["qemu"])?;
-            let run = qemu::run(&elf)?;
+            let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
             run.print();
             run.expect_success()?;
             Ok(format!("{} log lines", run.log.len()))
@@ -190,7 +190,7 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     let elf = build_firmware(bin, &["qemu"])?;
-    let run = qemu::run(&elf)?;
+    let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
     run.print();
     run.expect_success()
 }

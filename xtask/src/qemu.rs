@@ -42,6 +42,16 @@ pub fn ensure_installed() -> Result<(), String> {
     }
 }
 
+/// Deterministic time for the application: 8 ns of virtual time per instruction (a 125 MIPS
+/// core, roughly a 168 MHz Cortex-M4 with flash wait states), and idle time (WFI) skipped
+/// instead of waited for, so a 2 s run of the 1 kHz loop takes well under a second and its
+/// timing counters do not depend on the host's load.
+pub const APP_ICOUNT: &[&str] = &["-icount", "shift=3,sleep=off"];
+
+/// Instruction counting for the benchmark: 1 ns per instruction, so a timer clocked at QEMU's
+/// 1 GHz counts instructions.
+pub const BENCH_ICOUNT: &[&str] = &["-icount", "shift=0,sleep=off"];
+
 /// What a QEMU run produced.
 pub struct Run {
     /// QEMU's exit status (the semihosting exit code of the image).

@@ -1,0 +1,1 @@
+//! STM32F405RG board layer (placeholder until the HAL bring-up lands below).
