@@ -264,7 +264,10 @@ mod tests {
         s.psi_r_rad = Err(SensorFault::ErrorFlag(4));
         let (cmd, input) = decide(&mut c, &s, 5, 1e-3, &mut h);
         assert!(cmd.is_nan() && input.is_none());
-        assert_eq!((h.enc_parity, h.enc_error_flag, h.failsafe_steps), (1, 1, 1));
+        assert_eq!(
+            (h.enc_parity, h.enc_error_flag, h.failsafe_steps),
+            (1, 1, 1)
+        );
         // A NaN from the controller also fails safe, and is counted.
         let (cmd, _) = decide(&mut Nan, &good(), 6, 1e-3, &mut h);
         assert!(cmd.is_nan());

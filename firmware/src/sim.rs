@@ -56,6 +56,9 @@ pub const SHUNT: ShuntConfig = ShuntConfig {
 pub struct SimWorld {
     step: AtomicU32,
     duty_bits: AtomicU32,
+    /// Simulated wheel yaw of both wheels at the current step [rad, f32 bits], computed once
+    /// per step by [`SimWorld::set_step`] (so the devices' reads cost no `sinf`).
+    yaw_bits: [AtomicU32; 2],
 }
 
 impl SimWorld {
@@ -64,11 +67,19 @@ impl SimWorld {
         SimWorld {
             step: AtomicU32::new(0),
             duty_bits: AtomicU32::new(0),
+            yaw_bits: [AtomicU32::new(0), AtomicU32::new(0)],
         }
     }
-    /// Sets the step the devices answer for.
+    /// Sets the step the devices answer for (and computes the wheel yaw there).
     pub fn set_step(&self, step: u32) {
         self.step.store(step, Ordering::Relaxed);
+        for side in 0..2u8 {
+            let t = step as f32 * 1e-3;
+            let phase = if side == 0 { 0.0 } else { 0.3 };
+            let y = SHIMMY_AMPLITUDE_RAD
+                * libm::sinf(2.0 * core::f32::consts::PI * SHIMMY_HZ * t + phase);
+            self.yaw_bits[usize::from(side)].store(y.to_bits(), Ordering::Relaxed);
+        }
     }
     /// The current step.
     pub fn step(&self) -> u32 {
@@ -80,9 +91,8 @@ impl SimWorld {
 
     /// Simulated wheel yaw of wheel `side` (0 left, 1 right) at the current step [rad].
     pub fn yaw_rad(&self, side: u8) -> f32 {
-        let t = self.step() as f32 * 1e-3;
-        let phase = if side == 0 { 0.0 } else { 0.3 };
-        SHIMMY_AMPLITUDE_RAD * libm::sinf(2.0 * core::f32::consts::PI * SHIMMY_HZ * t + phase)
+        let i = usize::from(side.min(1));
+        f32::from_bits(self.yaw_bits[i].load(Ordering::Relaxed))
     }
 }
 
@@ -118,7 +128,8 @@ impl SimEncoder {
 
     fn counts(&self) -> u16 {
         let c = f32::from(ZERO_COUNTS)
-            + self.world.yaw_rad(self.side) * f32::from(COUNTS_PER_REV) / (2.0 * core::f32::consts::PI);
+            + self.world.yaw_rad(self.side) * f32::from(COUNTS_PER_REV)
+                / (2.0 * core::f32::consts::PI);
         // rem_euclid by hand (no_std f32): wrap into 0..16384.
         let n = f32::from(COUNTS_PER_REV);
         let w = c - n * libm::floorf(c / n);
@@ -346,8 +357,14 @@ pub fn run_closed_loop<C: crate::control::ControlStep>(
         if let Some(i) = input {
             // One count of quantisation (0.38 mrad) plus f32 rounding.
             let tol = 1.5 * crate::drivers::as5047p::RAD_PER_COUNT;
-            assert!((i.psi_l_rad - world.yaw_rad(0)).abs() < tol, "left yaw at {step}");
-            assert!((i.psi_r_rad - world.yaw_rad(1)).abs() < tol, "right yaw at {step}");
+            assert!(
+                (i.psi_l_rad - world.yaw_rad(0)).abs() < tol,
+                "left yaw at {step}"
+            );
+            assert!(
+                (i.psi_r_rad - world.yaw_rad(1)).abs() < tol,
+                "right yaw at {step}"
+            );
             if step > ROLL_START_STEP + 10 && step != SPEED_GLITCH_STEP {
                 // The estimate is bounded by pulse distance / time since edge between edges.
                 assert!(i.speed_mps <= SPEED_MPS * 1.001, "speed at {step}");
@@ -372,7 +389,10 @@ mod tests {
         let mut c = FixedCurrent { current_a: 0.5 };
         let h = run_closed_loop(world, &mut c, 1200);
         let (par, ef, glitch) = expected_faults(1200);
-        assert_eq!((h.enc_parity, h.enc_error_flag, h.speed_implausible), (par, ef, glitch));
+        assert_eq!(
+            (h.enc_parity, h.enc_error_flag, h.speed_implausible),
+            (par, ef, glitch)
+        );
         assert_eq!(h.failsafe_steps, par + ef);
         assert_eq!((h.enc_bus, h.enc_jump, h.current_faults), (0, 0, 0));
         assert_eq!(h.steps, 1200);

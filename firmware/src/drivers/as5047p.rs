@@ -271,10 +271,7 @@ mod tests {
         ex.extend(frame(0xC000, bad));
         let mut spi = Mock::new(&ex);
         let mut enc = As5047p::new(spi.clone());
-        assert_eq!(
-            enc.read_angle_counts(),
-            Err(Error::Parity { frame: bad })
-        );
+        assert_eq!(enc.read_angle_counts(), Err(Error::Parity { frame: bad }));
         spi.done();
     }
 
@@ -321,7 +318,14 @@ mod tests {
     fn unwraps_across_the_wrap() {
         // Zero at 16380 (4 counts below the wrap); walk up through the wrap and back.
         let mut t = AngleTracker::new(16380, 100);
-        let seq: [(u16, i32); 6] = [(16380, 0), (16383, 3), (2, 6), (50, 54), (16370, -10), (16383, 3)];
+        let seq: [(u16, i32); 6] = [
+            (16380, 0),
+            (16383, 3),
+            (2, 6),
+            (50, 54),
+            (16370, -10),
+            (16383, 3),
+        ];
         for (raw, expect_counts) in seq {
             let a = t.update(raw).unwrap();
             let expect = expect_counts as f32 * 2.0 * PI / 16384.0;

@@ -127,8 +127,8 @@ impl WheelSpeed {
             let v = self.speed_from_period(period);
             let elapsed_s = self.ticks_since_accept as f32 * tick_s;
             let allowed = self.cfg.max_accel_mps2 * elapsed_s + self.cfg.jump_margin_mps;
-            let plausible = v.is_finite()
-                && (!self.have_speed || (v - self.accepted_mps).abs() <= allowed);
+            let plausible =
+                v.is_finite() && (!self.have_speed || (v - self.accepted_mps).abs() <= allowed);
             if plausible {
                 self.accepted_mps = v;
                 self.have_speed = true;
