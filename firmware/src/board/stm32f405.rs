@@ -102,9 +102,7 @@ impl PulseCapture for BoardPulses {
         }
         PulseSample {
             new_period_ticks,
-            ticks_since_edge: self
-                .last_capture
-                .map_or(u32::MAX, |l| now.wrapping_sub(l)),
+            ticks_since_edge: self.last_capture.map_or(u32::MAX, |l| now.wrapping_sub(l)),
         }
     }
 }
@@ -156,8 +154,12 @@ pub fn init(dp: pac::Peripherals) -> Board {
         1.MHz(),
         &mut rcc,
     );
-    let cs1 = gpioa.pa4.into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
-    let cs2 = gpiob.pb12.into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
+    let cs1 = gpioa
+        .pa4
+        .into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
+    let cs2 = gpiob
+        .pb12
+        .into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
     let enc_l = match ExclusiveDevice::new_no_delay(spi1, cs1) {
         Ok(d) => d,
         Err(e) => match e {},
