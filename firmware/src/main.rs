@@ -99,7 +99,7 @@ mod app {
         let pwm_ok = b.coil.set_current_a(cmd).is_ok();
 
         let mut busy = false;
-        if step % ESTIMATOR_DECIMATION == 0 {
+        if step.is_multiple_of(ESTIMATOR_DECIMATION) {
             if input.is_some() {
                 latest.lock(|l| *l = input);
             }
@@ -131,10 +131,10 @@ mod app {
         }
         *cx.local.est_runs += 1;
         let runs = *cx.local.est_runs;
-        if runs % SLOW_DIVIDER == 0 {
+        if runs.is_multiple_of(SLOW_DIVIDER) {
             cx.local.est.slow_update();
         }
-        if runs % TELEMETRY_DIVIDER == 0 {
+        if runs.is_multiple_of(TELEMETRY_DIVIDER) {
             let h = cx.shared.health.lock(|h| *h);
             defmt::info!(
                 "telemetry: toe-difference rms {=f32} mrad; {}",

@@ -93,7 +93,7 @@ mod bench {
             w(TIM2 + 0x28, 0);
             w(TIM2 + 0x2C, u32::MAX);
             w(TIM2 + 0x14, 1);
-            w(TIM2 + 0x00, 1);
+            w(TIM2, 1); // CR1 (offset 0): CEN
         }
     }
 
