@@ -138,3 +138,25 @@ impl fmt::Display for MemoryReport {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(flash: u64, bss: u64) -> MemoryReport {
+        MemoryReport {
+            name: "test.elf".into(),
+            sections: vec![
+                (".text".into(), FLASH.0, flash, true, false),
+                (".bss".into(), RAM.0, bss, false, true),
+            ],
+        }
+    }
+
+    #[test]
+    fn budgets_pass_at_the_limit_and_fail_one_byte_over() {
+        assert!(report(FLASH_BUDGET, RAM_BUDGET).check_budget().is_ok());
+        assert!(report(FLASH_BUDGET + 1, 0).check_budget().is_err());
+        assert!(report(0, RAM_BUDGET + 1).check_budget().is_err());
+    }
+}

@@ -84,6 +84,16 @@ fn test() -> Result<(), String> {
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         ("on-target benchmark budgets (QEMU -icount)", bench),
         (
+            "an over-budget benchmark entry fails the run",
+            || match run_bench(&["qemu", "deliberate-failure"]) {
+                Ok(_) => Err("the deliberately over-budget entry did not fail the bench".into()),
+                Err(e) if e.contains("over budget") => {
+                    Ok("exit non-zero, row marked OVER BUDGET".into())
+                }
+                Err(e) => Err(format!("the bench failed, but not for the budget: {e}")),
+            },
+        ),
+        (
             "a failing on-target test fails the run",
             on_target_failure_is_caught,
         ),
@@ -179,9 +189,13 @@ fn on_target_failure_is_caught() -> Step {
 /// Builds and runs the benchmark binary with instruction counting, prints its table and
 /// fails if the counter calibration failed or an entry is over its budget.
 fn bench() -> Step {
+    run_bench(&["qemu"])
+}
+
+fn run_bench(features: &[&str]) -> Step {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
-    let elf = build_firmware("target-bench", &["qemu"])?;
+    let elf = build_firmware("target-bench", features)?;
     let run = qemu::run_with(&elf, qemu::BENCH_ICOUNT)?;
     let mut rows = Vec::new();
     for line in &run.log {
@@ -202,8 +216,13 @@ fn bench() -> Step {
     if !run.stderr.trim().is_empty() {
         eprintln!("  qemu stderr: {}", run.stderr.trim());
     }
-    run.expect_success()
-        .map_err(|e| format!("{e} (calibration failed or an entry is over budget)"))?;
+    let over = rows
+        .iter()
+        .filter(|r| r.get(3).is_some_and(|x| x.contains("OVER BUDGET")))
+        .count();
+    run.expect_success().map_err(|e| {
+        format!("{e}: {over} entries over budget (or the counter calibration failed)")
+    })?;
     if rows.is_empty() {
         return Err("the benchmark printed no rows".into());
     }

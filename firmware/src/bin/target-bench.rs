@@ -68,6 +68,13 @@ mod bench {
             budget: None,
             run: matmul10,
         },
+        // Proves that an entry over its budget fails the run (`cargo xtask test` builds it).
+        #[cfg(feature = "deliberate-failure")]
+        Entry {
+            name: "deliberately over budget (proves the check)",
+            budget: Some(1),
+            run: biquad,
+        },
         Entry {
             name: "eigen update stand-in: Schur 10x10 f64",
             budget: None,
