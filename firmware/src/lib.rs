@@ -5,8 +5,23 @@
 //! --workspace` on the host never needs the thumbv7em toolchain.
 #![cfg_attr(target_os = "none", no_std)]
 
+pub mod control;
+pub mod drivers;
+pub mod sensors;
+pub mod sim;
+
+#[cfg(target_os = "none")]
+pub mod board;
+#[cfg(target_os = "none")]
+pub mod periph;
 #[cfg(target_os = "none")]
 pub mod runtime;
+#[cfg(target_os = "none")]
+pub mod stack;
 
 /// Firmware identification logged at boot.
 pub const BANNER: &str = concat!("shimmy-firmware ", env!("CARGO_PKG_VERSION"));
+
+// The device crate provides the interrupt vector table (and RTIC's `device`).
+#[cfg(target_os = "none")]
+pub use stm32f4xx_hal as hal;

@@ -4,6 +4,11 @@ use object::{Object, ObjectSection, SectionFlags};
 use std::fmt;
 use std::path::Path;
 
+/// Budgets of the release application image (issue 6): what the firmware may use of the
+/// STM32F405RG, leaving room for the core's controller and estimators and for a bootloader.
+pub const FLASH_BUDGET: u64 = 96 * 1024;
+pub const RAM_BUDGET: u64 = 24 * 1024;
+
 /// STM32F405RG memory map (must match `memory.x`).
 const FLASH: (u64, u64) = (0x0800_0000, 1024 * 1024);
 const RAM: (u64, u64) = (0x2000_0000, 128 * 1024);
@@ -73,6 +78,28 @@ impl MemoryReport {
     }
 }
 
+impl MemoryReport {
+    /// Fails if the image exceeds [`FLASH_BUDGET`] or [`RAM_BUDGET`].
+    pub fn check_budget(&self) -> Result<(), String> {
+        let (f, r) = (self.flash_bytes(), self.ram_bytes());
+        println!(
+            "  budget: flash {f} B <= {FLASH_BUDGET} B, static RAM {r} B <= {RAM_BUDGET} B: {}",
+            if f <= FLASH_BUDGET && r <= RAM_BUDGET {
+                "ok"
+            } else {
+                "EXCEEDED"
+            }
+        );
+        if f > FLASH_BUDGET || r > RAM_BUDGET {
+            return Err(format!(
+                "{} exceeds its budget (flash {f} B of {FLASH_BUDGET} B, static RAM {r} B of {RAM_BUDGET} B)",
+                self.name
+            ));
+        }
+        Ok(())
+    }
+}
+
 fn within(addr: u64, (origin, len): (u64, u64)) -> bool {
     addr >= origin && addr < origin + len
 }
@@ -109,5 +136,27 @@ impl fmt::Display for MemoryReport {
             RAM.1 / 1024,
             pct(self.ram_bytes(), RAM.1)
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(flash: u64, bss: u64) -> MemoryReport {
+        MemoryReport {
+            name: "test.elf".into(),
+            sections: vec![
+                (".text".into(), FLASH.0, flash, true, false),
+                (".bss".into(), RAM.0, bss, false, true),
+            ],
+        }
+    }
+
+    #[test]
+    fn budgets_pass_at_the_limit_and_fail_one_byte_over() {
+        assert!(report(FLASH_BUDGET, RAM_BUDGET).check_budget().is_ok());
+        assert!(report(FLASH_BUDGET + 1, 0).check_budget().is_err());
+        assert!(report(0, RAM_BUDGET + 1).check_budget().is_err());
     }
 }

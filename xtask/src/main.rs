@@ -5,7 +5,11 @@
 //!                                on-target tests under QEMU (and proof that a failing one fails)
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
-//! cargo xtask size               release firmware build and its flash/RAM table
+//! cargo xtask size               release firmware build and its flash/RAM table, checked
+//!                                against the budgets (flash <= 96 KiB, static RAM <= 24 KiB)
+//! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
+//!                                per call of each entry, checked against its budget, and the
+//!                                stack high-water mark
 //! ```
 //!
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm) or
@@ -27,8 +31,9 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
         Some("size") => size(),
+        Some("bench") => bench().map(|_| ()),
         _ => {
-            eprintln!("usage: cargo xtask <test | qemu [BIN] | size>");
+            eprintln!("usage: cargo xtask <test | qemu [BIN] | size | bench>");
             return ExitCode::from(2);
         }
     };
@@ -73,16 +78,28 @@ fn test() -> Result<(), String> {
             let report = elf::MemoryReport::read(&elf)?;
             println!("{report}");
             report.check_fits()?;
+            report.check_budget()?;
             Ok(report.one_line())
         }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
+        ("on-target benchmark budgets (QEMU -icount)", bench),
+        (
+            "an over-budget benchmark entry fails the run",
+            || match run_bench(&["qemu", "deliberate-failure"]) {
+                Ok(_) => Err("the deliberately over-budget entry did not fail the bench".into()),
+                Err(e) if e.contains("over budget") => {
+                    Ok("exit non-zero, row marked OVER BUDGET".into())
+                }
+                Err(e) => Err(format!("the bench failed, but not for the budget: {e}")),
+            },
+        ),
         (
             "a failing on-target test fails the run",
             on_target_failure_is_caught,
         ),
-        ("firmware boots under QEMU", || {
+        ("firmware app under QEMU (RTIC, simulated sensors)", || {
             let elf = build_firmware(FIRMWARE, &["qemu"])?;
-            let run = qemu::run(&elf)?;
+            let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
             run.print();
             run.expect_success()?;
             Ok(format!("{} log lines", run.log.len()))
@@ -169,19 +186,63 @@ fn on_target_failure_is_caught() -> Step {
     ))
 }
 
+/// Builds and runs the benchmark binary with instruction counting, prints its table and
+/// fails if the counter calibration failed or an entry is over its budget.
+fn bench() -> Step {
+    run_bench(&["qemu"])
+}
+
+fn run_bench(features: &[&str]) -> Step {
+    ensure_thumb_target()?;
+    qemu::ensure_installed()?;
+    let elf = build_firmware("target-bench", features)?;
+    let run = qemu::run_with(&elf, qemu::BENCH_ICOUNT)?;
+    let mut rows = Vec::new();
+    for line in &run.log {
+        match line.split_once("bench | ") {
+            Some((_, rest)) => rows.push(rest.split(" | ").map(str::to_string).collect::<Vec<_>>()),
+            None => println!("  | {line}"),
+        }
+    }
+    println!(
+        "  {:<50} {:>12} {:>8}  result",
+        "name", "instructions", "budget"
+    );
+    for r in &rows {
+        if let [name, n, budget, result] = r.as_slice() {
+            println!("  {name:<50} {n:>12} {budget:>8}  {result}");
+        }
+    }
+    if !run.stderr.trim().is_empty() {
+        eprintln!("  qemu stderr: {}", run.stderr.trim());
+    }
+    let over = rows
+        .iter()
+        .filter(|r| r.get(3).is_some_and(|x| x.contains("OVER BUDGET")))
+        .count();
+    run.expect_success().map_err(|e| {
+        format!("{e}: {over} entries over budget (or the counter calibration failed)")
+    })?;
+    if rows.is_empty() {
+        return Err("the benchmark printed no rows".into());
+    }
+    Ok(format!("{} entries within budget", rows.len()))
+}
+
 fn size() -> Result<(), String> {
     ensure_thumb_target()?;
     let elf = build_firmware(FIRMWARE, &[])?;
     let report = elf::MemoryReport::read(&elf)?;
     println!("{report}");
-    report.check_fits()
+    report.check_fits()?;
+    report.check_budget()
 }
 
 fn run_in_qemu(bin: &str) -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     let elf = build_firmware(bin, &["qemu"])?;
-    let run = qemu::run(&elf)?;
+    let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
     run.print();
     run.expect_success()
 }

@@ -29,6 +29,26 @@ mod harness {
             name: "params::validation",
             run: validation,
         },
+        Test {
+            name: "as5047p::command_frames",
+            run: as5047p_frames,
+        },
+        Test {
+            name: "as5047p::unwrap_across_wrap",
+            run: as5047p_unwrap,
+        },
+        Test {
+            name: "wheel_speed::period_timeout_jump",
+            run: wheel_speed,
+        },
+        Test {
+            name: "coil::shunt_scaling_and_pwm_clamp",
+            run: coil,
+        },
+        Test {
+            name: "sim::closed_loop_faults_counted",
+            run: closed_loop,
+        },
         #[cfg(feature = "deliberate-failure")]
         Test {
             name: "harness::deliberate_failure",
@@ -54,6 +74,86 @@ mod harness {
         let bad = PlantParams::nominal().with(Param::Sigma, -0.1);
         assert!(bad.validate() == Err((Param::Sigma, -0.1)));
         assert!(ParamSet::Hard.params().validate().is_ok());
+    }
+
+    // Driver logic, the same cases as the host tests (which use embedded-hal-mock): a
+    // difference between host and target arithmetic shows up here.
+
+    fn as5047p_frames() {
+        use shimmy_firmware::drivers::as5047p::{decode_response, read_command, Error};
+        assert_eq!(read_command(0x3FFF), 0xFFFF);
+        assert_eq!(read_command(0x0000), 0xC000);
+        assert_eq!(read_command(0x0001), 0x4001);
+        // 0x3039 (12345) has 6 ones: parity 0; flipping a bit breaks it.
+        assert_eq!(decode_response::<()>(0x3039), Ok((false, 12345)));
+        assert_eq!(
+            decode_response::<()>(0x3038),
+            Err(Error::Parity { frame: 0x3038 })
+        );
+    }
+
+    fn as5047p_unwrap() {
+        use core::f32::consts::PI;
+        use shimmy_firmware::drivers::as5047p::AngleTracker;
+        let mut t = AngleTracker::new(16380, 100);
+        for (raw, counts) in [(16380u16, 0i32), (16383, 3), (2, 6), (50, 54), (16370, -10)] {
+            let a = t.update(raw).unwrap_or(f32::NAN);
+            assert!((a - counts as f32 * 2.0 * PI / 16384.0).abs() < 1e-6);
+        }
+        assert!(t.update(16370 - 200).is_err());
+    }
+
+    fn wheel_speed() {
+        use shimmy_firmware::drivers::wheel_speed::{PulseSample, SpeedStatus, WheelSpeed};
+        use shimmy_firmware::sim::SPEED_CONFIG;
+        let mut w = WheelSpeed::new(SPEED_CONFIG);
+        let r = w.update(
+            PulseSample {
+                new_period_ticks: Some(2291),
+                ticks_since_edge: 0,
+            },
+            1000,
+        );
+        assert!((r.speed_mps - 20.0).abs() < 0.01);
+        let r = w.update(
+            PulseSample {
+                new_period_ticks: Some(1145),
+                ticks_since_edge: 0,
+            },
+            1000,
+        );
+        assert!(r.status == SpeedStatus::Implausible);
+        let r = w.update(
+            PulseSample {
+                new_period_ticks: None,
+                ticks_since_edge: 600_000,
+            },
+            1000,
+        );
+        assert!(r.status == SpeedStatus::Standstill && r.speed_mps == 0.0);
+    }
+
+    fn coil() {
+        use shimmy_firmware::drivers::coil_pwm::{CoilDriver, FAILSAFE_CURRENT_A};
+        use shimmy_firmware::sim::{SimPwm, SimWorld, COIL, SHUNT};
+        static WORLD: SimWorld = SimWorld::new();
+        let Ok(mut d) = CoilDriver::new(SimPwm::new(&WORLD), COIL);
+        assert!(d.commanded_a() == FAILSAFE_CURRENT_A);
+        let _ = d.set_current_a(7.0);
+        assert!(d.commanded_a() == COIL.max_current_a);
+        let _ = d.set_current_a(f32::NAN);
+        assert!(d.commanded_a() == FAILSAFE_CURRENT_A);
+        assert!((SHUNT.amps_per_count() * 1241.0 - 1.0).abs() < 1e-3);
+    }
+
+    fn closed_loop() {
+        use shimmy_firmware::control::FixedCurrent;
+        use shimmy_firmware::sim::{expected_faults, run_closed_loop, SimWorld};
+        static WORLD: SimWorld = SimWorld::new();
+        let h = run_closed_loop(&WORLD, &mut FixedCurrent { current_a: 0.5 }, 1200);
+        let (par, ef, glitch) = expected_faults(1200);
+        assert!((h.enc_parity, h.enc_error_flag, h.speed_implausible) == (par, ef, glitch));
+        assert!(h.failsafe_steps == par + ef && h.steps == 1200);
     }
 
     #[cfg(feature = "deliberate-failure")]

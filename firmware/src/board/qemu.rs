@@ -1,0 +1,37 @@
+//! QEMU (netduinoplus2) board layer: no clock setup, simulated sensors.
+
+use super::Board;
+use crate::drivers::coil_pwm::CoilDriver;
+use crate::hal::pac;
+use crate::periph::{ControlTimer, Watchdog};
+use crate::sim::{self, SimPwm, SimWorld};
+
+/// The simulated sensor set.
+pub type BoardSensors = sim::SimSensors;
+/// The simulated coil PWM.
+pub type Pwm = SimPwm;
+
+/// The simulated world the devices read.
+pub static WORLD: SimWorld = SimWorld::new();
+
+/// Control steps before the `qemu` run exits.
+pub const QEMU_STEPS: u32 = 2000;
+
+/// QEMU's stm32f405 clocks its timers at 1 GHz (verified by `cargo xtask bench`'s
+/// calibration: TIM2 at prescaler 0 counts one per instruction at `-icount shift=0`).
+const TIMER_CLOCK_HZ: u32 = 1_000_000_000;
+
+/// Brings up the simulated board.
+pub fn init(dp: pac::Peripherals) -> Board {
+    let coil = match CoilDriver::new(SimPwm::new(&WORLD), sim::COIL) {
+        Ok(c) => c,
+        Err(e) => match e {},
+    };
+    let watchdog = Watchdog::start(dp.IWDG);
+    Board {
+        sensors: sim::sensors(&WORLD),
+        coil,
+        timer: ControlTimer::start(dp.TIM2, TIMER_CLOCK_HZ),
+        watchdog,
+    }
+}

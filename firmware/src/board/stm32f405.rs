@@ -1,0 +1,211 @@
+//! STM32F405RG board layer: clocks, pins and peripherals (stm32f4xx-hal), wrapped in the
+//! drivers of [`crate::drivers`]. Wiring: README, "Firmware" / "Wiring".
+//!
+//! | function                     | peripheral       | pins                                  |
+//! |------------------------------|------------------|---------------------------------------|
+//! | left wheel-yaw AS5047P       | SPI1, mode 1     | PA5 SCK, PA6 MISO, PA7 MOSI, PA4 CS   |
+//! | right wheel-yaw AS5047P      | SPI2, mode 1     | PB13 SCK, PB14 MISO, PB15 MOSI, PB12 CS |
+//! | wheel-speed pulses           | TIM5 CH1 capture | PA0                                   |
+//! | coil current (shunt amp out) | ADC1 IN1         | PA1                                   |
+//! | coil PWM (gate driver input) | TIM4 CH1, 20 kHz | PB6                                   |
+//! | control period               | TIM2 (internal)  | -                                     |
+
+use super::Board;
+use crate::drivers::as5047p::{AngleTracker, As5047p};
+use crate::drivers::coil_current::{AdcChannel, CoilCurrentSensor, ShuntConfig};
+use crate::drivers::coil_pwm::{CoilConfig, CoilDriver};
+use crate::drivers::wheel_speed::{PulseCapture, PulseSample, SpeedConfig, WheelSpeed};
+use crate::hal::{
+    adc::{config::AdcConfig, config::SampleTime, Adc},
+    gpio::{Analog, Output, Pin, PushPull},
+    pac,
+    prelude::*,
+    rcc,
+    spi::Spi,
+    timer::{CaptureChannel, CaptureHzManager, CapturePolarity, Flag, PwmChannel, Timer},
+};
+use crate::periph::{ControlTimer, Watchdog};
+use crate::sensors::{Sensors, YawChannel};
+use core::convert::Infallible;
+use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
+
+/// Left encoder: SPI1 with chip select PA4.
+pub type EncLeft = ExclusiveDevice<Spi<pac::SPI1>, Pin<'A', 4, Output<PushPull>>, NoDelay>;
+/// Right encoder: SPI2 with chip select PB12.
+pub type EncRight = ExclusiveDevice<Spi<pac::SPI2>, Pin<'B', 12, Output<PushPull>>, NoDelay>;
+/// The coil PWM channel.
+pub type Pwm = PwmChannel<pac::TIM4, 0>;
+/// The board's sensor set.
+pub type BoardSensors = Sensors<EncLeft, EncRight, BoardPulses, BoardAdc>;
+
+/// Tone wheel and tyre of the reference vehicle.
+/// TODO(vehicle): measured rolling radius and tooth count of the actual axle.
+pub const SPEED: SpeedConfig = SpeedConfig {
+    pulses_per_rev: 48,
+    rolling_radius_m: 0.35,
+    tick_hz: 1_000_000,
+    timeout_s: 0.5,
+    max_accel_mps2: 12.0,
+    jump_margin_mps: 0.5,
+};
+
+/// Shunt chain: 20 mOhm, INA240A2 (gain 50), 3.3 V reference, 12 bit, mid-rail offset.
+/// TODO(calibration): measure `offset_counts` at boot with the coil off.
+pub const SHUNT: ShuntConfig = ShuntConfig {
+    shunt_ohm: 0.02,
+    amp_gain: 50.0,
+    vref_v: 3.3,
+    bits: 12,
+    offset_counts: 2048.0,
+};
+
+/// Coil: 4 ohm hot, 12 V supply, 2 A maximum (the reference damper's u_max).
+pub const COIL: CoilConfig = CoilConfig {
+    coil_ohm: 4.0,
+    supply_v: 12.0,
+    max_current_a: 2.0,
+};
+
+/// Raw counts of straight ahead of the two encoders.
+/// TODO(calibration): store per vehicle (flash) after a straight-ahead calibration.
+pub const ZERO_COUNTS: [u16; 2] = [0, 0];
+
+/// Largest plausible encoder step per 1 ms sample: 50 counts = 19 mrad/ms = 19 rad/s.
+pub const MAX_STEP_COUNTS: u16 = 50;
+
+/// Wheel-speed pulses from TIM5 channel 1 input capture (1 MHz, 32 bit), polled once per
+/// control step.
+///
+/// Limitation: only the newest edge per step is seen; with more than one edge per step (an
+/// overcapture; above ~45 m/s with 48 teeth and 0.35 m) no period is reported and the speed
+/// is bounded by the between-edges rule. TODO: capture interrupt or DMA for higher speeds.
+pub struct BoardPulses {
+    tim: CaptureHzManager<pac::TIM5>,
+    ch1: CaptureChannel<pac::TIM5, 0>,
+    last_capture: Option<u32>,
+}
+
+impl PulseCapture for BoardPulses {
+    fn take(&mut self) -> PulseSample {
+        // SAFETY: reading TIM5 CNT (read-only use of a register the manager owns).
+        let now = unsafe { (*pac::TIM5::ptr()).cnt().read().bits() };
+        let flags = self.tim.flags();
+        let mut new_period_ticks = None;
+        if flags.contains(Flag::C1) {
+            let cap = self.ch1.get_capture(); // reading CCR1 clears CC1IF
+            if flags.contains(Flag::C1Overcapture) {
+                self.tim.clear_flags(Flag::C1Overcapture);
+            } else if let Some(last) = self.last_capture {
+                new_period_ticks = Some(cap.wrapping_sub(last));
+            }
+            self.last_capture = Some(cap);
+        }
+        PulseSample {
+            new_period_ticks,
+            ticks_since_edge: self.last_capture.map_or(u32::MAX, |l| now.wrapping_sub(l)),
+        }
+    }
+}
+
+/// ADC1 channel 1 (PA1).
+pub struct BoardAdc {
+    adc: Adc<pac::ADC1>,
+    pin: Pin<'A', 1, Analog>,
+}
+
+impl AdcChannel for BoardAdc {
+    type Error = Infallible;
+    fn read_counts(&mut self) -> Result<u16, Infallible> {
+        Ok(self.adc.convert(&self.pin, SampleTime::Cycles_84))
+    }
+}
+
+/// Brings up the board: 168 MHz from the 8 MHz HSE, peripherals, coil at the fail-safe
+/// current, watchdog running, control timer started (its interrupt fires once `init` returns).
+pub fn init(dp: pac::Peripherals) -> Board {
+    let mut rcc = dp.RCC.freeze(
+        rcc::Config::hse(8.MHz())
+            .sysclk(168.MHz())
+            .pclk1(42.MHz())
+            .pclk2(84.MHz()),
+    );
+    let timer_clock_hz = rcc.clocks.timclk1().raw();
+    let gpioa = dp.GPIOA.split(&mut rcc);
+    let gpiob = dp.GPIOB.split(&mut rcc);
+
+    // Coil first, so the fail-safe current is on before anything else can fail.
+    let (_, (pwm_ch1, ..)) = dp.TIM4.pwm_hz(20.kHz(), &mut rcc);
+    let mut pwm = pwm_ch1.with(gpiob.pb6);
+    pwm.enable();
+    let coil = match CoilDriver::new(pwm, COIL) {
+        Ok(c) => c,
+        Err(e) => match e {},
+    };
+
+    let spi1 = dp.SPI1.spi(
+        (Some(gpioa.pa5), Some(gpioa.pa6), Some(gpioa.pa7)),
+        embedded_hal::spi::MODE_1,
+        1.MHz(),
+        &mut rcc,
+    );
+    let spi2 = dp.SPI2.spi(
+        (Some(gpiob.pb13), Some(gpiob.pb14), Some(gpiob.pb15)),
+        embedded_hal::spi::MODE_1,
+        1.MHz(),
+        &mut rcc,
+    );
+    let cs1 = gpioa
+        .pa4
+        .into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
+    let cs2 = gpiob
+        .pb12
+        .into_push_pull_output_in_state(crate::hal::gpio::PinState::High);
+    let enc_l = match ExclusiveDevice::new_no_delay(spi1, cs1) {
+        Ok(d) => d,
+        Err(e) => match e {},
+    };
+    let enc_r = match ExclusiveDevice::new_no_delay(spi2, cs2) {
+        Ok(d) => d,
+        Err(e) => match e {},
+    };
+
+    let (tim5, (cap1, ..)) = Timer::new(dp.TIM5, &mut rcc).capture_hz(1.MHz());
+    let mut cap1 = cap1.with(gpioa.pa0);
+    cap1.set_polarity(CapturePolarity::ActiveHigh);
+    cap1.enable();
+
+    let adc = Adc::new(dp.ADC1, true, AdcConfig::default(), &mut rcc);
+    let current = CoilCurrentSensor::new(
+        BoardAdc {
+            adc,
+            pin: gpioa.pa1.into_analog(),
+        },
+        SHUNT,
+    );
+
+    let sensors = Sensors {
+        left: YawChannel {
+            encoder: As5047p::new(enc_l),
+            tracker: AngleTracker::new(ZERO_COUNTS[0], MAX_STEP_COUNTS),
+        },
+        right: YawChannel {
+            encoder: As5047p::new(enc_r),
+            tracker: AngleTracker::new(ZERO_COUNTS[1], MAX_STEP_COUNTS),
+        },
+        pulses: BoardPulses {
+            tim: tim5,
+            ch1: cap1,
+            last_capture: None,
+        },
+        speed: WheelSpeed::new(SPEED),
+        current,
+    };
+
+    let watchdog = Watchdog::start(dp.IWDG);
+    Board {
+        sensors,
+        coil,
+        timer: ControlTimer::start(dp.TIM2, timer_clock_hz),
+        watchdog,
+    }
+}
