@@ -7,4 +7,5 @@ pub mod disturbance;
 pub mod integrator;
 pub mod paramfile;
 pub mod plant;
+pub mod scenario_file;
 pub mod stability_cmd;

@@ -1,0 +1,605 @@
+//! Scenario files (TOML): everything one simulator run needs, validated as a whole before
+//! anything runs. A bad file is rejected with a message that names the field and the allowed
+//! range; unknown fields are errors (a typo must not silently fall back to a default).
+//!
+//! ```toml
+//! name = "ramp through the Hopf window"
+//! duration_s = 60.0
+//! seed = 7                        # road noise and sensor noise
+//!
+//! [plant]
+//! params = "nominal"              # nominal | gentle | hard | path to a parameter file
+//! overrides = { c_a = 72000.0 }   # optional, by field name (see `shimmy-sim params`)
+//!
+//! [controller]
+//! kind = "asmc"                   # no-damper | passive-off | passive-on | smc | asmc | skyhook
+//! on_current_a = 1.0              # passive-on only
+//!
+//! [speed]                         # exactly one of: constant_kmh | ramp | points
+//! ramp = { from_kmh = 20.0, to_kmh = 120.0, start_s = 0.0, end_s = 60.0 }
+//!
+//! [initial]
+//! yaw_deg = 0.5                   # initial in-phase wheel-yaw perturbation
+//!
+//! [[impulse]]                     # pothole / road joint: half-sine yaw torque on both wheels
+//! t_s = 10.0
+//! duration_s = 0.02
+//! peak_nm = 400.0
+//!
+//! [road_noise]
+//! std_nm = 15.0
+//! corner_hz = 20.0
+//! common = 0.5
+//!
+//! [imbalance]
+//! amplitude_nm = 4.0
+//! phase_deg = [0.0, 90.0]
+//!
+//! [driver]                        # lane_change or slalom
+//! slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
+//!
+//! [sensors]
+//! encoder_bits = 14
+//! encoder_noise_lsb = 0.5
+//!
+//! [output]
+//! dir = "out/ramp"
+//! trace_every = 5                 # record every n-th 1 ms period
+//! ```
+
+use crate::disturbance::{DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile};
+use crate::paramfile;
+use anyhow::{bail, Context, Result};
+use serde::Deserialize;
+use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Controller names a scenario may use (`no-damper` = no damper force at all).
+pub const CONTROLLERS: [&str; 6] = [
+    "no-damper",
+    "passive-off",
+    "passive-on",
+    "smc",
+    "asmc",
+    "skyhook",
+];
+
+/// A validated scenario, ready to run.
+#[derive(Clone, Debug)]
+pub struct ScenarioSpec {
+    /// Display name.
+    pub name: String,
+    /// Simulated time [s].
+    pub duration_s: f64,
+    /// Seed of road and sensor noise.
+    pub seed: u64,
+    /// The true plant.
+    pub params: PlantParams,
+    /// Controller name, one of [`CONTROLLERS`].
+    pub controller: String,
+    /// Fixed current of `passive-on` [A].
+    pub on_current_a: f64,
+    /// Initial in-phase wheel yaw [rad].
+    pub initial_yaw_rad: f64,
+    /// Speed, driver and road inputs.
+    pub scenario: Scenario,
+    /// Encoder resolution [bits].
+    pub encoder_bits: u32,
+    /// Encoder noise [LSB rms].
+    pub encoder_noise_lsb: f64,
+    /// Output folder.
+    pub out_dir: PathBuf,
+    /// Trace decimation (every n-th period).
+    pub trace_every: usize,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    name: Option<String>,
+    duration_s: f64,
+    #[serde(default = "default_seed")]
+    seed: u64,
+    plant: Option<PlantSection>,
+    controller: Option<ControllerSection>,
+    speed: SpeedSection,
+    initial: Option<InitialSection>,
+    #[serde(default)]
+    impulse: Vec<ImpulseSection>,
+    road_noise: Option<RoadNoiseSection>,
+    imbalance: Option<ImbalanceSection>,
+    driver: Option<DriverSection>,
+    sensors: Option<SensorSection>,
+    output: Option<OutputSection>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlantSection {
+    params: Option<String>,
+    #[serde(default)]
+    overrides: BTreeMap<String, f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ControllerSection {
+    kind: String,
+    on_current_a: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SpeedSection {
+    constant_kmh: Option<f64>,
+    ramp: Option<RampSection>,
+    /// `[[t_s, v_kmh], ...]`
+    points: Option<Vec<[f64; 2]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RampSection {
+    from_kmh: f64,
+    to_kmh: f64,
+    start_s: f64,
+    end_s: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InitialSection {
+    yaw_deg: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ImpulseSection {
+    t_s: f64,
+    duration_s: f64,
+    peak_nm: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RoadNoiseSection {
+    std_nm: f64,
+    corner_hz: f64,
+    #[serde(default)]
+    common: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ImbalanceSection {
+    amplitude_nm: f64,
+    #[serde(default)]
+    phase_deg: [f64; 2],
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DriverSection {
+    lane_change: Option<LaneChangeSection>,
+    slalom: Option<SlalomSection>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LaneChangeSection {
+    amplitude_nm: f64,
+    period_s: f64,
+    start_s: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SlalomSection {
+    amplitude_nm: f64,
+    freq_hz: f64,
+    start_s: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorSection {
+    encoder_bits: Option<u32>,
+    encoder_noise_lsb: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OutputSection {
+    dir: Option<String>,
+    trace_every: Option<usize>,
+}
+
+/// Checks `lo <= value <= hi` (and finiteness), naming the field and the range on failure.
+fn in_range(field: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<f64> {
+    if value.is_finite() && (lo..=hi).contains(&value) {
+        Ok(value)
+    } else {
+        bail!("field `{field}` = {value}: allowed range {lo} ..= {hi} {unit}")
+    }
+}
+
+/// Reads and validates a scenario file.
+pub fn load(path: &Path) -> Result<ScenarioSpec> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    parse(&text, &stem).with_context(|| format!("in scenario file {}", path.display()))
+}
+
+/// Parses and validates scenario TOML; `default_name` names the run when the file does not.
+pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
+    let f: File = toml::from_str(text)?;
+    let duration_s = in_range("duration_s", f.duration_s, 0.01, 3600.0, "s")?;
+
+    let params = match &f.plant {
+        Some(p) => {
+            let base = p.params.as_deref().unwrap_or("nominal");
+            let mut params = paramfile::load(base).context("field `plant.params`")?;
+            for (name, value) in &p.overrides {
+                let Some(param) = Param::from_name(name) else {
+                    bail!("field `plant.overrides.{name}`: no such parameter (see `shimmy-sim params`)");
+                };
+                params = params.with(param, *value);
+            }
+            if let Err((param, value)) = params.validate() {
+                bail!(
+                    "field `plant.overrides.{}` = {value}: must be finite and positive ({})",
+                    param.name(),
+                    param.unit()
+                );
+            }
+            params
+        }
+        None => paramfile::load("nominal")?,
+    };
+
+    let (controller, on_current_a) = match &f.controller {
+        Some(c) => {
+            if !CONTROLLERS.contains(&c.kind.as_str()) {
+                bail!(
+                    "field `controller.kind` = {:?}: allowed: {}",
+                    c.kind,
+                    CONTROLLERS.join(", ")
+                );
+            }
+            let on = match (c.kind.as_str(), c.on_current_a) {
+                ("passive-on", Some(i)) => in_range("controller.on_current_a", i, 0.0, 2.0, "A")?,
+                ("passive-on", None) => {
+                    bail!("field `controller.on_current_a` is required for passive-on")
+                }
+                (_, Some(_)) => bail!("field `controller.on_current_a` only applies to passive-on"),
+                (_, None) => 0.0,
+            };
+            (c.kind.clone(), on)
+        }
+        None => ("asmc".to_string(), 0.0),
+    };
+
+    let speed = parse_speed(&f.speed, duration_s)?;
+    let mut scenario = Scenario::new(speed);
+
+    for (i, imp) in f.impulse.iter().enumerate() {
+        let t0_s = in_range(&format!("impulse[{i}].t_s"), imp.t_s, 0.0, duration_s, "s")?;
+        let dur = in_range(
+            &format!("impulse[{i}].duration_s"),
+            imp.duration_s,
+            1e-3,
+            1.0,
+            "s",
+        )?;
+        let peak = in_range(
+            &format!("impulse[{i}].peak_nm"),
+            imp.peak_nm,
+            -5000.0,
+            5000.0,
+            "N m",
+        )?;
+        scenario.impulses.push(Impulse {
+            t0_s,
+            duration_s: dur,
+            peak_nm: [peak, peak],
+        });
+    }
+    if let Some(n) = &f.road_noise {
+        let std_nm = in_range("road_noise.std_nm", n.std_nm, 0.0, 500.0, "N m")?;
+        let corner_hz = in_range("road_noise.corner_hz", n.corner_hz, 0.1, 200.0, "Hz")?;
+        let common = in_range("road_noise.common", n.common, 0.0, 1.0, "")?;
+        scenario.noise = Some(RoadNoise::new(std_nm, corner_hz, common, f.seed));
+    }
+    if let Some(b) = &f.imbalance {
+        let a = in_range("imbalance.amplitude_nm", b.amplitude_nm, 0.0, 200.0, "N m")?;
+        let mut phase_rad = [0.0; 2];
+        for (k, p) in b.phase_deg.iter().enumerate() {
+            phase_rad[k] = in_range(
+                &format!("imbalance.phase_deg[{k}]"),
+                *p,
+                -360.0,
+                360.0,
+                "deg",
+            )?
+            .to_radians();
+        }
+        scenario.imbalance = Some(Imbalance {
+            amplitude_nm: [a, a],
+            phase_rad,
+            radius_m: params.r,
+        });
+    }
+    if let Some(d) = &f.driver {
+        scenario.driver = match (&d.lane_change, &d.slalom) {
+            (Some(l), None) => DriverTorque::LaneChange {
+                amplitude_nm: in_range(
+                    "driver.lane_change.amplitude_nm",
+                    l.amplitude_nm,
+                    -50.0,
+                    50.0,
+                    "N m",
+                )?,
+                period_s: in_range("driver.lane_change.period_s", l.period_s, 0.2, 20.0, "s")?,
+                t0_s: in_range(
+                    "driver.lane_change.start_s",
+                    l.start_s,
+                    0.0,
+                    duration_s,
+                    "s",
+                )?,
+            },
+            (None, Some(s)) => DriverTorque::Slalom {
+                amplitude_nm: in_range(
+                    "driver.slalom.amplitude_nm",
+                    s.amplitude_nm,
+                    -50.0,
+                    50.0,
+                    "N m",
+                )?,
+                freq_hz: in_range("driver.slalom.freq_hz", s.freq_hz, 0.05, 3.0, "Hz")?,
+                t0_s: in_range("driver.slalom.start_s", s.start_s, 0.0, duration_s, "s")?,
+            },
+            _ => bail!("field `driver`: give exactly one of `lane_change` or `slalom`"),
+        };
+    }
+
+    let initial_yaw_rad = match &f.initial {
+        Some(i) => in_range("initial.yaw_deg", i.yaw_deg, -10.0, 10.0, "deg")?.to_radians(),
+        None => 0.0,
+    };
+    let (encoder_bits, encoder_noise_lsb) = match &f.sensors {
+        Some(s) => (
+            in_range(
+                "sensors.encoder_bits",
+                f64::from(s.encoder_bits.unwrap_or(14)),
+                8.0,
+                24.0,
+                "bit",
+            )? as u32,
+            in_range(
+                "sensors.encoder_noise_lsb",
+                s.encoder_noise_lsb.unwrap_or(0.5),
+                0.0,
+                100.0,
+                "LSB",
+            )?,
+        ),
+        None => (14, 0.5),
+    };
+    let name = f.name.clone().unwrap_or_else(|| default_name.to_string());
+    let (out_dir, trace_every) = match &f.output {
+        Some(o) => (
+            o.dir.clone().map(PathBuf::from),
+            in_range(
+                "output.trace_every",
+                o.trace_every.unwrap_or(5) as f64,
+                1.0,
+                1000.0,
+                "",
+            )? as usize,
+        ),
+        None => (None, 5),
+    };
+    let out_dir = out_dir.unwrap_or_else(|| PathBuf::from("out").join(sanitize(&name)));
+
+    Ok(ScenarioSpec {
+        name,
+        duration_s,
+        seed: f.seed,
+        params,
+        controller,
+        on_current_a,
+        initial_yaw_rad,
+        scenario,
+        encoder_bits,
+        encoder_noise_lsb,
+        out_dir,
+        trace_every,
+    })
+}
+
+fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
+    const MAX_KMH: f64 = 200.0;
+    match (s.constant_kmh, &s.ramp, &s.points) {
+        (Some(v), None, None) => Ok(SpeedProfile::Constant(kmh_to_mps(in_range(
+            "speed.constant_kmh",
+            v,
+            0.0,
+            MAX_KMH,
+            "km/h",
+        )?))),
+        (None, Some(r), None) => {
+            let v0 = in_range("speed.ramp.from_kmh", r.from_kmh, 0.0, MAX_KMH, "km/h")?;
+            let v1 = in_range("speed.ramp.to_kmh", r.to_kmh, 0.0, MAX_KMH, "km/h")?;
+            let t0 = in_range("speed.ramp.start_s", r.start_s, 0.0, duration_s, "s")?;
+            let t1 = in_range("speed.ramp.end_s", r.end_s, t0, f64::MAX, "s")?;
+            Ok(SpeedProfile::Ramp {
+                v0_mps: kmh_to_mps(v0),
+                v1_mps: kmh_to_mps(v1),
+                t0_s: t0,
+                t1_s: t1,
+            })
+        }
+        (None, None, Some(pts)) => {
+            if pts.is_empty() {
+                bail!("field `speed.points`: give at least one [t_s, v_kmh] point");
+            }
+            let mut out = Vec::with_capacity(pts.len());
+            let mut last_t = f64::NEG_INFINITY;
+            for (i, [t, v]) in pts.iter().enumerate() {
+                let t = in_range(
+                    &format!("speed.points[{i}][0] (t_s)"),
+                    *t,
+                    0.0,
+                    f64::MAX,
+                    "s",
+                )?;
+                if t < last_t {
+                    bail!("field `speed.points[{i}]`: times must not decrease ({t} s after {last_t} s)");
+                }
+                last_t = t;
+                let v = in_range(
+                    &format!("speed.points[{i}][1] (v_kmh)"),
+                    *v,
+                    0.0,
+                    MAX_KMH,
+                    "km/h",
+                )?;
+                out.push((t, kmh_to_mps(v)));
+            }
+            Ok(SpeedProfile::Piecewise(out))
+        }
+        _ => bail!("field `speed`: give exactly one of `constant_kmh`, `ramp` or `points`"),
+    }
+}
+
+fn sanitize(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "ramp"
+duration_s = 30.0
+seed = 3
+[plant]
+params = "hard"
+overrides = { c_a = 72000.0 }
+[controller]
+kind = "passive-on"
+on_current_a = 1.0
+[speed]
+ramp = { from_kmh = 20.0, to_kmh = 120.0, start_s = 0.0, end_s = 30.0 }
+[initial]
+yaw_deg = 0.5
+[[impulse]]
+t_s = 5.0
+duration_s = 0.02
+peak_nm = 300.0
+[road_noise]
+std_nm = 10.0
+corner_hz = 20.0
+common = 0.5
+[imbalance]
+amplitude_nm = 4.0
+phase_deg = [0.0, 90.0]
+[driver]
+slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
+"#;
+
+    #[test]
+    fn a_complete_file_parses_into_the_run() {
+        let s = parse(GOOD, "x").unwrap();
+        assert_eq!(s.name, "ramp");
+        assert_eq!(s.params.c_a, 72000.0);
+        assert_eq!(s.params.k_d, 5000.0, "hard set");
+        assert_eq!(s.controller, "passive-on");
+        assert!((s.scenario.speed.at(15.0) - kmh_to_mps(70.0)).abs() < 1e-12);
+        assert_eq!(s.scenario.impulses.len(), 1);
+        assert!(s.scenario.noise.is_some() && s.scenario.imbalance.is_some());
+        assert!(matches!(s.scenario.driver, DriverTorque::Slalom { .. }));
+        assert!((s.initial_yaw_rad - 0.5f64.to_radians()).abs() < 1e-15);
+        assert_eq!(s.out_dir, PathBuf::from("out/ramp"));
+    }
+
+    fn err(text: &str) -> String {
+        format!("{:#}", parse(text, "x").unwrap_err())
+    }
+
+    #[test]
+    fn bad_files_name_the_field_and_the_range() {
+        let base = "duration_s = 10.0\n[speed]\nconstant_kmh = 50.0\n";
+        assert!(parse(base, "x").is_ok());
+        let e = err("duration_s = 10.0\n[speed]\nconstant_kmh = 900.0\n");
+        assert!(
+            e.contains("speed.constant_kmh") && e.contains("0 ..= 200"),
+            "{e}"
+        );
+        let e = err(&format!("{base}[controller]\nkind = \"pid\"\n"));
+        assert!(e.contains("controller.kind") && e.contains("asmc"), "{e}");
+        let e = err(&format!("{base}[controller]\nkind = \"passive-on\"\n"));
+        assert!(e.contains("controller.on_current_a"), "{e}");
+        let e = err(&format!(
+            "{base}[road_noise]\nstd_nm = 10.0\ncorner_hz = -1.0\n"
+        ));
+        assert!(e.contains("road_noise.corner_hz"), "{e}");
+        let e = err(&format!("{base}[plant]\noverrides = {{ k_dd = 1.0 }}\n"));
+        assert!(e.contains("plant.overrides.k_dd"), "{e}");
+        let e = err(&format!("{base}[plant]\noverrides = {{ sigma = -1.0 }}\n"));
+        assert!(e.contains("plant.overrides.sigma"), "{e}");
+        let e = err(&format!("{base}[initial]\nyaw_degs = 1.0\n"));
+        assert!(e.contains("yaw_degs"), "unknown fields are errors: {e}");
+        let e = err("duration_s = 10.0\n[speed]\nconstant_kmh = 50.0\nramp = { from_kmh = 1.0, to_kmh = 2.0, start_s = 0.0, end_s = 1.0 }\n");
+        assert!(e.contains("exactly one"), "{e}");
+        let e =
+            err("duration_s = 10.0\n[speed]\npoints = [[0.0, 10.0], [5.0, 20.0], [4.0, 30.0]]\n");
+        assert!(e.contains("speed.points[2]"), "{e}");
+        let e = err("[speed]\nconstant_kmh = 50.0\n");
+        assert!(
+            e.contains("duration_s"),
+            "a missing required field is named: {e}"
+        );
+        let e = err(&format!(
+            "{base}[[impulse]]\nt_s = 20.0\nduration_s = 0.02\npeak_nm = 1.0\n"
+        ));
+        assert!(e.contains("impulse[0].t_s"), "{e}");
+    }
+
+    #[test]
+    fn every_shipped_scenario_is_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+                n += 1;
+            }
+        }
+        assert!(
+            n >= 5,
+            "expected the standard scenarios in {}",
+            dir.display()
+        );
+    }
+}
