@@ -7,5 +7,6 @@ pub mod disturbance;
 pub mod integrator;
 pub mod paramfile;
 pub mod plant;
+pub mod reference_bench;
 pub mod scenario_file;
 pub mod stability_cmd;

@@ -54,6 +54,7 @@ type StepFn = fn() -> Step;
 fn test() -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
+    ensure_scipy()?;
     let steps: Vec<(&str, StepFn)> = vec![
         ("cargo fmt --check", || {
             cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
@@ -322,4 +323,26 @@ fn ensure_thumb_target() -> Result<(), String> {
     .map_err(|e| {
         format!("{e}\nInstall it by hand: rustup target add {TARGET} (in the repository root)")
     })
+}
+
+/// The host tests compare the plant with an independent NumPy/SciPy implementation
+/// (`host-sim/reference/plant_scipy.py`): install numpy and scipy with pip when they are missing.
+fn ensure_scipy() -> Result<(), String> {
+    let have = |py: &str| {
+        Command::new(py)
+            .args(["-c", "import numpy, scipy"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if have("python3") {
+        return Ok(());
+    }
+    println!("xtask: installing numpy and scipy with pip");
+    run(Command::new("python3").args(["-m", "pip", "install", "--quiet", "numpy", "scipy"]))
+        .map_err(|e| format!("{e}\nInstall them by hand: python3 -m pip install numpy scipy"))?;
+    if have("python3") {
+        Ok(())
+    } else {
+        Err("numpy/scipy still not importable after pip install".into())
+    }
 }

@@ -1,0 +1,122 @@
+#!/usr/bin/env python3
+"""Reference implementation of the shimmy plant in NumPy/SciPy, written from
+shared/reference-plant.md independently of the Rust code.
+
+Used by `shimmy-sim reference-bench` as (1) a speed reference (solve_ivp for the time-domain run,
+numpy.linalg.eigvals for the eigenvalue sweep) and (2) a second implementation whose trajectory
+and eigenvalues the Rust results must match.
+
+usage: plant_scipy.py CASE.toml RESULT.json
+CASE.toml holds [plant] (parameter names as in core/src/params.rs), [damper] (Spencer model,
+already scaled) and [case] (speed, current, initial yaw, duration, sample times, sweep speeds).
+"""
+import json
+import sys
+import time
+import tomllib
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+
+def tyre_force(p, a):
+    d = p["mu"] * p["f_z"]
+    b = p["c_a"] / (p["c_s"] * d)
+    return d * np.sin(p["c_s"] * np.arctan(b * a))
+
+
+def rhs(t, x, p, m, v, u_cmd):
+    psi_l, psi_r, phi, th, dpsi_l, dpsi_r, dphi, dth, a_l, a_r, u, y, z = x
+    h = p["i_p"] * v / p["r"]
+    f_l, f_r = tyre_force(p, a_l), tyre_force(p, a_r)
+    # Spencer modified Bouc-Wen damper on the track rod.
+    xd = 0.5 * p["l_t"] * (psi_l + psi_r)
+    vd = 0.5 * p["l_t"] * (dpsi_l + dpsi_r)
+    u_cmd = min(max(u_cmd, 0.0), m["u_max"])
+    du = -m["eta"] * (u - u_cmd)
+    alpha = m["alpha_a"] + m["alpha_b"] * u
+    c0 = m["c0a"] + m["c0b"] * u
+    c1 = m["c1a"] + m["c1b"] * u
+    dy = (alpha * z + c0 * vd + m["k0"] * (xd - y)) / (c0 + c1)
+    rel = vd - dy
+    n = m["n"]
+    dz = (m["a_bw"] * rel - m["beta"] * rel * abs(z) ** n
+          - m["gamma"] * abs(rel) * abs(z) ** (n - 1) * z)
+    f_d = c1 * dy + m["k1"] * (xd - m["x0"])
+    tq_d = 0.5 * p["l_t"] * f_d
+    trail = p["e"] + p["t_p"]
+    kd = p["k_d"] * (th / p["i_s"] - psi_l)
+    ktr = p["k_tr"] * (psi_l - psi_r)
+    return [
+        dpsi_l, dpsi_r, dphi, dth,
+        (-p["c_k"] * dpsi_l - ktr + kd - trail * f_l - h * dphi - tq_d) / p["i_k"],
+        (-p["c_k"] * dpsi_r + ktr - trail * f_r - h * dphi - tq_d) / p["i_k"],
+        (-p["c_phi"] * dphi - p["k_phi"] * phi + p["h_r"] * (f_l + f_r)
+         + h * (dpsi_l + dpsi_r)) / p["i_phi"],
+        (-p["c_sw"] * dth - kd / p["i_s"]) / p["j_sw"],
+        (v * (psi_l - a_l) + p["e"] * dpsi_l - p["h_r"] * dphi) / p["sigma"],
+        (v * (psi_r - a_r) + p["e"] * dpsi_r - p["h_r"] * dphi) / p["sigma"],
+        du, dy, dz,
+    ]
+
+
+def linear_a(p, v):
+    """A(V) of the linearised plant without damper (tyres linear: F = C_a a)."""
+    h = p["i_p"] * v / p["r"]
+    ca, trail = p["c_a"], p["e"] + p["t_p"]
+    m_inv = np.diag(1.0 / np.array([p["i_k"], p["i_k"], p["i_phi"], p["j_sw"]]))
+    k = np.array([
+        [p["k_tr"] + p["k_d"], -p["k_tr"], 0.0, -p["k_d"] / p["i_s"]],
+        [-p["k_tr"], p["k_tr"], 0.0, 0.0],
+        [0.0, 0.0, p["k_phi"], 0.0],
+        [-p["k_d"] / p["i_s"], 0.0, 0.0, p["k_d"] / p["i_s"] ** 2],
+    ])
+    c = np.array([
+        [p["c_k"], 0.0, h, 0.0],
+        [0.0, p["c_k"], h, 0.0],
+        [-h, -h, p["c_phi"], 0.0],
+        [0.0, 0.0, 0.0, p["c_sw"]],
+    ])
+    g = np.array([[-trail * ca, 0.0], [0.0, -trail * ca], [p["h_r"] * ca, p["h_r"] * ca], [0.0, 0.0]])
+    a = np.zeros((10, 10))
+    a[0:4, 4:8] = np.eye(4)
+    a[4:8, 0:4] = -m_inv @ k
+    a[4:8, 4:8] = -m_inv @ c
+    a[4:8, 8:10] = m_inv @ g
+    s = p["sigma"]
+    a[8, 0], a[9, 1] = v / s, v / s
+    a[8, 4], a[9, 5] = p["e"] / s, p["e"] / s
+    a[8, 6], a[9, 6] = -p["h_r"] / s, -p["h_r"] / s
+    a[8, 8], a[9, 9] = -v / s, -v / s
+    return a
+
+
+def main():
+    case_path, out_path = sys.argv[1], sys.argv[2]
+    with open(case_path, "rb") as f:
+        cfg = tomllib.load(f)
+    p, m, c = cfg["plant"], cfg["damper"], cfg["case"]
+    x0 = np.zeros(13)
+    x0[0] = x0[1] = np.radians(c["initial_yaw_deg"])
+    t_eval = np.array(c["sample_times_s"])
+    start = time.perf_counter()
+    sol = solve_ivp(rhs, (0.0, c["duration_s"]), x0, method=c["method"], t_eval=t_eval,
+                    rtol=c["rtol"], atol=c["atol"], args=(p, m, c["speed_mps"], c["current_a"]))
+    sim_wall = time.perf_counter() - start
+    if not sol.success:
+        sys.exit(f"solve_ivp failed: {sol.message}")
+    speeds = np.array(c["sweep_speeds_mps"])
+    start = time.perf_counter()
+    max_re = [float(np.max(np.linalg.eigvals(linear_a(p, v)).real)) for v in speeds]
+    sweep_wall = time.perf_counter() - start
+    json.dump({
+        "sim_wall_s": sim_wall,
+        "rhs_evals": int(sol.nfev),
+        "psi_l_rad": sol.y[0].tolist(),
+        "sweep_wall_s": sweep_wall,
+        "max_re": max_re,
+    }, open(out_path, "w"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,267 @@
+//! `shimmy-sim reference-bench`: the simulator next to an independent NumPy/SciPy implementation
+//! of the same plant (`host-sim/reference/plant_scipy.py`, written from reference-plant.md), run
+//! in one command: speed ratios for the time-domain run and the eigenvalue sweep, and agreement
+//! of the two implementations' trajectories and eigenvalues.
+//!
+//! The time-domain case is the nonlinear plant with the MR damper at a constant coil current
+//! (SciPy gets its best case: one `solve_ivp` call over the whole run, where the Rust simulator
+//! advances in 1 ms control periods as it does in closed loop).
+
+use crate::plant::{idx, Inputs, Plant, Simulator, N_STATE};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use shimmy_core::mr_damper::SpencerParams;
+use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+/// Options of `shimmy-sim reference-bench`.
+#[derive(Args, Debug)]
+pub struct ReferenceBenchArgs {
+    /// Parameter set (name or TOML file).
+    #[arg(long, default_value = "nominal")]
+    pub params: String,
+    /// Simulated time of the time-domain run [s].
+    #[arg(long, default_value_t = 10.0)]
+    pub duration_s: f64,
+    /// Forward speed [km/h] (inside the Hopf window by default).
+    #[arg(long, default_value_t = 60.0)]
+    pub speed_kmh: f64,
+    /// Constant coil current [A].
+    #[arg(long, default_value_t = 0.5)]
+    pub current_a: f64,
+    /// Initial in-phase wheel yaw [deg] (large enough for the damper to slide).
+    #[arg(long, default_value_t = 3.0)]
+    pub initial_yaw_deg: f64,
+    /// Points of the eigenvalue sweep (1-150 km/h).
+    #[arg(long, default_value_t = 2000)]
+    pub sweep_points: usize,
+    /// SciPy integrator (`LSODA`, `Radau`, `BDF`, `RK45`).
+    #[arg(long, default_value = "LSODA")]
+    pub scipy_method: String,
+    /// Python interpreter with numpy and scipy.
+    #[arg(long, default_value = "python3")]
+    pub python: String,
+    /// Output folder (case file, SciPy result, summary).
+    #[arg(long, default_value = "out/reference-bench")]
+    pub out: PathBuf,
+}
+
+/// What one comparison measured.
+#[derive(Debug)]
+pub struct ReferenceResult {
+    /// Simulated seconds per wall second, Rust.
+    pub rust_sim_rate: f64,
+    /// Simulated seconds per wall second, SciPy.
+    pub scipy_sim_rate: f64,
+    /// Eigen-sweep points per wall second, Rust.
+    pub rust_sweep_rate: f64,
+    /// Eigen-sweep points per wall second, NumPy.
+    pub numpy_sweep_rate: f64,
+    /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times [rad].
+    pub max_traj_diff_rad: f64,
+    /// Largest |psi_L| of the run [rad] (scale of the difference).
+    pub max_psi_rad: f64,
+    /// Largest |max Re lambda (Rust) - max Re lambda (NumPy)| over the sweep [1/s].
+    pub max_eig_diff: f64,
+}
+
+/// Runs both implementations and compares them.
+pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
+    let params = crate::paramfile::load(&a.params)?;
+    let damper = SpencerParams::steering();
+    let v_mps = kmh_to_mps(a.speed_kmh);
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+
+    let sample_every = 10; // every 10 ms
+    let n_periods = (a.duration_s * 1000.0).round() as usize;
+    let sample_times: Vec<f64> = (0..=n_periods)
+        .step_by(sample_every)
+        .map(|k| k as f64 * 1e-3)
+        .collect();
+    let sweep: Vec<f64> = (0..a.sweep_points)
+        .map(|i| kmh_to_mps(1.0 + 149.0 * i as f64 / (a.sweep_points.max(2) - 1) as f64))
+        .collect();
+
+    // Rust: the simulator in 1 ms control periods.
+    let mut x0 = [0.0; N_STATE];
+    x0[idx::PSI_L] = a.initial_yaw_deg.to_radians();
+    x0[idx::PSI_R] = x0[idx::PSI_L];
+    let mut sim = Simulator::new(Plant::with_mr_damper(params), x0);
+    let inputs = Inputs {
+        current_cmd_a: a.current_a,
+        driver_torque_nm: 0.0,
+        yaw_torque_nm: [0.0; 2],
+        speed_mps: v_mps,
+    };
+    let mut psi_rust = vec![sim.state()[idx::PSI_L]];
+    let start = Instant::now();
+    for k in 1..=n_periods {
+        sim.advance(1e-3, &inputs)
+            .map_err(|e| anyhow::anyhow!("simulator: {e:?}"))?;
+        if k % sample_every == 0 {
+            psi_rust.push(sim.state()[idx::PSI_L]);
+        }
+    }
+    let rust_sim_wall = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let mut max_re_rust = Vec::with_capacity(sweep.len());
+    for &v in &sweep {
+        let m = shimmy_core::plant::linearise(&params, v, 0.0);
+        let ev =
+            shimmy_core::eigen::eigenvalues(&m).map_err(|e| anyhow::anyhow!("eigen: {e:?}"))?;
+        max_re_rust.push(ev.iter().map(|l| l.re).fold(f64::NEG_INFINITY, f64::max));
+    }
+    let rust_sweep_wall = start.elapsed().as_secs_f64();
+
+    // SciPy: the same case, from a case file.
+    let case = a.out.join("case.toml");
+    std::fs::write(
+        &case,
+        case_toml(&params, &damper, a, v_mps, &sample_times, &sweep),
+    )?;
+    let result = a.out.join("scipy.json");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference/plant_scipy.py");
+    let status = Command::new(&a.python)
+        .arg(&script)
+        .arg(&case)
+        .arg(&result)
+        .status()
+        .with_context(|| format!("starting {} (needs numpy and scipy)", a.python))?;
+    if !status.success() {
+        bail!(
+            "{} {} failed ({status}); it needs numpy and scipy (pip install numpy scipy)",
+            a.python,
+            script.display()
+        );
+    }
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&result)?)?;
+    let num = |k: &str| {
+        json[k]
+            .as_f64()
+            .with_context(|| format!("scipy.json: `{k}`"))
+    };
+    let list = |k: &str| -> Result<Vec<f64>> {
+        json[k]
+            .as_array()
+            .with_context(|| format!("scipy.json: `{k}`"))?
+            .iter()
+            .map(|v| v.as_f64().context("number"))
+            .collect()
+    };
+    let psi_scipy = list("psi_l_rad")?;
+    let max_re_numpy = list("max_re")?;
+    if psi_scipy.len() != psi_rust.len() || max_re_numpy.len() != max_re_rust.len() {
+        bail!("the SciPy result has a different number of samples");
+    }
+    let max_abs_diff = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+    };
+    Ok(ReferenceResult {
+        rust_sim_rate: a.duration_s / rust_sim_wall,
+        scipy_sim_rate: a.duration_s / num("sim_wall_s")?,
+        rust_sweep_rate: sweep.len() as f64 / rust_sweep_wall,
+        numpy_sweep_rate: sweep.len() as f64 / num("sweep_wall_s")?,
+        max_traj_diff_rad: max_abs_diff(&psi_rust, &psi_scipy),
+        max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
+        max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
+    })
+}
+
+fn case_toml(
+    p: &PlantParams,
+    d: &SpencerParams,
+    a: &ReferenceBenchArgs,
+    v_mps: f64,
+    sample_times: &[f64],
+    sweep: &[f64],
+) -> String {
+    let mut s = String::from("[plant]\n");
+    for q in Param::ALL {
+        let _ = writeln!(s, "{} = {:e}", q.name(), p.get(q));
+    }
+    s.push_str("\n[damper]\n");
+    for (k, v) in [
+        ("c0a", d.c0a),
+        ("c0b", d.c0b),
+        ("k0", d.k0),
+        ("c1a", d.c1a),
+        ("c1b", d.c1b),
+        ("k1", d.k1),
+        ("x0", d.x0),
+        ("alpha_a", d.alpha_a),
+        ("alpha_b", d.alpha_b),
+        ("gamma", d.gamma),
+        ("beta", d.beta),
+        ("a_bw", d.a_bw),
+        ("n", d.n),
+        ("eta", d.eta),
+        ("u_max", d.u_max),
+    ] {
+        let _ = writeln!(s, "{k} = {v:e}");
+    }
+    let list = |xs: &[f64]| {
+        xs.iter()
+            .map(|x| format!("{x:e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let _ = write!(
+        s,
+        "\n[case]\nspeed_mps = {v_mps:e}\ncurrent_a = {:e}\ninitial_yaw_deg = {:e}\nduration_s = {:e}\n\
+         method = \"{}\"\nrtol = 1e-8\natol = 1e-12\nsample_times_s = [{}]\nsweep_speeds_mps = [{}]\n",
+        a.current_a,
+        a.initial_yaw_deg,
+        a.duration_s,
+        a.scipy_method,
+        list(sample_times),
+        list(sweep)
+    );
+    s
+}
+
+/// The command: run, print the table, write it to `summary.txt`.
+pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
+    let r = compare(a)?;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "reference bench: {} at {} km/h, MR damper at {} A, {} deg start, {} s; sweep of {} speeds",
+        a.params, a.speed_kmh, a.current_a, a.initial_yaw_deg, a.duration_s, a.sweep_points
+    );
+    let _ = writeln!(
+        t,
+        "  {:<34} {:>14} {:>14} {:>8}",
+        "", "shimmy-sim", "SciPy/NumPy", "ratio"
+    );
+    let _ = writeln!(
+        t,
+        "  {:<34} {:>14.1} {:>14.2} {:>7.0}x",
+        "time domain [sim s / wall s]",
+        r.rust_sim_rate,
+        r.scipy_sim_rate,
+        r.rust_sim_rate / r.scipy_sim_rate
+    );
+    let _ = writeln!(
+        t,
+        "  {:<34} {:>14.0} {:>14.0} {:>7.1}x",
+        "eigen sweep [points / wall s]",
+        r.rust_sweep_rate,
+        r.numpy_sweep_rate,
+        r.rust_sweep_rate / r.numpy_sweep_rate
+    );
+    let _ = writeln!(
+        t,
+        "  agreement: max |psi_L diff| = {:.3e} rad (of max |psi_L| {:.3e} rad); max |max Re lambda diff| = {:.3e} 1/s",
+        r.max_traj_diff_rad, r.max_psi_rad, r.max_eig_diff
+    );
+    print!("{t}");
+    std::fs::write(a.out.join("summary.txt"), &t)?;
+    Ok(())
+}
