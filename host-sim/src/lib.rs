@@ -10,3 +10,4 @@ pub mod plant;
 pub mod reference_bench;
 pub mod scenario_file;
 pub mod stability_cmd;
+pub mod sweep;

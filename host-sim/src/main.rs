@@ -32,6 +32,9 @@ enum Command {
     /// Speed and agreement against an independent NumPy/SciPy implementation of the plant
     /// (needs python3 with numpy and scipy).
     ReferenceBench(shimmy_sim::reference_bench::ReferenceBenchArgs),
+    /// Stability maps over speed x one parameter (x damper current): growth-rate heat map with
+    /// the Hopf boundary (PNG) and CSV, computed in parallel.
+    Sweep(shimmy_sim::sweep::SweepArgs),
 }
 
 fn main() -> Result<()> {
@@ -42,6 +45,7 @@ fn main() -> Result<()> {
         Some(Command::Stability(a)) => shimmy_sim::stability_cmd::run_stability(&a),
         Some(Command::Sensitivity(a)) => shimmy_sim::stability_cmd::run_sensitivity(&a),
         Some(Command::ReferenceBench(a)) => shimmy_sim::reference_bench::command(&a),
+        Some(Command::Sweep(a)) => shimmy_sim::sweep::command(&a),
         // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
         None => print_params("nominal"),
     }

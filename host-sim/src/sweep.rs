@@ -1,0 +1,423 @@
+//! `shimmy-sim sweep`: stability maps over speed x one parameter (x damper current): the largest
+//! real part of the oscillatory eigenvalues of A(V) on a grid, the Hopf boundary of each
+//! parameter row refined by the bounded Brent search, a PNG heat map with the boundary drawn on
+//! it, and CSV. Rows run in parallel (rayon) with a progress bar; the result does not depend on
+//! the number of threads (each grid point is computed independently, rows are written in order).
+
+use crate::stability_cmd::damper_equivalent;
+use anyhow::{anyhow, bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use plotters::prelude::*;
+use rayon::prelude::*;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use shimmy_core::stability::{self, CrossingKind};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Options of `shimmy-sim sweep`.
+#[derive(Args, Debug, Clone)]
+pub struct SweepArgs {
+    /// Base parameter set (name or TOML file).
+    #[arg(long, default_value = "nominal")]
+    pub params: String,
+    /// Parameter varied on the vertical axis (field name, see `shimmy-sim params`).
+    #[arg(long, default_value = "k_d")]
+    pub param: String,
+    /// Smallest factor on the parameter's base value.
+    #[arg(long, default_value_t = 0.5)]
+    pub factor_min: f64,
+    /// Largest factor on the parameter's base value.
+    #[arg(long, default_value_t = 1.5)]
+    pub factor_max: f64,
+    /// Number of parameter values.
+    #[arg(long, default_value_t = 41)]
+    pub factor_steps: usize,
+    /// Lowest speed [km/h].
+    #[arg(long, default_value_t = 2.0)]
+    pub v_min_kmh: f64,
+    /// Highest speed [km/h].
+    #[arg(long, default_value_t = 150.0)]
+    pub v_max_kmh: f64,
+    /// Number of speeds.
+    #[arg(long, default_value_t = 149)]
+    pub v_steps: usize,
+    /// MR damper currents [A] (one map each, as an equivalent viscous damper); none = no damper.
+    #[arg(long, value_delimiter = ',')]
+    pub damper_currents: Vec<f64>,
+    /// Wheel-yaw amplitude of the damper's describing function [deg].
+    #[arg(long, default_value_t = 0.5)]
+    pub ref_amplitude_deg: f64,
+    /// Output folder.
+    #[arg(long, default_value = "out/sweep")]
+    pub out: PathBuf,
+    /// No progress bar (for scripts and tests).
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One parameter row of a map.
+#[derive(Debug, Clone)]
+pub struct SweepRow {
+    /// Parameter value.
+    pub value: f64,
+    /// Largest real part of the oscillatory eigenvalues at each speed [1/s].
+    pub max_re: Vec<f64>,
+    /// Hopf crossings in the speed range: (speed [km/h], onset?).
+    pub crossings: Vec<(f64, bool)>,
+}
+
+/// One map (one damper setting).
+#[derive(Debug, Clone)]
+pub struct SweepMap {
+    /// Label of the damper setting.
+    pub damper: String,
+    /// Equivalent viscous damper coefficient [N s/m].
+    pub c_nspm: f64,
+    /// Speeds [km/h].
+    pub speeds_kmh: Vec<f64>,
+    /// Rows, by increasing parameter value.
+    pub rows: Vec<SweepRow>,
+}
+
+/// Computes the maps.
+pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
+    let base = crate::paramfile::load(&a.params)?;
+    let Some(param) = Param::from_name(&a.param) else {
+        let names: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
+        bail!(
+            "--param {}: no such parameter, allowed: {}",
+            a.param,
+            names.join(", ")
+        );
+    };
+    let ok = a.factor_min.is_finite()
+        && a.factor_max.is_finite()
+        && a.factor_min > 0.0
+        && a.factor_max >= a.factor_min
+        && a.factor_steps >= 1
+        && a.v_min_kmh > 0.0
+        && a.v_max_kmh > a.v_min_kmh
+        && a.v_steps >= 2;
+    if !ok {
+        bail!(
+            "need 0 < factor-min <= factor-max, factor-steps >= 1, 0 < v-min < v-max, v-steps >= 2"
+        );
+    }
+    let speeds_kmh: Vec<f64> = (0..a.v_steps)
+        .map(|i| a.v_min_kmh + (a.v_max_kmh - a.v_min_kmh) * i as f64 / (a.v_steps - 1) as f64)
+        .collect();
+    let values: Vec<f64> = (0..a.factor_steps)
+        .map(|j| {
+            let f = if a.factor_steps == 1 {
+                a.factor_min
+            } else {
+                a.factor_min
+                    + (a.factor_max - a.factor_min) * j as f64 / (a.factor_steps - 1) as f64
+            };
+            base.get(param) * f
+        })
+        .collect();
+    let mut dampers: Vec<(String, f64)> = Vec::new();
+    if a.damper_currents.is_empty() {
+        dampers.push(("no damper".into(), 0.0));
+    }
+    for &i in &a.damper_currents {
+        let d = damper_equivalent(
+            &base,
+            i,
+            a.ref_amplitude_deg,
+            kmh_to_mps(a.v_min_kmh),
+            kmh_to_mps(a.v_max_kmh),
+        )?;
+        dampers.push((format!("MR {i:.2} A"), d.c_eq_nspm));
+    }
+
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new((dampers.len() * values.len()) as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} rows {elapsed_precise} eta {eta}")
+            .context("progress template")?,
+    );
+    let mut maps = Vec::new();
+    for (label, c) in dampers {
+        let rows: Result<Vec<SweepRow>> = values
+            .par_iter()
+            .map(|&value| {
+                let row = row(&base.with(param, value), value, c, &speeds_kmh, a);
+                bar.inc(1);
+                row
+            })
+            .collect();
+        maps.push(SweepMap {
+            damper: label,
+            c_nspm: c,
+            speeds_kmh: speeds_kmh.clone(),
+            rows: rows?,
+        });
+    }
+    bar.finish_and_clear();
+    Ok((param, maps))
+}
+
+fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -> Result<SweepRow> {
+    let max_re = speeds_kmh
+        .iter()
+        .map(|&v| {
+            stability::critical_mode_at(p, kmh_to_mps(v), c)
+                .map(|m| m.re)
+                .map_err(|e| anyhow!("eigenvalues at {v} km/h, {} = {value}: {e:?}", a.param))
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    let step = kmh_to_mps(speeds_kmh[1] - speeds_kmh[0]);
+    let crossings = stability::hopf_crossings(
+        p,
+        c,
+        kmh_to_mps(a.v_min_kmh),
+        kmh_to_mps(a.v_max_kmh),
+        step,
+        1e-4,
+    )
+    .map_err(|e| anyhow!("Hopf crossings, {} = {value}: {e:?}", a.param))?
+    .iter()
+    .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
+    .collect();
+    Ok(SweepRow {
+        value,
+        max_re,
+        crossings,
+    })
+}
+
+/// The command: compute, write CSV + PNG per map, print the boundary table.
+pub fn command(a: &SweepArgs) -> Result<()> {
+    let (param, maps) = compute(a)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    for (k, map) in maps.iter().enumerate() {
+        let tag = if map.c_nspm == 0.0 {
+            "no-damper".to_string()
+        } else {
+            format!("damper{k}")
+        };
+        let grid = a.out.join(format!("sweep-{}-{tag}.csv", param.name()));
+        let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name()));
+        let png = a.out.join(format!("sweep-{}-{tag}.png", param.name()));
+        write_csv(&grid, &boundary, param, map)?;
+        plot(&png, param, map, &a.params)?;
+        println!(
+            "{} ({}, c = {:.1} N s/m): Hopf boundary vs {} [{}]",
+            a.params,
+            map.damper,
+            map.c_nspm,
+            param.name(),
+            param.unit()
+        );
+        println!(
+            "  {:>14}  {:>12} {:>12}",
+            param.name(),
+            "onset km/h",
+            "offset km/h"
+        );
+        let every = (map.rows.len() / 10).max(1);
+        for r in map.rows.iter().step_by(every) {
+            let on = r
+                .crossings
+                .iter()
+                .find(|c| c.1)
+                .map(|c| format!("{:.2}", c.0));
+            let off = r
+                .crossings
+                .iter()
+                .find(|c| !c.1)
+                .map(|c| format!("{:.2}", c.0));
+            println!(
+                "  {:>14.6e}  {:>12} {:>12}",
+                r.value,
+                on.unwrap_or_else(|| "-".into()),
+                off.unwrap_or_else(|| "-".into())
+            );
+        }
+        println!(
+            "  wrote {}, {}, {}",
+            grid.display(),
+            boundary.display(),
+            png.display()
+        );
+    }
+    Ok(())
+}
+
+fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Result<()> {
+    let mut s = format!(
+        "{} [{}],speed [km/h],max Re lambda (oscillatory) [1/s]\n",
+        param.name(),
+        param.unit()
+    );
+    for r in &map.rows {
+        for (v, re) in map.speeds_kmh.iter().zip(&r.max_re) {
+            let _ = writeln!(s, "{:e},{v},{re:e}", r.value);
+        }
+    }
+    std::fs::write(grid, s)?;
+    let mut b = format!(
+        "{} [{}],crossing speed [km/h],kind\n",
+        param.name(),
+        param.unit()
+    );
+    for r in &map.rows {
+        for (v, onset) in &r.crossings {
+            let _ = writeln!(
+                b,
+                "{:e},{v:.4},{}",
+                r.value,
+                if *onset { "onset" } else { "offset" }
+            );
+        }
+    }
+    std::fs::write(boundary, b)?;
+    Ok(())
+}
+
+fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
+    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (v0, v1) = (map.speeds_kmh[0], map.speeds_kmh[map.speeds_kmh.len() - 1]);
+    let (p0, p1) = (map.rows[0].value, map.rows[map.rows.len() - 1].value);
+    let dp = if map.rows.len() > 1 {
+        (p1 - p0) / (map.rows.len() - 1) as f64
+    } else {
+        p0.abs().max(1.0) * 0.1
+    };
+    let dv = map.speeds_kmh[1] - map.speeds_kmh[0];
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "{set}, {}: growth rate max Re lambda [1/s] (red unstable, blue stable); black: Hopf boundary",
+                map.damper
+            ),
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(80)
+        .build_cartesian_2d(v0 - dv / 2.0..v1 + dv / 2.0, p0 - dp / 2.0..p1 + dp / 2.0)?;
+    chart
+        .configure_mesh()
+        .x_desc("speed [km/h]")
+        .y_desc(format!("{} [{}]", param.name(), param.unit()))
+        .draw()?;
+    // Symmetric colour scale around zero, clipped at the 95th percentile of |Re|.
+    let mut mags: Vec<f64> = map
+        .rows
+        .iter()
+        .flat_map(|r| r.max_re.iter().map(|x| x.abs()))
+        .collect();
+    mags.sort_by(f64::total_cmp);
+    let scale = mags
+        .get(mags.len() * 95 / 100)
+        .copied()
+        .unwrap_or(1.0)
+        .max(1e-9);
+    chart.draw_series(map.rows.iter().flat_map(|r| {
+        map.speeds_kmh.iter().zip(&r.max_re).map(move |(&v, &re)| {
+            let t = (re / scale).clamp(-1.0, 1.0);
+            let (red, green, blue) = if t >= 0.0 {
+                (255.0, 255.0 * (1.0 - t), 255.0 * (1.0 - t))
+            } else {
+                (255.0 * (1.0 + t), 255.0 * (1.0 + t), 255.0)
+            };
+            Rectangle::new(
+                [
+                    (v - dv / 2.0, r.value - dp / 2.0),
+                    (v + dv / 2.0, r.value + dp / 2.0),
+                ],
+                RGBColor(red as u8, green as u8, blue as u8).filled(),
+            )
+        })
+    }))?;
+    chart.draw_series(map.rows.iter().flat_map(|r| {
+        r.crossings
+            .iter()
+            .map(move |&(v, _)| Circle::new((v, r.value), 3, BLACK.filled()))
+    }))?;
+    root.present()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(out: &Path) -> SweepArgs {
+        SweepArgs {
+            params: "nominal".into(),
+            param: "k_d".into(),
+            factor_min: 0.8,
+            factor_max: 1.0,
+            factor_steps: 3,
+            v_min_kmh: 5.0,
+            v_max_kmh: 120.0,
+            v_steps: 47,
+            damper_currents: vec![],
+            ref_amplitude_deg: 0.5,
+            out: out.to_path_buf(),
+            quiet: true,
+        }
+    }
+
+    #[test]
+    fn map_matches_the_stability_command_and_is_deterministic() {
+        let out = std::env::temp_dir().join(format!("shimmy-sweep-{}", std::process::id()));
+        let a = args(&out);
+        let (_, maps) = compute(&a).unwrap();
+        let (_, again) = compute(&a).unwrap();
+        let last = &maps[0].rows[2]; // factor 1.0: the nominal set
+        assert_eq!(last.max_re, again[0].rows[2].max_re, "deterministic");
+        // The boundary of the nominal row is the nominal Hopf window found independently by a
+        // fine hopf_crossings call.
+        let p = PlantParams::nominal();
+        let fine =
+            stability::hopf_crossings(&p, 0.0, kmh_to_mps(5.0), kmh_to_mps(120.0), 0.05, 1e-6)
+                .unwrap();
+        assert_eq!(last.crossings.len(), fine.len());
+        for (c, f) in last.crossings.iter().zip(fine.iter()) {
+            assert!(
+                (c.0 - mps_to_kmh(f.speed_mps)).abs() < 0.01,
+                "{c:?} vs {f:?}"
+            );
+        }
+        // Lower K_d widens the window (sensitivity result): onset moves down.
+        let soft = &maps[0].rows[0];
+        assert!(soft.crossings[0].0 < last.crossings[0].0);
+        // Grid sign agrees with the boundary: unstable strictly inside the window.
+        let (on, off) = (last.crossings[0].0, last.crossings[1].0);
+        for (v, re) in maps[0].speeds_kmh.iter().zip(&last.max_re) {
+            if *v > on + 0.5 && *v < off - 0.5 {
+                assert!(*re > 0.0, "{v} km/h inside the window must be unstable");
+            } else if *v < on - 0.5 || *v > off + 0.5 {
+                assert!(*re < 0.0, "{v} km/h outside the window must be stable");
+            }
+        }
+        command(&a).unwrap();
+        let png = out.join("sweep-k_d-no-damper.png");
+        assert!(
+            std::fs::metadata(&png).unwrap().len() > 10_000,
+            "a non-empty heat map"
+        );
+        let _ = std::fs::remove_dir_all(&out);
+    }
+
+    #[test]
+    fn bad_arguments_are_rejected_with_the_name() {
+        let out = std::env::temp_dir();
+        let mut a = args(&out);
+        a.param = "kd".into();
+        assert!(format!("{:#}", compute(&a).unwrap_err()).contains("--param kd"));
+        let mut a = args(&out);
+        a.v_max_kmh = 1.0;
+        assert!(compute(&a).is_err());
+    }
+}
