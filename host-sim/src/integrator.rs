@@ -424,9 +424,17 @@ impl<const N: usize> Ark436<N> {
         let t_end = t0 + dt;
         let mut t = t0;
         let mut imp = [false; N];
+        // The implicit components' indices (usually one or two), to touch only those twice.
+        let mut imp_idx = [0usize; N];
+        let mut n_imp = 0;
         for (i, m) in imp.iter_mut().enumerate() {
             *m = sys.implicit(i);
+            if *m {
+                imp_idx[n_imp] = i;
+                n_imp += 1;
+            }
         }
+        let imp_idx = &imp_idx[..n_imp];
         let mut k = [[0.0; N]; 6];
         sys.rhs(y, &mut k[0]);
         self.stats.evaluations += 1;
@@ -474,11 +482,18 @@ impl<const N: usize> Ark436<N> {
             }
             let mut solved = true;
             for s in 1..6 {
+                let (ae, ai) = (&ARK_AE[s], &ARK_AI[s]);
                 for i in 0..N {
-                    let a = if imp[i] { &ARK_AI[s] } else { &ARK_AE[s] };
                     let mut acc = 0.0;
                     for (j, kj) in k.iter().enumerate().take(s) {
-                        acc += a[j] * kj[i];
+                        acc += ae[j] * kj[i];
+                    }
+                    yt[i] = y[i] + h * acc;
+                }
+                for &i in imp_idx {
+                    let mut acc = 0.0;
+                    for (j, kj) in k.iter().enumerate().take(s) {
+                        acc += ai[j] * kj[i];
                     }
                     yt[i] = y[i] + h * acc;
                 }
@@ -692,7 +707,11 @@ mod tests {
         }
         for i in 0..6 {
             check(ARK_AI[5][i], ARK_B[i], "stiffly accurate");
-            check(ARK_AI[i][i], if i == 0 { 0.0 } else { ARK_GAMMA }, "diagonal");
+            check(
+                ARK_AI[i][i],
+                if i == 0 { 0.0 } else { ARK_GAMMA },
+                "diagonal",
+            );
         }
         let c2 = had(&c, &c);
         let c3 = had(&c2, &c);
