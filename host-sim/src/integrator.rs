@@ -741,7 +741,7 @@ mod tests {
     }
 
     /// Oscillator x'' = -w^2 x driving a Bouc-Wen-like hysteresis variable
-    /// z' = x' (1 - mu z |z|) (plateaus z = +-1/sqrt(mu), relaxation rate 2 sqrt(mu) |x'| there:
+    /// z' = x' - mu |x'| z |z| (plateaus z = +-1/sqrt(mu), relaxation rate 2 sqrt(mu) |x'| there:
     /// stiff for large mu, like the MR damper's z). z is implicit (scalar Newton solve), x
     /// explicit. With mu = 0 and zero start z = x exactly.
     struct StiffPair {
@@ -753,7 +753,7 @@ mod tests {
         fn rhs(&self, y: &[f64; 3], dy: &mut [f64; 3]) {
             dy[0] = y[1];
             dy[1] = -self.w * self.w * y[0];
-            dy[2] = y[1] * (1.0 - self.mu * y[2] * y[2].abs());
+            dy[2] = y[1] - self.mu * y[1].abs() * y[2] * y[2].abs();
         }
         fn implicit(&self, i: usize) -> bool {
             i == 2
@@ -762,8 +762,8 @@ mod tests {
             let (c, v) = (y[2], y[1]);
             let mut z = c;
             for _ in 0..50 {
-                let g = z - c - hg * v * (1.0 - self.mu * z * z.abs());
-                let dg = 1.0 + hg * v * self.mu * 2.0 * z.abs();
+                let g = z - c - hg * (v - self.mu * v.abs() * z * z.abs());
+                let dg = 1.0 + hg * self.mu * v.abs() * 2.0 * z.abs();
                 if dg <= 1e-12 {
                     return false;
                 }
@@ -803,15 +803,17 @@ mod tests {
         assert!((p - 4.0).abs() < 0.4, "ARK order {p}");
     }
 
-    /// Stiff hysteresis (mu = 1e6: plateau 1e-3, relaxation rate up to 2e3 |x'| ~ 9e3 /s at 7 Hz
+    /// Stiff hysteresis (mu = 1e8: plateau 1e-4, relaxation rate up to 2e4 |x'| ~ 9e4 /s at 7 Hz
     /// and amplitude 0.1): the adaptive ARK steps over the plateaus with steps set by accuracy and
-    /// needs at most half the evaluations of Dopri5 (stability-limited there) at the same
-    /// tolerance; both agree with a tight Dopri5 reference to 1e-7 (tolerance 1e-8 per step).
+    /// needs at most half the evaluations of Dopri5 (stability-limited there; measured 7657 vs
+    /// 56078) at the same tolerance; both agree with a tight Dopri5 reference to 1e-7 (tolerance
+    /// 1e-8 per step). At mu = 1e6 (rate ~9e3 /s) both need about the same number: the gain
+    /// needs stiffness well beyond what accuracy alone asks for.
     #[test]
     fn ark436_steps_over_a_stiff_relaxation() {
         let sys = StiffPair {
             w: 2.0 * std::f64::consts::PI * 7.0,
-            mu: 1e6,
+            mu: 1e8,
         };
         let mut f = |_t: f64, y: &[f64; 3], dy: &mut [f64; 3]| sys.rhs(y, dy);
         let y0 = [0.1, 0.0, 0.0];

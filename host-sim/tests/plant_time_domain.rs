@@ -533,7 +533,7 @@ fn imex_matches_fine_rk4_while_sliding_with_switching_current() {
     let plant = Plant::with_mr_damper(p);
     let x0 = initial_yaw(3f64.to_radians());
     let inputs = |k: usize| Inputs {
-        current_cmd_a: if (k / 50) % 2 == 0 { 0.0 } else { 1.0 },
+        current_cmd_a: if (k / 50).is_multiple_of(2) { 0.0 } else { 1.0 },
         speed_mps: kmh_to_mps(60.0),
         ..Inputs::default()
     };
