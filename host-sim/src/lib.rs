@@ -8,3 +8,7 @@ pub mod integrator;
 pub mod paramfile;
 pub mod plant;
 pub mod stability_cmd;
+pub mod closed_loop;
+pub mod compare;
+pub mod demo;
+pub mod sensors;

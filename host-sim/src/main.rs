@@ -29,6 +29,8 @@ enum Command {
     Stability(shimmy_sim::stability_cmd::StabilityArgs),
     /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
     Sensitivity(shimmy_sim::stability_cmd::SensitivityArgs),
+    /// Every controller over the standard scenario set: one table, CSV and PNG plots.
+    Compare(shimmy_sim::compare::CompareArgs),
 }
 
 fn main() -> Result<()> {
@@ -38,8 +40,8 @@ fn main() -> Result<()> {
         Some(Command::Bifurcation(args)) => shimmy_sim::bifurcation::command(&args),
         Some(Command::Stability(a)) => shimmy_sim::stability_cmd::run_stability(&a),
         Some(Command::Sensitivity(a)) => shimmy_sim::stability_cmd::run_sensitivity(&a),
-        // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
-        None => print_params("nominal"),
+        Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
+        None => shimmy_sim::demo::command(),
     }
 }
 
