@@ -228,12 +228,15 @@ pub struct RunMetrics {
 pub const SHIMMY_AMP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
 /// Sustained shimmy: at least this long above [`SHIMMY_AMP_RAD`] [s].
-pub const SHIMMY_MIN_S: f64 = 2.0;
+pub const SHIMMY_MIN_S: f64 = 3.0;
 
 impl RunMetrics {
-    /// A limit cycle / sustained shimmy was seen.
+    /// A limit cycle / sustained shimmy was seen: the shimmy-band amplitude is above
+    /// [`SHIMMY_AMP_RAD`] in the last 0.5 s, or it was above it for [`SHIMMY_MIN_S`] or longer
+    /// (a shimmy that a speed ramp leaves behind at its end). A decaying transient of a
+    /// disturbance does neither.
     pub fn shimmies(&self) -> bool {
-        self.shimmy_s >= SHIMMY_MIN_S
+        self.amp_end_rad > SHIMMY_AMP_RAD || self.shimmy_s >= SHIMMY_MIN_S
     }
 }
 

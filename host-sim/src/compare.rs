@@ -8,7 +8,7 @@ use crate::disturbance::{
 use crate::plant::State;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use shimmy_core::control::ControllerKind;
+use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{mode_at, ModeSelect};
 use std::io::Write;
@@ -61,7 +61,7 @@ pub fn pothole(t0_s: f64, peak_nm: f64) -> Impulse {
 }
 
 /// Peak torque of the standard pothole [N m].
-pub const POTHOLE_NM: f64 = 1500.0;
+pub const POTHOLE_NM: f64 = 1000.0;
 /// Initial yaw of the "large" kick [deg] (breaks through the 0 A damper's friction).
 pub const BIG_KICK_DEG: f64 = 3.0;
 
@@ -232,6 +232,57 @@ pub struct CompareArgs {
     /// Only scenarios whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
+    /// Override the ASMC dead zone [rad/s] (gain studies).
+    #[arg(long)]
+    pub dead_zone: Option<f32>,
+    /// Override the ASMC adaptation rate gamma.
+    #[arg(long)]
+    pub gamma: Option<f32>,
+    /// Override the ASMC leakage sigma [1/s].
+    #[arg(long)]
+    pub leak: Option<f32>,
+    /// Override the sliding-surface slope lambda [1/s].
+    #[arg(long)]
+    pub lambda: Option<f32>,
+    /// Override the boundary layer phi [rad/s].
+    #[arg(long)]
+    pub phi: Option<f32>,
+    /// Override the fixed SMC gain K [rad/s^2].
+    #[arg(long)]
+    pub smc_k: Option<f32>,
+    /// Override the ASMC K_min (= K_init) [rad/s^2].
+    #[arg(long)]
+    pub k_min: Option<f32>,
+}
+
+impl CompareArgs {
+    /// The control parameters: defaults with the overrides applied.
+    pub fn control_params(&self) -> ControlParams {
+        let mut c = ControlParams::default();
+        if let Some(v) = self.dead_zone {
+            c.asmc.dead_zone_radps = v;
+        }
+        if let Some(v) = self.gamma {
+            c.asmc.gamma = v;
+        }
+        if let Some(v) = self.leak {
+            c.asmc.sigma_per_s = v;
+        }
+        if let Some(v) = self.lambda {
+            c.smc.lambda_per_s = v;
+        }
+        if let Some(v) = self.phi {
+            c.smc.phi_radps = v;
+        }
+        if let Some(v) = self.smc_k {
+            c.smc.k_radps2 = v;
+        }
+        if let Some(v) = self.k_min {
+            c.asmc.k_min_radps2 = v;
+            c.asmc.k_init_radps2 = v;
+        }
+        c
+    }
 }
 
 /// One (scenario, controller) result.
@@ -250,8 +301,13 @@ pub struct RunRow {
 }
 
 /// Runs one scenario with one arm.
-pub fn run_one(spec: &ScenarioSpec, arm: Arm) -> Result<(RunMetrics, LoopResult)> {
+pub fn run_one(
+    spec: &ScenarioSpec,
+    arm: Arm,
+    control: &ControlParams,
+) -> Result<(RunMetrics, LoopResult)> {
     let mut cfg = LoopConfig::new(spec.plant, arm, spec.duration_s);
+    cfg.control = *control;
     cfg.x0 = spec.x0;
     cfg.record_every = 5;
     let mut sc = spec.scenario.clone();
@@ -261,17 +317,42 @@ pub fn run_one(spec: &ScenarioSpec, arm: Arm) -> Result<(RunMetrics, LoopResult)
 }
 
 /// The least constant current (to `tol_a`) with which no scenario in `specs` shimmies
-/// (bisection on [0, i_max]; assumes more current never makes it worse).
-pub fn least_suppressing_current(specs: &[ScenarioSpec], i_max: f32, tol_a: f32) -> Result<f32> {
+/// (bisection on [0, i_max]; assumes more current never makes it worse). Scenarios that still
+/// shimmy at `i_max` (beyond the damper's authority) are left out; their names are returned.
+pub fn least_suppressing_current(
+    specs: &[ScenarioSpec],
+    i_max: f32,
+    tol_a: f32,
+) -> Result<(f32, Vec<String>)> {
+    let at_max: Vec<bool> = specs
+        .par_iter()
+        .map(|s| {
+            Ok(run_one(s, Arm::Mr(ControllerKind::PassiveOn { current_a: i_max }), &ControlParams::default())?
+                .0
+                .shimmies())
+        })
+        .collect::<Result<_>>()?;
+    let beyond: Vec<String> = specs
+        .iter()
+        .zip(&at_max)
+        .filter(|(_, &b)| b)
+        .map(|(s, _)| s.name.clone())
+        .collect();
+    let specs: Vec<ScenarioSpec> = specs
+        .iter()
+        .zip(&at_max)
+        .filter(|(_, &b)| !b)
+        .map(|(s, _)| s.clone())
+        .collect();
     let ok = |i: f32| -> Result<bool> {
         let r: Result<Vec<bool>> = specs
             .par_iter()
-            .map(|s| Ok(!run_one(s, Arm::Mr(ControllerKind::PassiveOn { current_a: i }))?.0.shimmies()))
+            .map(|s| Ok(!run_one(s, Arm::Mr(ControllerKind::PassiveOn { current_a: i }), &ControlParams::default())?.0.shimmies()))
             .collect();
         Ok(r?.into_iter().all(|b| b))
     };
     if ok(0.0)? {
-        return Ok(0.0);
+        return Ok((0.0, beyond));
     }
     let (mut lo, mut hi) = (0.0f32, i_max);
     while hi - lo > tol_a {
@@ -282,7 +363,7 @@ pub fn least_suppressing_current(specs: &[ScenarioSpec], i_max: f32, tol_a: f32)
             lo = mid;
         }
     }
-    Ok(hi)
+    Ok((hi, beyond))
 }
 
 fn opt(v: Option<f64>, prec: usize) -> String {
@@ -509,13 +590,13 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
 }
 
 /// Runs every arm over every scenario (in parallel).
-pub fn run_all(specs: &[ScenarioSpec], arms: &[Arm]) -> Result<Vec<RunRow>> {
+pub fn run_all(specs: &[ScenarioSpec], arms: &[Arm], control: &ControlParams) -> Result<Vec<RunRow>> {
     let jobs: Vec<(usize, Arm)> = (0..specs.len())
         .flat_map(|i| arms.iter().map(move |&a| (i, a)))
         .collect();
     jobs.par_iter()
         .map(|&(i, arm)| {
-            let (m, result) = run_one(&specs[i], arm)?;
+            let (m, result) = run_one(&specs[i], arm, control)?;
             Ok(RunRow {
                 scenario: specs[i].name.clone(),
                 arm,
@@ -541,8 +622,11 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         }
         None => {
             let i_max = shimmy_core::control::ControlParams::default().limits.i_max_a;
-            let i = least_suppressing_current(&specs, i_max, 0.02)?;
-            println!("passive-on current: {i:.3} A (least constant current with no shimmy in any scenario, bisection to 0.02 A)");
+            let (i, beyond) = least_suppressing_current(&specs, i_max, 0.02)?;
+            println!("passive-on current: {i:.3} A (least constant current with no shimmy in any scenario that {i_max} A can stabilise, bisection to 0.02 A)");
+            if !beyond.is_empty() {
+                println!("beyond the damper's authority (shimmy even at a constant {i_max} A): {}", beyond.join(", "));
+            }
             i
         }
     };
@@ -555,7 +639,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         println!("scenario {:<22} {}", s.name, s.description);
     }
     let wall = std::time::Instant::now();
-    let rows = run_all(&specs, &arms)?;
+    let rows = run_all(&specs, &arms, &a.control_params())?;
     let wall_s = wall.elapsed().as_secs_f64();
     let tab = table(&rows, &specs);
     println!("\n{tab}");
