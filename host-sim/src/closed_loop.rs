@@ -17,7 +17,9 @@ use crate::disturbance::Scenario;
 use crate::integrator::IntegrateError;
 use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
 use crate::sensors::{Measurement, SensorConfig, Sensors, Truth};
-use shimmy_core::control::{ControlInput, ControlOutput, ControlParams, Controller, ControllerKind};
+use shimmy_core::control::{
+    ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
+};
 use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
 use shimmy_core::params::PlantParams;
 

@@ -42,7 +42,11 @@ pub struct DemoOutput {
     pub metrics: [RunMetrics; 2],
 }
 
-fn plot_meter(path: &Path, runs: &[(&str, &LoopResult)], window_kmh: Option<(f64, f64)>) -> Result<()> {
+fn plot_meter(
+    path: &Path,
+    runs: &[(&str, &LoopResult)],
+    window_kmh: Option<(f64, f64)>,
+) -> Result<()> {
     use plotters::prelude::*;
     let root = BitMapBackend::new(path, (1100, 700)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -127,7 +131,10 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     sc.imbalance = Some(im);
     let t_hit = o.ramp_s * (v_fg - v0) / (v1 - v0);
     sc.impulses.push(pothole(t_hit, POTHOLE_NM));
-    let arms = [Arm::Mr(ControllerKind::PassiveOff), Arm::Mr(ControllerKind::Asmc)];
+    let arms = [
+        Arm::Mr(ControllerKind::PassiveOff),
+        Arm::Mr(ControllerKind::Asmc),
+    ];
     let results: Vec<(LoopConfig, LoopResult)> = arms
         .par_iter()
         .map(|&arm| {
@@ -153,7 +160,10 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     plot_meter(&p2, &runs, window_kmh)?;
     let m: Vec<RunMetrics> = results.iter().map(|(c, r)| r.metrics(c, None)).collect();
     let mut md = String::new();
-    let _ = writeln!(md, "# shimmy demo: MR damper off vs adaptive sliding-mode control\n");
+    let _ = writeln!(
+        md,
+        "# shimmy demo: MR damper off vs adaptive sliding-mode control\n"
+    );
     let _ = writeln!(
         md,
         "Plant: `nominal` 4-DOF solid axle with the Spencer MR damper (coil lag included); sensors: 14-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n"

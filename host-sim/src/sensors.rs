@@ -271,7 +271,10 @@ mod tests {
         // Two samples late: reading k shows the angle of sample k-2 (within the noise, 1 LSB).
         for (k, &o) in outs.iter().enumerate().skip(2) {
             let want = 0.01 * (k - 2) as f64;
-            assert!((f64::from(o) - want).abs() < 4e-3 * 0.25, "{k}: {o} vs {want}");
+            assert!(
+                (f64::from(o) - want).abs() < 4e-3 * 0.25,
+                "{k}: {o} vs {want}"
+            );
         }
     }
 }

@@ -47,7 +47,10 @@ fn smc_and_asmc_suppress_the_limit_cycle_that_passive_off_settles_on() {
     let s = spec("kick-3deg");
     let p = ControlParams::default();
     let off = compare::run_one(&s, Arm::Mr(ControllerKind::PassiveOff), &p).unwrap();
-    println!("passive-off: amplitude at end {:.3} deg", off.0.amp_end_rad.to_degrees());
+    println!(
+        "passive-off: amplitude at end {:.3} deg",
+        off.0.amp_end_rad.to_degrees()
+    );
     assert!(off.0.amp_end_rad > 2f64.to_radians());
     assert!(off.0.shimmies());
     for kind in [ControllerKind::Smc, ControllerKind::Asmc] {
@@ -81,9 +84,13 @@ fn asmc_needs_less_energy_than_the_least_passive_current() {
         compare::least_suppressing_current(std::slice::from_ref(&s), p.limits.i_max_a, 0.02)
             .unwrap();
     assert!(beyond.is_empty());
-    let on = compare::run_one(&s, Arm::Mr(ControllerKind::PassiveOn { current_a: i_on }), &p)
-        .unwrap()
-        .0;
+    let on = compare::run_one(
+        &s,
+        Arm::Mr(ControllerKind::PassiveOn { current_a: i_on }),
+        &p,
+    )
+    .unwrap()
+    .0;
     let asmc = compare::run_one(&s, Arm::Mr(ControllerKind::Asmc), &p)
         .unwrap()
         .0;
