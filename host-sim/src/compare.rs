@@ -252,6 +252,9 @@ pub struct CompareArgs {
     /// Override the ASMC K_min (= K_init) [rad/s^2].
     #[arg(long)]
     pub k_min: Option<f32>,
+    /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
+    #[arg(long)]
+    pub ideal_sensors: bool,
 }
 
 impl CompareArgs {
@@ -299,6 +302,9 @@ pub struct RunRow {
     pub result: LoopResult,
 }
 
+/// Set by `compare --ideal-sensors` (a study switch, off by default).
+static IDEAL_SENSORS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 /// Runs one scenario with one arm.
 pub fn run_one(
     spec: &ScenarioSpec,
@@ -307,6 +313,9 @@ pub fn run_one(
 ) -> Result<(RunMetrics, LoopResult)> {
     let mut cfg = LoopConfig::new(spec.plant, arm, spec.duration_s);
     cfg.control = *control;
+    if IDEAL_SENSORS.load(std::sync::atomic::Ordering::Relaxed) {
+        cfg.sensors = crate::sensors::SensorConfig::ideal();
+    }
     cfg.x0 = spec.x0;
     cfg.record_every = 5;
     let mut sc = spec.scenario.clone();
@@ -635,6 +644,7 @@ pub fn run_all(
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    IDEAL_SENSORS.store(a.ideal_sensors, std::sync::atomic::Ordering::Relaxed);
     let mut specs = standard_scenarios(a.quick);
     if let Some(f) = &a.only {
         specs.retain(|s| s.name.contains(f.as_str()));
