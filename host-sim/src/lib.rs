@@ -2,12 +2,16 @@
 //! plant, studies (stability, bifurcation, ...) and their reports.
 
 pub mod bifurcation;
+pub mod closed_loop;
+pub mod compare;
 pub mod damper_equiv;
+pub mod demo;
 pub mod disturbance;
 pub mod integrator;
 pub mod paramfile;
 pub mod plant;
 pub mod reference_bench;
 pub mod scenario_file;
+pub mod sensors;
 pub mod stability_cmd;
 pub mod sweep;

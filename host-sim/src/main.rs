@@ -35,6 +35,8 @@ enum Command {
     /// Stability maps over speed x one parameter (x damper current): growth-rate heat map with
     /// the Hopf boundary (PNG) and CSV, computed in parallel.
     Sweep(shimmy_sim::sweep::SweepArgs),
+    /// Every controller over the standard scenario set: one table, CSV and PNG plots.
+    Compare(shimmy_sim::compare::CompareArgs),
 }
 
 fn main() -> Result<()> {
@@ -46,8 +48,8 @@ fn main() -> Result<()> {
         Some(Command::Sensitivity(a)) => shimmy_sim::stability_cmd::run_sensitivity(&a),
         Some(Command::ReferenceBench(a)) => shimmy_sim::reference_bench::command(&a),
         Some(Command::Sweep(a)) => shimmy_sim::sweep::command(&a),
-        // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
-        None => print_params("nominal"),
+        Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
+        None => shimmy_sim::demo::command(),
     }
 }
 

@@ -277,16 +277,19 @@ fn asmc_stays_quiet_on_sensor_noise_and_the_dead_zone_is_needed() {
     let p = ControlParams::default();
     let (s_rms, i_mean, k) = run_noise(p, 3.0);
     println!("noise: s rms {s_rms:.4} rad/s, mean current {i_mean:.4} A, K {k:.3}");
-    // The dead zone sits above 2 sigma of the noise on s.
-    assert!(p.asmc.dead_zone_radps > 2.0 * s_rms as f32, "s rms {s_rms}");
-    assert!(k < 0.2, "K {k}");
+    // The dead zone sits above 1.5 sigma of the noise on s (tuned down from 2 sigma in the
+    // 4-DOF closed loop for settling, see AsmcParams::default): noise excursions then raise K
+    // a little (< 1 rad/s^2, 3 % of K_max) but the quiet zone keeps the current near zero.
+    assert!(p.asmc.dead_zone_radps > 1.5 * s_rms as f32, "s rms {s_rms}");
+    assert!(k < 1.0, "K {k}");
     assert!(i_mean < 0.05, "mean current {i_mean}");
     // Without the dead zone the noise pumps K up.
     let mut p0 = p;
     p0.asmc.dead_zone_radps = 0.0;
     let (_, i0, k0) = run_noise(p0, 3.0);
     println!("without dead zone / quiet zone: K {k0:.3}, mean current {i0:.3} A");
-    assert!(k0 > 4.0 * k.max(0.25), "K without dead zone {k0}");
+    // (K 0.55 -> 1.49 with gamma 300, dead zone 0.04; the current shows it more: 0.008 -> 1.9 A.)
+    assert!(k0 > 2.0 * k.max(0.25), "K without dead zone {k0}");
     // ... and without the quiet zone the viscous part keeps current on the coil for noise.
     assert!(i0 > 0.1, "{i0}");
     // The fixed-gain SMC has neither: its switching term acts on noise at near-zero stroke
@@ -369,7 +372,8 @@ fn slow_steering_does_not_make_the_damper_work() {
     p0.conditioning.split_hz = 0.0; // identity high-pass
     let (i_raw, _) = run_open(ControllerKind::Asmc, p0, 6.0, steer);
     println!("mean current on 0.3 Hz steering: {i_hp:.3} A with HP, {i_raw:.3} A without");
-    assert!(i_hp < 0.03, "{i_hp}");
+    // (0.039 A with the closed-loop-tuned dead zone of 0.04 rad/s; 0.03 A would hold for 0.06.)
+    assert!(i_hp < 0.05, "{i_hp}");
     assert!(i_raw > 5.0 * i_hp.max(0.02), "{i_raw}");
 }
 

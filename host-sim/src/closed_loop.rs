@@ -1,0 +1,516 @@
+//! The closed loop in lockstep at the control rate (1 kHz): the nonlinear plant (with the MR
+//! damper and its coil lag) -> [`sensors`](crate::sensors) -> `shimmy_core::control::Controller`
+//! -> coil-current command -> plant; the data-driven mode meter
+//! (`shimmy_core::estimator::MarginEstimator`) runs on the same measured encoder angles.
+//!
+//! Per control period `k` (t = k dt):
+//! 1. the sensors read the true state at t (encoder angles, speed, coil current);
+//! 2. `Controller::step` turns the measurement into a current command;
+//! 3. the mode meter takes the sample (its 100 Hz outputs are recorded);
+//! 4. observers (e.g. a margin pipeline or a monitor) see everything of the sample;
+//! 5. the plant advances over [t, t + dt) with the command and the scenario's inputs held.
+//!
+//! [`run`] returns a decimated [`TraceRow`] trace, the meter outputs, the full-rate series
+//! needed for metrics and the [`RunMetrics`].
+
+use crate::disturbance::Scenario;
+use crate::integrator::IntegrateError;
+use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
+use crate::sensors::{Measurement, SensorConfig, Sensors, Truth};
+use shimmy_core::control::{
+    ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
+};
+use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
+use shimmy_core::params::PlantParams;
+
+/// What sits on the track rod and drives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Arm {
+    /// No damper at all (F_d = 0): the reference plant that shimmies.
+    NoDamper,
+    /// The MR damper driven by a controller.
+    Mr(ControllerKind),
+}
+
+impl Arm {
+    /// Short name for tables, file names and legends.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Arm::NoDamper => "no-damper",
+            Arm::Mr(k) => k.name(),
+        }
+    }
+
+    /// Parses a name (`no-damper` or a controller name; `passive-on` takes `on_current_a`).
+    pub fn from_name(name: &str, on_current_a: f32) -> Option<Self> {
+        match name {
+            "no-damper" | "none" => Some(Arm::NoDamper),
+            n => ControllerKind::from_name(n, on_current_a).map(Arm::Mr),
+        }
+    }
+}
+
+/// Configuration of one closed-loop run.
+#[derive(Clone, Debug)]
+pub struct LoopConfig {
+    /// The true plant (the controller knows only `control.nominal`).
+    pub plant: PlantParams,
+    /// Damper and controller.
+    pub arm: Arm,
+    /// Controller gains and limits.
+    pub control: ControlParams,
+    /// Sensor models.
+    pub sensors: SensorConfig,
+    /// Control period [s].
+    pub dt_s: f64,
+    /// Length of the run [s].
+    pub duration_s: f64,
+    /// Record every n-th period in the trace (metrics always use every period).
+    pub record_every: usize,
+    /// Run the data-driven mode meter.
+    pub estimator: bool,
+    /// Plant integrator.
+    pub method: Method,
+    /// Coil resistance for the energy metric [Ohm].
+    pub coil_resistance_ohm: f64,
+    /// Initial plant state.
+    pub x0: State,
+}
+
+impl LoopConfig {
+    /// Defaults: 1 kHz, default sensors and control gains, trace at 200 Hz, meter on,
+    /// Dopri5 rtol 1e-7, 4 Ohm coil (the firmware's `CoilParams` default), plant at rest.
+    pub fn new(plant: PlantParams, arm: Arm, duration_s: f64) -> Self {
+        LoopConfig {
+            plant,
+            arm,
+            control: ControlParams::default(),
+            sensors: SensorConfig::default(),
+            dt_s: 1e-3,
+            duration_s,
+            record_every: 5,
+            estimator: true,
+            method: Method::default(),
+            coil_resistance_ohm: f64::from(
+                shimmy_core::control::actuator::CoilParams::default().r_coil_ohm,
+            ),
+            x0: [0.0; crate::plant::N_STATE],
+        }
+    }
+}
+
+/// Everything about one sample, for observers.
+#[derive(Clone, Copy, Debug)]
+pub struct SampleRecord<'a> {
+    /// Sample index.
+    pub k: u64,
+    /// Time [s].
+    pub t_s: f64,
+    /// True plant state at t.
+    pub state: &'a State,
+    /// Plant inputs held over [t, t + dt).
+    pub inputs: &'a Inputs,
+    /// What the firmware read.
+    pub meas: &'a Measurement,
+    /// The controller's output.
+    pub control: &'a ControlOutput,
+    /// The mode meter's output, on the samples where it produced one.
+    pub meter: Option<&'a MeterOutput>,
+    /// Damper force at t [N].
+    pub damper_force_n: f64,
+}
+
+/// A hook that sees every sample (margin pipeline, monitor, fault bookkeeping, ...).
+pub trait LoopObserver {
+    /// Called once per control period, after the controller and the meter ran.
+    fn on_sample(&mut self, r: &SampleRecord<'_>);
+}
+
+/// One recorded row of the trace.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TraceRow {
+    /// Time [s].
+    pub t_s: f64,
+    /// Left wheel yaw [rad].
+    pub psi_l_rad: f64,
+    /// Right wheel yaw [rad].
+    pub psi_r_rad: f64,
+    /// Steering-wheel angle [rad].
+    pub theta_sw_rad: f64,
+    /// Speed [m/s].
+    pub speed_mps: f64,
+    /// Driver torque [N m].
+    pub driver_torque_nm: f64,
+    /// Coil current command [A].
+    pub current_cmd_a: f64,
+    /// Actual coil input (the damper's filtered u, 1 V per A) [A].
+    pub coil_a: f64,
+    /// Damper force [N].
+    pub damper_force_n: f64,
+    /// Sliding variable [rad/s].
+    pub s_radps: f64,
+    /// Switching gain in use [rad/s^2].
+    pub gain_radps2: f64,
+    /// Control flags as bits: clipped 1, saturated 2, slew 4, invalid 8, below speed 16,
+    /// adapting 32.
+    pub flags: u8,
+    /// Latest mode-meter slow damping ratio (NaN before the first valid one).
+    pub zeta: f64,
+    /// Latest mode-meter frequency [Hz] (NaN before the first valid one).
+    pub freq_hz: f64,
+}
+
+/// One 100 Hz output of the mode meter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeterRow {
+    /// Time [s].
+    pub t_s: f64,
+    /// True speed [m/s].
+    pub speed_mps: f64,
+    /// Slow (margin) estimate.
+    pub zeta_slow: f64,
+    /// Its one-sigma uncertainty.
+    pub sigma_zeta_slow: f64,
+    /// Fast (warning) estimate.
+    pub zeta_fast: f64,
+    /// Frequency of the slow estimate [Hz].
+    pub freq_hz: f64,
+    /// In-band amplitude [rad].
+    pub amplitude_rad: f64,
+    /// Slow estimate valid.
+    pub valid: bool,
+}
+
+/// Full-rate series used for metrics.
+#[derive(Clone, Debug, Default)]
+pub struct Series {
+    /// Left wheel yaw [rad].
+    pub psi_l_rad: Vec<f64>,
+    /// Steering-wheel angle [rad].
+    pub theta_sw_rad: Vec<f64>,
+    /// Current command [A].
+    pub cmd_a: Vec<f64>,
+    /// Actual coil current [A].
+    pub coil_a: Vec<f64>,
+    /// Damper force [N].
+    pub force_n: Vec<f64>,
+}
+
+/// Metrics of one run.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RunMetrics {
+    /// Peak |psi_L| [rad].
+    pub peak_yaw_rad: f64,
+    /// RMS psi_L [rad].
+    pub rms_yaw_rad: f64,
+    /// 2 % settling time after the disturbance [s] (`None` if no disturbance time was given or
+    /// it never settled).
+    pub settle_s: Option<f64>,
+    /// Peak |theta_sw| [rad].
+    pub peak_sw_rad: f64,
+    /// RMS coil current [A].
+    pub rms_current_a: f64,
+    /// Peak coil current [A].
+    pub peak_current_a: f64,
+    /// Coil energy R * integral i^2 dt [J].
+    pub energy_j: f64,
+    /// Total variation of the current command sum |i_k - i_{k-1}| [A].
+    pub chatter_a: f64,
+    /// RMS damper force [N].
+    pub rms_force_n: f64,
+    /// Shimmy-band (high-passed at 2 Hz) amplitude of psi_L over the last 0.5 s [rad].
+    pub amp_end_rad: f64,
+    /// Time [s] in 0.5 s blocks whose shimmy-band amplitude exceeds [`SHIMMY_AMP_RAD`].
+    pub shimmy_s: f64,
+    /// Largest shimmy-band block amplitude [rad].
+    pub amp_max_rad: f64,
+}
+
+/// Shimmy-band amplitude above which a block counts as shimmy: 0.5 deg.
+pub const SHIMMY_AMP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+
+/// Sustained shimmy: at least this long above [`SHIMMY_AMP_RAD`] [s].
+pub const SHIMMY_MIN_S: f64 = 3.0;
+
+impl RunMetrics {
+    /// A limit cycle / sustained shimmy was seen: the shimmy-band amplitude is above
+    /// [`SHIMMY_AMP_RAD`] in the last 0.5 s, or it was above it for [`SHIMMY_MIN_S`] or longer
+    /// (a shimmy that a speed ramp leaves behind at its end). A decaying transient of a
+    /// disturbance does neither.
+    pub fn shimmies(&self) -> bool {
+        self.amp_end_rad > SHIMMY_AMP_RAD || self.shimmy_s >= SHIMMY_MIN_S
+    }
+}
+
+/// Computes the metrics from full-rate series (period `dt_s`; disturbance at `t_dist_s`).
+pub fn metrics(s: &Series, dt_s: f64, coil_r_ohm: f64, t_dist_s: Option<f64>) -> RunMetrics {
+    let n = s.psi_l_rad.len().max(1) as f64;
+    let peak = |v: &[f64]| v.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    let mut m = RunMetrics {
+        peak_yaw_rad: peak(&s.psi_l_rad),
+        rms_yaw_rad: rms(&s.psi_l_rad),
+        peak_sw_rad: peak(&s.theta_sw_rad),
+        rms_current_a: rms(&s.coil_a),
+        peak_current_a: peak(&s.coil_a),
+        energy_j: coil_r_ohm * s.coil_a.iter().map(|i| i * i).sum::<f64>() * dt_s,
+        chatter_a: s.cmd_a.windows(2).map(|w| (w[1] - w[0]).abs()).sum(),
+        rms_force_n: rms(&s.force_n),
+        ..RunMetrics::default()
+    };
+    // Shimmy-band amplitude: 2nd-order Butterworth high pass at 2 Hz (bilinear), 0.5 s blocks.
+    let hp = high_pass(&s.psi_l_rad, 2.0, dt_s);
+    let block = ((0.5 / dt_s).round() as usize).max(1);
+    let mut last = 0.0;
+    for b in hp.chunks(block) {
+        let a = peak(b);
+        if a > SHIMMY_AMP_RAD {
+            m.shimmy_s += b.len() as f64 * dt_s;
+        }
+        m.amp_max_rad = m.amp_max_rad.max(a);
+        last = a;
+    }
+    m.amp_end_rad = last;
+    // 2 % settling about the final value (mean of the last 0.5 s: a friction damper can stop
+    // off centre), relative to the peak excursion after the disturbance.
+    if let Some(td) = t_dist_s {
+        let k0 = ((td / dt_s).round() as usize).min(s.psi_l_rad.len());
+        let tail = &s.psi_l_rad[s.psi_l_rad.len().saturating_sub(block)..];
+        let fin = tail.iter().sum::<f64>() / tail.len().max(1) as f64;
+        let after = &s.psi_l_rad[k0..];
+        let pk = after.iter().fold(0.0f64, |a, x| a.max((x - fin).abs()));
+        let band = 0.02 * pk;
+        if pk > 0.0 {
+            let last_out = after.iter().rposition(|x| (x - fin).abs() > band);
+            m.settle_s = match last_out {
+                None => Some(0.0),
+                Some(i) if i + block >= after.len() => None,
+                Some(i) => Some((i + 1) as f64 * dt_s),
+            };
+        }
+    }
+    m
+}
+
+/// Second-order Butterworth high pass (bilinear transform, prewarped) of `x`.
+pub fn high_pass(x: &[f64], fc_hz: f64, dt_s: f64) -> Vec<f64> {
+    let k = (std::f64::consts::PI * fc_hz * dt_s).tan();
+    let q = std::f64::consts::FRAC_1_SQRT_2;
+    let norm = 1.0 / (1.0 + k / q + k * k);
+    let (b0, b1, b2) = (norm, -2.0 * norm, norm);
+    let a1 = 2.0 * (k * k - 1.0) * norm;
+    let a2 = (1.0 - k / q + k * k) * norm;
+    let (mut y1, mut y2) = (0.0, 0.0);
+    let x0 = x.first().copied().unwrap_or(0.0);
+    // Start from the first value as steady state (no step transient).
+    let (mut xi1, mut xi2) = (x0, x0);
+    x.iter()
+        .map(|&xi| {
+            let y = b0 * xi + b1 * xi1 + b2 * xi2 - a1 * y1 - a2 * y2;
+            xi2 = xi1;
+            xi1 = xi;
+            y2 = y1;
+            y1 = y;
+            y
+        })
+        .collect()
+}
+
+/// Result of one run.
+#[derive(Clone, Debug, Default)]
+pub struct LoopResult {
+    /// Decimated trace.
+    pub trace: Vec<TraceRow>,
+    /// Mode-meter outputs (100 Hz).
+    pub meter: Vec<MeterRow>,
+    /// Full-rate series.
+    pub series: Series,
+    /// Simulated time [s].
+    pub sim_s: f64,
+    /// Wall-clock time of the run [s].
+    pub wall_s: f64,
+}
+
+impl LoopResult {
+    /// Metrics with the disturbance at `t_dist_s`.
+    pub fn metrics(&self, cfg: &LoopConfig, t_dist_s: Option<f64>) -> RunMetrics {
+        metrics(&self.series, cfg.dt_s, cfg.coil_resistance_ohm, t_dist_s)
+    }
+
+    /// Writes the trace as CSV.
+    pub fn write_trace_csv(&self, path: &std::path::Path) -> std::io::Result<()> {
+        use std::io::Write;
+        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(
+            w,
+            "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz"
+        )?;
+        for r in &self.trace {
+            writeln!(
+                w,
+                "{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{}",
+                r.t_s,
+                r.psi_l_rad,
+                r.psi_r_rad,
+                r.theta_sw_rad,
+                r.speed_mps,
+                r.driver_torque_nm,
+                r.current_cmd_a,
+                r.coil_a,
+                r.damper_force_n,
+                r.s_radps,
+                r.gain_radps2,
+                r.flags,
+                r.zeta,
+                r.freq_hz
+            )?;
+        }
+        w.flush()
+    }
+}
+
+fn flag_bits(o: &ControlOutput) -> u8 {
+    let f = o.flags;
+    u8::from(f.clipped)
+        | (u8::from(f.saturated) << 1)
+        | (u8::from(f.slew_limited) << 2)
+        | (u8::from(f.input_invalid) << 3)
+        | (u8::from(f.below_speed) << 4)
+        | (u8::from(f.adapting) << 5)
+}
+
+/// Runs the closed loop over `scenario` (its `current_a` is ignored: the controller sets the
+/// current). `observer` sees every sample.
+pub fn run(
+    cfg: &LoopConfig,
+    scenario: &mut Scenario,
+    mut observer: Option<&mut dyn LoopObserver>,
+) -> Result<LoopResult, IntegrateError> {
+    let wall = std::time::Instant::now();
+    let (damper, kind) = match cfg.arm {
+        Arm::NoDamper => (Damper::None, ControllerKind::PassiveOff),
+        Arm::Mr(k) => (
+            Damper::Mr(shimmy_core::mr_damper::SpencerParams::steering()),
+            k,
+        ),
+    };
+    let plant = Plant::new(cfg.plant, damper);
+    let mut sim = Simulator::with_method(plant, cfg.x0, cfg.method);
+    let mut ctl = Controller::new(kind, cfg.control);
+    let mut sensors = Sensors::new(cfg.sensors);
+    let mut meter = if cfg.estimator {
+        MarginEstimator::<f32>::new(EstimatorConfig::default()).ok()
+    } else {
+        None
+    };
+    let n = (cfg.duration_s / cfg.dt_s).round() as usize;
+    let every = cfg.record_every.max(1);
+    let mut res = LoopResult::default();
+    let s = &mut res.series;
+    s.psi_l_rad.reserve(n);
+    s.theta_sw_rad.reserve(n);
+    s.cmd_a.reserve(n);
+    s.coil_a.reserve(n);
+    s.force_n.reserve(n);
+    let (mut zeta, mut freq) = (f64::NAN, f64::NAN);
+    let radius = cfg.plant.r as f32;
+    for k in 0..n {
+        let t = k as f64 * cfg.dt_s;
+        let x = *sim.state();
+        let coil = if matches!(cfg.arm, Arm::NoDamper) {
+            0.0
+        } else {
+            x[idx::U]
+        };
+        let mut inputs = scenario.inputs(t, cfg.dt_s);
+        let meas = sensors.sample(
+            t,
+            &Truth {
+                psi_l_rad: x[idx::PSI_L],
+                psi_r_rad: x[idx::PSI_R],
+                speed_mps: inputs.speed_mps,
+                coil_current_a: coil,
+            },
+        );
+        let out = ctl.step(&ControlInput {
+            t_s: t as f32,
+            dt_s: cfg.dt_s as f32,
+            psi_l_rad: meas.psi_l_rad,
+            psi_r_rad: meas.psi_r_rad,
+            speed_mps: meas.speed_mps,
+            coil_current_a: meas.coil_current_a,
+        });
+        inputs.current_cmd_a = if matches!(cfg.arm, Arm::NoDamper) {
+            0.0
+        } else {
+            f64::from(out.current_cmd_a)
+        };
+        let mo = meter.as_mut().and_then(|m| {
+            m.push(&Sample {
+                psi_l_rad: meas.psi_l_rad,
+                psi_r_rad: meas.psi_r_rad,
+                wheel: WheelOrder::Speed {
+                    speed_mps: meas.speed_mps,
+                    radius_m: radius,
+                },
+                damper_cmd: out.current_cmd_a,
+            })
+        });
+        if let Some(o) = &mo {
+            if o.slow.valid {
+                zeta = f64::from(o.slow.zeta);
+                freq = f64::from(o.slow.freq_hz);
+            }
+            res.meter.push(MeterRow {
+                t_s: t,
+                speed_mps: inputs.speed_mps,
+                zeta_slow: f64::from(o.slow.zeta),
+                sigma_zeta_slow: f64::from(o.slow.sigma_zeta),
+                zeta_fast: f64::from(o.fast.zeta),
+                freq_hz: f64::from(o.slow.freq_hz),
+                amplitude_rad: f64::from(o.amplitude_rad),
+                valid: o.slow.valid,
+            });
+        }
+        let f_d = sim.forces(&inputs).damper_n;
+        s.psi_l_rad.push(x[idx::PSI_L]);
+        s.theta_sw_rad.push(x[idx::THETA_SW]);
+        s.cmd_a.push(inputs.current_cmd_a);
+        s.coil_a.push(coil);
+        s.force_n.push(f_d);
+        if let Some(obs) = observer.as_deref_mut() {
+            obs.on_sample(&SampleRecord {
+                k: k as u64,
+                t_s: t,
+                state: &x,
+                inputs: &inputs,
+                meas: &meas,
+                control: &out,
+                meter: mo.as_ref(),
+                damper_force_n: f_d,
+            });
+        }
+        if k % every == 0 {
+            res.trace.push(TraceRow {
+                t_s: t,
+                psi_l_rad: x[idx::PSI_L],
+                psi_r_rad: x[idx::PSI_R],
+                theta_sw_rad: x[idx::THETA_SW],
+                speed_mps: inputs.speed_mps,
+                driver_torque_nm: inputs.driver_torque_nm,
+                current_cmd_a: inputs.current_cmd_a,
+                coil_a: coil,
+                damper_force_n: f_d,
+                s_radps: f64::from(out.s_radps),
+                gain_radps2: f64::from(out.gain_radps2),
+                flags: flag_bits(&out),
+                zeta,
+                freq_hz: freq,
+            });
+        }
+        sim.advance(cfg.dt_s, &inputs)?;
+    }
+    res.sim_s = n as f64 * cfg.dt_s;
+    res.wall_s = wall.elapsed().as_secs_f64();
+    Ok(res)
+}
