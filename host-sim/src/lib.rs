@@ -11,6 +11,7 @@ pub mod integrator;
 pub mod paramfile;
 pub mod plant;
 pub mod reference_bench;
+pub mod run_cmd;
 pub mod scenario_file;
 pub mod sensors;
 pub mod stability_cmd;

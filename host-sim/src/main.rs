@@ -37,6 +37,8 @@ enum Command {
     Sweep(shimmy_sim::sweep::SweepArgs),
     /// Every controller over the standard scenario set: one table, CSV and PNG plots.
     Compare(shimmy_sim::compare::CompareArgs),
+    /// Run one scenario file (TOML, see host-sim/scenarios/): metrics, trace CSV, plots.
+    Run(shimmy_sim::run_cmd::RunArgs),
 }
 
 fn main() -> Result<()> {
@@ -49,6 +51,7 @@ fn main() -> Result<()> {
         Some(Command::ReferenceBench(a)) => shimmy_sim::reference_bench::command(&a),
         Some(Command::Sweep(a)) => shimmy_sim::sweep::command(&a),
         Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
+        Some(Command::Run(a)) => shimmy_sim::run_cmd::command(&a),
         None => shimmy_sim::demo::command(),
     }
 }
