@@ -80,10 +80,10 @@ use crate::control::actuator::CurrentLimiter;
 use crate::control::{ControlInput, ControlOutput, Controller, ControllerKind, ControlParams};
 
 /// Fail-safe coil current [A] = the coil rating. Computed by `tests/tests/failsafe_current.rs`
-/// (describing function of the Spencer damper + `hopf_crossings`, 0.1-150 km/h... see there):
-/// the nominal family (nominal, +-20 % C_a/sigma/e) needs c >= 1.2 x 1139 = 1367 N s/m, i.e.
+/// (describing function of the Spencer damper + `hopf_crossings` over 0.1 m/s-150 km/h):
+/// the nominal family (nominal, +-20 % C_a/sigma/e) needs c_eq >= 1.2 x 1367 N s/m, i.e.
 /// I_min = 1.13 A at the 0.5 deg reference amplitude (asserted: constant >= 1.25 I_min) and
-/// 1.73 A at 1 deg; at 2-3 deg and for the hard family (c >= 1.2 x 2922 N s/m) no current
+/// 1.73 A at 1 deg; at 2-3 deg and for the hard family (c_eq >= 1.2 x 3506 N s/m) no current
 /// within the rating meets the requirement, so the constant is the rating (c_eq grows with the
 /// current at every amplitude; asserted). Time domain (nonlinear simulator, 5-130 km/h): the
 /// nominal set recovers from 3 deg and the hard set from 0.5 deg at this current, with 0 A both
