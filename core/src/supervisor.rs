@@ -77,7 +77,7 @@
 //! taken with wrapping arithmetic, so the 71.6 min wrap is harmless).
 
 use crate::control::actuator::CurrentLimiter;
-use crate::control::{ControlInput, ControlOutput, Controller, ControllerKind, ControlParams};
+use crate::control::{ControlInput, ControlOutput, ControlParams, Controller, ControllerKind};
 
 /// Fail-safe coil current [A] = the coil rating. Computed by `tests/tests/failsafe_current.rs`
 /// (describing function of the Spencer damper + `hopf_crossings` over 0.1 m/s-150 km/h):
@@ -259,7 +259,9 @@ impl FaultSet {
 
     /// The kinds in the set.
     pub fn iter(self) -> impl Iterator<Item = FaultKind> {
-        FaultKind::ALL.into_iter().filter(move |k| self.contains(*k))
+        FaultKind::ALL
+            .into_iter()
+            .filter(move |k| self.contains(*k))
     }
 }
 
@@ -569,10 +571,7 @@ impl Supervisor {
 
     /// Counters of fault `k`.
     pub fn record(&self, k: FaultKind) -> FaultRecord {
-        self.records
-            .get(k as usize)
-            .copied()
-            .unwrap_or_default()
+        self.records.get(k as usize).copied().unwrap_or_default()
     }
 
     /// Frames checked.
@@ -701,11 +700,7 @@ impl Supervisor {
     fn check_speed(&mut self, f: &RawFrame, det: &mut FaultSet) -> Option<f32> {
         let v = f.speed_mps;
         let p = self.p;
-        if !f.speed_valid
-            || !v.is_finite()
-            || v < -p.speed_neg_tol_mps
-            || v > p.max_speed_mps
-        {
+        if !f.speed_valid || !v.is_finite() || v < -p.speed_neg_tol_mps || v > p.max_speed_mps {
             det.insert(FaultKind::SpeedInvalid);
             return None;
         }
@@ -768,9 +763,8 @@ impl Supervisor {
                 }
                 if gap > NOMINAL_PERIOD_US + NOMINAL_PERIOD_US / 2 {
                     let missed = gap.saturating_add(NOMINAL_PERIOD_US / 2) / NOMINAL_PERIOD_US;
-                    self.missed_samples = self
-                        .missed_samples
-                        .saturating_add(missed.saturating_sub(1));
+                    self.missed_samples =
+                        self.missed_samples.saturating_add(missed.saturating_sub(1));
                 }
                 if gap == 0 || gap > p.max_gap_us {
                     period_s
@@ -785,7 +779,13 @@ impl Supervisor {
         self.check_encoder(1, &f.right, &f.left, f.t_us, &mut det);
         let l_ok = !det.left();
         let r_ok = !det.right();
-        if l_ok && r_ok && !within(abs(f.left.angle_rad - f.right.angle_rad), p.max_disagree_rad) {
+        if l_ok
+            && r_ok
+            && !within(
+                abs(f.left.angle_rad - f.right.angle_rad),
+                p.max_disagree_rad,
+            )
+        {
             det.insert(FaultKind::EncoderDisagree);
         }
         // Speed.
@@ -845,8 +845,7 @@ impl Supervisor {
             t_s: f.t_us as f32 * 1e-6,
             dt_s,
             angles_rad: angles,
-            speed_mps: if a.contains(FaultKind::SpeedInvalid) || a.contains(FaultKind::SpeedJump)
-            {
+            speed_mps: if a.contains(FaultKind::SpeedInvalid) || a.contains(FaultKind::SpeedJump) {
                 None
             } else {
                 speed
@@ -910,10 +909,8 @@ impl Supervisor {
         } else if fail {
             (Mode::FailSafe, Some(fixed))
         } else {
-            let floor = a.left()
-                || a.right()
-                || !speed_trusted
-                || a.contains(FaultKind::BothStuckSuspect);
+            let floor =
+                a.left() || a.right() || !speed_trusted || a.contains(FaultKind::BothStuckSuspect);
             let advisory =
                 a.contains(FaultKind::CoilSensor) || a.contains(FaultKind::MarginUnavailable);
             if floor {

@@ -24,10 +24,10 @@
 //! The zero-current speed `ZERO_CURRENT_SAFE_BELOW_MPS` is checked the same way: below it every
 //! variant is stable with no damper at all.
 
+use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{critical_mode_at, hopf_crossings, V_SEARCH_MIN_MPS};
 use shimmy_core::supervisor::{FAILSAFE_CURRENT_A, ZERO_CURRENT_SAFE_BELOW_MPS};
-use shimmy_core::mr_damper::SpencerParams;
 use shimmy_sim::bifurcation::{run_speed, DamperSetting};
 use shimmy_sim::damper_equiv::mr_equivalent_viscous;
 
@@ -84,11 +84,15 @@ fn stable_everywhere(p: &PlantParams, c: f64) -> bool {
 fn shimmy_freqs(vars: &[(String, PlantParams)]) -> Vec<f64> {
     let mut f = Vec::new();
     for (_, p) in vars {
-        let c = hopf_crossings(p, 0.0, V_SEARCH_MIN_MPS, v_max_mps(), STEP_MPS, 1e-3)
-            .expect("hopf");
+        let c =
+            hopf_crossings(p, 0.0, V_SEARCH_MIN_MPS, v_max_mps(), STEP_MPS, 1e-3).expect("hopf");
         // In-phase shimmy crossings only: the ~47 Hz anti-phase mode that some +20 % variants
         // lose above ~200 km/h does not move the damper (its stroke is in-phase only).
-        f.extend(c.iter().map(|x| x.freq_hz).filter(|f| *f < SHIMMY_BAND_HI_HZ));
+        f.extend(
+            c.iter()
+                .map(|x| x.freq_hz)
+                .filter(|f| *f < SHIMMY_BAND_HI_HZ),
+        );
     }
     f
 }
@@ -169,7 +173,9 @@ fn failsafe_current_removes_every_hopf_window_with_margin() {
     // Nominal family at the reference amplitude 0.5 deg: the design basis, with the margins on
     // c (x1.2) and on the current (x1.25).
     let nom = requirement(&family(ParamSet::Nominal));
-    let i_ref = nom.i_min[0].1.expect("nominal, 0.5 deg: reachable within the coil rating");
+    let i_ref = nom.i_min[0]
+        .1
+        .expect("nominal, 0.5 deg: reachable within the coil rating");
     println!("  nominal family: c_req = {:.0} N s/m", nom.c_req);
     assert!(
         f64::from(FAILSAFE_CURRENT_A) >= MARGIN * i_ref,
@@ -201,7 +207,10 @@ fn failsafe_current_removes_every_hopf_window_with_margin() {
             "hard, {a} deg: requirement unmet and the fail-safe current is not the rating"
         );
     }
-    assert!(f64::from(FAILSAFE_CURRENT_A) <= u_max, "beyond the coil rating");
+    assert!(
+        f64::from(FAILSAFE_CURRENT_A) <= u_max,
+        "beyond the coil rating"
+    );
 }
 
 /// Peak |psi_L| [deg] in the last second of a 4 s run from an in-phase start `psi0_deg`.
@@ -266,7 +275,10 @@ fn hard_set_large_disturbance_beats_any_fixed_current() {
         3.0,
     );
     println!("hard set, 20 km/h, 3 deg start, full current: {a:.2} deg after 4 s");
-    assert!(a > 3.0, "hard set now recovers from 3 deg at full current: revisit the docs");
+    assert!(
+        a > 3.0,
+        "hard set now recovers from 3 deg at full current: revisit the docs"
+    );
 }
 
 #[test]
@@ -274,9 +286,12 @@ fn zero_current_is_safe_below_the_lowest_onset() {
     let mut lowest = f64::INFINITY;
     for (name, p) in variants() {
         let g0 = critical_mode_at(&p, V_SEARCH_MIN_MPS, 0.0).expect("eig").re;
-        assert!(g0 < 0.0, "{name}: unstable at the lowest speed without damper");
-        let c = hopf_crossings(&p, 0.0, V_SEARCH_MIN_MPS, v_max_mps(), STEP_MPS, 1e-3)
-            .expect("hopf");
+        assert!(
+            g0 < 0.0,
+            "{name}: unstable at the lowest speed without damper"
+        );
+        let c =
+            hopf_crossings(&p, 0.0, V_SEARCH_MIN_MPS, v_max_mps(), STEP_MPS, 1e-3).expect("hopf");
         if let Some(first) = c.first() {
             lowest = lowest.min(first.speed_mps);
         }
@@ -291,4 +306,3 @@ fn zero_current_is_safe_below_the_lowest_onset() {
         "zero-current speed not 20 % below the lowest onset {lowest:.3} m/s"
     );
 }
-

@@ -75,6 +75,10 @@ fn test() -> Result<(), String> {
             report.check_fits()?;
             Ok(report.one_line())
         }),
+        ("panic-free control path (link check)", || {
+            // Links only if no panic is reachable (firmware/src/bin/panic-free-check.rs).
+            build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
+        }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         (
             "a failing on-target test fails the run",

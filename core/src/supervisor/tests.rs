@@ -130,7 +130,10 @@ fn rate_check_catches_a_bit_flip_but_not_shimmy() {
     // The next good sample is accepted again (rate reference was not moved by the bad one).
     let o = run(&mut s, 1001, 1, |_, f| f);
     assert!(o.verdict.detected.is_empty());
-    assert!(o.verdict.faults.contains(FaultKind::RightRate), "hysteresis");
+    assert!(
+        o.verdict.faults.contains(FaultKind::RightRate),
+        "hysteresis"
+    );
 }
 
 #[test]
@@ -217,7 +220,11 @@ fn speed_checks() {
             corrupt(&mut f);
             f
         });
-        assert!(o.verdict.detected.contains(kind), "{kind:?}: {:?}", o.verdict);
+        assert!(
+            o.verdict.detected.contains(kind),
+            "{kind:?}: {:?}",
+            o.verdict
+        );
         assert_eq!(o.verdict.mode, Mode::Degraded);
         assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
         assert!(o.current_cmd_a >= FAILSAFE_CURRENT_A - 1e-6);
@@ -248,15 +255,30 @@ fn timing_gap_fails_safe_and_recovers_after_the_hysteresis() {
     assert_eq!(o.verdict.mode, Mode::Normal, "{:?}", o.verdict);
     assert!(o.control.is_some());
     let ev: heapless::Vec<SupervisorEvent, 8> = s.supervisor_mut().drain_events().collect();
-    assert!(matches!(
-        ev.as_slice(),
-        [
-            SupervisorEvent::Raised { kind: FaultKind::Timing, .. },
-            SupervisorEvent::ModeChange { to: Mode::FailSafe, .. },
-            SupervisorEvent::Cleared { kind: FaultKind::Timing, .. },
-            SupervisorEvent::ModeChange { to: Mode::Normal, .. },
-        ]
-    ), "{ev:?}");
+    assert!(
+        matches!(
+            ev.as_slice(),
+            [
+                SupervisorEvent::Raised {
+                    kind: FaultKind::Timing,
+                    ..
+                },
+                SupervisorEvent::ModeChange {
+                    to: Mode::FailSafe,
+                    ..
+                },
+                SupervisorEvent::Cleared {
+                    kind: FaultKind::Timing,
+                    ..
+                },
+                SupervisorEvent::ModeChange {
+                    to: Mode::Normal,
+                    ..
+                },
+            ]
+        ),
+        "{ev:?}"
+    );
     // Without hysteresis the mode would flap: show the recovery time matters.
     let mut p = SupervisorParams {
         recovery_s: 0.0,
