@@ -158,7 +158,7 @@ fn requirement(vars: &[(String, PlantParams)]) -> Requirement {
         })
         .collect();
     println!(
-        "shimmy freqs {:.2}-{:.2} Hz; c_req = {c_req:.0} N s/m (x{MARGIN_C} margin)",
+        "shimmy freqs {:.2}-{:.2} Hz; c_req = {c_req:.0} N s/m (I_min needs c_eq >= {MARGIN_C} c_req)",
         freqs[0], freqs[1]
     );
     Requirement { c_req, i_min }
