@@ -1,7 +1,9 @@
 //! Sequences of raw sensor frames into the combined 1 kHz core step (supervisor + controller +
 //! limiter) and the margin estimator. Checks the output contract on every step.
 //!
-//! Run: `cd fuzz && cargo +nightly fuzz run safe_step -- -max_total_time=60`
+//! Run (needs `cargo install cargo-fuzz`; the installed nightly 1.97 is older than the crate's
+//! rust-version 1.98, so the pinned 1.98 toolchain is used with nightly features unlocked):
+//! `cd fuzz && RUSTC_BOOTSTRAP=1 cargo fuzz run safe_step -- -max_total_time=60`
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
