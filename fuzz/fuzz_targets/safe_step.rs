@@ -28,7 +28,9 @@ fuzz_target!(|data: &[u8]| {
     };
     let kind = match sel % 5 {
         0 => ControllerKind::PassiveOff,
-        1 => ControllerKind::PassiveOn { current_a: f32::from(sel) / 64.0 },
+        1 => ControllerKind::PassiveOn {
+            current_a: f32::from(sel) / 64.0,
+        },
         2 => ControllerKind::Smc,
         3 => ControllerKind::Asmc,
         _ => ControllerKind::Skyhook,
@@ -50,7 +52,13 @@ fuzz_target!(|data: &[u8]| {
             error_flag: f & 4 != 0,
         };
         // Small perturbations of plausible values most of the time, raw bits otherwise.
-        let plaus = |x: f32, scale: f32| if flags & 0x100 == 0 && x.is_finite() { (x % 1.0) * scale } else { x };
+        let plaus = |x: f32, scale: f32| {
+            if flags & 0x100 == 0 && x.is_finite() {
+                (x % 1.0) * scale
+            } else {
+                x
+            }
+        };
         let frame = RawFrame {
             t_us,
             left: enc(plaus(f32_at(b, 2), 0.1), flags),
@@ -66,9 +74,16 @@ fuzz_target!(|data: &[u8]| {
         };
         let o = safe.step(&frame, margin);
         assert!(o.current_cmd_a.is_finite(), "NaN command");
-        assert!((0.0..=i_max).contains(&o.current_cmd_a), "command {}", o.current_cmd_a);
+        assert!(
+            (0.0..=i_max).contains(&o.current_cmd_a),
+            "command {}",
+            o.current_cmd_a
+        );
         assert!(safe.controller().adaptive_gain().is_finite());
-        let wheel = WheelOrder::Speed { speed_mps: frame.speed_mps, radius_m: 0.35 };
+        let wheel = WheelOrder::Speed {
+            speed_mps: frame.speed_mps,
+            radius_m: 0.35,
+        };
         if let Some(s) = SafeController::estimator_sample(&o, wheel) {
             let _ = est.push(&s);
             for rls in [est.fast_rls(), est.slow_rls()] {
