@@ -82,6 +82,10 @@ fn test() -> Result<(), String> {
             report.check_budget()?;
             Ok(report.one_line())
         }),
+        ("panic-free control path (link check)", || {
+            // Links only if no panic is reachable (firmware/src/bin/panic-free-check.rs).
+            build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
+        }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         ("on-target benchmark budgets (QEMU -icount)", bench),
         (

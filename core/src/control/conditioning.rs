@@ -176,7 +176,8 @@ impl RateObserver {
             1000.0
         };
         let t = 1.0 / fs;
-        let wb = 2.0 * PI * (bandwidth_hz as f64).clamp(0.1, 0.45 * fs);
+        // max/min instead of clamp: no panic on NaN bounds (panic-free check).
+        let wb = 2.0 * PI * (bandwidth_hz as f64).max(0.1).min(0.45 * fs);
         let zeta = (damping as f64).clamp(0.1, 0.999);
         let r = libm::exp(-zeta * wb * t);
         let theta = wb * libm::sqrt(1.0 - zeta * zeta) * t;

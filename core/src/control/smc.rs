@@ -259,8 +259,10 @@ impl AdaptiveGain {
     /// Starts at `p.k_init_radps2` (projected onto the bounds).
     pub fn new(p: &AsmcParams) -> Self {
         AdaptiveGain {
+            // max/min instead of clamp: no panic on NaN bounds (panic-free check).
             k: p.k_init_radps2
-                .clamp(p.k_min_radps2, p.k_max_radps2.max(p.k_min_radps2)),
+                .max(p.k_min_radps2)
+                .min(p.k_max_radps2.max(p.k_min_radps2)),
         }
     }
 

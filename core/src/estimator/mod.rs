@@ -531,7 +531,8 @@ impl<T: Real> MarginEstimator<T> {
         self.out.excitation_rms_rad = exc_rms;
         self.out.amplitude_rad = (T::from_f64(2.0) * self.amp_ms).sqrt().to_f32() * scale;
 
-        let p = self.p;
+        // `min` lets the optimiser drop the bounds checks (panic-free check).
+        let p = self.p.min(MAX_ORDER);
         if self.hist_len >= p {
             // regressor
             let mut phi = [T::ZERO; N_MAX];
@@ -598,11 +599,11 @@ impl<T: Real> MarginEstimator<T> {
             self.out.fast = self.tr_fast.est;
             self.out.slow = self.tr_slow.est;
         }
-        // shift history
-        for i in (1..p).rev() {
-            self.hist[i] = self.hist[i - 1];
+        // shift history (y in at index 0; no indexing, so no bounds check: panic-free check)
+        let mut carry = y;
+        for h in self.hist.iter_mut().take(p) {
+            core::mem::swap(h, &mut carry);
         }
-        self.hist[0] = y;
         self.hist_len = (self.hist_len + 1).min(p);
         self.u_prev = u;
         self.last_phase = self.phase;

@@ -161,7 +161,8 @@ impl<T: Real> Rls<T> {
 
     /// One RLS update with target `y` and regressor `phi`; returns the a-priori innovation.
     pub fn update(&mut self, phi: &[T; N_MAX], y: T) -> Result<T, RlsError> {
-        let n = self.n;
+        // `min` lets the optimiser drop the bounds checks (panic-free check).
+        let n = self.n.min(N_MAX);
         if !y.is_finite() || phi.iter().take(n).any(|v| !v.is_finite()) {
             return Err(RlsError::NonFiniteInput);
         }

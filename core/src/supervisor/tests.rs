@@ -1,0 +1,536 @@
+//! Supervisor and SafeController tests: one scenario per check (each also shows the healthy
+//! counterpart raises nothing), hysteresis, latches, and property tests over arbitrary input.
+
+use super::*;
+use crate::control::{ControlParams, ControllerKind};
+use proptest::prelude::*;
+
+const I_MAX: f32 = 2.0;
+
+fn safe() -> SafeController {
+    SafeController::new(
+        ControllerKind::Asmc,
+        ControlParams::default(),
+        SupervisorParams::default(),
+    )
+}
+
+/// Shimmy-like in-phase yaw: 7 deg at 7 Hz plus a tiny anti-phase part (track-rod compliance).
+fn yaw(k: u32) -> (f32, f32) {
+    let t = k as f32 * 1e-3;
+    let a = 7f32.to_radians() * libm::sinf(2.0 * core::f32::consts::PI * 7.0 * t);
+    let d = 2e-4 * libm::sinf(2.0 * core::f32::consts::PI * 47.0 * t);
+    (a + d, a - d)
+}
+
+fn frame(k: u32, speed: f32) -> RawFrame {
+    let (l, r) = yaw(k);
+    RawFrame::ok(k * NOMINAL_PERIOD_US, l, r, speed)
+}
+
+/// Runs `n` frames from `k0` through `f` (which may corrupt them); returns the last output.
+fn run(
+    s: &mut SafeController,
+    k0: u32,
+    n: u32,
+    mut f: impl FnMut(u32, RawFrame) -> RawFrame,
+) -> SafeOutput {
+    let mut out = SafeOutput::default();
+    for k in k0..k0 + n {
+        out = s.step(&f(k, frame(k, 20.0)), MarginStatus::NotUsed);
+        assert!(out.current_cmd_a.is_finite() && (0.0..=I_MAX).contains(&out.current_cmd_a));
+    }
+    out
+}
+
+#[test]
+fn healthy_shimmy_raises_nothing_and_is_transparent() {
+    // 7 deg at 7 Hz is above the no-damper limit cycle of the reference plant: a large healthy
+    // signal. The supervised command equals the bare controller's.
+    let mut s = safe();
+    let mut bare = Controller::new(ControllerKind::Asmc, ControlParams::default());
+    for k in 0..3000 {
+        let f = frame(k, 20.0);
+        let o = s.step(&f, MarginStatus::Valid);
+        let b = bare.step(&ControlInput {
+            t_s: k as f32 * 1e-3,
+            dt_s: 1e-3,
+            psi_l_rad: f.left.angle_rad,
+            psi_r_rad: f.right.angle_rad,
+            speed_mps: 20.0,
+            coil_current_a: None,
+        });
+        assert_eq!(o.verdict.mode, Mode::Normal, "k={k} {:?}", o.verdict);
+        assert!(o.verdict.faults.is_empty());
+        assert_eq!(o.current_cmd_a, b.current_cmd_a, "k={k}");
+    }
+    assert_eq!(s.supervisor().missed_samples(), 0);
+}
+
+#[test]
+fn one_encoder_nan_degrades_to_the_other_with_a_floor() {
+    let mut s = safe();
+    run(&mut s, 0, 500, |_, f| f);
+    let o = run(&mut s, 500, 10, |_, mut f| {
+        f.left.angle_rad = f32::NAN;
+        f
+    });
+    assert!(o.verdict.faults.contains(FaultKind::LeftNonFinite));
+    assert_eq!(o.verdict.mode, Mode::Degraded);
+    assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+    let (l, r) = o.validated.angles_rad.expect("right stands in");
+    assert_eq!(l, r);
+    assert_eq!(r, yaw(509).1);
+    assert!(o.current_cmd_a >= FAILSAFE_CURRENT_A.min(I_MAX) - 1e-6);
+    assert!(o.control.is_some());
+}
+
+#[test]
+fn both_encoders_lost_is_failsafe_and_zero_current_at_walking_pace() {
+    let mut s = safe();
+    run(&mut s, 0, 100, |_, f| f);
+    let o = run(&mut s, 100, 5, |_, mut f| {
+        f.left.read_ok = false;
+        f.right.parity_ok = false;
+        f
+    });
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+    assert!(o.verdict.faults.contains(FaultKind::LeftRead));
+    assert!(o.verdict.faults.contains(FaultKind::RightFlag));
+    assert_eq!(o.current_cmd_a, FAILSAFE_CURRENT_A);
+    assert!(o.control.is_none());
+    // Same at a trusted 0.3 m/s: 0 A.
+    let mut s = safe();
+    let mut o = SafeOutput::default();
+    for k in 0..100 {
+        let mut f = frame(k, 0.3);
+        if k >= 50 {
+            f.left.error_flag = true;
+            f.right.angle_rad = f32::INFINITY;
+        }
+        o = s.step(&f, MarginStatus::NotUsed);
+    }
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+    assert_eq!(o.verdict.safe_current_a, Some(0.0));
+    assert_eq!(o.current_cmd_a, 0.0);
+}
+
+#[test]
+fn rate_check_catches_a_bit_flip_but_not_shimmy() {
+    let mut s = safe();
+    let o = run(&mut s, 0, 1000, |_, f| f);
+    assert!(o.verdict.faults.is_empty());
+    // 14-bit encoder, bit 12 flipped: + 2 pi / 4 rad... scaled to the limit: +0.3 rad.
+    let o = run(&mut s, 1000, 1, |_, mut f| {
+        f.right.angle_rad += 0.3;
+        f
+    });
+    assert!(o.verdict.detected.contains(FaultKind::RightRate));
+    assert!(!o.verdict.detected.contains(FaultKind::RightRange));
+    // The next good sample is accepted again (rate reference was not moved by the bad one).
+    let o = run(&mut s, 1001, 1, |_, f| f);
+    assert!(o.verdict.detected.is_empty());
+    assert!(
+        o.verdict.faults.contains(FaultKind::RightRate),
+        "hysteresis"
+    );
+}
+
+#[test]
+fn range_check() {
+    let mut s = safe();
+    let o = run(&mut s, 0, 2, |_, mut f| {
+        f.left.angle_rad = 0.9;
+        f
+    });
+    assert!(o.verdict.detected.contains(FaultKind::LeftRange));
+}
+
+#[test]
+fn stuck_encoder_needs_the_other_to_move() {
+    // Left frozen while the right follows shimmy: stuck after 100 samples.
+    let mut s = safe();
+    let frozen = yaw(0).0;
+    let o = run(&mut s, 0, 99, |_, mut f| {
+        f.left.angle_rad = frozen;
+        f
+    });
+    assert!(!o.verdict.faults.contains(FaultKind::LeftStuck));
+    let o = run(&mut s, 99, 30, |_, mut f| {
+        f.left.angle_rad = frozen;
+        f
+    });
+    assert!(o.verdict.faults.contains(FaultKind::LeftStuck));
+    assert_eq!(o.verdict.mode, Mode::Degraded);
+    // Smooth straight road: both constant and identical for 1.5 s at 20 m/s: no fault at all.
+    let mut s = safe();
+    let o = run(&mut s, 0, 1500, |_, mut f| {
+        f.left.angle_rad = 0.001;
+        f.right.angle_rad = 0.001;
+        f
+    });
+    assert!(o.verdict.faults.is_empty(), "{:?}", o.verdict);
+    assert_eq!(o.verdict.mode, Mode::Normal);
+    // ... but after 2 s it is suspected: Degraded with the floor (safe, never FailSafe).
+    let o = run(&mut s, 1500, 600, |_, mut f| {
+        f.left.angle_rad = 0.001;
+        f.right.angle_rad = 0.001;
+        f
+    });
+    assert!(o.verdict.faults.contains(FaultKind::BothStuckSuspect));
+    assert_eq!(o.verdict.mode, Mode::Degraded);
+    assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+    // Standing still: never suspected.
+    let mut s = safe();
+    for k in 0..5000 {
+        let o = s.step(
+            &RawFrame::ok(k * NOMINAL_PERIOD_US, 0.001, 0.001, 0.0),
+            MarginStatus::NotUsed,
+        );
+        assert!(o.verdict.faults.is_empty());
+    }
+}
+
+#[test]
+fn disagreeing_encoders_are_failsafe() {
+    let mut s = safe();
+    let o = run(&mut s, 0, 1, |_, mut f| {
+        f.left.angle_rad = 0.2;
+        f.right.angle_rad = -0.2;
+        f
+    });
+    assert!(o.verdict.faults.contains(FaultKind::EncoderDisagree));
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+}
+
+#[test]
+fn speed_checks() {
+    type Corrupt = fn(&mut RawFrame);
+    let cases: [(Corrupt, FaultKind); 5] = [
+        (|f| f.speed_valid = false, FaultKind::SpeedInvalid),
+        (|f| f.speed_mps = f32::NAN, FaultKind::SpeedInvalid),
+        (|f| f.speed_mps = -3.0, FaultKind::SpeedInvalid),
+        (|f| f.speed_mps = 90.0, FaultKind::SpeedInvalid),
+        (|f| f.speed_mps = 25.0, FaultKind::SpeedJump),
+    ];
+    for (corrupt, kind) in cases {
+        let mut s = safe();
+        run(&mut s, 0, 100, |_, f| f);
+        let o = run(&mut s, 100, 1, |_, mut f| {
+            corrupt(&mut f);
+            f
+        });
+        assert!(
+            o.verdict.detected.contains(kind),
+            "{kind:?}: {:?}",
+            o.verdict
+        );
+        assert_eq!(o.verdict.mode, Mode::Degraded);
+        assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+        assert!(o.current_cmd_a >= FAILSAFE_CURRENT_A - 1e-6);
+    }
+    // A hard brake (1 g) is not a jump.
+    let mut s = safe();
+    for k in 0..2000u32 {
+        let v = 30.0 - 9.81 * k as f32 * 1e-3;
+        let (l, r) = yaw(k);
+        let o = s.step(&RawFrame::ok(k * 1000, l, r, v), MarginStatus::NotUsed);
+        assert!(o.verdict.faults.is_empty(), "k={k}");
+    }
+}
+
+#[test]
+fn timing_gap_fails_safe_and_recovers_after_the_hysteresis() {
+    let mut s = safe();
+    run(&mut s, 0, 100, |_, f| f);
+    // 10 samples missing.
+    let o = run(&mut s, 110, 1, |_, f| f);
+    assert!(o.verdict.detected.contains(FaultKind::Timing));
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+    assert_eq!(s.supervisor().missed_samples(), 10);
+    // Still fail-safe 0.9 s later, normal after 1 s.
+    let o = run(&mut s, 111, 900, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+    let o = run(&mut s, 1011, 101, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::Normal, "{:?}", o.verdict);
+    assert!(o.control.is_some());
+    let ev: heapless::Vec<SupervisorEvent, 8> = s.supervisor_mut().drain_events().collect();
+    assert!(
+        matches!(
+            ev.as_slice(),
+            [
+                SupervisorEvent::Raised {
+                    kind: FaultKind::Timing,
+                    ..
+                },
+                SupervisorEvent::ModeChange {
+                    to: Mode::FailSafe,
+                    ..
+                },
+                SupervisorEvent::Cleared {
+                    kind: FaultKind::Timing,
+                    ..
+                },
+                SupervisorEvent::ModeChange {
+                    to: Mode::Normal,
+                    ..
+                },
+            ]
+        ),
+        "{ev:?}"
+    );
+    // Without hysteresis the mode would flap: show the recovery time matters.
+    let mut p = SupervisorParams {
+        recovery_s: 0.0,
+        ..SupervisorParams::default()
+    };
+    p.max_gap_us = 5000;
+    let mut s0 = SafeController::new(ControllerKind::Asmc, ControlParams::default(), p);
+    run(&mut s0, 0, 10, |_, f| f);
+    run(&mut s0, 20, 1, |_, f| f);
+    let o = run(&mut s0, 21, 1, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::Normal, "no hysteresis: back at once");
+}
+
+#[test]
+fn time_stamp_wrap_is_not_a_fault() {
+    let mut s = safe();
+    let t0 = u32::MAX - 5000;
+    for k in 0..20u32 {
+        let (l, r) = yaw(k);
+        let f = RawFrame::ok(t0.wrapping_add(k * 1000), l, r, 20.0);
+        let o = s.step(&f, MarginStatus::NotUsed);
+        assert!(o.verdict.faults.is_empty(), "k={k}: {:?}", o.verdict);
+    }
+    // A repeated stamp is.
+    let o = s.step(
+        &RawFrame::ok(t0.wrapping_add(19 * 1000), 0.0, 0.0, 20.0),
+        MarginStatus::NotUsed,
+    );
+    assert!(o.verdict.detected.contains(FaultKind::Timing));
+}
+
+/// First-order coil: i' = (i_cmd - i) / tau, tau = L/R = 1/190 s.
+fn coil(i: &mut f32, cmd: f32) -> f32 {
+    *i += (cmd - *i) * (1e-3 * 190.0);
+    *i
+}
+
+#[test]
+fn coil_open_and_short_are_latched_failsafe_at_zero_current() {
+    // Healthy coil with its lag: passive-on 1.5 A steps, no fault.
+    let mut s = SafeController::new(
+        ControllerKind::PassiveOn { current_a: 1.5 },
+        ControlParams::default(),
+        SupervisorParams::default(),
+    );
+    let mut i = 0.0;
+    for k in 0..500 {
+        let mut f = frame(k, 20.0);
+        f.coil_current_a = Some(coil(&mut i, s.last_command_a()));
+        let o = s.step(&f, MarginStatus::NotUsed);
+        assert!(o.verdict.faults.is_empty(), "k={k} {:?}", o.verdict);
+    }
+    // Open: measured 0.
+    for k in 500..600 {
+        let mut f = frame(k, 20.0);
+        f.coil_current_a = Some(0.0);
+        s.step(&f, MarginStatus::NotUsed);
+    }
+    let mut f = frame(600, 20.0);
+    f.coil_current_a = Some(0.0);
+    let o = s.step(&f, MarginStatus::NotUsed);
+    assert!(o.verdict.faults.contains(FaultKind::CoilOpen));
+    assert_eq!(o.verdict.mode, Mode::FailSafe);
+    assert!(!o.verdict.damper_available);
+    assert_eq!(o.current_cmd_a, 0.0);
+    // Latched: 3 s of a healthy coil later it is still there.
+    let mut i = 0.0;
+    for k in 601..3600 {
+        let mut f = frame(k, 20.0);
+        f.coil_current_a = Some(coil(&mut i, s.last_command_a()));
+        s.step(&f, MarginStatus::NotUsed);
+    }
+    assert!(s.supervisor().faults().contains(FaultKind::CoilOpen));
+    s.supervisor_mut().clear_latched();
+    let mut f = frame(3600, 20.0);
+    f.coil_current_a = Some(coil(&mut i, s.last_command_a()));
+    let o = s.step(&f, MarginStatus::NotUsed);
+    assert_eq!(o.verdict.mode, Mode::Normal);
+    // Short: measured 3 A while commanding 1.5 A.
+    for k in 3601..3700 {
+        let mut f = frame(k, 20.0);
+        f.coil_current_a = Some(3.0);
+        s.step(&f, MarginStatus::NotUsed);
+    }
+    assert!(s.supervisor().faults().contains(FaultKind::CoilShort));
+    assert_eq!(s.last_command_a(), 0.0);
+    assert_eq!(s.supervisor().record(FaultKind::CoilShort).activations, 1);
+}
+
+#[test]
+fn margin_unavailable_is_advisory() {
+    let mut s = safe();
+    let mut o = SafeOutput::default();
+    for k in 0..10_001 {
+        o = s.step(&frame(k, 20.0), MarginStatus::Invalid);
+    }
+    assert!(o.verdict.faults.contains(FaultKind::MarginUnavailable));
+    assert_eq!(o.verdict.mode, Mode::Degraded);
+    assert_eq!(o.verdict.safe_current_a, None);
+}
+
+#[test]
+fn event_log_drops_oldest() {
+    let mut s = safe();
+    // Alternate a parity error and 1.1 s of health: raise/clear/mode events.
+    let mut k = 0;
+    for _ in 0..20 {
+        run(&mut s, k, 1, |_, mut f| {
+            f.left.parity_ok = false;
+            f
+        });
+        run(&mut s, k + 1, 1100, |_, f| f);
+        k += 1101;
+    }
+    assert_eq!(s.supervisor().events().count(), EVENT_CAPACITY);
+    assert_eq!(s.supervisor().dropped_events(), 80 - EVENT_CAPACITY as u32);
+    assert_eq!(s.supervisor().record(FaultKind::LeftFlag).activations, 20);
+}
+
+// ---- property tests ----------------------------------------------------------------------
+
+fn any_f32() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        4 => -1.0f32..1.0,
+        1 => Just(f32::NAN),
+        1 => Just(f32::INFINITY),
+        1 => Just(f32::NEG_INFINITY),
+        1 => Just(f32::MAX),
+        1 => Just(-f32::MAX),
+        1 => Just(f32::MIN_POSITIVE),
+        2 => any::<f32>(),
+    ]
+}
+
+fn any_enc() -> impl Strategy<Value = EncoderReading> {
+    (any_f32(), any::<bool>(), any::<bool>(), any::<bool>()).prop_map(|(a, r, p, e)| {
+        EncoderReading {
+            angle_rad: a,
+            read_ok: r,
+            parity_ok: p,
+            error_flag: e,
+        }
+    })
+}
+
+/// (time step in us, frame without its stamp). Time steps: mostly nominal, sometimes 0,
+/// gaps, or huge (backwards after wrap).
+fn any_step() -> impl Strategy<Value = (u32, RawFrame)> {
+    let dt = prop_oneof![6 => Just(1000u32), 1 => Just(0u32), 1 => 0u32..20_000, 1 => any::<u32>()];
+    let speed = prop_oneof![3 => 0.0f32..70.0, 1 => any_f32(), 1 => any::<f32>()];
+    let coil = prop_oneof![2 => Just(None), 1 => any_f32().prop_map(Some), 1 => (0.0f32..3.0).prop_map(Some)];
+    (dt, any_enc(), any_enc(), speed, any::<bool>(), coil).prop_map(|(dt, l, r, v, vok, c)| {
+        (
+            dt,
+            RawFrame {
+                t_us: 0,
+                left: l,
+                right: r,
+                speed_mps: v,
+                speed_valid: vok,
+                coil_current_a: c,
+            },
+        )
+    })
+}
+
+fn any_kind() -> impl Strategy<Value = ControllerKind> {
+    prop_oneof![
+        Just(ControllerKind::PassiveOff),
+        any_f32().prop_map(|c| ControllerKind::PassiveOn { current_a: c }),
+        Just(ControllerKind::Smc),
+        Just(ControllerKind::Asmc),
+        Just(ControllerKind::Skyhook),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// Whatever arrives: no panic, the command is finite and in [0, I_max], the internal state
+    /// stays finite, and a FailSafe verdict is obeyed.
+    #[test]
+    fn safe_step_contract(
+        kind in any_kind(),
+        steps in proptest::collection::vec(any_step(), 1..400),
+        margin in prop_oneof![Just(MarginStatus::NotUsed), Just(MarginStatus::Valid), Just(MarginStatus::Invalid)],
+    ) {
+        let mut s = SafeController::new(kind, ControlParams::default(), SupervisorParams::default());
+        let mut t = 0u32;
+        for (dt, mut f) in steps {
+            t = t.wrapping_add(dt);
+            f.t_us = t;
+            let prev = s.last_command_a();
+            let o = s.step(&f, margin);
+            prop_assert!(o.current_cmd_a.is_finite());
+            prop_assert!((0.0..=I_MAX).contains(&o.current_cmd_a));
+            prop_assert!(o.validated.dt_s.is_finite() && o.validated.dt_s > 0.0);
+            prop_assert!(s.controller().adaptive_gain().is_finite());
+            if let Some(c) = o.control {
+                prop_assert!(c.s_radps.is_finite());
+                prop_assert!(c.desired_force_n.is_finite());
+                prop_assert!(c.conditioned.psi_rad.is_finite() && c.conditioned.rate_radps.is_finite());
+                prop_assert!(o.verdict.mode != Mode::FailSafe);
+            }
+            if let Some((l, r)) = o.validated.angles_rad {
+                prop_assert!(l.is_finite() && r.is_finite() && l.abs() <= 0.8 && r.abs() <= 0.8);
+            }
+            if o.verdict.mode == Mode::FailSafe {
+                prop_assert!(o.control.is_none());
+                let target = o.verdict.safe_current_a.unwrap_or(FAILSAFE_CURRENT_A);
+                // Moves toward the safe current at the slew limit (2000 A/s).
+                let max_step = 2000.0 * o.validated.dt_s;
+                prop_assert!((o.current_cmd_a - target).abs() <= ((prev - target).abs() - max_step).max(0.0) + 1e-5);
+            }
+            if let Some(floor) = o.verdict.safe_current_a {
+                if o.verdict.mode == Mode::Degraded {
+                    let max_step = 2000.0 * o.validated.dt_s;
+                    prop_assert!(o.current_cmd_a >= (prev + max_step).min(floor) - 1e-5);
+                }
+            }
+        }
+    }
+
+    /// The margin estimator under arbitrary input: no panic, the RLS covariances stay finite,
+    /// symmetric, and within the trace bound.
+    #[test]
+    fn rls_covariance_stays_finite_and_symmetric(
+        samples in proptest::collection::vec((any_f32(), any_f32(), any_f32(), any_f32()), 1..2000),
+    ) {
+        use crate::estimator::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
+        let cfg = EstimatorConfig::default();
+        let mut est = MarginEstimator::<f32>::new(cfg).expect("default config");
+        for (i, (l, r, v, c)) in samples.into_iter().enumerate() {
+            let wheel = if i % 3 == 0 {
+                WheelOrder::Speed { speed_mps: v, radius_m: 0.35 }
+            } else {
+                WheelOrder::Phase { phase_rad: v }
+            };
+            if let Some(out) = est.push(&Sample { psi_l_rad: l, psi_r_rad: r, wheel, damper_cmd: c }) {
+                prop_assert!(out.fast.zeta.is_finite() || !out.fast.valid);
+                prop_assert!(out.slow.zeta.is_finite() || !out.slow.valid);
+            }
+            for rls in [est.fast_rls(), est.slow_rls()] {
+                let tr = rls.trace();
+                prop_assert!(tr.is_finite() && tr >= 0.0, "trace {}", tr);
+                prop_assert!(tr <= cfg.trace_max.unwrap_or(f32::MAX) * 1.0001, "trace {}", tr);
+                prop_assert!(rls.asymmetry() == 0.0, "asymmetry {}", rls.asymmetry());
+                for j in 0..rls.dim() {
+                    prop_assert!(rls.p(j, j) >= 0.0);
+                    prop_assert!(rls.theta().iter().all(|x| x.is_finite()));
+                }
+            }
+        }
+    }
+}
