@@ -1,9 +1,0 @@
-//! Uses the workspace's memory map.
-fn main() {
-    let out = std::path::PathBuf::from(std::env::var("OUT_DIR").unwrap());
-    std::fs::copy("../../../memory.x", out.join("memory.x")).unwrap();
-    // The workspace link flags name defmt.x; this tool logs through semihosting, not defmt.
-    std::fs::write(out.join("defmt.x"), "").unwrap();
-    println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=../../../memory.x");
-}
