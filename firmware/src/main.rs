@@ -160,7 +160,8 @@ mod app {
                     u.report.speed_margin_mps.unwrap_or(f32::NAN)
                 );
             }
-            if runs.is_multiple_of(MODEL_DIVIDER) && model::spawn(cx.local.data.speed_mps()).is_err()
+            if runs.is_multiple_of(MODEL_DIVIDER)
+                && model::spawn(cx.local.data.speed_mps()).is_err()
             {
                 cx.shared.health.lock(|h| h.model_busy += 1);
             }

@@ -26,8 +26,8 @@
 use crate::control::{ControlInput, ControlStep};
 use shimmy_core::control::{ControlOutput, ControlParams, Controller, ControllerKind};
 use shimmy_core::estimator::{
-    EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, MarginReport,
-    MeterOutput, ModelMargin, Sample, WheelOrder,
+    EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, MarginReport, MeterOutput,
+    ModelMargin, Sample, WheelOrder,
 };
 use shimmy_core::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 use shimmy_core::params::PlantParams;
@@ -271,8 +271,7 @@ impl ModelMarginTask {
         let Ok((mode, dzeta, _)) = stability::dzeta_dv(p, v, c, ModeSelect::Shimmy) else {
             return ModelMargin::default();
         };
-        let onset = match stability::critical_speed_near(p, c, v, self.hint_mps, MODEL_MAX_EVALS)
-        {
+        let onset = match stability::critical_speed_near(p, c, v, self.hint_mps, MODEL_MAX_EVALS) {
             Ok(cs) => {
                 self.hint_mps = Some(cs.speed_mps);
                 self.last_evals = cs.evals;

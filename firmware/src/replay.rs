@@ -11,9 +11,7 @@
 
 use crate::control::ControlInput;
 use crate::drivers::as5047p::AngleTracker;
-use crate::monitoring::{
-    CoreController, DataMargin, MeterSample, ModelMarginTask, DT_S,
-};
+use crate::monitoring::{CoreController, DataMargin, MeterSample, ModelMarginTask, DT_S};
 use shimmy_core::estimator::ModelMargin;
 use shimmy_core::monitor::Level;
 

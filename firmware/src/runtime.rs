@@ -40,29 +40,9 @@ pub fn finish(_outcome: Outcome) -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// QEMU builds (tests) log the full panic message through `core::fmt`.
-#[cfg(feature = "qemu")]
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     defmt::error!("panic: {}", defmt::Display2Format(info));
-    finish(Outcome::Failure)
-}
-
-/// The board build logs a static message and the location only: formatting the message's
-/// arguments would link `core::fmt`'s float formatting (~15 KiB of flash, `cargo xtask size`).
-#[cfg(not(feature = "qemu"))]
-#[panic_handler]
-fn panic(info: &core::panic::PanicInfo) -> ! {
-    let msg = info.message().as_str().unwrap_or("(formatted message)");
-    match info.location() {
-        Some(l) => defmt::error!(
-            "panic at {=str}:{=u32}: {=str}",
-            l.file(),
-            l.line(),
-            msg
-        ),
-        None => defmt::error!("panic: {=str}", msg),
-    }
     finish(Outcome::Failure)
 }
 

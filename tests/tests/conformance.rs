@@ -44,10 +44,7 @@ fn counts(psi_rad: f64) -> u16 {
 /// Records the trace from the simulator (deterministic: fixed seed, fixed-step output).
 fn record_trace() -> Vec<u8> {
     let p = PlantParams::nominal();
-    let mut sim = Simulator::new(
-        Plant::with_mr_damper(p),
-        initial_yaw(1.0_f64.to_radians()),
-    );
+    let mut sim = Simulator::new(Plant::with_mr_damper(p), initial_yaw(1.0_f64.to_radians()));
     let mut sc = Scenario::new(SpeedProfile::Ramp {
         v0_mps: 6.0,
         v1_mps: 12.0,
@@ -93,14 +90,18 @@ fn trace_matches_the_simulator() {
             replay::sample(&fresh, k).unwrap(),
         );
         assert_eq!(a.2.to_bits(), b.2.to_bits(), "speed at sample {k}");
-        let d = |x: u16, y: u16| ((i32::from(x) - i32::from(y)).rem_euclid(16384)).min(
-            (i32::from(y) - i32::from(x)).rem_euclid(16384),
-        );
+        let d = |x: u16, y: u16| {
+            ((i32::from(x) - i32::from(y)).rem_euclid(16384))
+                .min((i32::from(y) - i32::from(x)).rem_euclid(16384))
+        };
         let (dl, dr) = (d(a.0, b.0), d(a.1, b.1));
         assert!(dl <= 1 && dr <= 1, "sample {k}: {a:?} vs {b:?}");
         differ += usize::from(dl + dr > 0);
     }
-    assert!(differ * 1000 <= n, "{differ} of {n} samples differ by a count");
+    assert!(
+        differ * 1000 <= n,
+        "{differ} of {n} samples differ by a count"
+    );
 }
 
 /// The replay digest of the committed trace on the host, written for `cargo xtask test`.

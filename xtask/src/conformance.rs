@@ -77,7 +77,10 @@ pub fn step() -> Result<String, String> {
     run.print();
     run.expect_success()?;
     let target = parse(&run.log);
-    println!("  {:<28} {:>6} {:>18} {:>18}  result", "channel", "count", "hash", "last bits");
+    println!(
+        "  {:<28} {:>6} {:>18} {:>18}  result",
+        "channel", "count", "hash", "last bits"
+    );
     for h in &host {
         let t = target.iter().find(|t| t.channel == h.channel);
         let f = |i: usize| h.fields.get(i).map(String::as_str).unwrap_or("?");
@@ -109,9 +112,11 @@ mod tests {
     #[test]
     fn identical_rows_pass_and_any_difference_fails() {
         let host = rows("conformance | a | 10 | 00ff | 01\nconformance | b | 1 | 0001 | 02");
-        let same = rows("INFO conformance | a | 10 | 00ff | 01\nINFO conformance | b | 1 | 0001 | 02");
+        let same =
+            rows("INFO conformance | a | 10 | 00ff | 01\nINFO conformance | b | 1 | 0001 | 02");
         assert_eq!(compare(&host, &same), Ok(2));
-        let one_bit = rows("INFO conformance | a | 10 | 00fe | 01\nINFO conformance | b | 1 | 0001 | 02");
+        let one_bit =
+            rows("INFO conformance | a | 10 | 00fe | 01\nINFO conformance | b | 1 | 0001 | 02");
         assert!(compare(&host, &one_bit).unwrap_err().contains("a: host"));
         let missing = rows("INFO conformance | a | 10 | 00ff | 01");
         assert!(compare(&host, &missing).is_err());

@@ -139,28 +139,6 @@ impl fmt::Display for MemoryReport {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn report(flash: u64, bss: u64) -> MemoryReport {
-        MemoryReport {
-            name: "test.elf".into(),
-            sections: vec![
-                (".text".into(), FLASH.0, flash, true, false),
-                (".bss".into(), RAM.0, bss, false, true),
-            ],
-        }
-    }
-
-    #[test]
-    fn budgets_pass_at_the_limit_and_fail_one_byte_over() {
-        assert!(report(FLASH_BUDGET, RAM_BUDGET).check_budget().is_ok());
-        assert!(report(FLASH_BUDGET + 1, 0).check_budget().is_err());
-        assert!(report(0, RAM_BUDGET + 1).check_budget().is_err());
-    }
-}
-
 /// The largest flash symbols of an ELF (`cargo bloat`-style) and the flash bytes per crate
 /// (first path segment of the demangled name; `?` for symbols without one).
 pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
@@ -187,7 +165,7 @@ pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
     let total: u64 = syms.iter().map(|s| s.0).sum();
     let mut out = format!("flash by crate (sized symbols, {total} B):\n");
     let mut crates: Vec<_> = by_crate.into_iter().collect();
-    crates.sort_by(|a, b| b.1.cmp(&a.1));
+    crates.sort_by_key(|c| std::cmp::Reverse(c.1));
     for (k, v) in crates.iter().take(12) {
         out.push_str(&format!("  {v:>8} B  {k}\n"));
     }
@@ -210,5 +188,27 @@ fn crate_of(name: &str) -> String {
     match s.split_once("::") {
         Some((k, _)) if !k.contains(' ') => k.to_string(),
         _ => "?".into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(flash: u64, bss: u64) -> MemoryReport {
+        MemoryReport {
+            name: "test.elf".into(),
+            sections: vec![
+                (".text".into(), FLASH.0, flash, true, false),
+                (".bss".into(), RAM.0, bss, false, true),
+            ],
+        }
+    }
+
+    #[test]
+    fn budgets_pass_at_the_limit_and_fail_one_byte_over() {
+        assert!(report(FLASH_BUDGET, RAM_BUDGET).check_budget().is_ok());
+        assert!(report(FLASH_BUDGET + 1, 0).check_budget().is_err());
+        assert!(report(0, RAM_BUDGET + 1).check_budget().is_err());
     }
 }

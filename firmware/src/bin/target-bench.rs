@@ -334,7 +334,9 @@ mod bench {
         use shimmy_core::stability::critical_speed_near;
         let p = PlantParams::nominal();
         let mut v = 6.0;
-        let mut hint = critical_speed_near(&p, 0.0, v, None, 40).ok().map(|c| c.speed_mps);
+        let mut hint = critical_speed_near(&p, 0.0, v, None, 40)
+            .ok()
+            .map(|c| c.speed_mps);
         measure(|| {
             v += 0.1;
             let r = critical_speed_near(&p, 0.0, black_box(v), hint, 12);
