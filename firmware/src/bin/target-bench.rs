@@ -63,12 +63,12 @@ mod bench {
             run: asmc_step,
         },
         Entry {
-            name: "MarginEstimator::push, plain sample (9 of 10)",
+            name: "DataMargin::push (MarginEstimator), plain sample",
             budget: Budget::None,
             run: push_plain,
         },
         Entry {
-            name: "MarginEstimator::push, 10th sample (RLS + roots)",
+            name: "DataMargin::push, 10th (RLS, roots, fusion, monitor)",
             budget: Budget::None,
             run: push_decimated,
         },
