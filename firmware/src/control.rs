@@ -28,18 +28,14 @@ pub struct ControlInput {
 
 /// What the firmware calls once per control step with validated inputs. Returns the coil
 /// current command [A]; NaN or out-of-range values are handled by the coil driver (NaN: fail-
-/// safe current, range: clamped).
-///
-/// TODO(core controller): implement this for the core's adaptive sliding-mode controller
-/// (`shimmy_core::control::...`): `fn step(&mut self, i) -> f32 { self.ctrl.step(...) }`, and
-/// construct it in `main.rs` `init` instead of [`FixedCurrent`].
+/// safe current, range: clamped). The application uses
+/// [`crate::monitoring::CoreController`] (the core's ASMC).
 pub trait ControlStep {
     /// One 1 kHz step.
     fn step(&mut self, input: &ControlInput) -> f32;
 }
 
-/// Placeholder controller: a fixed current (the fail-safe current until the core controller is
-/// plugged in).
+/// A fixed current (tests, and the simplest fail-safe law).
 #[derive(Clone, Copy, Debug)]
 pub struct FixedCurrent {
     /// The current it commands [A].
@@ -49,41 +45,6 @@ pub struct FixedCurrent {
 impl ControlStep for FixedCurrent {
     fn step(&mut self, _input: &ControlInput) -> f32 {
         self.current_a
-    }
-}
-
-/// The slower estimator work (mode meter ~100 Hz, eigen margin ~10 Hz), fed with decimated
-/// validated inputs by the estimator task.
-///
-/// TODO(core estimator): implement for the core's mode meter / eigen-margin estimator.
-pub trait EstimatorStep {
-    /// One ~100 Hz update with the newest decimated sample.
-    fn update(&mut self, input: &ControlInput);
-    /// One ~10 Hz slow update (eigen margin); must finish well within 100 ms.
-    fn slow_update(&mut self);
-}
-
-/// Placeholder estimator: RMS of the toe difference psi_L - psi_R over the slow period.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct RmsEstimator {
-    sum_sq: f32,
-    n: u32,
-    /// RMS of psi_L - psi_R over the last slow period [rad].
-    pub last_rms_rad: f32,
-}
-
-impl EstimatorStep for RmsEstimator {
-    fn update(&mut self, input: &ControlInput) {
-        let d = input.psi_l_rad - input.psi_r_rad;
-        self.sum_sq += d * d;
-        self.n += 1;
-    }
-    fn slow_update(&mut self) {
-        if self.n > 0 {
-            self.last_rms_rad = libm::sqrtf(self.sum_sq / self.n as f32);
-        }
-        self.sum_sq = 0.0;
-        self.n = 0;
     }
 }
 
@@ -116,8 +77,12 @@ pub struct Health {
     pub speed_implausible: u32,
     /// Coil-current ADC errors or saturation.
     pub current_faults: u32,
-    /// 100 Hz estimator requests dropped because the estimator was still busy.
+    /// 100 Hz meter requests dropped because the meter task was still busy.
     pub estimator_busy: u32,
+    /// 10 Hz model-margin requests dropped because the model task was still busy.
+    pub model_busy: u32,
+    /// Meter samples dropped because the SPSC queue to the meter task was full.
+    pub meter_dropped: u32,
     /// PWM write errors.
     pub pwm_errors: u32,
 }

@@ -7,6 +7,8 @@
 
 pub mod control;
 pub mod drivers;
+pub mod monitoring;
+pub mod replay;
 pub mod sensors;
 pub mod sim;
 

@@ -45,7 +45,7 @@ pub const SPEED_CONFIG: SpeedConfig = SpeedConfig {
 
 /// Shunt chain of the simulation (same as the reference board).
 pub const SHUNT: ShuntConfig = ShuntConfig {
-    shunt_ohm: 0.02,
+    shunt_ohm: 0.015,
     amp_gain: 50.0,
     vref_v: 3.3,
     bits: 12,
@@ -396,6 +396,12 @@ mod tests {
         assert_eq!(h.failsafe_steps, par + ef);
         assert_eq!((h.enc_bus, h.enc_jump, h.current_faults), (0, 0, 0));
         assert_eq!(h.steps, 1200);
+    }
+
+    #[test]
+    fn shunt_range_covers_the_coil_maximum() {
+        let top = f32::from(SHUNT.full_scale_counts()) - SHUNT.offset_counts;
+        assert!(SHUNT.amps_per_count() * top > COIL.max_current_a);
     }
 
     #[test]

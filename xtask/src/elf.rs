@@ -139,6 +139,58 @@ impl fmt::Display for MemoryReport {
     }
 }
 
+/// The largest flash symbols of an ELF (`cargo bloat`-style) and the flash bytes per crate
+/// (first path segment of the demangled name; `?` for symbols without one).
+pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
+    use object::{ObjectSymbol, SymbolKind};
+    use std::collections::BTreeMap;
+    let data = std::fs::read(path).map_err(|e| format!("read {}: {e}", path.display()))?;
+    let file = object::File::parse(&*data).map_err(|e| format!("parse ELF: {e}"))?;
+    let mut syms: Vec<(u64, String)> = file
+        .symbols()
+        .filter(|s| matches!(s.kind(), SymbolKind::Text | SymbolKind::Data))
+        .filter(|s| within(s.address() & !1, FLASH) && s.size() > 0)
+        .map(|s| {
+            let name = s.name().unwrap_or("?");
+            (s.size(), format!("{:#}", rustc_demangle::demangle(name)))
+        })
+        .collect();
+    syms.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    syms.dedup();
+    let mut by_crate: BTreeMap<String, u64> = BTreeMap::new();
+    for (size, name) in &syms {
+        let krate = crate_of(name);
+        *by_crate.entry(krate).or_default() += size;
+    }
+    let total: u64 = syms.iter().map(|s| s.0).sum();
+    let mut out = format!("flash by crate (sized symbols, {total} B):\n");
+    let mut crates: Vec<_> = by_crate.into_iter().collect();
+    crates.sort_by_key(|c| std::cmp::Reverse(c.1));
+    for (k, v) in crates.iter().take(12) {
+        out.push_str(&format!("  {v:>8} B  {k}\n"));
+    }
+    out.push_str(&format!("largest {n} flash symbols:\n"));
+    for (size, name) in syms.iter().take(n) {
+        let short: String = name.chars().take(110).collect();
+        out.push_str(&format!("  {size:>8} B  {short}\n"));
+    }
+    Ok(out)
+}
+
+/// Crate of a demangled symbol: `<impl ...>` names use the type's path; compiler builtins
+/// (`__aeabi_*`, `__adddf3`, ...) are the soft-float library.
+fn crate_of(name: &str) -> String {
+    let s = name.trim_start_matches('<').trim_start_matches('&');
+    let s = s.strip_prefix("mut ").unwrap_or(s);
+    if s.starts_with("__") {
+        return "compiler_builtins (soft-float, mem*)".into();
+    }
+    match s.split_once("::") {
+        Some((k, _)) if !k.contains(' ') => k.to_string(),
+        _ => "?".into(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

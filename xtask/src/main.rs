@@ -7,6 +7,8 @@
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
 //!                                against the budgets (flash <= 96 KiB, static RAM <= 24 KiB)
+//! cargo xtask conformance        replay the committed sensor trace on the host and under QEMU
+//!                                and require bit-identical controller/estimator outputs
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
 //!                                stack high-water mark
@@ -15,6 +17,7 @@
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm) or
 //! rustup (the thumbv7em target); otherwise it stops and says what to install.
 
+mod conformance;
 mod elf;
 mod qemu;
 
@@ -32,8 +35,9 @@ fn main() -> ExitCode {
         Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
         Some("size") => size(),
         Some("bench") => bench().map(|_| ()),
+        Some("conformance") => conformance::step().map(|s| println!("{s}")),
         _ => {
-            eprintln!("usage: cargo xtask <test | qemu [BIN] | size | bench>");
+            eprintln!("usage: cargo xtask <test | qemu [BIN] | size | bench | conformance>");
             return ExitCode::from(2);
         }
     };
@@ -78,6 +82,7 @@ fn test() -> Result<(), String> {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
             println!("{report}");
+            println!("{}", elf::top_symbols(&elf, 15)?);
             report.check_fits()?;
             report.check_budget()?;
             Ok(report.one_line())
@@ -87,6 +92,10 @@ fn test() -> Result<(), String> {
             build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
         }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
+        (
+            "host/target conformance (trace replay, bit-identical)",
+            conformance::step,
+        ),
         ("on-target benchmark budgets (QEMU -icount)", bench),
         (
             "an over-budget benchmark entry fails the run",
@@ -239,6 +248,7 @@ fn size() -> Result<(), String> {
     let elf = build_firmware(FIRMWARE, &[])?;
     let report = elf::MemoryReport::read(&elf)?;
     println!("{report}");
+    println!("{}", elf::top_symbols(&elf, 25)?);
     report.check_fits()?;
     report.check_budget()
 }
@@ -254,7 +264,7 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
 
 /// Builds a firmware binary in release mode for the target and copies the ELF to a name that
 /// records its features, so builds with different features never overwrite each other.
-fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
+pub fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
     let features = features.join(",");
     let mut args = vec![
         "build",
@@ -283,7 +293,7 @@ fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
     Ok(copy)
 }
 
-fn cargo(args: &[&str]) -> Result<(), String> {
+pub fn cargo(args: &[&str]) -> Result<(), String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     run(Command::new(cargo).args(args).current_dir(root()))
 }

@@ -17,68 +17,92 @@
 #[cfg(target_os = "none")]
 mod bench {
     use core::hint::black_box;
-    use shimmy_firmware::control::{decide, EstimatorStep, FixedCurrent, Health, RmsEstimator};
     use shimmy_firmware::runtime::{finish, Outcome};
 
     /// Budget of one control step [instructions] (DESIGN: 1 kHz loop on a 168 MHz M4).
     const CONTROL_STEP_BUDGET: u32 = 5_000;
+    /// Instructions per second we count on: 168 MHz at a worst-case 1.5 cycles per
+    /// instruction (flash wait states, FPU, branches).
+    const INSN_PER_S: u64 = 168_000_000 * 2 / 3;
+    /// Budget of one 100 Hz meter run (10 pushes incl. the decimated update, fusion,
+    /// monitor): half its 10 ms period, the rest is left to preemption by the control task.
+    const METER_RUN_BUDGET: u32 = (INSN_PER_S / 100 / 2) as u32;
+    /// Budget of one 10 Hz model update: half its 100 ms period.
+    const MODEL_UPDATE_BUDGET: u32 = (INSN_PER_S / 10 / 2) as u32;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
 
+    /// How an entry's count is judged.
+    #[derive(Clone, Copy)]
+    enum Budget {
+        /// Only reported.
+        None,
+        /// Enforced: over it fails the run.
+        Hard(u32),
+        /// A known-exceeded target: reported as "OVER TARGET (TODO)" without failing the run,
+        /// so the gap stays visible until the incremental core versions land.
+        Target(u32),
+    }
+
     struct Entry {
         name: &'static str,
-        budget: Option<u32>,
+        budget: Budget,
         run: fn() -> u32,
     }
 
     const ENTRIES: &[Entry] = &[
         Entry {
-            name: "control step (sim sensors, validate, seam, PWM)",
-            budget: Some(CONTROL_STEP_BUDGET),
+            name: "control step: sensors, validate, core ASMC, PWM",
+            budget: Budget::Hard(CONTROL_STEP_BUDGET),
             run: control_step,
         },
         Entry {
-            name: "estimator update (placeholder RMS, 100 Hz)",
-            budget: None,
-            run: estimator_update,
+            name: "Controller::step ASMC alone",
+            budget: Budget::None,
+            run: asmc_step,
         },
         Entry {
-            name: "estimator slow update (placeholder, 10 Hz)",
-            budget: None,
-            run: estimator_slow,
+            name: "DataMargin::push (MarginEstimator), plain sample",
+            budget: Budget::None,
+            run: push_plain,
         },
         Entry {
-            name: "f32 biquad, one sample",
-            budget: None,
-            run: biquad,
+            name: "DataMargin::push, 10th (RLS, roots, fusion, monitor)",
+            budget: Budget::None,
+            run: push_decimated,
+        },
+        Entry {
+            name: "meter run at 100 Hz (10 pushes, fusion, monitor)",
+            budget: Budget::Target(METER_RUN_BUDGET),
+            run: meter_run,
+        },
+        Entry {
+            name: "eigen update: linearise + eigenvalues (f64)",
+            budget: Budget::None,
+            run: eigen_update,
+        },
+        Entry {
+            name: "critical_speed_near, warm start (+0.1 m/s)",
+            budget: Budget::None,
+            run: critical_warm,
+        },
+        Entry {
+            name: "model update at 10 Hz (dzeta_dv + critical speed)",
+            budget: Budget::Target(MODEL_UPDATE_BUDGET),
+            run: model_update,
         },
         Entry {
             name: "libm::sinf (f32)",
-            budget: None,
+            budget: Budget::None,
             run: sinf,
-        },
-        Entry {
-            name: "mr_damper::rates (f64 soft-float)",
-            budget: None,
-            run: damper_rates,
-        },
-        Entry {
-            name: "10x10 f64 matrix product (nalgebra)",
-            budget: None,
-            run: matmul10,
         },
         // Proves that an entry over its budget fails the run (`cargo xtask test` builds it).
         #[cfg(feature = "deliberate-failure")]
         Entry {
             name: "deliberately over budget (proves the check)",
-            budget: Some(1),
-            run: biquad,
-        },
-        Entry {
-            name: "eigen update stand-in: Schur 10x10 f64",
-            budget: None,
-            run: schur10,
+            budget: Budget::Hard(1),
+            run: sinf,
         },
     ];
 
@@ -172,55 +196,163 @@ mod bench {
         ok_tim && ok_syst
     }
 
+    /// Instructions of one call of `f` (call overhead subtracted).
+    fn measure_once<F: FnMut()>(mut f: F) -> u32 {
+        let oh = overhead();
+        raw_count(&mut f).saturating_sub(oh)
+    }
+
     // ---- the entries ----------------------------------------------------------------------
 
+    /// A deterministic shimmy-like yaw at step `k`: a 7 Hz oscillation with a slowly varying
+    /// amplitude plus pseudo-random noise (an LCG), so the RLS sees real excitation.
+    fn yaw(k: u32, seed: &mut u32) -> (f32, f32) {
+        *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let noise = ((*seed >> 8) as f32 / 16_777_216.0 - 0.5) * 2e-4;
+        let t = k as f32 * 1e-3;
+        let a = 2e-3 * (1.0 + 0.3 * libm::sinf(0.5 * t));
+        let y = a * libm::sinf(2.0 * core::f32::consts::PI * 7.0 * t) + noise;
+        (y, y * 0.98)
+    }
+
     fn control_step() -> u32 {
+        use shimmy_firmware::control::{decide, Health};
         use shimmy_firmware::drivers::coil_pwm::CoilDriver;
+        use shimmy_firmware::monitoring::CoreController;
         use shimmy_firmware::sim::{self, SimPwm, SimWorld};
         static WORLD: SimWorld = SimWorld::new();
         let mut sensors = sim::sensors(&WORLD);
         let Ok(mut coil) = CoilDriver::new(SimPwm::new(&WORLD), sim::COIL);
-        let mut ctrl = FixedCurrent { current_a: 1.0 };
+        let mut ctrl = CoreController::asmc();
         let mut h = Health::default();
         // The simulated world (two sinf per step) is advanced outside the measurement: only
         // the firmware's own work is counted (on the board the sensors answer by themselves).
-        WORLD.set_step(200);
-        measure(|| {
-            let s = sensors.sample(sim::TICKS_PER_STEP);
-            let (cmd, _) = decide(&mut ctrl, &s, 200, 1e-3, &mut h);
-            let _ = coil.set_current_a(cmd);
-        })
+        // 300 steps of warm-up (rolling, shimmy present, ASMC adapting), then 50 measured.
+        let mut worst = 0;
+        for step in 0..350 {
+            WORLD.set_step(step);
+            let mut one = || {
+                let s = sensors.sample(sim::TICKS_PER_STEP);
+                let (cmd, _) = decide(&mut ctrl, &s, step, 1e-3, &mut h);
+                let _ = coil.set_current_a(cmd);
+            };
+            if step < 300 {
+                one();
+            } else {
+                worst = worst.max(measure_once(one));
+            }
+        }
+        worst
     }
 
-    fn estimator_update() -> u32 {
-        let mut e = RmsEstimator::default();
-        let input = shimmy_firmware::control::ControlInput {
-            psi_l_rad: 0.01,
-            psi_r_rad: -0.003,
-            ..Default::default()
+    fn asmc_step() -> u32 {
+        use shimmy_core::control::{ControlInput, ControlParams, Controller, ControllerKind};
+        let mut c = Controller::new(ControllerKind::Asmc, ControlParams::default());
+        let mut seed = 1;
+        let mut worst = 0;
+        for k in 0..400u32 {
+            let (l, r) = yaw(k, &mut seed);
+            let i = ControlInput {
+                t_s: k as f32 * 1e-3,
+                dt_s: 1e-3,
+                psi_l_rad: 10.0 * l,
+                psi_r_rad: 10.0 * r,
+                speed_mps: 15.0,
+                coil_current_a: Some(0.5),
+            };
+            if k < 300 {
+                c.step(&i);
+            } else {
+                worst = worst.max(measure_once(|| {
+                    black_box(c.step(black_box(&i)));
+                }));
+            }
+        }
+        worst
+    }
+
+    /// (worst plain push, worst decimated push, worst meter run) after 3 s of warm-up.
+    fn meter_counts() -> (u32, u32, u32) {
+        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
+        let Some(mut d) = DataMargin::new() else {
+            return (u32::MAX, u32::MAX, u32::MAX);
         };
-        measure(|| e.update(black_box(&input)))
+        let mut seed = 7;
+        let (mut plain, mut dec, mut run) = (0, 0, 0);
+        let mut run_acc = 0u32;
+        for k in 0..3500u32 {
+            let (l, r) = yaw(k, &mut seed);
+            let s = MeterSample {
+                step: k,
+                psi_l_rad: l,
+                psi_r_rad: r,
+                speed_mps: 15.0,
+            };
+            if k < 3000 {
+                let _ = d.push(&s, None);
+                continue;
+            }
+            let mut got = false;
+            let n = measure_once(|| got = black_box(d.push(black_box(&s), None)).is_some());
+            run_acc += n;
+            if got {
+                dec = dec.max(n);
+                run = run.max(run_acc);
+                run_acc = 0;
+            } else {
+                plain = plain.max(n);
+            }
+        }
+        (plain, dec, run)
     }
 
-    fn estimator_slow() -> u32 {
-        let mut e = RmsEstimator::default();
+    fn push_plain() -> u32 {
+        meter_counts().0
+    }
+
+    fn push_decimated() -> u32 {
+        meter_counts().1
+    }
+
+    fn meter_run() -> u32 {
+        meter_counts().2
+    }
+
+    fn eigen_update() -> u32 {
+        use shimmy_core::params::PlantParams;
+        let p = PlantParams::nominal();
+        let mut v = 12.0;
         measure(|| {
-            e.update(black_box(&Default::default()));
-            e.slow_update()
+            let a = shimmy_core::plant::linearise(&p, black_box(v), 0.0);
+            let _ = black_box(shimmy_core::eigen::eigenvalues(&a));
+            v += 0.1;
         })
     }
 
-    fn biquad() -> u32 {
-        // Second-order low-pass (direct form II transposed), 1 kHz / 50 Hz Butterworth-ish.
-        let (b0, b1, b2, a1, a2) = (0.0201f32, 0.0402, 0.0201, -1.561, 0.6414);
-        let (mut z1, mut z2) = (0.0f32, 0.0f32);
-        let mut x = 0.3f32;
+    fn critical_warm() -> u32 {
+        use shimmy_core::params::PlantParams;
+        use shimmy_core::stability::critical_speed_near;
+        let p = PlantParams::nominal();
+        let mut v = 6.0;
+        let mut hint = critical_speed_near(&p, 0.0, v, None, 40)
+            .ok()
+            .map(|c| c.speed_mps);
         measure(|| {
-            let xi = black_box(x);
-            let y = b0 * xi + z1;
-            z1 = b1 * xi - a1 * y + z2;
-            z2 = b2 * xi - a2 * y;
-            x = black_box(y) + 0.1;
+            v += 0.1;
+            let r = critical_speed_near(&p, 0.0, black_box(v), hint, 12);
+            hint = r.ok().map(|c| c.speed_mps);
+        })
+    }
+
+    fn model_update() -> u32 {
+        use shimmy_core::params::PlantParams;
+        use shimmy_firmware::monitoring::ModelMarginTask;
+        let mut m = ModelMarginTask::new(PlantParams::nominal(), 0.0);
+        let mut v = 6.0f32;
+        let _ = m.update(v);
+        measure(|| {
+            v += 0.1;
+            black_box(m.update(black_box(v)));
         })
     }
 
@@ -228,48 +360,6 @@ mod bench {
         let mut x = 0.7f32;
         measure(|| {
             x = black_box(libm::sinf(black_box(x))) + 0.5;
-        })
-    }
-
-    fn damper_rates() -> u32 {
-        use shimmy_core::mr_damper::{rates, SpencerParams, SpencerState};
-        let p = SpencerParams::steering();
-        let s = SpencerState {
-            u: 0.8,
-            y: 0.001,
-            z: 0.0005,
-        };
-        measure(|| {
-            black_box(rates(&p, black_box(&s), 0.002, 0.05, 1.0));
-        })
-    }
-
-    type M10 = nalgebra::SMatrix<f64, 10, 10>;
-
-    fn test_matrix() -> M10 {
-        // A non-symmetric matrix with complex eigenvalues (a chain of damped oscillators).
-        M10::from_fn(|i, j| {
-            let (i, j) = (i as f64, j as f64);
-            if i == j {
-                -0.5 - 0.1 * i
-            } else {
-                1.0 / (1.0 + (i - j) * (i - j)) * if i < j { 1.0 } else { -0.7 }
-            }
-        })
-    }
-
-    fn matmul10() -> u32 {
-        let a = test_matrix();
-        let b = a.transpose();
-        measure(|| {
-            black_box(black_box(&a) * black_box(&b));
-        })
-    }
-
-    fn schur10() -> u32 {
-        let a = test_matrix();
-        measure(|| {
-            black_box(black_box(a).schur());
         })
     }
 
@@ -284,18 +374,23 @@ mod bench {
         for e in ENTRIES {
             let n = (e.run)();
             match e.budget {
-                Some(b) => {
+                Budget::Hard(b) | Budget::Target(b) => {
                     let pass = n <= b;
-                    ok &= pass;
+                    let hard = matches!(e.budget, Budget::Hard(_));
+                    ok &= pass || !hard;
                     defmt::info!(
                         "bench | {=str} | {=u32} | {=u32} | {=str}",
                         e.name,
                         n,
                         b,
-                        if pass { "ok" } else { "OVER BUDGET" }
+                        match (pass, hard) {
+                            (true, _) => "ok",
+                            (false, true) => "OVER BUDGET",
+                            (false, false) => "OVER TARGET (TODO)",
+                        }
                     );
                 }
-                None => defmt::info!(
+                Budget::None => defmt::info!(
                     "bench | {=str} | {=u32} | {=str} | reported",
                     e.name,
                     n,

@@ -143,7 +143,10 @@ mod harness {
         assert!(d.commanded_a() == COIL.max_current_a);
         let _ = d.set_current_a(f32::NAN);
         assert!(d.commanded_a() == FAILSAFE_CURRENT_A);
-        assert!((SHUNT.amps_per_count() * 1241.0 - 1.0).abs() < 1e-3);
+        // 1 A = 0.75 V at the ADC = 931 counts of 3.3 V / 4096.
+        assert!((SHUNT.amps_per_count() * 931.0 - 1.0).abs() < 1e-3);
+        // The ADC range covers the coil's maximum current.
+        assert!(SHUNT.amps_per_count() * (4095.0 - SHUNT.offset_counts) > COIL.max_current_a);
     }
 
     fn closed_loop() {

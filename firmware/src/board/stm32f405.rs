@@ -49,10 +49,11 @@ pub const SPEED: SpeedConfig = SpeedConfig {
     jump_margin_mps: 0.5,
 };
 
-/// Shunt chain: 20 mOhm, INA240A2 (gain 50), 3.3 V reference, 12 bit, mid-rail offset.
+/// Shunt chain: 15 mOhm, INA240A2 (gain 50; 0.75 V/A, so +-2.2 A around mid-rail covers the
+/// coil's 2 A maximum), 3.3 V reference, 12 bit, mid-rail offset.
 /// TODO(calibration): measure `offset_counts` at boot with the coil off.
 pub const SHUNT: ShuntConfig = ShuntConfig {
-    shunt_ohm: 0.02,
+    shunt_ohm: 0.015,
     amp_gain: 50.0,
     vref_v: 3.3,
     bits: 12,
