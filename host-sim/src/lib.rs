@@ -5,6 +5,7 @@ pub mod bifurcation;
 pub mod damper_equiv;
 pub mod disturbance;
 pub mod integrator;
+pub mod margin_cmd;
 pub mod paramfile;
 pub mod plant;
 pub mod stability_cmd;

@@ -29,6 +29,9 @@ enum Command {
     Stability(shimmy_sim::stability_cmd::StabilityArgs),
     /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
     Sensitivity(shimmy_sim::stability_cmd::SensitivityArgs),
+    /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
+    /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
+    Margin(shimmy_sim::margin_cmd::MarginArgs),
 }
 
 fn main() -> Result<()> {
@@ -38,6 +41,7 @@ fn main() -> Result<()> {
         Some(Command::Bifurcation(args)) => shimmy_sim::bifurcation::command(&args),
         Some(Command::Stability(a)) => shimmy_sim::stability_cmd::run_stability(&a),
         Some(Command::Sensitivity(a)) => shimmy_sim::stability_cmd::run_sensitivity(&a),
+        Some(Command::Margin(a)) => shimmy_sim::margin_cmd::command(&a),
         // TODO(issue 7): the built-in demo (damper off vs ASMC through the Hopf window).
         None => print_params("nominal"),
     }
