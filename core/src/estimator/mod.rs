@@ -39,7 +39,9 @@ pub mod real;
 pub mod rls;
 pub mod roots;
 
-pub use fusion::{Fusion, FusionInput, FusionParams, MarginReport, MarginSource, ModelMargin};
+pub use fusion::{
+    DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport, MarginSource, ModelMargin,
+};
 pub use model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 pub use pipeline::{PipelineOutput, PipelineParams, ShimmyPipeline};
 pub use real::Real;
