@@ -310,6 +310,7 @@ pub struct ModelMarginTracker {
     hint_below: Option<f64>,
     last_c: f64,
     cycle_start_s: Option<f32>,
+    next_due_s: Option<f32>,
     total_eigen_solves: u64,
     solves_last_call: u8,
     cycles: u32,
@@ -338,6 +339,7 @@ impl ModelMarginTracker {
             hint_below: None,
             last_c: 0.0,
             cycle_start_s: None,
+            next_due_s: None,
             total_eigen_solves: 0,
             solves_last_call: 0,
             cycles: 0,
@@ -431,9 +433,9 @@ impl ModelMarginTracker {
         }
         match self.phase {
             Phase::Idle => {
-                let due = match self.cycle_start_s {
+                let due = match self.next_due_s {
                     None => true,
-                    Some(t0) => !(t_s - t0 < self.cfg.period_s),
+                    Some(t1) => !(t_s < t1),
                 };
                 let v = speed_mps as f64;
                 let c = c_damper_nspm as f64;
@@ -445,7 +447,13 @@ impl ModelMarginTracker {
                     let v = v.clamp(V_SEARCH_MIN_MPS, V_SEARCH_MAX_MPS);
                     self.work = Self::blank(t_s, v, c);
                     self.work.calls = 1;
-                    self.cycle_start_s = Some(if t_s.is_finite() { t_s } else { 0.0 });
+                    let t = if t_s.is_finite() { t_s } else { 0.0 };
+                    self.cycle_start_s = Some(t);
+                    // 10 Hz on the schedule (no drift from the 1 ms call grid), unless late
+                    self.next_due_s = Some(match self.next_due_s {
+                        Some(d) if d + self.cfg.period_s > t => d + self.cfg.period_s,
+                        _ => t + self.cfg.period_s,
+                    });
                     self.phase = Phase::Modes;
                     // The first unit of work is done on this same call.
                     self.modes();
