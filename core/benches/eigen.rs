@@ -1,8 +1,8 @@
 //! Cost of the model-based margin path: `linearise` + bounded eigen-solve, the least-damped
 //! summary, dzeta/dV, and one warm-started `critical_speed_near` update.
 use criterion::{criterion_group, criterion_main, Criterion};
-use shimmy_core::params::ParamSet;
 use shimmy_core::estimator::{ModelMarginConfig, ModelMarginTracker};
+use shimmy_core::params::ParamSet;
 use shimmy_core::stability::{self, ModeSelect};
 use shimmy_core::{eigen, plant};
 use std::hint::black_box;
@@ -59,13 +59,17 @@ fn bench(c: &mut Criterion) {
         })
     });
     let calls = f64::from(calls.max(run_cycle(&mut tr, &mut t)));
-    println!("model margin: {calls} calls per warm cycle (divide the cycle time by it for one unit)");
-    c.bench_function("model margin one unit (g(V) eval = linearise + eigen-solve)", |b| {
-        b.iter(|| stability::critical_mode_at(black_box(&p), black_box(8.0), 0.0))
-    });
-    c.bench_function("model margin heaviest unit (modes: eigen-solve + shimmy shapes)", |b| {
-        b.iter(|| stability::mode_at(black_box(&p), black_box(8.0), 0.0, ModeSelect::Shimmy))
-    });
+    println!(
+        "model margin: {calls} calls per warm cycle (divide the cycle time by it for one unit)"
+    );
+    c.bench_function(
+        "model margin one unit (g(V) eval = linearise + eigen-solve)",
+        |b| b.iter(|| stability::critical_mode_at(black_box(&p), black_box(8.0), 0.0)),
+    );
+    c.bench_function(
+        "model margin heaviest unit (modes: eigen-solve + shimmy shapes)",
+        |b| b.iter(|| stability::mode_at(black_box(&p), black_box(8.0), 0.0, ModeSelect::Shimmy)),
+    );
 }
 
 criterion_group! {

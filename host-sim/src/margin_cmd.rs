@@ -221,8 +221,8 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
     let p = sc.params;
     let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
     let mut scen = sc.scenario();
-    let mut pipe = ShimmyPipeline::<16>::new(p, pp)
-        .map_err(|e| anyhow::anyhow!("pipeline config: {e:?}"))?;
+    let mut pipe =
+        ShimmyPipeline::<16>::new(p, pp).map_err(|e| anyhow::anyhow!("pipeline config: {e:?}"))?;
     let onset = onset_kmh(&p);
     let n = (sc.duration_s / DT_S).round() as usize;
     let mut rows = Vec::with_capacity(n / 10 + 1);
@@ -415,7 +415,11 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
             ("true zeta", BLACK, col(&|r| r.zeta_true)),
             ("model zeta", BLUE, col(&|r| r.zeta_model)),
             ("data zeta (slow)", RED, col(&|r| r.zeta_data)),
-            ("data zeta (fast)", RGBColor(0, 160, 0), col(&|r| r.zeta_fast)),
+            (
+                "data zeta (fast)",
+                RGBColor(0, 160, 0),
+                col(&|r| r.zeta_fast),
+            ),
         ],
         &v,
     )?;

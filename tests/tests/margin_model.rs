@@ -109,10 +109,15 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
                 t0 += 1.0;
                 assert!(calls <= 100, "{} {kmh} km/h: {calls} calls", set.name());
                 // modes: the shimmy and critical eigenvalues are eigenvalues of faer's solve
+                // (at the latched speed: the tracker takes the speed as f32)
+                let v = pt.speed_mps;
                 let eig = faer_eigs(&p, v, c);
                 for m in [pt.shimmy, pt.critical] {
                     let l = m.eigenvalue();
-                    let d = eig.iter().map(|e| (e - l).norm()).fold(f64::INFINITY, f64::min);
+                    let d = eig
+                        .iter()
+                        .map(|e| (e - l).norm())
+                        .fold(f64::INFINITY, f64::min);
                     assert!(d < 1e-9 * l.norm().max(1.0), "{l} not in faer's spectrum");
                 }
                 assert!(pt.shimmy_found);
@@ -196,8 +201,16 @@ fn incremental_update_never_exceeds_one_solve_per_call_and_finishes_in_100_calls
     let mut sum_solves = 0u64;
     for k in 0..120_000usize {
         let t = k as f64 * 1e-3;
-        let kmh = if t < 60.0 { 2.0 + t * 2.5 } else { 152.0 - (t - 60.0) * 2.5 };
-        let c = if (40.0..50.0).contains(&t) { 500.0 } else { 0.0 };
+        let kmh = if t < 60.0 {
+            2.0 + t * 2.5
+        } else {
+            152.0 - (t - 60.0) * 2.5
+        };
+        let c = if (40.0..50.0).contains(&t) {
+            500.0
+        } else {
+            0.0
+        };
         let before = tr.total_eigen_solves();
         let r = tr.step(t as f32, kmh_to_mps(kmh) as f32, c);
         assert!(tr.total_eigen_solves() - before <= 1, "t = {t}");

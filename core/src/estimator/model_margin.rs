@@ -610,7 +610,11 @@ impl ModelMarginTracker {
                             )
                         }
                     }
-                    None => (x + sgn * step, None, (2.0 * step).min(self.cfg.max_step_mps)),
+                    None => (
+                        x + sgn * step,
+                        None,
+                        (2.0 * step).min(self.cfg.max_step_mps),
+                    ),
                 };
                 let xn = if up { xn.min(lim) } else { xn.max(lim) };
                 let Some(gn) = self.g(xn) else {
@@ -707,8 +711,8 @@ mod tests {
     #[test]
     fn resumable_brent_matches_the_one_shot_brent() {
         let f = |x: f64| x * x * x - 2.0 * x - 5.0;
-        let one = stability::brent(|x| Ok::<_, ()>(f(x)), 2.0, 3.0, f(2.0), f(3.0), 1e-12, 100)
-            .unwrap();
+        let one =
+            stability::brent(|x| Ok::<_, ()>(f(x)), 2.0, 3.0, f(2.0), f(3.0), 1e-12, 100).unwrap();
         let mut b = ResumableBrent::new(2.0, 3.0, f(2.0), f(3.0), 1e-12);
         let mut n = 0;
         let r = loop {

@@ -11,9 +11,7 @@
 //! All thresholds live in [`PipelineParams`]; `PipelineParams::default()` is the tuned design
 //! point (see [`PipelineParams::tuned_monitor`] for how each threshold was chosen).
 
-use super::fusion::{
-    DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport, ModelMargin,
-};
+use super::fusion::{DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport, ModelMargin};
 use super::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use super::{ConfigError, EstimatorConfig, MarginEstimator, MeterOutput, Sample};
 use crate::monitor::{Level, Monitor, MonitorInput, MonitorParams};
