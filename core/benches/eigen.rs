@@ -42,7 +42,7 @@ fn bench(c: &mut Criterion) {
     // same speed) and the mean cost of one call while a cycle is in progress (one unit of work).
     let mut tr = ModelMarginTracker::new(p, ModelMarginConfig::default());
     let mut t = 0.0f32;
-    let mut run_cycle = |tr: &mut ModelMarginTracker, t: &mut f32| -> u16 {
+    let run_cycle = |tr: &mut ModelMarginTracker, t: &mut f32| -> u16 {
         loop {
             *t += 1e-3;
             if let Some(pt) = tr.step(*t, black_box(25.0 / 3.6), 0.0) {

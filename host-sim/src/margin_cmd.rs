@@ -346,13 +346,14 @@ pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+type Series<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
 
 fn panel(
     area: &Area<'_>,
     caption: &str,
     t: (f64, f64),
     range: (f64, f64),
-    series: &[(&str, RGBColor, Vec<(f64, f64)>)],
+    series: &[Series<'_>],
     vlines: &[(f64, RGBColor)],
 ) -> Result<()> {
     let mut chart = ChartBuilder::on(area)

@@ -435,7 +435,7 @@ impl ModelMarginTracker {
             Phase::Idle => {
                 let due = match self.next_due_s {
                     None => true,
-                    Some(t1) => !(t_s < t1),
+                    Some(t1) => t_s >= t1 || t_s.is_nan(),
                 };
                 let v = speed_mps as f64;
                 let c = c_damper_nspm as f64;
