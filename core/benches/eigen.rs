@@ -1,6 +1,7 @@
 //! Cost of the model-based margin path: `linearise` + bounded eigen-solve, the least-damped
 //! summary, dzeta/dV, and one warm-started `critical_speed_near` update.
 use criterion::{criterion_group, criterion_main, Criterion};
+use shimmy_core::estimator::{ModelMarginConfig, ModelMarginTracker};
 use shimmy_core::params::ParamSet;
 use shimmy_core::stability::{self, ModeSelect};
 use shimmy_core::{eigen, plant};
@@ -37,6 +38,38 @@ fn bench(c: &mut Criterion) {
     c.bench_function("critical_speed_near cold (from 5 m/s)", |b| {
         b.iter(|| stability::critical_speed_near(black_box(&p), 0.0, black_box(5.0), None, 60))
     });
+    // The incremental model margin: a full cycle (warm: hints from the previous cycle at the
+    // same speed) and the mean cost of one call while a cycle is in progress (one unit of work).
+    let mut tr = ModelMarginTracker::new(p, ModelMarginConfig::default());
+    let mut t = 0.0f32;
+    let run_cycle = |tr: &mut ModelMarginTracker, t: &mut f32| -> u16 {
+        loop {
+            *t += 1e-3;
+            if let Some(pt) = tr.step(*t, black_box(25.0 / 3.6), 0.0) {
+                // idle out the rest of the 100 ms period without timing it
+                return pt.calls;
+            }
+        }
+    };
+    let calls = run_cycle(&mut tr, &mut t);
+    c.bench_function("model margin full cycle (warm, 25 km/h)", |b| {
+        b.iter(|| {
+            t += 0.2;
+            run_cycle(&mut tr, &mut t)
+        })
+    });
+    let calls = f64::from(calls.max(run_cycle(&mut tr, &mut t)));
+    println!(
+        "model margin: {calls} calls per warm cycle (divide the cycle time by it for one unit)"
+    );
+    c.bench_function(
+        "model margin one unit (g(V) eval = linearise + eigen-solve)",
+        |b| b.iter(|| stability::critical_mode_at(black_box(&p), black_box(8.0), 0.0)),
+    );
+    c.bench_function(
+        "model margin heaviest unit (modes: eigen-solve + shimmy shapes)",
+        |b| b.iter(|| stability::mode_at(black_box(&p), black_box(8.0), 0.0, ModeSelect::Shimmy)),
+    );
 }
 
 criterion_group! {

@@ -8,6 +8,7 @@ pub mod damper_equiv;
 pub mod demo;
 pub mod disturbance;
 pub mod integrator;
+pub mod margin_cmd;
 pub mod paramfile;
 pub mod plant;
 pub mod reference_bench;

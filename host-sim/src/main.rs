@@ -39,6 +39,9 @@ enum Command {
     Compare(shimmy_sim::compare::CompareArgs),
     /// Run one scenario file (TOML, see host-sim/scenarios/): metrics, trace CSV, plots.
     Run(shimmy_sim::run_cmd::RunArgs),
+    /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
+    /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
+    Margin(shimmy_sim::margin_cmd::MarginArgs),
 }
 
 fn main() -> Result<()> {
@@ -52,6 +55,7 @@ fn main() -> Result<()> {
         Some(Command::Sweep(a)) => shimmy_sim::sweep::command(&a),
         Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
         Some(Command::Run(a)) => shimmy_sim::run_cmd::command(&a),
+        Some(Command::Margin(a)) => shimmy_sim::margin_cmd::command(&a),
         None => shimmy_sim::demo::command(),
     }
 }

@@ -41,6 +41,21 @@ pub struct FusionParams {
     pub min_slope_per_mps: f32,
     /// Accelerations smaller than this give no time-to-critical, m/s^2.
     pub min_accel_mps2: f32,
+    /// When the data-based margin zeta_hat / |dzeta/dV| enters the reported minimum.
+    pub data_margin: DataMarginUse,
+}
+
+/// When the (noisy) data-based speed margin is used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum DataMarginUse {
+    /// Always: margin = min(dV_data, dV_model).
+    #[default]
+    Always,
+    /// Only when the model has no onset above V or is flagged inconsistent with the data
+    /// (the flutterometer idea: data that agree with the model within k sigma confirm the
+    /// model's low-noise margin; data that disagree replace it). The ambient-data spread of
+    /// dV_data (~0.5 m/s at 20 km/h on the nominal plant) would otherwise cause false warnings.
+    WhenModelInconsistent,
 }
 
 impl Default for FusionParams {
@@ -51,6 +66,7 @@ impl Default for FusionParams {
             mismatch_release_s: 3.0,
             min_slope_per_mps: 1.0e-5,
             min_accel_mps2: 0.05,
+            data_margin: DataMarginUse::Always,
         }
     }
 }
@@ -185,15 +201,39 @@ impl Fusion {
         r.zeta_model = Some(m.zeta as f32);
         r.freq_model_hz = m.freq_hz.is_finite().then_some(m.freq_hz as f32);
 
+        // consistency with hysteresis in time
+        if data_valid {
+            let sigma = r.sigma_zeta_data.max(1e-6);
+            let mismatch =
+                libm::fabsf(r.zeta_data - m.zeta as f32) > self.params.mismatch_sigmas * sigma;
+            if mismatch {
+                self.agree_since_s = None;
+                let since = *self.mismatch_since_s.get_or_insert(t);
+                if t - since >= self.params.mismatch_hold_s {
+                    self.consistent = false;
+                }
+            } else {
+                self.mismatch_since_s = None;
+                let since = *self.agree_since_s.get_or_insert(t);
+                if t - since >= self.params.mismatch_release_s {
+                    self.consistent = true;
+                }
+            }
+        }
         let slope = m.dzeta_dv_per_mps;
         let mut best: Option<(f32, MarginSource)> = None;
-        if data_valid && libm::fabs(slope) >= self.params.min_slope_per_mps as f64 {
+        let model_onset = m.v_crit_onset_mps.filter(|x| x.is_finite());
+        let use_data = match self.params.data_margin {
+            DataMarginUse::Always => true,
+            DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
+        };
+        if use_data && data_valid && libm::fabs(slope) >= self.params.min_slope_per_mps as f64 {
             let dv = (r.zeta_data.max(0.0) as f64 / libm::fabs(slope)) as f32;
             if dv.is_finite() {
                 best = Some((dv, MarginSource::Data));
             }
         }
-        if let Some(vc) = m.v_crit_onset_mps.filter(|x| x.is_finite()) {
+        if let Some(vc) = model_onset {
             let dv = (vc - v as f64).max(0.0) as f32;
             if best.is_none_or(|(b, _)| dv < b) {
                 best = Some((dv, MarginSource::Model));
@@ -214,25 +254,6 @@ impl Fusion {
             }
         }
 
-        // consistency with hysteresis in time
-        if data_valid {
-            let sigma = r.sigma_zeta_data.max(1e-6);
-            let mismatch =
-                libm::fabsf(r.zeta_data - m.zeta as f32) > self.params.mismatch_sigmas * sigma;
-            if mismatch {
-                self.agree_since_s = None;
-                let since = *self.mismatch_since_s.get_or_insert(t);
-                if t - since >= self.params.mismatch_hold_s {
-                    self.consistent = false;
-                }
-            } else {
-                self.mismatch_since_s = None;
-                let since = *self.agree_since_s.get_or_insert(t);
-                if t - since >= self.params.mismatch_release_s {
-                    self.consistent = true;
-                }
-            }
-        }
         r.model_consistent = self.consistent;
         r.valid = data_valid && r.speed_margin_mps.is_some();
         r
@@ -343,6 +364,55 @@ mod tests {
             t += 0.01;
         }
         assert!(step(&mut f, &good, t).model_consistent);
+    }
+
+    #[test]
+    fn data_margin_only_when_the_model_is_inconsistent() {
+        let mut f = Fusion::new(FusionParams {
+            data_margin: DataMarginUse::WhenModelInconsistent,
+            ..FusionParams::default()
+        });
+        // model: onset 5 m/s ahead, slope -0.004; data 0.01 -> dV_data 2.5 m/s
+        let m = ModelMargin {
+            zeta: 0.012,
+            freq_hz: 8.0,
+            dzeta_dv_per_mps: -0.004,
+            v_crit_onset_mps: Some(25.0),
+            valid: true,
+        };
+        let agree = est(0.01, 0.01);
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
+            f.update(&FusionInput {
+                t_s: t,
+                speed_mps: 20.0,
+                accel_mps2: 0.0,
+                fast: e,
+                slow: e,
+                model: Some(&m),
+            })
+        };
+        let r = step(&mut f, &agree, 0.0);
+        assert_eq!(r.margin_source, MarginSource::Model);
+        assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
+        // data much lower than the model for longer than the hold: data margin takes over
+        let low = est(-0.03, 0.005);
+        let mut t = 0.0;
+        let mut r = r;
+        while t < 4.0 {
+            t += 0.01;
+            r = step(&mut f, &low, t);
+        }
+        assert!(!r.model_consistent);
+        assert_eq!(r.margin_source, MarginSource::Data, "{r:?}");
+        assert_eq!(r.speed_margin_mps, Some(0.0));
+        let lowish = est(0.004, 0.0005);
+        r = step(&mut f, &lowish, t + 0.01);
+        assert_eq!(r.margin_source, MarginSource::Data);
+        assert!((r.speed_margin_mps.unwrap() - 1.0).abs() < 1e-4);
+        // with the default (Always) the same data margin is used at once
+        let mut g = Fusion::new(FusionParams::default());
+        let r = step(&mut g, &agree, 0.0);
+        assert_eq!(r.margin_source, MarginSource::Data);
     }
 
     #[test]

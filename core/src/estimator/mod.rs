@@ -33,11 +33,17 @@
 
 pub mod decimate;
 pub mod fusion;
+pub mod model_margin;
+pub mod pipeline;
 pub mod real;
 pub mod rls;
 pub mod roots;
 
-pub use fusion::{Fusion, FusionInput, FusionParams, MarginReport, MarginSource, ModelMargin};
+pub use fusion::{
+    DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport, MarginSource, ModelMargin,
+};
+pub use model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
+pub use pipeline::{PipelineOutput, PipelineParams, ShimmyPipeline};
 pub use real::Real;
 
 use decimate::Decimator;
