@@ -15,6 +15,7 @@
 mod check {
     use core::ptr::{read_volatile, write_volatile};
     use cortex_m_rt::entry;
+    // The device crate supplies the interrupt vector table the runtime's linker script expects.
     use shimmy_core::control::{ControlParams, ControllerKind};
     use shimmy_core::estimator::{
         EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, WheelOrder,
@@ -22,6 +23,7 @@ mod check {
     use shimmy_core::supervisor::{
         EncoderReading, MarginStatus, RawFrame, SafeController, SupervisorParams,
     };
+    use stm32f4xx_hal as _;
 
     /// Raw input words, written by "hardware" (opaque to the optimiser).
     static mut INPUT: [u32; 10] = [0; 10];

@@ -7,16 +7,15 @@
 //!   gives its passive (zero-field) damping. This cannot be changed by software.
 //! - As soon as the driver is constructed, and whenever the control loop has no valid command
 //!   (invalid sensors, a NaN from the controller, the supervisor's fault state), it drives
-//!   [`FAILSAFE_CURRENT_A`]: a fixed moderate current that gives more damping than coil-off.
-//!   TODO(supervisor issue): set `FAILSAFE_CURRENT_A` from the stability analysis (the current
-//!   whose damping keeps the nominal plant stable across the speed range) instead of this
-//!   placeholder.
+//!   [`FAILSAFE_CURRENT_A`]: the supervisor's fail-safe current, chosen from the stability
+//!   analysis (`shimmy_core::supervisor::FAILSAFE_CURRENT_A`, checked by
+//!   `tests/tests/failsafe_current.rs`).
 
 use embedded_hal::pwm::SetDutyCycle;
 
-/// Coil current commanded while the loop has no valid command [A].
-/// TODO(supervisor issue): derive from the stability analysis (see module docs).
-pub const FAILSAFE_CURRENT_A: f32 = 1.0;
+/// Coil current commanded while the loop has no valid command [A]: the supervisor's fail-safe
+/// current (one definition, in core).
+pub const FAILSAFE_CURRENT_A: f32 = shimmy_core::supervisor::FAILSAFE_CURRENT_A;
 
 /// Electrical data of the coil drive.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -91,7 +90,9 @@ fn clamp_current(i: f32, max: f32) -> f32 {
     if i.is_nan() {
         return 0.0;
     }
-    i.clamp(0.0, max)
+    // Not f32::clamp: its (unreachable) panic message for a NaN bound links core::fmt's float
+    // formatting into the image (~9 KiB of flash).
+    i.max(0.0).min(max)
 }
 
 #[cfg(test)]
