@@ -24,34 +24,18 @@ pub const N_STATE: usize = 13;
 /// Full simulator state.
 pub type State = [f64; N_STATE];
 
-/// Indices into [`State`].
+/// Indices into [`State`]: the 10 plant states in the core's order (one definition, in
+/// `shimmy_core::plant`), then the damper's internal states.
 pub mod idx {
-    /// Left wheel yaw psi_L [rad].
-    pub const PSI_L: usize = 0;
-    /// Right wheel yaw psi_R [rad].
-    pub const PSI_R: usize = 1;
-    /// Axle roll phi [rad].
-    pub const PHI: usize = 2;
-    /// Steering-wheel angle theta_sw [rad].
-    pub const THETA_SW: usize = 3;
-    /// dpsi_L [rad/s].
-    pub const DPSI_L: usize = 4;
-    /// dpsi_R [rad/s].
-    pub const DPSI_R: usize = 5;
-    /// dphi [rad/s].
-    pub const DPHI: usize = 6;
-    /// dtheta_sw [rad/s].
-    pub const DTHETA_SW: usize = 7;
-    /// Lagged slip angle a_L [rad].
-    pub const A_L: usize = 8;
-    /// Lagged slip angle a_R [rad].
-    pub const A_R: usize = 9;
+    pub use shimmy_core::plant::{
+        A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, PHI, PSI_L, PSI_R, THETA_SW,
+    };
     /// Damper filtered coil input u [V] (1 V per A).
-    pub const U: usize = 10;
+    pub const U: usize = shimmy_core::plant::N_STATES;
     /// Damper internal displacement y [m].
-    pub const Y: usize = 11;
+    pub const Y: usize = U + 1;
     /// Damper Bouc-Wen variable z [m].
-    pub const Z: usize = 12;
+    pub const Z: usize = U + 2;
 }
 
 /// Names and units of the states, for CSV headers.
