@@ -8,8 +8,8 @@
 //! cycle); the wheel-speed pulses start at step [`ROLL_START_STEP`] at [`SPEED_MPS`].
 
 use crate::drivers::as5047p::{read_command, Register, COUNTS_PER_REV};
-use crate::drivers::coil_current::{AdcChannel, ShuntConfig};
-use crate::drivers::wheel_speed::{PulseCapture, PulseSample, SpeedConfig};
+use crate::drivers::coil_current::AdcChannel;
+use crate::drivers::wheel_speed::{PulseCapture, PulseSample};
 use core::convert::Infallible;
 use core::sync::atomic::{AtomicU32, Ordering};
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
@@ -33,24 +33,8 @@ pub const SPEED_GLITCH_STEP: u32 = 900;
 /// Control period in capture-timer ticks (1 MHz timer, 1 kHz loop).
 pub const TICKS_PER_STEP: u32 = 1000;
 
-/// Speed configuration of the simulated (and the reference board's) tone wheel.
-pub const SPEED_CONFIG: SpeedConfig = SpeedConfig {
-    pulses_per_rev: 48,
-    rolling_radius_m: 0.35,
-    tick_hz: 1_000_000,
-    timeout_s: 0.5,
-    max_accel_mps2: 12.0,
-    jump_margin_mps: 0.5,
-};
-
-/// Shunt chain of the simulation (same as the reference board).
-pub const SHUNT: ShuntConfig = ShuntConfig {
-    shunt_ohm: 0.015,
-    amp_gain: 50.0,
-    vref_v: 3.3,
-    bits: 12,
-    offset_counts: 2048.0,
-};
+/// The simulated sensors use the reference board's calibration.
+pub use crate::calibration::{SHUNT, WHEEL_SPEED as SPEED_CONFIG};
 
 /// The shared state of the simulated world: the step number and the coil duty.
 pub struct SimWorld {

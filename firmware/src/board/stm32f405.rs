@@ -12,9 +12,9 @@
 
 use super::Board;
 use crate::drivers::as5047p::{AngleTracker, As5047p};
-use crate::drivers::coil_current::{AdcChannel, CoilCurrentSensor, ShuntConfig};
+use crate::drivers::coil_current::{AdcChannel, CoilCurrentSensor};
 use crate::drivers::coil_pwm::{CoilConfig, CoilDriver};
-use crate::drivers::wheel_speed::{PulseCapture, PulseSample, SpeedConfig, WheelSpeed};
+use crate::drivers::wheel_speed::{PulseCapture, PulseSample, WheelSpeed};
 use crate::hal::{
     adc::{config::AdcConfig, config::SampleTime, Adc},
     gpio::{Analog, Output, Pin, PushPull},
@@ -38,27 +38,7 @@ pub type Pwm = PwmChannel<pac::TIM4, 0>;
 /// The board's sensor set.
 pub type BoardSensors = Sensors<EncLeft, EncRight, BoardPulses, BoardAdc>;
 
-/// Tone wheel and tyre of the reference vehicle.
-/// TODO(vehicle): measured rolling radius and tooth count of the actual axle.
-pub const SPEED: SpeedConfig = SpeedConfig {
-    pulses_per_rev: 48,
-    rolling_radius_m: 0.35,
-    tick_hz: 1_000_000,
-    timeout_s: 0.5,
-    max_accel_mps2: 12.0,
-    jump_margin_mps: 0.5,
-};
-
-/// Shunt chain: 15 mOhm, INA240A2 (gain 50; 0.75 V/A, so +-2.2 A around mid-rail covers the
-/// coil's 2 A maximum), 3.3 V reference, 12 bit, mid-rail offset.
-/// TODO(calibration): measure `offset_counts` at boot with the coil off.
-pub const SHUNT: ShuntConfig = ShuntConfig {
-    shunt_ohm: 0.015,
-    amp_gain: 50.0,
-    vref_v: 3.3,
-    bits: 12,
-    offset_counts: 2048.0,
-};
+use crate::calibration::{SHUNT, WHEEL_SPEED as SPEED};
 
 /// Coil: 4 ohm hot, 12 V supply, 2 A maximum (the reference damper's u_max).
 pub const COIL: CoilConfig = CoilConfig {
