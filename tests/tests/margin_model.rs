@@ -4,6 +4,7 @@
 //! update within 100 calls).
 use faer::Mat;
 use nalgebra::Complex;
+use shimmy_core::eigen::Precision;
 use shimmy_core::estimator::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
 use shimmy_core::plant::{linearise, N_STATES};
@@ -80,6 +81,26 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
     // Tolerances: eigenvalues 1e-9 relative (both solvers backward stable, as in
     // eigen_vs_faer.rs); critical speeds 0.05 km/h (the requirement; the dense grid itself
     // locates the sign change to +-0.005 km/h and the tracker's Brent tolerance is 1e-4 m/s).
+    tracker_agrees_with_faer(ModelMarginConfig::default(), 1e-9);
+}
+
+#[test]
+fn f32_eigen_solves_still_meet_the_critical_speed_requirement() {
+    // The firmware's configuration: A rounded to f32, balanced, solved in f32. Eigenvalues are
+    // then only as good as f32 rounding of the balanced matrix allows: eps_f32 = 1.2e-7 times
+    // the eigenvalue condition numbers (O(10-100) here), so 2e-5 relative to |lambda| (to the
+    // mode's omega_n for the real part; measured worst 2.9e-6). The critical speeds must still
+    // meet the 0.05 km/h requirement.
+    let cfg = ModelMarginConfig {
+        eigen_precision: Precision::F32,
+        ..ModelMarginConfig::default()
+    };
+    tracker_agrees_with_faer(cfg, 2e-5);
+}
+
+fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
+    let mut worst_kmh = 0.0f64;
+    let mut worst_eig = 0.0f64;
     for (set, c) in [
         (ParamSet::Nominal, 0.0),
         (ParamSet::Hard, 0.0),
@@ -90,7 +111,7 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
         let dense = dense_crossings(&p, c);
         assert!(!dense.is_empty(), "{}: no window", set.name());
         println!("{} c={c}: dense crossings {dense:?}", set.name());
-        let mut tr = ModelMarginTracker::new(p, ModelMarginConfig::default());
+        let mut tr = ModelMarginTracker::new(p, cfg);
         let mut t0 = 0.0f32;
         for kmh in [5.0, 20.0, 45.0, 75.0, 100.0, 130.0] {
             let v = kmh_to_mps(kmh);
@@ -99,12 +120,7 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
                 let (pt, calls) = if warm {
                     cycle(&mut tr, t0, v, c)
                 } else {
-                    cycle(
-                        &mut ModelMarginTracker::new(p, ModelMarginConfig::default()),
-                        0.0,
-                        v,
-                        c,
-                    )
+                    cycle(&mut ModelMarginTracker::new(p, cfg), 0.0, v, c)
                 };
                 t0 += 1.0;
                 assert!(calls <= 100, "{} {kmh} km/h: {calls} calls", set.name());
@@ -118,12 +134,17 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
                         .iter()
                         .map(|e| (e - l).norm())
                         .fold(f64::INFINITY, f64::min);
-                    assert!(d < 1e-9 * l.norm().max(1.0), "{l} not in faer's spectrum");
+                    worst_eig = worst_eig.max(d / l.norm().max(1.0));
+                    assert!(
+                        d < eig_rel * l.norm().max(1.0),
+                        "{l} not in faer's spectrum"
+                    );
                 }
                 assert!(pt.shimmy_found);
-                assert!((pt.critical.re - g_faer(&p, v, c)).abs() < 1e-9 * pt.critical.omega_n);
+                assert!((pt.critical.re - g_faer(&p, v, c)).abs() < eig_rel * pt.critical.omega_n);
                 let max_re = eig.iter().map(|e| e.re).fold(f64::NEG_INFINITY, f64::max);
-                assert!((pt.max_re - max_re).abs() < 1e-9 * max_re.abs().max(1.0));
+                let max_abs = eig.iter().map(|e| e.norm()).fold(1.0, f64::max);
+                assert!((pt.max_re - max_re).abs() < eig_rel * max_abs);
                 // shimmy mode = the in-phase wheel-yaw mode in the 4-9 Hz band, never 47 Hz
                 assert!(pt.shimmy.freq_hz > 3.0 && pt.shimmy.freq_hz < 12.0);
                 // critical speeds: first dense crossing above / below
@@ -134,6 +155,7 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
                     match (ours, theirs) {
                         (Some(o), Some((x, kind))) => {
                             let ok = mps_to_kmh(o.speed_mps);
+                            worst_kmh = worst_kmh.max((ok - x).abs());
                             assert!(
                                 (ok - x).abs() < 0.05,
                                 "{} {kmh} km/h {side}: {ok} vs dense {x}",
@@ -149,6 +171,10 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
             }
         }
     }
+    println!(
+        "{:?}: worst eigenvalue distance {worst_eig:.1e} x |lambda|, worst critical speed {worst_kmh:.4} km/h",
+        cfg.eigen_precision
+    );
 }
 
 #[test]

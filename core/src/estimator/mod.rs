@@ -48,7 +48,7 @@ pub use real::Real;
 
 use decimate::Decimator;
 use rls::{Rls, N_MAX};
-use roots::{aberth, select_mode, C64, MAX_ORDER};
+use roots::{aberth, select_mode, Cx, MAX_ORDER};
 
 /// Configuration of the mode meter. `Default` is the tested design point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -259,8 +259,8 @@ pub struct MeterCounters {
 }
 
 #[derive(Clone, Copy, Debug)]
-struct Track {
-    roots: [C64; MAX_ORDER],
+struct Track<T> {
+    roots: [Cx<T>; MAX_ORDER],
     roots_ok: bool,
     last_freq_hz: Option<f64>,
     est: ModeEstimate,
@@ -268,11 +268,11 @@ struct Track {
     warmup_updates: u32,
 }
 
-impl Track {
+impl<T: Real> Track<T> {
     fn new(lambda: f64, fs_dec_hz: f64, warmup_tc: f64) -> Self {
         let tc = 1.0 / (1.0 - lambda);
         Self {
-            roots: [C64::default(); MAX_ORDER],
+            roots: [Cx::default(); MAX_ORDER],
             roots_ok: false,
             last_freq_hz: None,
             est: ModeEstimate::default(),
@@ -302,8 +302,8 @@ pub struct MarginEstimator<T> {
     u_prev: T,
     fast: Rls<T>,
     slow: Rls<T>,
-    tr_fast: Track,
-    tr_slow: Track,
+    tr_fast: Track<T>,
+    tr_slow: Track<T>,
     hp_prev_in: T,
     hp_state: T,
     hp_alpha: T,
@@ -620,13 +620,13 @@ impl<T: Real> MarginEstimator<T> {
         fs: f64,
         p: usize,
         rls: &Rls<T>,
-        tr: &mut Track,
+        tr: &mut Track<T>,
         frozen: bool,
         counters: &mut MeterCounters,
     ) {
-        let mut c = [0.0f64; MAX_ORDER];
+        let mut c = [T::ZERO; MAX_ORDER];
         for (ci, th) in c.iter_mut().zip(rls.theta().iter()).take(p) {
-            *ci = -th.to_f64();
+            *ci = -*th;
         }
         let coeffs = c.get(..p).unwrap_or(&[]);
         let status = match aberth(coeffs, &mut tr.roots, tr.roots_ok, cfg.root_max_iter) {
@@ -651,7 +651,8 @@ impl<T: Real> MarginEstimator<T> {
                         tr.last_freq_hz = Some(m.freq_hz);
                         let wn = 2.0 * core::f64::consts::PI * m.wn_hz;
                         let z = m.zeta.max(cfg.sigma_zeta_floor as f64);
-                        let sigma = libm::sqrt(z / (wn * tr.t_eff_s));
+                        // in T: f64 sqrt is software on the target
+                        let sigma = T::from_f64(z / (wn * tr.t_eff_s)).sqrt().to_f64();
                         tr.est.zeta = m.zeta as f32;
                         tr.est.freq_hz = m.freq_hz as f32;
                         tr.est.wn_hz = m.wn_hz as f32;

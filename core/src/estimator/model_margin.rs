@@ -52,6 +52,8 @@ pub struct ModelMarginConfig {
     pub max_evals_per_search: u16,
     /// Relative change of the damper coefficient that invalidates the warm-start hints.
     pub c_change_rel: f64,
+    /// Float type of the eigen-solves (the firmware uses `F32`: f64 is software on the M4).
+    pub eigen_precision: eigen::Precision,
 }
 
 impl Default for ModelMarginConfig {
@@ -64,6 +66,7 @@ impl Default for ModelMarginConfig {
             max_step_mps: 2.0,
             max_evals_per_search: 45,
             c_change_rel: 0.01,
+            eigen_precision: eigen::Precision::F64,
         }
     }
 }
@@ -414,7 +417,10 @@ impl ModelMarginTracker {
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
         self.evals_this_search = self.evals_this_search.saturating_add(1);
-        match stability::critical_mode_at(&self.p, v, self.work.c_damper_nspm) {
+        let a = linearise(&self.p, v, self.work.c_damper_nspm);
+        match eigen::eigenvalues_in(&a, self.cfg.eigen_precision)
+            .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
+        {
             Ok(m) if m.re.is_finite() => Some(m.re),
             _ => {
                 self.work.errors = self.work.errors.saturating_add(1);
@@ -506,7 +512,7 @@ impl ModelMarginTracker {
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
         let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
-        let ok = eigen::eigenvalues(&a).and_then(|vals| {
+        let ok = eigen::eigenvalues_in(&a, self.cfg.eigen_precision).and_then(|vals| {
             let crit = eigen::critical_oscillatory_mode(&vals)?;
             let (shimmy, found) =
                 match stability::select_mode(&self.p, &a, &vals, ModeSelect::Shimmy) {

@@ -41,8 +41,15 @@ pub trait Real:
     fn sin(self) -> Self;
     /// Cosine (libm).
     fn cos(self) -> Self;
+    /// Natural logarithm (libm).
+    fn ln(self) -> Self;
+    /// Four-quadrant arctangent of `self / x` (libm).
+    fn atan2(self, x: Self) -> Self;
     /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
+    /// Relative step below which the root finder has converged: a few hundred ulps, so the
+    /// roots carry no more error than the coefficients' own rounding puts into them.
+    const ROOT_TOL: Self;
 }
 
 impl Real for f32 {
@@ -81,9 +88,18 @@ impl Real for f32 {
         libm::cosf(self)
     }
     #[inline]
+    fn ln(self) -> Self {
+        libm::logf(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2f(self, x)
+    }
+    #[inline]
     fn is_finite(self) -> bool {
         f32::is_finite(self)
     }
+    const ROOT_TOL: Self = 64.0 * f32::EPSILON;
 }
 
 impl Real for f64 {
@@ -122,7 +138,16 @@ impl Real for f64 {
         libm::cos(self)
     }
     #[inline]
+    fn ln(self) -> Self {
+        libm::log(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2(self, x)
+    }
+    #[inline]
     fn is_finite(self) -> bool {
         f64::is_finite(self)
     }
+    const ROOT_TOL: Self = 1e-13;
 }
