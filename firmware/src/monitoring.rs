@@ -21,6 +21,7 @@
 //! `ShimmyPipeline`: one eigen-solve is ~3.8 M soft-float instructions on the M4.
 
 use shimmy_core::control::{ControlParams, ControllerKind};
+use shimmy_core::eigen::Precision;
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::estimator::{ConfigError, PipelineParams, Sample, WheelOrder};
@@ -188,10 +189,13 @@ impl DataMargin {
 }
 
 /// The model-margin tracker's configuration in the firmware: the core's tuned one with the
-/// refresh period [`MODEL_REFRESH_S`].
+/// refresh period [`MODEL_REFRESH_S`] and the eigen-solves in f32 on the FPU (balanced; the
+/// critical speeds still meet 0.05 km/h, `tests/tests/margin_model.rs`; f64 is software
+/// floating point on the M4, ~20x the instructions).
 pub fn model_config() -> ModelMarginConfig {
     ModelMarginConfig {
         period_s: MODEL_REFRESH_S,
+        eigen_precision: Precision::F32,
         ..PipelineParams::default().model
     }
 }
