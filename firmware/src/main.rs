@@ -241,6 +241,13 @@ mod app {
             stack_used,
             stack_size
         );
+        // Announced for `cargo xtask qemu`, which checks the logged mode changes against it.
+        let mut modes = heapless::String::<160>::new();
+        for m in EXPECTED_MODES {
+            let _ = modes.push_str(m.name());
+            let _ = modes.push(' ');
+        }
+        defmt::info!("scenario: expected supervisor modes {=str}", modes.as_str());
         let (par, ef, glitch) = expected_faults(h.steps);
         let checks = [
             ("steps", h.steps == board::QEMU_STEPS),
