@@ -255,7 +255,13 @@ mod tests {
         }
         assert_eq!(
             modes,
-            [Mode::Normal, Mode::Degraded, Mode::FailSafe, Mode::Degraded, Mode::Normal]
+            [
+                Mode::Normal,
+                Mode::Degraded,
+                Mode::FailSafe,
+                Mode::Degraded,
+                Mode::Normal
+            ]
         );
         assert_eq!((h.enc_parity, h.enc_error_flag, h.mode_changes), (1, 1, 4));
         // Each protocol error raises `*-flag` and `*-nonfinite` (the frame carries no angle).

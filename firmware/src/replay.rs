@@ -135,7 +135,12 @@ pub fn sample(trace: &[u8], k: usize) -> Option<(u16, u16, f32)> {
     Some((u(0), u(2), v))
 }
 
-fn reading(tracker: &mut AngleTracker, raw: u16, fault: Option<Injected>, left: bool) -> EncoderReading {
+fn reading(
+    tracker: &mut AngleTracker,
+    raw: u16,
+    fault: Option<Injected>,
+    left: bool,
+) -> EncoderReading {
     let mut e = EncoderReading::ok(f32::NAN);
     match fault {
         Some(Injected::LeftParity) if left => e.parity_ok = false,

@@ -129,7 +129,11 @@ fn host_digest() {
     // Accumulating 1 ms steps in f32 may take one sample more or less than the exact 1 s.
     let (l, r) = (replay::FAULTS[0].0 as u32, replay::FAULTS[1].0 as u32);
     let failsafe = l + 1000 - r;
-    assert!(d.failsafe.abs_diff(failsafe) <= 1, "{} vs {failsafe}", d.failsafe);
+    assert!(
+        d.failsafe.abs_diff(failsafe) <= 1,
+        "{} vs {failsafe}",
+        d.failsafe
+    );
     assert!(d.degraded >= 2 * (r - l), "{}", d.degraded);
     assert!(d.mode_changes >= 4, "{}", d.mode_changes);
     let mut text = String::new();

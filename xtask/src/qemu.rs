@@ -204,9 +204,7 @@ pub fn check_supervisor(log: &[String]) -> Result<String, String> {
         seen.push(to.trim());
     }
     if seen != expected {
-        return Err(format!(
-            "supervisor modes {seen:?}, expected {expected:?}"
-        ));
+        return Err(format!("supervisor modes {seen:?}, expected {expected:?}"));
     }
     if !seen.contains(&"fail-safe") || seen.last() != Some(&"normal") {
         return Err(format!(
@@ -256,7 +254,10 @@ mod tests {
                      INFO scenario: expected supervisor modes normal fail-safe";
         assert!(check_supervisor(&log(stuck)).is_err());
         // A different sequence than announced.
-        let other = good.replace("modes normal fail-safe normal", "modes normal degraded normal");
+        let other = good.replace(
+            "modes normal fail-safe normal",
+            "modes normal degraded normal",
+        );
         assert!(check_supervisor(&log(&other)).is_err());
         // A fault that never clears.
         let open = good.replace("INFO supervisor: fault left-flag cleared", "");
