@@ -83,6 +83,11 @@ mod bench {
             run: eigen_update,
         },
         Entry {
+            name: "eigen update: linearise + eigenvalues (f32, balanced)",
+            budget: Budget::None,
+            run: eigen_update_f32,
+        },
+        Entry {
             name: "model tracker: one call (max over the ramp)",
             budget: Budget::None,
             run: tracker_call,
@@ -332,6 +337,18 @@ mod bench {
 
     fn meter_run() -> u32 {
         meter_counts().2
+    }
+
+    fn eigen_update_f32() -> u32 {
+        use shimmy_core::eigen::{eigenvalues_in, Precision};
+        use shimmy_core::params::PlantParams;
+        let p = PlantParams::nominal();
+        let mut v = 12.0;
+        measure(|| {
+            let a = shimmy_core::plant::linearise(&p, black_box(v), 0.0);
+            let _ = black_box(eigenvalues_in(&a, Precision::F32));
+            v += 0.1;
+        })
     }
 
     fn eigen_update() -> u32 {
