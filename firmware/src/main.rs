@@ -65,6 +65,7 @@ mod app {
             shimmy_core::VERSION,
             FAILSAFE_CURRENT_A
         );
+        log_reset_cause(&cx.device.RCC);
         let board = board::init(cx.device);
         let (tx, rx) = cx.local.queue.split();
         let Ok(data) = DataMargin::new() else {
@@ -213,6 +214,31 @@ mod app {
                 );
             }
         }
+    }
+
+    /// Logs why the MCU (re)started (RCC_CSR reset flags, RM0090 6.3.21) and clears the flags.
+    /// A power-on also sets the brown-out flag, so power-on is tested first.
+    fn log_reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) {
+        let f = rcc.csr().read();
+        let cause = if f.wdgrstf().bit_is_set() {
+            "independent watchdog (the control loop stopped completing steps)"
+        } else if f.wwdgrstf().bit_is_set() {
+            "window watchdog"
+        } else if f.sftrstf().bit_is_set() {
+            "software reset (panic or fault handler)"
+        } else if f.porrstf().bit_is_set() {
+            "power-on"
+        } else if f.borrstf().bit_is_set() {
+            "brown-out (supply below the BOR level)"
+        } else if f.lpwrrstf().bit_is_set() {
+            "low-power management"
+        } else if f.padrstf().bit_is_set() {
+            "reset pin (NRST, debug probe)"
+        } else {
+            "none flagged"
+        };
+        rcc.csr().modify(|_, w| w.rmvf().set_bit());
+        defmt::warn!("reset cause: {=str}", cause);
     }
 
     fn level_name(l: shimmy_core::monitor::Level) -> &'static str {
