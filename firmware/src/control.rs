@@ -1,52 +1,22 @@
-//! The seam between the firmware and the core controller, sensor validation, and the health
-//! counters of the control loop.
+//! The seam between the drivers and the core's supervised controller, and the health counters
+//! of the control loop.
 //!
-//! Per control step (1 kHz): [`crate::sensors::Sensors::sample`] -> [`validate`] ->
-//! [`ControlStep::step`] (the core controller plugs in here) -> coil current command ->
-//! [`crate::drivers::coil_pwm::CoilDriver::set_current_a`]. Without a complete, valid input the
-//! controller is not called and the coil gets the fail-safe current.
+//! Per control step (1 kHz): [`crate::sensors::Sensors::sample`] -> [`raw_frame`] (what only the
+//! firmware knows: SPI errors, AS5047P parity / error flag, the tone-wheel decoding, ADC
+//! errors; each counted) -> `shimmy_core::supervisor::SafeController::step` (the one
+//! validation policy: range, rate, stuck, left/right agreement, speed plausibility, coil
+//! checks, timing; fault records, Normal / Degraded / FailSafe with recovery hysteresis; the
+//! core controller; the final clamp and slew limit) -> coil current command ->
+//! [`crate::drivers::coil_pwm::CoilDriver::set_current_a`]. [`supervised_step`] is that chain.
 
 use crate::drivers::wheel_speed::SpeedStatus;
 use crate::sensors::{SampleSet, SensorFault};
+use shimmy_core::supervisor::{
+    EncoderReading, MarginStatus, Mode, RawFrame, SafeController, SafeOutput,
+};
 
-/// Validated inputs of one control step (the controller sees only these).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct ControlInput {
-    /// Control step number since boot.
-    pub step: u32,
-    /// Control period [s].
-    pub dt_s: f32,
-    /// Left wheel yaw [rad], relative to straight ahead.
-    pub psi_l_rad: f32,
-    /// Right wheel yaw [rad].
-    pub psi_r_rad: f32,
-    /// Vehicle speed [m/s].
-    pub speed_mps: f32,
-    /// Measured coil current [A].
-    pub coil_current_a: f32,
-}
-
-/// What the firmware calls once per control step with validated inputs. Returns the coil
-/// current command [A]; NaN or out-of-range values are handled by the coil driver (NaN: fail-
-/// safe current, range: clamped). The application uses
-/// [`crate::monitoring::CoreController`] (the core's ASMC).
-pub trait ControlStep {
-    /// One 1 kHz step.
-    fn step(&mut self, input: &ControlInput) -> f32;
-}
-
-/// A fixed current (tests, and the simplest fail-safe law).
-#[derive(Clone, Copy, Debug)]
-pub struct FixedCurrent {
-    /// The current it commands [A].
-    pub current_a: f32,
-}
-
-impl ControlStep for FixedCurrent {
-    fn step(&mut self, _input: &ControlInput) -> f32 {
-        self.current_a
-    }
-}
+/// Control period [us] (the supervisor's time stamps advance by this per step).
+pub const PERIOD_US: u32 = 1000;
 
 /// Counters of the control loop. Every fault increments one; nothing is silent. Logged by the
 /// telemetry and at the end of a QEMU run.
@@ -63,26 +33,34 @@ pub struct Health {
     pub max_latency_ticks: u32,
     /// Longest step seen (entry to exit) [timer ticks].
     pub max_step_ticks: u32,
-    /// Steps in which the coil got the fail-safe current instead of the controller's command.
+    /// Steps the supervisor spent in FailSafe (fixed safe current, controller ignored).
     pub failsafe_steps: u32,
+    /// Steps the supervisor spent in Degraded (controller runs, possibly with a current floor).
+    pub degraded_steps: u32,
+    /// Supervisor mode changes.
+    pub mode_changes: u32,
+    /// Fault activations (a fault kind entering the supervisor's active set).
+    pub faults_raised: u32,
+    /// The supervisor's active faults now (bit i = `FaultKind::ALL[i]`).
+    pub active_faults: u32,
     /// Encoder SPI bus errors.
     pub enc_bus: u32,
     /// Encoder responses with wrong parity.
     pub enc_parity: u32,
     /// Encoder responses with the error flag set.
     pub enc_error_flag: u32,
-    /// Encoder samples rejected as implausible jumps.
-    pub enc_jump: u32,
-    /// Speed periods rejected as implausible (value held).
+    /// Wheel-speed periods rejected by the tone-wheel decoder (value held).
     pub speed_implausible: u32,
     /// Coil-current ADC errors or saturation.
     pub current_faults: u32,
-    /// 100 Hz meter requests dropped because the meter task was still busy.
+    /// 100 Hz meter requests that found the meter task still running.
     pub estimator_busy: u32,
-    /// 10 Hz model-margin requests dropped because the model task was still busy.
-    pub model_busy: u32,
     /// Meter samples dropped because the SPSC queue to the meter task was full.
     pub meter_dropped: u32,
+    /// Completed model-margin cycles (background loop).
+    pub model_cycles: u32,
+    /// Model cycles that took longer than their refresh period (the tracker's overruns).
+    pub model_late: u32,
     /// PWM write errors.
     pub pwm_errors: u32,
 }
@@ -90,16 +68,20 @@ pub struct Health {
 /// A step whose entry latency exceeds this many ticks (1 tick = 1 us) counts as a late start.
 pub const LATE_START_TICKS: u32 = 100;
 
+fn bump(c: &mut u32) {
+    *c = c.saturating_add(1);
+}
+
 impl Health {
     fn count(&mut self, f: SensorFault) {
-        let c = match f {
+        bump(match f {
             SensorFault::Bus => &mut self.enc_bus,
             SensorFault::Parity => &mut self.enc_parity,
             SensorFault::ErrorFlag(_) => &mut self.enc_error_flag,
-            SensorFault::Jump => &mut self.enc_jump,
             SensorFault::Saturated => &mut self.current_faults,
-        };
-        *c = c.saturating_add(1);
+            // Unwrap ambiguity (a half-turn step): the NaN angle is the supervisor's fault.
+            SensorFault::Jump => return,
+        });
     }
 
     /// Records the timing of one step: `latency_ticks` from the period start to the step's
@@ -111,90 +93,114 @@ impl Health {
             self.max_step_ticks = self.max_step_ticks.max(duration_ticks);
         }
         if latency_ticks > LATE_START_TICKS {
-            self.late_starts = self.late_starts.saturating_add(1);
+            bump(&mut self.late_starts);
         }
         if wrapped {
-            self.overruns = self.overruns.saturating_add(1);
+            bump(&mut self.overruns);
         }
+    }
+
+    /// Records the supervisor's verdict of one step.
+    pub fn record_verdict(&mut self, out: &SafeOutput) {
+        let v = &out.verdict;
+        match v.mode {
+            Mode::Normal => {}
+            Mode::Degraded => bump(&mut self.degraded_steps),
+            Mode::FailSafe => bump(&mut self.failsafe_steps),
+        }
+        let bits = v.faults.bits();
+        self.faults_raised = self
+            .faults_raised
+            .saturating_add((bits & !self.active_faults).count_ones());
+        self.active_faults = bits;
     }
 }
 
-/// Validates one sample set; counts each fault. `None`: the step must use the fail-safe.
-pub fn validate(s: &SampleSet, step: u32, dt_s: f32, h: &mut Health) -> Option<ControlInput> {
-    if s.speed.status == SpeedStatus::Implausible {
-        h.speed_implausible = h.speed_implausible.saturating_add(1);
+/// One encoder result as the supervisor's reading: the bus and protocol outcome of the driver
+/// (the angle is NaN when no angle was received, so the supervisor also records `*-nonfinite`
+/// next to `*-read` / `*-flag`).
+pub fn encoder_reading(r: Result<f32, SensorFault>) -> EncoderReading {
+    let mut e = EncoderReading::ok(f32::NAN);
+    match r {
+        Ok(v) => e.angle_rad = v,
+        Err(SensorFault::Parity) => e.parity_ok = false,
+        Err(SensorFault::ErrorFlag(_)) => e.error_flag = true,
+        Err(SensorFault::Bus | SensorFault::Saturated) => e.read_ok = false,
+        // No angle (the supervisor sees NaN: `*NonFinite`).
+        Err(SensorFault::Jump) => {}
     }
-    let mut ok = true;
-    let mut take = |r: Result<f32, SensorFault>, h: &mut Health| match r {
-        Ok(v) if v.is_finite() => v,
-        Ok(_) => {
-            ok = false;
-            0.0
-        }
-        Err(f) => {
+    e
+}
+
+/// The raw frame of control step `step`: the driver results decoded into the supervisor's
+/// input; the driver-level faults (bus, parity, error flag, tone-wheel glitch, ADC) are
+/// counted here, everything else is judged by the supervisor.
+pub fn raw_frame(s: &SampleSet, step: u32, h: &mut Health) -> RawFrame {
+    for r in [s.psi_l_rad, s.psi_r_rad] {
+        if let Err(f) = r {
             h.count(f);
-            ok = false;
-            0.0
         }
+    }
+    let speed_valid = match s.speed.status {
+        SpeedStatus::Valid | SpeedStatus::Standstill => true,
+        // The decoder rejected one period and holds the last accepted value (a missing or
+        // extra tooth is a decoding error, like an SPI parity error).
+        SpeedStatus::Implausible => {
+            bump(&mut h.speed_implausible);
+            true
+        }
+        SpeedStatus::Starting => false,
     };
-    let psi_l_rad = take(s.psi_l_rad, h);
-    let psi_r_rad = take(s.psi_r_rad, h);
     let coil_current_a = match s.coil_current_a {
         Ok(v) => v,
-        Err(_) => {
-            // The measured current is not needed for a safe command; count it and go on.
-            h.current_faults = h.current_faults.saturating_add(1);
+        Err(f) => {
+            h.count(f);
+            // The supervisor raises `CoilSensor` (advisory: the coil is driven open loop).
             f32::NAN
         }
     };
-    if !ok {
-        return None;
-    }
-    Some(ControlInput {
-        step,
-        dt_s,
-        psi_l_rad,
-        psi_r_rad,
+    RawFrame {
+        t_us: step.wrapping_mul(PERIOD_US),
+        left: encoder_reading(s.psi_l_rad),
+        right: encoder_reading(s.psi_r_rad),
         speed_mps: s.speed.speed_mps,
-        coil_current_a,
-    })
+        speed_valid,
+        coil_current_a: Some(coil_current_a),
+    }
 }
 
-/// One control decision: validated input -> controller, otherwise the fail-safe (NaN, which
-/// the coil driver turns into [`crate::drivers::coil_pwm::FAILSAFE_CURRENT_A`]).
-pub fn decide<C: ControlStep>(
-    ctrl: &mut C,
+/// One control step: drivers' results -> [`raw_frame`] -> [`SafeController::step`]. The
+/// command (`current_cmd_a` of the output) is finite and inside the coil limits whatever the
+/// sensors delivered; `margin` is the validity of the newest margin report.
+pub fn supervised_step(
+    ctrl: &mut SafeController,
     s: &SampleSet,
     step: u32,
-    dt_s: f32,
+    margin: MarginStatus,
     h: &mut Health,
-) -> (f32, Option<ControlInput>) {
-    match validate(s, step, dt_s, h) {
-        Some(input) => {
-            let cmd = ctrl.step(&input);
-            if cmd.is_finite() {
-                (cmd, Some(input))
-            } else {
-                h.failsafe_steps = h.failsafe_steps.saturating_add(1);
-                (f32::NAN, Some(input))
-            }
-        }
-        None => {
-            h.failsafe_steps = h.failsafe_steps.saturating_add(1);
-            (f32::NAN, None)
-        }
+) -> SafeOutput {
+    let frame = raw_frame(s, step, h);
+    let before = ctrl.supervisor().mode();
+    let out = ctrl.step(&frame, margin);
+    if out.verdict.mode != before {
+        bump(&mut h.mode_changes);
     }
+    h.record_verdict(&out);
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::drivers::wheel_speed::SpeedReading;
+    use crate::monitoring::safe_controller;
+    use shimmy_core::supervisor::{FaultKind, FAILSAFE_CURRENT_A};
 
-    fn good() -> SampleSet {
+    fn good(k: u32) -> SampleSet {
+        let y = 0.01 * libm::sinf(k as f32 * 0.05);
         SampleSet {
-            psi_l_rad: Ok(0.01),
-            psi_r_rad: Ok(-0.01),
+            psi_l_rad: Ok(y),
+            psi_r_rad: Ok(y * 0.98),
             speed: SpeedReading {
                 speed_mps: 20.0,
                 status: SpeedStatus::Valid,
@@ -203,40 +209,68 @@ mod tests {
         }
     }
 
-    struct Nan;
-    impl ControlStep for Nan {
-        fn step(&mut self, _: &ControlInput) -> f32 {
-            f32::NAN
-        }
-    }
-
     #[test]
-    fn valid_input_reaches_the_controller() {
+    fn driver_faults_map_onto_the_supervisor_reading() {
+        assert!(!encoder_reading(Err(SensorFault::Parity)).parity_ok);
+        assert!(encoder_reading(Err(SensorFault::ErrorFlag(2))).error_flag);
+        assert!(!encoder_reading(Err(SensorFault::Bus)).read_ok);
+        let ok = encoder_reading(Ok(0.1));
+        assert!(ok.read_ok && ok.parity_ok && !ok.error_flag && ok.angle_rad == 0.1);
         let mut h = Health::default();
-        let mut c = FixedCurrent { current_a: 0.7 };
-        let (cmd, input) = decide(&mut c, &good(), 5, 1e-3, &mut h);
-        assert_eq!(cmd, 0.7);
-        assert_eq!(input.unwrap().psi_l_rad, 0.01);
-        assert_eq!(h, Health::default());
-    }
-
-    #[test]
-    fn each_fault_is_counted_and_fails_safe() {
-        let mut h = Health::default();
-        let mut c = FixedCurrent { current_a: 0.7 };
-        let mut s = good();
+        let mut s = good(0);
         s.psi_l_rad = Err(SensorFault::Parity);
-        s.psi_r_rad = Err(SensorFault::ErrorFlag(4));
-        let (cmd, input) = decide(&mut c, &s, 5, 1e-3, &mut h);
-        assert!(cmd.is_nan() && input.is_none());
+        s.speed.status = SpeedStatus::Starting;
+        s.coil_current_a = Err(SensorFault::Saturated);
+        let f = raw_frame(&s, 7, &mut h);
+        assert_eq!(f.t_us, 7000);
+        assert!(!f.speed_valid && f.coil_current_a.is_some_and(f32::is_nan));
+        assert_eq!((h.enc_parity, h.current_faults), (1, 1));
+    }
+
+    /// One parity error on one encoder: Degraded (the other stands in, current floor); on both:
+    /// FailSafe at the core's fail-safe current; recovery after the core's hysteresis.
+    #[test]
+    fn parity_errors_drive_the_core_supervisor_and_it_recovers() {
+        let mut c = safe_controller();
+        let mut h = Health::default();
+        let mut modes = Vec::new();
+        for k in 0..4000u32 {
+            let mut s = good(k);
+            if k == 100 {
+                s.psi_l_rad = Err(SensorFault::Parity);
+            }
+            if k == 300 {
+                s.psi_r_rad = Err(SensorFault::ErrorFlag(2));
+            }
+            let o = supervised_step(&mut c, &s, k, MarginStatus::NotUsed, &mut h);
+            assert!(o.current_cmd_a.is_finite());
+            if modes.last() != Some(&o.verdict.mode) {
+                modes.push(o.verdict.mode);
+            }
+            if (310..1000).contains(&k) {
+                // Slewed towards the fail-safe current.
+                assert_eq!(o.verdict.mode, Mode::FailSafe);
+                assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+            }
+        }
         assert_eq!(
-            (h.enc_parity, h.enc_error_flag, h.failsafe_steps),
-            (1, 1, 1)
+            modes,
+            [
+                Mode::Normal,
+                Mode::Degraded,
+                Mode::FailSafe,
+                Mode::Degraded,
+                Mode::Normal
+            ]
         );
-        // A NaN from the controller also fails safe, and is counted.
-        let (cmd, _) = decide(&mut Nan, &good(), 6, 1e-3, &mut h);
-        assert!(cmd.is_nan());
-        assert_eq!(h.failsafe_steps, 2);
+        assert_eq!((h.enc_parity, h.enc_error_flag, h.mode_changes), (1, 1, 4));
+        // Each protocol error raises `*-flag` and `*-nonfinite` (the frame carries no angle).
+        assert_eq!(h.faults_raised, 4);
+        assert_eq!(h.active_faults, 0);
+        assert_eq!(c.supervisor().record(FaultKind::LeftFlag).activations, 1);
+        assert_eq!(c.supervisor().record(FaultKind::RightFlag).activations, 1);
+        // Recovery times: left clears 1 s after step 100, right 1 s after step 300.
+        assert_eq!(h.degraded_steps + h.failsafe_steps, 1300 - 100 + 1);
     }
 
     #[test]

@@ -2,17 +2,16 @@
 //!
 //! | task | runs | priority | work |
 //! |---|---|---|---|
-//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> validation -> core ASMC (`Controller::step`) -> coil PWM; pushes the step's sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
-//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `MarginEstimator<f32>` (10 pushes, one decimated RLS + roots update), fusion with the newest model margin, monitor; every 10th run spawns `model`; warnings on level changes, telemetry at 1 Hz |
-//! | `model` | software task, 10 Hz | 1 | model margin in f64: shimmy mode + d zeta/dV (`dzeta_dv`, `ModeSelect::Shimmy`) and the Hopf onset speed (`critical_speed_near`, warm start) |
-//! | `idle` | - | 0 | WFI |
+//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> coil PWM; pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
+//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f64 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
 //!
-//! The `qemu` build runs the same application on simulated sensors and exits after
-//! `board::QEMU_STEPS` steps with the counters, failing if they are not what the simulation
-//! injected.
+//! The `qemu` build runs the same application on simulated sensors with injected faults and
+//! exits after `board::QEMU_STEPS` steps with the counters, failing if they are not what the
+//! simulation injected.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -21,16 +20,14 @@ mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use shimmy_core::estimator::ModelMargin;
     use shimmy_core::params::PlantParams;
+    use shimmy_core::supervisor::{MarginStatus, SafeController, FAILSAFE_CURRENT_A};
     use shimmy_firmware::board::{self, Board};
-    use shimmy_firmware::control::{decide, Health};
-    use shimmy_firmware::drivers::coil_pwm::FAILSAFE_CURRENT_A;
+    use shimmy_firmware::control::{supervised_step, Health};
     use shimmy_firmware::monitoring::{
-        CoreController, DataMargin, MeterSample, ModelMarginTask, DT_S, METER_DECIMATION,
+        safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
     use shimmy_firmware::periph::PERIOD_TICKS;
 
-    /// Model (eigen-margin) update every this many meter runs (10 Hz).
-    const MODEL_DIVIDER: u32 = 10;
     /// Telemetry every this many meter runs (1 Hz).
     const TELEMETRY_DIVIDER: u32 = 100;
     /// SPSC capacity is one less than this: 3 meter periods of samples.
@@ -39,21 +36,24 @@ mod app {
     #[shared]
     struct Shared {
         health: Health,
-        /// Newest model margin (written by `model`, read by `meter`).
+        /// Newest model margin (written by the background loop, read by `meter`).
         model: Option<ModelMargin>,
+        /// Time [s] and trusted speed [m/s] of the newest meter sample (for the model loop).
+        now: (f32, f32),
+        /// Validity of the newest margin report (for the supervisor's margin check).
+        margin: MarginStatus,
     }
 
     #[local]
     struct Local {
         board: Board,
-        // TODO(core supervisor): wrap in the core's `SafeController` when it lands.
-        ctrl: CoreController,
+        ctrl: SafeController,
         step: u32,
         tx: Producer<'static, MeterSample>,
         rx: Consumer<'static, MeterSample>,
         data: DataMargin,
         meter_runs: u32,
-        model_task: ModelMarginTask,
+        model_task: ModelTask,
     }
 
     #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
@@ -65,39 +65,70 @@ mod app {
             shimmy_core::VERSION,
             FAILSAFE_CURRENT_A
         );
+        log_reset_cause(&cx.device.RCC);
         let board = board::init(cx.device);
         let (tx, rx) = cx.local.queue.split();
-        let Some(data) = DataMargin::new() else {
-            // The core's default estimator configuration is checked by a host test; if it
-            // were rejected the damper still gets the fail-safe current out of reset.
+        let Ok(data) = DataMargin::new() else {
+            // The core's default configuration is checked by a host test; if it were rejected
+            // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
         (
             Shared {
                 health: Health::default(),
                 model: None,
+                now: (0.0, f32::NAN),
+                margin: MarginStatus::Invalid,
             },
             Local {
                 board,
-                ctrl: CoreController::asmc(),
+                ctrl: safe_controller(),
                 step: 0,
                 tx,
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelMarginTask::new(PlantParams::nominal(), 0.0),
+                model_task: ModelTask::new(PlantParams::nominal()),
             },
         )
     }
 
-    #[idle]
-    fn idle(_: idle::Context) -> ! {
+    /// The background loop: the model-margin tracker, one unit of work (at most one eigen-solve,
+    /// ~3.8 M instructions) per call; the control and meter tasks preempt it at any instruction.
+    #[idle(local = [model_task], shared = [model, now, health])]
+    fn idle(mut cx: idle::Context) -> ! {
         loop {
-            cortex_m::asm::wfi();
+            let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
+            let task = &mut *cx.local.model_task;
+            if let Some(pt) = task.step(t_s, speed_mps) {
+                let m = pt.margin();
+                cx.shared.model.lock(|x| *x = Some(m));
+                let late = task.tracker().overruns();
+                cx.shared.health.lock(|h| {
+                    h.model_cycles = h.model_cycles.saturating_add(1);
+                    h.model_late = late;
+                });
+                defmt::info!(
+                    "model: t {=f32} s, v {=f64} m/s: shimmy zeta {=f64} at {=f64} Hz, dzeta/dV {=f64} per m/s, onset {=f64} m/s; {=u16} eigen-solves in {=u16} calls, {=u16} errors",
+                    pt.t_s,
+                    pt.speed_mps,
+                    m.zeta,
+                    m.freq_hz,
+                    m.dzeta_dv_per_mps,
+                    m.v_crit_onset_mps.unwrap_or(f64::NAN),
+                    pt.eigen_solves,
+                    pt.calls,
+                    pt.errors
+                );
+            }
+            if !task.tracker().busy() {
+                // Nothing due: sleep until the next interrupt (at most 1 ms).
+                cortex_m::asm::wfi();
+            }
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx], shared = [health])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx], shared = [health, margin])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         let entry = b.timer.now_ticks();
@@ -105,18 +136,16 @@ mod app {
         let latency = b.timer.entry_latency_ticks(entry);
         let step = *cx.local.step;
         let mut health = cx.shared.health;
+        let mut margin = cx.shared.margin;
         #[cfg(feature = "qemu")]
         board::WORLD.set_step(step);
 
         let samples = b.sensors.sample(PERIOD_TICKS);
-        let (cmd, input) = health.lock(|h| decide(cx.local.ctrl, &samples, step, DT_S, h));
-        let pwm_ok = b.coil.set_current_a(cmd).is_ok();
+        let status = margin.lock(|m| *m);
+        let out = health.lock(|h| supervised_step(cx.local.ctrl, &samples, step, status, h));
+        let pwm_ok = b.coil.set_current_a(out.current_cmd_a).is_ok();
 
-        let dropped = cx
-            .local
-            .tx
-            .enqueue(MeterSample::of(step, input.as_ref()))
-            .is_err();
+        let dropped = cx.local.tx.enqueue(MeterSample::of(step, &out)).is_err();
         let busy = step.is_multiple_of(METER_DECIMATION) && meter::spawn().is_err();
 
         let exit = b.timer.now_ticks();
@@ -138,16 +167,20 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model])]
+    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin])]
     async fn meter(mut cx: meter::Context) {
         let model = cx.shared.model.lock(|m| *m);
         while let Some(s) = cx.local.rx.dequeue() {
-            let Some(u) = cx.local.data.push(&s, model.as_ref()) else {
+            let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
+            let now = (u.report.t_s, cx.local.data.speed_mps());
+            cx.shared.now.lock(|n| *n = now);
+            let status = cx.local.data.margin_status();
+            cx.shared.margin.lock(|m| *m = status);
             *cx.local.meter_runs += 1;
             let runs = *cx.local.meter_runs;
-            if u.level_changed {
+            if changed {
                 defmt::warn!(
                     "warning level {=str} at t = {=f32} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
                     level_name(u.level),
@@ -159,11 +192,6 @@ mod app {
                     u.meter.amplitude_rad * 1e3,
                     u.report.speed_margin_mps.unwrap_or(f32::NAN)
                 );
-            }
-            if runs.is_multiple_of(MODEL_DIVIDER)
-                && model::spawn(cx.local.data.speed_mps()).is_err()
-            {
-                cx.shared.health.lock(|h| h.model_busy += 1);
             }
             if runs.is_multiple_of(TELEMETRY_DIVIDER) {
                 let h = cx.shared.health.lock(|h| *h);
@@ -188,10 +216,29 @@ mod app {
         }
     }
 
-    #[task(priority = 1, local = [model_task], shared = [model])]
-    async fn model(mut cx: model::Context, speed_mps: f32) {
-        let m = cx.local.model_task.update(speed_mps);
-        cx.shared.model.lock(|x| *x = Some(m));
+    /// Logs why the MCU (re)started (RCC_CSR reset flags, RM0090 6.3.21) and clears the flags.
+    /// A power-on also sets the brown-out flag, so power-on is tested first.
+    fn log_reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) {
+        let f = rcc.csr().read();
+        let cause = if f.wdgrstf().bit_is_set() {
+            "independent watchdog (the control loop stopped completing steps)"
+        } else if f.wwdgrstf().bit_is_set() {
+            "window watchdog"
+        } else if f.sftrstf().bit_is_set() {
+            "software reset (panic or fault handler)"
+        } else if f.porrstf().bit_is_set() {
+            "power-on"
+        } else if f.borrstf().bit_is_set() {
+            "brown-out (supply below the BOR level)"
+        } else if f.lpwrrstf().bit_is_set() {
+            "low-power management"
+        } else if f.padrstf().bit_is_set() {
+            "reset pin (NRST, debug probe)"
+        } else {
+            "none flagged"
+        };
+        rcc.csr().modify(|_, w| w.rmvf().set_bit());
+        defmt::warn!("reset cause: {=str}", cause);
     }
 
     fn level_name(l: shimmy_core::monitor::Level) -> &'static str {
@@ -204,12 +251,15 @@ mod app {
         }
     }
 
-    /// End of a `qemu` run: the counters must be exactly what the simulation injected, with
-    /// no overrun and no late start.
+    /// End of a `qemu` run: the counters must be exactly what the simulation injected (driver
+    /// faults once each, the supervisor's FailSafe time, every fault recovered), with no
+    /// overrun, no late start, no busy meter and at least one completed model cycle, none late.
     #[cfg(feature = "qemu")]
     fn qemu_finish(h: Health) -> ! {
         use shimmy_firmware::runtime::{finish, Outcome};
-        use shimmy_firmware::sim::expected_faults;
+        use shimmy_firmware::sim::{
+            expected_faults, EXPECTED_FAILSAFE_STEPS, EXPECTED_FAULTS_RAISED, EXPECTED_MODES,
+        };
         let (stack_used, stack_size) = shimmy_firmware::stack::high_water();
         defmt::info!("final counters: {}", h);
         defmt::info!(
@@ -217,38 +267,61 @@ mod app {
             stack_used,
             stack_size
         );
+        // Announced for `cargo xtask qemu`, which checks the logged mode changes against it.
+        let mut modes = heapless::String::<160>::new();
+        for m in EXPECTED_MODES {
+            let _ = modes.push_str(m.name());
+            let _ = modes.push(' ');
+        }
+        defmt::info!("scenario: expected supervisor modes {=str}", modes.as_str());
         let (par, ef, glitch) = expected_faults(h.steps);
-        let ok = h.steps == board::QEMU_STEPS
-            && (h.enc_parity, h.enc_error_flag, h.speed_implausible) == (par, ef, glitch)
-            && h.failsafe_steps == par + ef
-            && h.enc_bus + h.enc_jump + h.current_faults + h.pwm_errors == 0
-            && h.overruns == 0
-            && h.late_starts == 0
-            && h.meter_dropped == 0;
-        // Not required (yet): `estimator_busy` / `model_busy` count spawns that found the
-        // meter / model task still running. The meter's decimated update (~1.24 M
-        // instructions) and the model update (~27 M) are over their periods' budgets
-        // (`cargo xtask bench`); the queue keeps every sample (meter_dropped == 0 is
-        // required) and the 1 kHz task never overruns. TODO(core pipeline / model_margin):
-        // require both to be 0 once the incremental versions land.
-        if h.estimator_busy + h.model_busy > 0 {
-            defmt::warn!(
-                "meter busy {=u32} times, model busy {=u32} times (over budget, see bench)",
-                h.estimator_busy,
-                h.model_busy
-            );
+        let checks = [
+            ("steps", h.steps == board::QEMU_STEPS),
+            (
+                "driver faults (parity, error flag, speed glitch) counted once each",
+                (h.enc_parity, h.enc_error_flag, h.speed_implausible) == (par, ef, glitch),
+            ),
+            (
+                "no other driver fault",
+                h.enc_bus + h.current_faults + h.pwm_errors == 0,
+            ),
+            (
+                "supervisor: FailSafe steps",
+                h.failsafe_steps == EXPECTED_FAILSAFE_STEPS,
+            ),
+            (
+                "supervisor: faults raised",
+                h.faults_raised == EXPECTED_FAULTS_RAISED,
+            ),
+            (
+                "supervisor: mode changes",
+                h.mode_changes as usize == EXPECTED_MODES.len() - 1,
+            ),
+            ("supervisor: every fault recovered", h.active_faults == 0),
+            ("no overrun, no late start", h.overruns + h.late_starts == 0),
+            (
+                "meter never busy, no sample dropped",
+                h.estimator_busy + h.meter_dropped == 0,
+            ),
+            (
+                "model cycles completed, none late",
+                h.model_cycles > 0 && h.model_late == 0,
+            ),
+        ];
+        let mut ok = true;
+        for (name, pass) in checks {
+            if !pass {
+                defmt::error!("qemu run check failed: {=str}", name);
+            }
+            ok &= pass;
         }
         if ok {
             defmt::info!(
-                "qemu run ok: {=u32} steps, injected faults counted (parity {=u32}, error flag {=u32}, speed {=u32}), no overrun",
-                h.steps, par, ef, glitch
+                "qemu run ok: {=u32} steps, injected faults counted (parity {=u32}, error flag {=u32}, speed {=u32}), supervisor recovered, {=u32} model cycles, no overrun",
+                h.steps, par, ef, glitch, h.model_cycles
             );
             finish(Outcome::Success)
         } else {
-            defmt::error!(
-                "qemu run: counters differ from the injected faults (parity {=u32}, error flag {=u32}, speed {=u32}) or timing failed",
-                par, ef, glitch
-            );
             finish(Outcome::Failure)
         }
     }

@@ -1,26 +1,47 @@
-//! Host/target conformance: replays a recorded sensor trace through the firmware's seams (the
-//! encoder angle tracker, [`validate`](crate::control::validate)-equivalent conversion, the
-//! core controller, the mode meter + fusion + monitor, the model margin) and digests every
+//! Host/target conformance: replays a recorded sensor trace through the firmware's code
+//! path (the encoder angle tracker, [`crate::control::supervised_step`]-equivalent frame
+//! building, the core's `SafeController` (supervisor + ASMC + limiter), the core's data
+//! pipeline (mode meter + fusion + monitor) and the model-margin tracker) and digests every
 //! output as bit patterns. The host test (`tests/tests/conformance.rs`) and the on-target
 //! program (`src/bin/conformance.rs`, under QEMU) run this same function on the same trace;
 //! `cargo xtask test` fails unless every channel's digest is identical.
+//!
+//! The replay injects encoder faults at fixed samples ([`FAULTS`]) so the supervisor's
+//! Degraded / FailSafe modes and its recovery are part of the comparison.
 //!
 //! Trace format (little-endian, [`SAMPLE_BYTES`] bytes per 1 kHz sample, no header): left raw
 //! 14-bit encoder count (u16), right raw count (u16), vehicle speed (f32 bits, m/s). Angles
 //! are 0 at raw count [`ZERO_COUNTS`].
 
-use crate::control::ControlInput;
 use crate::drivers::as5047p::AngleTracker;
-use crate::monitoring::{CoreController, DataMargin, MeterSample, ModelMarginTask, DT_S};
+use crate::monitoring::{safe_controller, DataMargin, MeterSample, ModelTask, DT_S};
 use shimmy_core::estimator::ModelMargin;
 use shimmy_core::monitor::Level;
+use shimmy_core::supervisor::{EncoderReading, Mode, RawFrame};
 
 /// Bytes per sample in a trace.
 pub const SAMPLE_BYTES: usize = 8;
 /// Raw count of 0 rad in traces.
 pub const ZERO_COUNTS: u16 = 8192;
-/// Model updates every this many meter updates (10 Hz).
-pub const MODEL_DIVIDER: u32 = 10;
+/// An encoder fault the replay injects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Injected {
+    /// Parity error on the left encoder's response.
+    LeftParity,
+    /// The right encoder's error flag.
+    RightErrorFlag,
+    /// The right encoder's raw count frozen.
+    RightStuck,
+}
+
+/// Injected faults: (first sample, end sample (exclusive), fault). A parity error on the left
+/// (Degraded), then the right error flag while the left has not recovered (FailSafe), both
+/// recover (1 s each); later the right encoder freezes for 0.3 s.
+pub const FAULTS: [(usize, usize, Injected); 3] = [
+    (1500, 1501, Injected::LeftParity),
+    (1700, 1701, Injected::RightErrorFlag),
+    (4000, 4300, Injected::RightStuck),
+];
 
 /// FNV-1a 64-bit hash of a byte stream (order-sensitive, cheap on the M4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,8 +91,9 @@ impl Channel {
 }
 
 /// Names of the channels, in [`Digest::channels`] order.
-pub const CHANNELS: [&str; 6] = [
+pub const CHANNELS: [&str; 7] = [
     "coil_current_cmd_a",
+    "supervisor_mode_faults",
     "meter_fast_zeta_freq",
     "meter_slow_zeta_freq_amp",
     "fused_report",
@@ -83,11 +105,15 @@ pub const CHANNELS: [&str; 6] = [
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Digest {
     /// Per channel, in [`CHANNELS`] order.
-    pub channels: [Channel; 6],
+    pub channels: [Channel; 7],
     /// Samples replayed.
     pub samples: u32,
-    /// Samples the angle tracker rejected (fail-safe steps).
-    pub rejected: u32,
+    /// Samples in which the supervisor was in FailSafe.
+    pub failsafe: u32,
+    /// Samples in which the supervisor was in Degraded.
+    pub degraded: u32,
+    /// Supervisor mode changes.
+    pub mode_changes: u32,
     /// Highest warning level seen.
     pub worst_level: Level,
 }
@@ -109,8 +135,26 @@ pub fn sample(trace: &[u8], k: usize) -> Option<(u16, u16, f32)> {
     Some((u(0), u(2), v))
 }
 
-/// Replays `trace` through the controller and the margin estimation with the default
-/// configuration, `params` as the model plant.
+fn reading(
+    tracker: &mut AngleTracker,
+    raw: u16,
+    fault: Option<Injected>,
+    left: bool,
+) -> EncoderReading {
+    let mut e = EncoderReading::ok(f32::NAN);
+    match fault {
+        Some(Injected::LeftParity) if left => e.parity_ok = false,
+        Some(Injected::RightErrorFlag) if !left => e.error_flag = true,
+        _ => match tracker.update(raw) {
+            Ok(a) => e.angle_rad = a,
+            Err(_) => e.read_ok = false,
+        },
+    }
+    e
+}
+
+/// Replays `trace` through the supervised controller and the margin estimation with the
+/// firmware's configuration, `params` as the model plant.
 pub fn replay(
     trace: &[u8],
     params: &shimmy_core::params::PlantParams,
@@ -119,42 +163,59 @@ pub fn replay(
         return Err(ReplayError::Length);
     }
     let n = trace.len() / SAMPLE_BYTES;
-    let mut ctrl = CoreController::asmc();
-    let mut data = DataMargin::new().ok_or(ReplayError::Config)?;
-    let mut model_task = ModelMarginTask::new(*params, 0.0);
+    let mut ctrl = safe_controller();
+    let mut data = DataMargin::new().map_err(|_| ReplayError::Config)?;
+    let mut model_task = ModelTask::new(*params);
     let mut model: Option<ModelMargin> = None;
-    let mut trk = [AngleTracker::new(ZERO_COUNTS, 200); 2];
+    let mut trk = [AngleTracker::new(ZERO_COUNTS, 8191); 2];
     let mut d = Digest::default();
-    let mut meter_runs = 0u32;
+    let mut stuck_r: Option<u16> = None;
+    let mut mode = Mode::Normal;
     for k in 0..n {
-        let Some((l, r, v)) = sample(trace, k) else {
+        let Some((l, mut r, v)) = sample(trace, k) else {
             break;
         };
+        let fault = FAULTS
+            .iter()
+            .find(|(a, b, _)| (*a..*b).contains(&k))
+            .map(|f| f.2);
+        if fault == Some(Injected::RightStuck) {
+            r = *stuck_r.get_or_insert(r);
+        }
         let step = k as u32;
         d.samples += 1;
-        let input = match (trk[0].update(l), trk[1].update(r)) {
-            (Ok(psi_l_rad), Ok(psi_r_rad)) => Some(ControlInput {
-                step,
-                dt_s: DT_S,
-                psi_l_rad,
-                psi_r_rad,
-                speed_mps: v,
-                coil_current_a: f32::NAN,
-            }),
-            _ => None,
+        let frame = RawFrame {
+            t_us: step.wrapping_mul(crate::control::PERIOD_US),
+            left: reading(&mut trk[0], l, fault, true),
+            right: reading(&mut trk[1], r, fault, false),
+            speed_mps: v,
+            speed_valid: true,
+            coil_current_a: None,
         };
-        let cmd = match &input {
-            Some(i) => crate::control::ControlStep::step(&mut ctrl, i),
-            None => {
-                d.rejected += 1;
-                f32::NAN
-            }
-        };
+        let out = ctrl.step(&frame, data.margin_status());
+        let cmd = out.current_cmd_a;
         d.channels[0].record(|h| h.f32(cmd), f64::from(cmd));
-        let ms = MeterSample::of(step, input.as_ref());
-        if let Some(u) = data.push(&ms, model.as_ref()) {
+        let vd = &out.verdict;
+        d.channels[1].record(
+            |h| {
+                h.bytes(&[vd.mode as u8]);
+                h.bytes(&vd.faults.bits().to_le_bytes());
+                h.bytes(&vd.detected.bits().to_le_bytes());
+                h.f32(vd.safe_current_a.unwrap_or(f32::NAN));
+            },
+            f64::from(vd.mode as u8),
+        );
+        match vd.mode {
+            Mode::Normal => {}
+            Mode::Degraded => d.degraded += 1,
+            Mode::FailSafe => d.failsafe += 1,
+        }
+        d.mode_changes += u32::from(vd.mode != mode);
+        mode = vd.mode;
+        let ms = MeterSample::of(step, &out);
+        if let Some((u, _)) = data.push(&ms, model.as_ref()) {
             let (f, s) = (&u.meter.fast, &u.meter.slow);
-            d.channels[1].record(
+            d.channels[2].record(
                 |h| {
                     h.f32(f.zeta);
                     h.f32(f.freq_hz);
@@ -163,7 +224,7 @@ pub fn replay(
                 },
                 f64::from(f.zeta),
             );
-            d.channels[2].record(
+            d.channels[3].record(
                 |h| {
                     h.f32(s.zeta);
                     h.f32(s.freq_hz);
@@ -175,8 +236,10 @@ pub fn replay(
                 f64::from(s.zeta),
             );
             let rep = &u.report;
-            d.channels[3].record(
+            d.channels[4].record(
                 |h| {
+                    h.f32(rep.zeta_data);
+                    h.f32(rep.sigma_zeta_data);
                     h.f32(rep.speed_margin_mps.unwrap_or(f32::NAN));
                     h.f32(rep.time_to_critical_s.unwrap_or(f32::NAN));
                     h.f32(rep.zeta_model.unwrap_or(f32::NAN));
@@ -188,23 +251,29 @@ pub fn replay(
                 },
                 f64::from(rep.speed_margin_mps.unwrap_or(f32::NAN)),
             );
-            d.channels[4].record(|h| h.bytes(&[u.level as u8]), u.level as u8 as f64);
+            d.channels[5].record(|h| h.bytes(&[u.level as u8]), u.level as u8 as f64);
             d.worst_level = d.worst_level.max(u.level);
-            meter_runs += 1;
-            if meter_runs.is_multiple_of(MODEL_DIVIDER) {
-                let m = model_task.update(data.speed_mps());
-                d.channels[5].record(
-                    |h| {
-                        h.f64(m.zeta);
-                        h.f64(m.freq_hz);
-                        h.f64(m.dzeta_dv_per_mps);
-                        h.f64(m.v_crit_onset_mps.unwrap_or(f64::NAN));
-                        h.bytes(&[u8::from(m.valid)]);
-                    },
-                    m.zeta,
-                );
-                model = Some(m);
-            }
+        }
+        // The background model loop: one tracker call per sample here (on the board as many as
+        // the CPU leaves; the results are the same per completed cycle, only their timing
+        // differs).
+        if let Some(pt) = model_task.step(step as f32 * DT_S, data.speed_mps()) {
+            let m = pt.margin();
+            d.channels[6].record(
+                |h| {
+                    h.f64(m.zeta);
+                    h.f64(m.freq_hz);
+                    h.f64(m.dzeta_dv_per_mps);
+                    h.f64(m.v_crit_onset_mps.unwrap_or(f64::NAN));
+                    h.bytes(&[u8::from(m.valid)]);
+                    h.f64(pt.above.map_or(f64::NAN, |c| c.speed_mps));
+                    h.f64(pt.below.map_or(f64::NAN, |c| c.speed_mps));
+                    h.f64(pt.max_re);
+                    h.bytes(&pt.eigen_solves.to_le_bytes());
+                },
+                m.zeta,
+            );
+            model = Some(m);
         }
     }
     Ok(d)

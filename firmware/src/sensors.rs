@@ -16,7 +16,7 @@ pub enum SensorFault {
     Parity,
     /// Encoder error flag; the ERRFL contents.
     ErrorFlag(u16),
-    /// Encoder step larger than a wheel can turn in one sample.
+    /// The angle tracker could not unwrap the step (half a turn in one sample).
     Jump,
     /// Current ADC at full scale.
     Saturated,

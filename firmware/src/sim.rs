@@ -5,7 +5,20 @@
 //!
 //! Scenario: both wheels oscillate at [`SHIMMY_HZ`] with [`SHIMMY_AMPLITUDE_RAD`] around a
 //! straight-ahead raw count just below the 14-bit wrap (so unwrapping is exercised every
-//! cycle); the wheel-speed pulses start at step [`ROLL_START_STEP`] at [`SPEED_MPS`].
+//! cycle); the vehicle rolls at [`SPEED_MPS`] from step 0 on (the MCU "restarts while
+//! driving": the speed is unknown until the first tone-wheel period).
+//!
+//! Faults and what the core supervisor must make of them ([`EXPECTED_MODES`]; recovery after
+//! 1 s without the fault):
+//!
+//! | step | fault | supervisor |
+//! |---|---|---|
+//! | 0-2 | no complete wheel-speed period yet | `speed-invalid`: Degraded (fail-safe floor) until ~1003 |
+//! | [`PARITY_FAULT_STEP`] | left response with a flipped bit (parity) | `left-flag`: Degraded |
+//! | [`ERROR_FLAG_STEP`] | right encoder error flag (ERRFL = invalid command) | `right-flag`: both encoders lost, FailSafe |
+//! | [`SPEED_GLITCH_STEP`] | one wheel-speed period half as long | rejected by the tone-wheel decoder, value held (no supervisor fault) |
+//! | +1 s | left clears, then right | Degraded, then Normal |
+//! | [`STUCK_START_STEP`]..[`STUCK_END_STEP`] | right encoder frozen | `right-stuck` after 100 samples: Degraded, Normal 1 s after the end |
 
 use crate::drivers::as5047p::{read_command, Register, COUNTS_PER_REV};
 use crate::drivers::coil_current::AdcChannel;
@@ -20,16 +33,32 @@ pub const SHIMMY_HZ: f32 = 8.0;
 pub const SHIMMY_AMPLITUDE_RAD: f32 = 0.02;
 /// Raw count of straight ahead (calibrated zero) of both encoders.
 pub const ZERO_COUNTS: u16 = 16_380;
-/// Step at which the wheels start rolling.
-pub const ROLL_START_STEP: u32 = 100;
 /// Simulated vehicle speed [m/s].
 pub const SPEED_MPS: f32 = 20.0;
 /// Step at which the left encoder's response has a flipped bit (parity error).
-pub const PARITY_FAULT_STEP: u32 = 500;
+pub const PARITY_FAULT_STEP: u32 = 1300;
 /// Step at which the right encoder sets its error flag (ERRFL = invalid command).
-pub const ERROR_FLAG_STEP: u32 = 700;
+pub const ERROR_FLAG_STEP: u32 = 1500;
 /// Step at which one wheel-speed period is half as long as it should be.
-pub const SPEED_GLITCH_STEP: u32 = 900;
+pub const SPEED_GLITCH_STEP: u32 = 1900;
+/// First step at which the right encoder's angle is frozen (stuck sensor).
+pub const STUCK_START_STEP: u32 = 2600;
+/// First step at which the right encoder moves again.
+pub const STUCK_END_STEP: u32 = 2750;
+/// Steps a run needs to see every fault raised and cleared again.
+pub const SCENARIO_STEPS: u32 = 4000;
+/// The supervisor's mode sequence over [`SCENARIO_STEPS`] (see the module table); `cargo xtask
+/// qemu` checks the application's decoded log against it.
+pub const EXPECTED_MODES: [shimmy_core::supervisor::Mode; 9] = {
+    use shimmy_core::supervisor::Mode::{Degraded as D, FailSafe as F, Normal as N};
+    [N, D, N, D, F, D, N, D, N]
+};
+/// Steps in FailSafe over [`SCENARIO_STEPS`]: from the right error flag until the left
+/// parity fault has been absent for the 1 s recovery time.
+pub const EXPECTED_FAILSAFE_STEPS: u32 = PARITY_FAULT_STEP + 1001 - ERROR_FLAG_STEP;
+/// Fault activations over [`SCENARIO_STEPS`]: speed-invalid, left-flag + left-nonfinite (a
+/// corrupted frame carries no angle), right-flag + right-nonfinite, right-stuck.
+pub const EXPECTED_FAULTS_RAISED: u32 = 6;
 /// Control period in capture-timer ticks (1 MHz timer, 1 kHz loop).
 pub const TICKS_PER_STEP: u32 = 1000;
 
@@ -58,6 +87,9 @@ impl SimWorld {
     pub fn set_step(&self, step: u32) {
         self.step.store(step, Ordering::Relaxed);
         for side in 0..2u8 {
+            if side == 1 && (STUCK_START_STEP..STUCK_END_STEP).contains(&step) {
+                continue; // frozen: the right encoder keeps reporting the same angle
+            }
             let t = step as f32 * 1e-3;
             let phase = if side == 0 { 0.0 } else { 0.3 };
             let y = SHIMMY_AMPLITUDE_RAD
@@ -169,7 +201,7 @@ impl SpiDevice for SimEncoder {
     }
 }
 
-/// Wheel-speed pulses of a vehicle at [`SPEED_MPS`] from [`ROLL_START_STEP`] on.
+/// Wheel-speed pulses of a vehicle at [`SPEED_MPS`] (rolling from step 0 on).
 pub struct SimPulses {
     world: &'static SimWorld,
     last_edge_index: Option<u64>,
@@ -194,13 +226,7 @@ impl SimPulses {
 impl PulseCapture for SimPulses {
     fn take(&mut self) -> PulseSample {
         let step = self.world.step();
-        if step < ROLL_START_STEP {
-            return PulseSample {
-                new_period_ticks: None,
-                ticks_since_edge: u32::MAX,
-            };
-        }
-        let t = u64::from(step - ROLL_START_STEP) * u64::from(TICKS_PER_STEP);
+        let t = u64::from(step) * u64::from(TICKS_PER_STEP);
         let p = u64::from(Self::period_ticks());
         let idx = t / p;
         let since = (t - idx * p) as u32;
@@ -301,8 +327,8 @@ pub fn sensors(world: &'static SimWorld) -> SimSensors {
     use crate::drivers::coil_current::CoilCurrentSensor;
     use crate::drivers::wheel_speed::WheelSpeed;
     use crate::sensors::{Sensors, YawChannel};
-    // 8 Hz * 0.02 rad * 2 pi = 1 rad/s peak: 2.6 counts per ms; allow 50 counts per step.
-    let tracker = AngleTracker::new(ZERO_COUNTS, 50);
+    // Unwrap only (the rate/stuck/range checks are the core supervisor's).
+    let tracker = AngleTracker::new(ZERO_COUNTS, 8191);
     Sensors {
         left: YawChannel {
             encoder: As5047p::new(SimEncoder::new(world, 0)),
@@ -318,16 +344,17 @@ pub fn sensors(world: &'static SimWorld) -> SimSensors {
     }
 }
 
-/// Runs the sensor -> validate -> control -> PWM chain for `steps` steps without a scheduler
-/// (host tests and on-target tests); checks every angle against the simulated truth and
-/// returns the health counters. Panics (test failure) on a wrong angle.
-pub fn run_closed_loop<C: crate::control::ControlStep>(
+/// Runs the sensor -> supervised controller -> PWM chain for `steps` steps without a
+/// scheduler (host tests and on-target tests); checks every trusted angle against the
+/// simulated truth and returns the health counters. Panics (test failure) on a wrong angle.
+pub fn run_closed_loop(
     world: &'static SimWorld,
-    ctrl: &mut C,
+    ctrl: &mut shimmy_core::supervisor::SafeController,
     steps: u32,
 ) -> crate::control::Health {
-    use crate::control::{decide, Health};
+    use crate::control::{supervised_step, Health};
     use crate::drivers::coil_pwm::CoilDriver;
+    use shimmy_core::supervisor::{MarginStatus, Mode};
     let mut s = sensors(world);
     let mut coil = match CoilDriver::new(SimPwm::new(world), COIL) {
         Ok(c) => c,
@@ -337,24 +364,18 @@ pub fn run_closed_loop<C: crate::control::ControlStep>(
     for step in 0..steps {
         world.set_step(step);
         let set = s.sample(TICKS_PER_STEP);
-        let (cmd, input) = decide(ctrl, &set, step, 1e-3, &mut h);
-        if let Some(i) = input {
+        let out = supervised_step(ctrl, &set, step, MarginStatus::NotUsed, &mut h);
+        if let (Mode::Normal, Some((l, r))) = (out.verdict.mode, out.validated.angles_rad) {
             // One count of quantisation (0.38 mrad) plus f32 rounding.
             let tol = 1.5 * crate::drivers::as5047p::RAD_PER_COUNT;
-            assert!(
-                (i.psi_l_rad - world.yaw_rad(0)).abs() < tol,
-                "left yaw at {step}"
-            );
-            assert!(
-                (i.psi_r_rad - world.yaw_rad(1)).abs() < tol,
-                "right yaw at {step}"
-            );
-            if step > ROLL_START_STEP + 10 && step != SPEED_GLITCH_STEP {
-                // The estimate is bounded by pulse distance / time since edge between edges.
-                assert!(i.speed_mps <= SPEED_MPS * 1.001, "speed at {step}");
-            }
+            assert!((l - world.yaw_rad(0)).abs() < tol, "left yaw at {step}");
+            assert!((r - world.yaw_rad(1)).abs() < tol, "right yaw at {step}");
         }
-        if let Err(e) = coil.set_current_a(cmd) {
+        if let Some(v) = out.validated.speed_mps {
+            // The estimate is bounded by pulse distance / time since edge between edges.
+            assert!(v <= SPEED_MPS * 1.001, "speed at {step}");
+        }
+        if let Err(e) = coil.set_current_a(out.current_cmd_a) {
             match e {}
         }
         h.steps += 1;
@@ -365,21 +386,45 @@ pub fn run_closed_loop<C: crate::control::ControlStep>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::FixedCurrent;
 
     #[test]
-    fn closed_loop_counts_each_injected_fault_once() {
+    fn closed_loop_counts_each_injected_fault_once_and_the_supervisor_recovers() {
         let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
-        let mut c = FixedCurrent { current_a: 0.5 };
-        let h = run_closed_loop(world, &mut c, 1200);
-        let (par, ef, glitch) = expected_faults(1200);
+        let mut c = crate::monitoring::safe_controller();
+        let h = run_closed_loop(world, &mut c, SCENARIO_STEPS);
+        let (par, ef, glitch) = expected_faults(SCENARIO_STEPS);
+        assert_eq!((par, ef, glitch), (1, 1, 1));
         assert_eq!(
             (h.enc_parity, h.enc_error_flag, h.speed_implausible),
             (par, ef, glitch)
         );
-        assert_eq!(h.failsafe_steps, par + ef);
-        assert_eq!((h.enc_bus, h.enc_jump, h.current_faults), (0, 0, 0));
-        assert_eq!(h.steps, 1200);
+        assert_eq!(h.failsafe_steps, EXPECTED_FAILSAFE_STEPS);
+        assert_eq!(h.faults_raised, EXPECTED_FAULTS_RAISED);
+        assert_eq!(h.mode_changes as usize, EXPECTED_MODES.len() - 1);
+        assert_eq!(h.active_faults, 0, "every fault recovered");
+        assert_eq!((h.enc_bus, h.current_faults), (0, 0));
+        assert_eq!(h.steps, SCENARIO_STEPS);
+        // The mode sequence, from the supervisor's event log.
+        use shimmy_core::supervisor::{Mode, SupervisorEvent};
+        let mut modes = vec![Mode::Normal];
+        for e in c.supervisor().events() {
+            if let SupervisorEvent::ModeChange { to, .. } = e {
+                modes.push(*to);
+            }
+        }
+        assert_eq!(modes, EXPECTED_MODES);
+    }
+
+    /// Negative test: without the stuck window the right encoder never raises `right-stuck`,
+    /// so the check above depends on the injected fault (not on a false alarm).
+    #[test]
+    fn a_healthy_right_encoder_is_not_stuck() {
+        let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
+        let mut c = crate::monitoring::safe_controller();
+        let h = run_closed_loop(world, &mut c, STUCK_START_STEP);
+        let stuck = shimmy_core::supervisor::FaultKind::RightStuck;
+        assert_eq!(c.supervisor().record(stuck).activations, 0);
+        assert_eq!(h.faults_raised, EXPECTED_FAULTS_RAISED - 1);
     }
 
     #[test]

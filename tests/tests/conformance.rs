@@ -8,13 +8,16 @@
 //!    (within one encoder count, see [`trace_matches_the_simulator`]). Regenerate with
 //!    `SHIMMY_BLESS=1 cargo test -p shimmy-tests --test conformance`.
 //! 2. [`host_digest`] replays the committed trace through `shimmy_firmware::replay::replay`
-//!    (core ASMC controller, `MarginEstimator<f32>`, fusion, monitor, model margin) on the host
+//!    (the core's `SafeController` (supervisor + ASMC + limiter) with injected encoder faults,
+//!    the core's `DataPipeline` (mode meter, fusion, monitor) and the `ModelMarginTracker` with
+//!    the firmware's configuration (f32 eigen-solves, 1 s refresh)) on the host
 //!    and writes each channel's digest (FNV-1a over the f32/f64 bit patterns) to
 //!    `target/conformance/host.txt`. `cargo xtask test` runs the same replay on the target
 //!    under QEMU (`firmware/src/bin/conformance.rs`) and requires identical digests: the
 //!    tolerance is zero ulp (see README, "Conformance").
 
 use shimmy_core::params::PlantParams;
+use shimmy_firmware::monitoring::MODEL_REFRESH_S;
 use shimmy_firmware::replay::{self, CHANNELS, SAMPLE_BYTES, ZERO_COUNTS};
 use shimmy_sim::disturbance::{initial_yaw, RoadNoise, Scenario, SpeedProfile};
 use shimmy_sim::plant::{idx, Plant, Simulator};
@@ -110,12 +113,29 @@ fn host_digest() {
     let trace = std::fs::read(fixture()).expect("fixture");
     let d = replay::replay(&trace, &PlantParams::nominal()).expect("replay");
     let n = (trace.len() / SAMPLE_BYTES) as u32;
-    assert_eq!((d.samples, d.rejected), (n, 0));
-    // Record counts: every sample, every 10th, every 100th.
-    let expect = [n, n / 10, n / 10, n / 10, n / 10, n / 100];
+    assert_eq!(d.samples, n);
+    // Record counts: every sample (command, supervisor), every 10th (meter, report, level),
+    // one model cycle per refresh period (1 s: 6 in the 6 s trace).
+    let cycles = (f64::from(n) * 1e-3 / f64::from(MODEL_REFRESH_S)).round() as u32;
+    let expect = [n, n, n / 10, n / 10, n / 10, n / 10, cycles];
     for ((name, c), e) in CHANNELS.iter().zip(d.channels.iter()).zip(expect) {
         assert_eq!(c.count, e, "{name}");
     }
+    // The injected faults drive the supervisor through Degraded and FailSafe and back:
+    // left parity at 1500 (Degraded), right error flag at 1700 (both lost: FailSafe) until the
+    // left fault has been absent for the 1 s recovery time (1000 samples), Degraded until the
+    // right one has; the right encoder frozen at 4000-4300 raises right-stuck after 100
+    // samples (if the left moves by > 5 mrad meanwhile) and recovers 1 s after 4300.
+    // Accumulating 1 ms steps in f32 may take one sample more or less than the exact 1 s.
+    let (l, r) = (replay::FAULTS[0].0 as u32, replay::FAULTS[1].0 as u32);
+    let failsafe = l + 1000 - r;
+    assert!(
+        d.failsafe.abs_diff(failsafe) <= 1,
+        "{} vs {failsafe}",
+        d.failsafe
+    );
+    assert!(d.degraded >= 2 * (r - l), "{}", d.degraded);
+    assert!(d.mode_changes >= 4, "{}", d.mode_changes);
     let mut text = String::new();
     for (name, c) in CHANNELS.iter().zip(d.channels.iter()) {
         text.push_str(&format!(
@@ -129,7 +149,10 @@ fn host_digest() {
             f64::from_bits(c.last_bits)
         );
     }
-    eprintln!("worst level {:?}", d.worst_level);
+    eprintln!(
+        "worst level {:?}; supervisor: {} fail-safe, {} degraded samples, {} mode changes",
+        d.worst_level, d.failsafe, d.degraded, d.mode_changes
+    );
     let dir = root().join("target/conformance");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("host.txt"), text).unwrap();

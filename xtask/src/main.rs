@@ -116,7 +116,8 @@ fn test() -> Result<(), String> {
             let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
             run.print();
             run.expect_success()?;
-            Ok(format!("{} log lines", run.log.len()))
+            let story = qemu::check_supervisor(&run.log)?;
+            Ok(format!("{} log lines; {story}", run.log.len()))
         }),
     ];
 
@@ -259,7 +260,11 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
     let elf = build_firmware(bin, &["qemu"])?;
     let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
     run.print();
-    run.expect_success()
+    run.expect_success()?;
+    if bin == FIRMWARE {
+        println!("xtask: {}", qemu::check_supervisor(&run.log)?);
+    }
+    Ok(())
 }
 
 /// Builds a firmware binary in release mode for the target and copies the ELF to a name that

@@ -175,3 +175,94 @@ pub fn decode_defmt(elf: &[u8], stream: &[u8]) -> Result<Vec<String>, String> {
     }
     Ok(lines)
 }
+
+/// Checks the supervisor's story in the application's decoded log: the mode changes it logged
+/// (`supervisor: mode A -> B`) must chain and give exactly the sequence the simulated scenario
+/// announces (`scenario: expected supervisor modes a b c`, `firmware/src/sim.rs`), it must
+/// pass through `fail-safe` and end in `normal`, and every fault raised must be cleared again.
+pub fn check_supervisor(log: &[String]) -> Result<String, String> {
+    let expected: Vec<&str> = log
+        .iter()
+        .find_map(|l| l.split_once("scenario: expected supervisor modes "))
+        .map(|(_, m)| m.split_whitespace().collect())
+        .ok_or("the run did not announce its expected supervisor modes")?;
+    let mut seen: Vec<&str> = Vec::new();
+    for l in log {
+        let Some((_, rest)) = l.split_once("supervisor: mode ") else {
+            continue;
+        };
+        let (from, to) = rest
+            .split_once(" -> ")
+            .ok_or_else(|| format!("unreadable mode change: {l}"))?;
+        match seen.last() {
+            None => seen.push(from.trim()),
+            Some(prev) if *prev != from.trim() => {
+                return Err(format!("mode change from {from} but the mode was {prev}"))
+            }
+            Some(_) => {}
+        }
+        seen.push(to.trim());
+    }
+    if seen != expected {
+        return Err(format!("supervisor modes {seen:?}, expected {expected:?}"));
+    }
+    if !seen.contains(&"fail-safe") || seen.last() != Some(&"normal") {
+        return Err(format!(
+            "the supervisor must reach fail-safe and recover to normal: {seen:?}"
+        ));
+    }
+    let count = |what: &str| {
+        let mut v: Vec<String> = log
+            .iter()
+            .filter_map(|l| l.split_once("supervisor: fault "))
+            .filter_map(|(_, r)| r.strip_suffix(what))
+            .map(|k| k.trim().to_string())
+            .collect();
+        v.sort();
+        v
+    };
+    let (raised, cleared) = (count(" raised"), count(" cleared"));
+    if raised.is_empty() || raised != cleared {
+        return Err(format!("faults raised {raised:?} but cleared {cleared:?}"));
+    }
+    Ok(format!(
+        "supervisor modes {} ({} faults raised and cleared)",
+        seen.join(" -> "),
+        raised.len()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log(s: &str) -> Vec<String> {
+        s.lines().map(str::to_string).collect()
+    }
+
+    #[test]
+    fn supervisor_story_is_checked() {
+        let good = "WARN supervisor: fault left-flag raised\n\
+                    WARN supervisor: mode normal -> fail-safe\n\
+                    INFO supervisor: fault left-flag cleared\n\
+                    WARN supervisor: mode fail-safe -> normal\n\
+                    INFO scenario: expected supervisor modes normal fail-safe normal";
+        assert!(check_supervisor(&log(good)).is_ok());
+        // Not recovered.
+        let stuck = "WARN supervisor: fault left-flag raised\n\
+                     WARN supervisor: mode normal -> fail-safe\n\
+                     INFO scenario: expected supervisor modes normal fail-safe";
+        assert!(check_supervisor(&log(stuck)).is_err());
+        // A different sequence than announced.
+        let other = good.replace(
+            "modes normal fail-safe normal",
+            "modes normal degraded normal",
+        );
+        assert!(check_supervisor(&log(&other)).is_err());
+        // A fault that never clears.
+        let open = good.replace("INFO supervisor: fault left-flag cleared", "");
+        assert!(check_supervisor(&log(&open)).is_err());
+        // No announcement.
+        assert!(check_supervisor(&log("WARN supervisor: mode normal -> fail-safe")).is_err());
+    }
+}

@@ -104,13 +104,91 @@ pub struct PipelineOutput {
     pub meter: MeterOutput,
 }
 
-/// Mode meter + incremental model margin + fusion + monitor with an event log of `N` entries.
+/// The data part of the pipeline: mode meter -> fusion (with a model margin supplied by the
+/// caller) -> monitor, with an event log of `N` entries.
+///
+/// [`ShimmyPipeline`] feeds it the margin of its own [`ModelMarginTracker`] every 1 kHz tick
+/// (host simulator). The firmware cannot: one tracker call costs up to one f64 eigen-solve
+/// (millions of soft-float instructions on the M4), so it runs this type in its 100 Hz meter
+/// task and the tracker in a background loop, and hands the newest completed model margin in.
+/// Both therefore use the same meter, fusion, monitor and thresholds ([`PipelineParams`]).
 #[derive(Clone, Debug)]
-pub struct ShimmyPipeline<const N: usize> {
-    params: PipelineParams,
+pub struct DataPipeline<const N: usize> {
     meter: MarginEstimator<f32>,
     fusion: Fusion,
     monitor: Monitor<N>,
+}
+
+impl<const N: usize> DataPipeline<N> {
+    /// The data part with `params.estimator`, `params.fusion` and `params.monitor`.
+    pub fn new(params: &PipelineParams) -> Result<Self, ConfigError> {
+        Ok(Self {
+            meter: MarginEstimator::new(params.estimator)?,
+            fusion: Fusion::new(params.fusion),
+            monitor: Monitor::new(params.monitor),
+        })
+    }
+
+    /// One 1 kHz sample: `sample` (wheel yaw angles, wheel order), vehicle speed and
+    /// acceleration, time, and the newest model margin (if any). Returns the report and level
+    /// on decimated steps (100 Hz).
+    pub fn push(
+        &mut self,
+        sample: &Sample,
+        speed_mps: f32,
+        accel_mps2: f32,
+        t_s: f32,
+        model: Option<&ModelMargin>,
+    ) -> Option<PipelineOutput> {
+        let out = self.meter.push(sample)?;
+        let report = self.fusion.update(&FusionInput {
+            t_s,
+            speed_mps,
+            accel_mps2,
+            fast: &out.fast,
+            slow: &out.slow,
+            model,
+        });
+        let level = self.monitor.update(&MonitorInput {
+            t_s,
+            amplitude_rad: out.amplitude_rad,
+            report: &report,
+        });
+        Some(PipelineOutput {
+            report,
+            level,
+            meter: out,
+        })
+    }
+
+    /// Tells the mode meter that the plant changed (e.g. the damper setting): it forgets
+    /// faster for a while.
+    pub fn regime_change(&mut self) {
+        self.meter.regime_change();
+    }
+
+    /// Current level.
+    pub fn level(&self) -> Level {
+        self.monitor.level()
+    }
+
+    /// The monitor (event log).
+    pub fn monitor(&self) -> &Monitor<N> {
+        &self.monitor
+    }
+
+    /// The mode meter.
+    pub fn meter(&self) -> &MarginEstimator<f32> {
+        &self.meter
+    }
+}
+
+/// Mode meter + incremental model margin + fusion + monitor with an event log of `N` entries:
+/// a [`DataPipeline`] fed by a [`ModelMarginTracker`] stepped on every call.
+#[derive(Clone, Debug)]
+pub struct ShimmyPipeline<const N: usize> {
+    params: PipelineParams,
+    data: DataPipeline<N>,
     model: ModelMarginTracker,
     model_margin: Option<ModelMargin>,
     c_damper_nspm: f32,
@@ -120,9 +198,7 @@ impl<const N: usize> ShimmyPipeline<N> {
     /// A pipeline for the plant `plant` (the model side linearises it).
     pub fn new(plant: PlantParams, params: PipelineParams) -> Result<Self, ConfigError> {
         Ok(Self {
-            meter: MarginEstimator::new(params.estimator)?,
-            fusion: Fusion::new(params.fusion),
-            monitor: Monitor::new(params.monitor),
+            data: DataPipeline::new(&params)?,
             model: ModelMarginTracker::new(plant, params.model),
             model_margin: None,
             c_damper_nspm: 0.0,
@@ -140,7 +216,7 @@ impl<const N: usize> ShimmyPipeline<N> {
     pub fn set_damper_viscous(&mut self, c_nspm: f32) {
         if c_nspm.is_finite() && c_nspm >= 0.0 {
             if libm::fabsf(c_nspm - self.c_damper_nspm) > 0.01 * self.c_damper_nspm.max(1.0) {
-                self.meter.regime_change();
+                self.data.regime_change();
             }
             self.c_damper_nspm = c_nspm;
         }
@@ -158,40 +234,33 @@ impl<const N: usize> ShimmyPipeline<N> {
         if let Some(pt) = self.model.step(t_s, speed_mps, self.c_damper_nspm) {
             self.model_margin = Some(pt.margin());
         }
-        let out = self.meter.push(sample)?;
-        let report = self.fusion.update(&FusionInput {
-            t_s,
+        self.data.push(
+            sample,
             speed_mps,
             accel_mps2,
-            fast: &out.fast,
-            slow: &out.slow,
-            model: self.model_margin.as_ref(),
-        });
-        let level = self.monitor.update(&MonitorInput {
             t_s,
-            amplitude_rad: out.amplitude_rad,
-            report: &report,
-        });
-        Some(PipelineOutput {
-            report,
-            level,
-            meter: out,
-        })
+            self.model_margin.as_ref(),
+        )
     }
 
     /// Current level.
     pub fn level(&self) -> Level {
-        self.monitor.level()
+        self.data.level()
     }
 
     /// The monitor (event log).
     pub fn monitor(&self) -> &Monitor<N> {
-        &self.monitor
+        self.data.monitor()
     }
 
     /// The mode meter.
     pub fn meter(&self) -> &MarginEstimator<f32> {
-        &self.meter
+        self.data.meter()
+    }
+
+    /// The data part (meter, fusion, monitor).
+    pub fn data(&self) -> &DataPipeline<N> {
+        &self.data
     }
 
     /// The model-margin tracker.
@@ -207,5 +276,55 @@ impl<const N: usize> ShimmyPipeline<N> {
     /// The model margin the fusion currently uses.
     pub fn model_margin(&self) -> Option<&ModelMargin> {
         self.model_margin.as_ref()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimator::WheelOrder;
+
+    /// `ShimmyPipeline` is exactly a `DataPipeline` fed by a tracker stepped each tick: the
+    /// composition by hand gives bit-identical outputs (so the firmware, which composes them
+    /// across tasks, runs the same data path as the simulator).
+    #[test]
+    fn shimmy_pipeline_is_data_pipeline_plus_tracker() {
+        let pp = PipelineParams::default();
+        let plant = PlantParams::nominal();
+        let mut whole = ShimmyPipeline::<8>::new(plant, pp).unwrap();
+        let mut data = DataPipeline::<8>::new(&pp).unwrap();
+        let mut tracker = ModelMarginTracker::new(plant, pp.model);
+        let mut mm: Option<ModelMargin> = None;
+        let mut seed = 3u32;
+        let mut outputs = 0;
+        let mut with_model = 0;
+        for k in 0..1500u32 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let noise = ((seed >> 8) as f32 / 16_777_216.0 - 0.5) * 2e-4;
+            let t = k as f32 * 1e-3;
+            let y = 2e-3 * libm::sinf(2.0 * core::f32::consts::PI * 6.5 * t) + noise;
+            let v = 6.0 + 0.5 * t;
+            let s = Sample {
+                psi_l_rad: y,
+                psi_r_rad: 0.98 * y,
+                wheel: WheelOrder::Speed {
+                    speed_mps: v,
+                    radius_m: 0.35,
+                },
+                damper_cmd: 0.0,
+            };
+            let a = whole.push(&s, v, 0.5, t);
+            if let Some(pt) = tracker.step(t, v, 0.0) {
+                mm = Some(pt.margin());
+            }
+            let b = data.push(&s, v, 0.5, t, mm.as_ref());
+            // Debug text: bit-exact for finite values and equal for NaN (== would not be).
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "tick {k}");
+            outputs += usize::from(a.is_some());
+            with_model += usize::from(a.is_some_and(|o| o.report.zeta_model.is_some()));
+        }
+        assert_eq!(outputs, 150);
+        assert!(with_model > 100, "{with_model}");
+        assert_eq!(whole.level(), data.level());
     }
 }

@@ -24,9 +24,11 @@ mod run {
             }
         };
         defmt::info!(
-            "conformance samples {=u32} rejected {=u32} worst level {=u8}",
+            "conformance samples {=u32}, supervisor: fail-safe {=u32}, degraded {=u32}, mode changes {=u32}; worst level {=u8}",
             d.samples,
-            d.rejected,
+            d.failsafe,
+            d.degraded,
+            d.mode_changes,
             d.worst_level as u8
         );
         for (name, c) in CHANNELS.iter().zip(d.channels.iter()) {

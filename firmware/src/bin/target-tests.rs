@@ -150,13 +150,18 @@ mod harness {
     }
 
     fn closed_loop() {
-        use shimmy_firmware::control::FixedCurrent;
-        use shimmy_firmware::sim::{expected_faults, run_closed_loop, SimWorld};
+        use shimmy_firmware::monitoring::safe_controller;
+        use shimmy_firmware::sim::{
+            expected_faults, run_closed_loop, SimWorld, EXPECTED_FAILSAFE_STEPS,
+            EXPECTED_FAULTS_RAISED, SCENARIO_STEPS,
+        };
         static WORLD: SimWorld = SimWorld::new();
-        let h = run_closed_loop(&WORLD, &mut FixedCurrent { current_a: 0.5 }, 1200);
-        let (par, ef, glitch) = expected_faults(1200);
+        let mut c = safe_controller();
+        let h = run_closed_loop(&WORLD, &mut c, SCENARIO_STEPS);
+        let (par, ef, glitch) = expected_faults(SCENARIO_STEPS);
         assert!((h.enc_parity, h.enc_error_flag, h.speed_implausible) == (par, ef, glitch));
-        assert!(h.failsafe_steps == par + ef && h.steps == 1200);
+        assert!(h.failsafe_steps == EXPECTED_FAILSAFE_STEPS && h.steps == SCENARIO_STEPS);
+        assert!(h.faults_raised == EXPECTED_FAULTS_RAISED && h.active_faults == 0);
     }
 
     #[cfg(feature = "deliberate-failure")]

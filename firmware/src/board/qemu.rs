@@ -14,8 +14,8 @@ pub type Pwm = SimPwm;
 /// The simulated world the devices read.
 pub static WORLD: SimWorld = SimWorld::new();
 
-/// Control steps before the `qemu` run exits.
-pub const QEMU_STEPS: u32 = 2000;
+/// Control steps before the `qemu` run exits: the simulated fault scenario.
+pub const QEMU_STEPS: u32 = sim::SCENARIO_STEPS;
 
 /// QEMU's stm32f405 clocks its timers at 1 GHz (verified by `cargo xtask bench`'s
 /// calibration: TIM2 at prescaler 0 counts one per instruction at `-icount shift=0`).

@@ -51,8 +51,9 @@ pub const COIL: CoilConfig = CoilConfig {
 /// TODO(calibration): store per vehicle (flash) after a straight-ahead calibration.
 pub const ZERO_COUNTS: [u16; 2] = [0, 0];
 
-/// Largest plausible encoder step per 1 ms sample: 50 counts = 19 mrad/ms = 19 rad/s.
-pub const MAX_STEP_COUNTS: u16 = 50;
+/// The angle tracker only unwraps (a step of up to half a turn is taken as is): the plausibility
+/// of the angle (range, rate, stuck, left/right agreement) is the core supervisor's check.
+pub const MAX_STEP_COUNTS: u16 = 8191;
 
 /// Wheel-speed pulses from TIM5 channel 1 input capture (1 MHz, 32 bit), polled once per
 /// control step.
@@ -83,7 +84,9 @@ impl PulseCapture for BoardPulses {
         }
         PulseSample {
             new_period_ticks,
-            ticks_since_edge: self.last_capture.map_or(u32::MAX, |l| now.wrapping_sub(l)),
+            // Before the first edge: the time since boot (TIM5 starts at 0), so the first
+            // 0.5 s after a restart read "starting" (unknown), not "standstill".
+            ticks_since_edge: self.last_capture.map_or(now, |l| now.wrapping_sub(l)),
         }
     }
 }

@@ -55,6 +55,10 @@ pub enum SpeedStatus {
     Standstill,
     /// The new period implied an impossible speed change; the previous value is held.
     Implausible,
+    /// Edges arrive but no complete period has been measured yet (rolling just started, or
+    /// the MCU restarted while driving): the speed is unknown, reported as 0 m/s and marked
+    /// invalid for the supervisor (a restart at 70 km/h must not read as standstill).
+    Starting,
 }
 
 /// A speed reading.
@@ -139,10 +143,11 @@ impl WheelSpeed {
             }
         }
         if !self.have_speed {
-            // Edges seen but no complete period yet (just started rolling).
+            // Edges seen but no complete period yet (just started rolling, or a restart while
+            // driving): unknown, not standstill.
             return SpeedReading {
                 speed_mps: 0.0,
-                status: SpeedStatus::Standstill,
+                status: SpeedStatus::Starting,
             };
         }
         // Between edges: no faster than one pulse distance over the time since the last edge.
