@@ -742,7 +742,8 @@ impl Supervisor {
         let p = self.p;
         let open = last_cmd_a > p.coil_min_cmd_a && i_meas < p.coil_open_ratio * last_cmd_a;
         let over_a = last_cmd_a + p.coil_over_a;
-        let short = i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
+        let short =
+            i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
         for (acc, cond) in self.coil_mismatch_s.iter_mut().zip([open, short]) {
             *acc = if cond { (*acc + dt_s).min(1e3) } else { 0.0 };
         }

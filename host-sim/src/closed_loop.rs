@@ -18,19 +18,19 @@
 //! needed for metrics and the [`RunMetrics`].
 
 use crate::disturbance::Scenario;
+use crate::faults::{FaultPlan, FaultSpec};
 use crate::integrator::IntegrateError;
 use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
-use crate::faults::{FaultPlan, FaultSpec};
 use crate::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
+use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
+use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::{
     FaultKind, FaultRecord, FaultSet, MarginStatus, Mode, SafeController, SafeOutput,
     SupervisorEvent, SupervisorParams,
 };
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
-use shimmy_core::params::PlantParams;
 
 /// What sits on the track rod and drives it.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -298,7 +298,9 @@ pub fn run_case(
         (Some(a), Some(b)) => Some(a.min(b)),
         (a, b) => a.or(b),
     };
-    let tail = ((0.5 / cfg.dt_s) as usize).min(r.series.coil_a.len()).max(1);
+    let tail = ((0.5 / cfg.dt_s) as usize)
+        .min(r.series.coil_a.len())
+        .max(1);
     let coil_tail = &r.series.coil_a[r.series.coil_a.len() - tail..];
     let mut detected: Vec<&str> = log.detected.iter().map(|k| k.name()).collect();
     if log.missed_samples > 0 {

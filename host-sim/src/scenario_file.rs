@@ -780,18 +780,66 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
         );
         assert_eq!(s.faults[2].mode, FaultMode::CoilShort(5.0));
         let cases = [
-            ("kind = \"melt\"\nstart_s = 1.0", "fault[0].kind", "coil-short"),
-            ("kind = \"nan\"\nstart_s = 11.0", "fault[0].start_s", "0 ..= 10"),
-            ("kind = \"nan\"\nstart_s = 5.0\nend_s = 4.0", "fault[0].end_s", "5 ..= 10"),
-            ("kind = \"nan\"\nsensor = \"middle\"\nstart_s = 1.0", "fault[0].sensor", "both"),
-            ("kind = \"speed-lost\"\nsensor = \"left\"\nstart_s = 1.0", "fault[0].sensor", "encoder faults"),
-            ("kind = \"noise\"\nstart_s = 1.0", "fault[0].std_deg", "required"),
-            ("kind = \"noise\"\nstart_s = 1.0\nstd_deg = 200.0", "fault[0].std_deg", "0 ..= 90"),
-            ("kind = \"nan\"\nstart_s = 1.0\nstd_deg = 1.0", "fault[0].std_deg", "only applies"),
-            ("kind = \"dropout\"\nstart_s = 1.0\nperiod_samples = 10\nlength_samples = 11", "fault[0].length_samples", "1 ..= 10"),
-            ("kind = \"frame-loss\"\nstart_s = 1.0\nperiod_samples = 10.5\nlength_samples = 1", "fault[0].period_samples", "whole"),
-            ("kind = \"coil-short\"\nstart_s = 1.0\nratio = 0.5", "fault[0].ratio", "1 ..= 100"),
-            ("kind = \"nan\"\nstart_s = 1.0\nside = \"left\"", "side", "unknown"),
+            (
+                "kind = \"melt\"\nstart_s = 1.0",
+                "fault[0].kind",
+                "coil-short",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 11.0",
+                "fault[0].start_s",
+                "0 ..= 10",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 5.0\nend_s = 4.0",
+                "fault[0].end_s",
+                "5 ..= 10",
+            ),
+            (
+                "kind = \"nan\"\nsensor = \"middle\"\nstart_s = 1.0",
+                "fault[0].sensor",
+                "both",
+            ),
+            (
+                "kind = \"speed-lost\"\nsensor = \"left\"\nstart_s = 1.0",
+                "fault[0].sensor",
+                "encoder faults",
+            ),
+            (
+                "kind = \"noise\"\nstart_s = 1.0",
+                "fault[0].std_deg",
+                "required",
+            ),
+            (
+                "kind = \"noise\"\nstart_s = 1.0\nstd_deg = 200.0",
+                "fault[0].std_deg",
+                "0 ..= 90",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 1.0\nstd_deg = 1.0",
+                "fault[0].std_deg",
+                "only applies",
+            ),
+            (
+                "kind = \"dropout\"\nstart_s = 1.0\nperiod_samples = 10\nlength_samples = 11",
+                "fault[0].length_samples",
+                "1 ..= 10",
+            ),
+            (
+                "kind = \"frame-loss\"\nstart_s = 1.0\nperiod_samples = 10.5\nlength_samples = 1",
+                "fault[0].period_samples",
+                "whole",
+            ),
+            (
+                "kind = \"coil-short\"\nstart_s = 1.0\nratio = 0.5",
+                "fault[0].ratio",
+                "1 ..= 100",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 1.0\nside = \"left\"",
+                "side",
+                "unknown",
+            ),
         ];
         for (entry, field, range) in cases {
             let e = err(&format!("{base}[[fault]]\n{entry}\n"));

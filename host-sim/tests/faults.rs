@@ -48,7 +48,11 @@ fn the_campaign_disturbance_starts_shimmy_without_a_damper() {
     assert!(none.amp_end_rad > 2f64.to_radians());
     let (asmc, _) =
         fault_campaign::run_case(&s, Arm::Mr(ControllerKind::Asmc), &healthy, V_KMH, true).unwrap();
-    assert!(asmc.suppressed(), "{:.3} deg", asmc.peak_after_rad.to_degrees());
+    assert!(
+        asmc.suppressed(),
+        "{:.3} deg",
+        asmc.peak_after_rad.to_degrees()
+    );
     assert!(!asmc.detected(), "no false alarm: {}", asmc.detected);
     assert_eq!(asmc.worst_mode, Mode::Normal);
 }
@@ -153,7 +157,10 @@ fn without_the_supervisor_a_frozen_encoder_pair_lets_shimmy_grow() {
     assert!(bare.final_cmd_a < 0.5, "bare controller: ~0 A");
     assert!(sup.detected.contains(FaultKind::BothStuckSuspect.name()));
     assert_eq!(sup.final_cmd_a, f64::from(FAILSAFE_CURRENT_A));
-    assert!(sup.amp_end_rad < 0.2 * SHIMMY_AMP_RAD, "supervised: settles");
+    assert!(
+        sup.amp_end_rad < 0.2 * SHIMMY_AMP_RAD,
+        "supervised: settles"
+    );
 }
 
 /// Negative test for NaN: the bare controller's own input check holds the fallback current,
@@ -180,7 +187,8 @@ fn nan_encoder_is_caught_by_both_layers() {
 /// The shipped fault scenario parses and runs: its four faults are detected in order.
 #[test]
 fn the_sensor_faults_scenario_detects_each_fault() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/sensor-faults.toml");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/sensor-faults.toml");
     let spec = shimmy_sim::scenario_file::load(&path).unwrap();
     assert_eq!(spec.faults.len(), 4);
     let (_, r) = shimmy_sim::run_cmd::run(&spec).unwrap();
