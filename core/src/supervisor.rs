@@ -357,9 +357,9 @@ pub struct SupervisorParams {
     /// Coil mismatch must last this long [s] (>> the coil's L/R = 5 ms).
     pub coil_fault_s: f32,
     /// Full scale of the coil-current measurement [A]: a reading at or above it means "at least
-    /// this much" (ADC saturated), so it counts as over-current whenever full scale >= command
-    /// + `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A = the ADC's
-    /// 2.5 A) could never be seen.
+    /// this much" (ADC saturated), so it counts as over-current whenever full scale is at least
+    /// command plus `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A =
+    /// the ADC's 2.5 A) could never be seen.
     pub coil_full_scale_a: f32,
     /// Margin invalid for this long raises `MarginUnavailable` [s] (0 disables).
     pub margin_invalid_s: f32,

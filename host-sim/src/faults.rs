@@ -283,8 +283,8 @@ impl FaultInjector for FaultPlan {
                         ..
                     } => {
                         let p = u64::from(period.max(1));
-                        if n % p == 0 {
-                            let sign = if (n / p) % 2 == 0 { 1.0 } else { -1.0 };
+                        if n.is_multiple_of(p) {
+                            let sign = if (n / p).is_multiple_of(2) { 1.0 } else { -1.0 };
                             *angle(m, left) += (sign * amplitude_rad) as f32;
                         }
                     }
@@ -300,10 +300,10 @@ impl FaultInjector for FaultPlan {
                     m.speed_valid = false;
                 }
                 FaultMode::SpeedImplausible(v) => m.speed_mps = v as f32,
-                FaultMode::FrameLoss { period, length } => {
-                    if n % u64::from(period.max(1)) < u64::from(length) {
-                        m.lost = true;
-                    }
+                FaultMode::FrameLoss { period, length }
+                    if n % u64::from(period.max(1)) < u64::from(length) =>
+                {
+                    m.lost = true;
                 }
                 _ => {}
             }
@@ -389,7 +389,7 @@ mod tests {
                 let n = k - 10;
                 match mode {
                     FaultMode::Stuck(_) => {
-                        assert_eq!(m.psi_l_rad, 0.01 * 10u64 as f32);
+                        assert_eq!(m.psi_l_rad, 0.01 * 10_f32);
                         assert_eq!(m.psi_r_rad, healthy.psi_r_rad);
                     }
                     FaultMode::Noise(..) => {

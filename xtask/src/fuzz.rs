@@ -62,9 +62,11 @@ pub fn command(args: &[String]) -> Result<(), String> {
                 }
                 targets = vec![t.clone()];
             }
-            other => return Err(format!(
+            other => {
+                return Err(format!(
                 "unknown argument {other}; usage: cargo xtask fuzz [--seconds N] [--target NAME]"
-            )),
+            ))
+            }
         }
     }
     for t in &targets {
