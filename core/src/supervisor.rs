@@ -22,10 +22,10 @@
 //! | `EncoderDisagree` | both valid but \|psi_L - psi_R\| > `max_disagree_rad` |
 //! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
-//! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) |
+//! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
 //! | `CoilOpen` | command > `coil_min_cmd_a` and measured < `coil_open_ratio` x command for `coil_fault_s` |
-//! | `CoilShort` | measured > command + `coil_over_a` for `coil_fault_s` |
+//! | `CoilShort` | measured > command + `coil_over_a` (or at the ADC full scale when that is above it) for `coil_fault_s` |
 //! | `CoilSensor` | measured coil current NaN/Inf |
 //! | `MarginUnavailable` | the margin estimate is invalid for `margin_invalid_s` (advisory) |
 //!
@@ -343,6 +343,9 @@ pub struct SupervisorParams {
     pub speed_neg_tol_mps: f32,
     /// Largest plausible |dV/dt| [m/s^2].
     pub max_accel_mps2: f32,
+    /// Sample-to-sample speed noise tolerated on top of the acceleration bound [m/s] (a
+    /// wheel-speed signal read every 1 ms carries noise much larger than 1.5 g x 1 ms).
+    pub speed_noise_tol_mps: f32,
     /// Largest time-stamp gap before `Timing` [us].
     pub max_gap_us: u32,
     /// Coil checks only run above this command [A].
@@ -353,6 +356,11 @@ pub struct SupervisorParams {
     pub coil_over_a: f32,
     /// Coil mismatch must last this long [s] (>> the coil's L/R = 5 ms).
     pub coil_fault_s: f32,
+    /// Full scale of the coil-current measurement [A]: a reading at or above it means "at least
+    /// this much" (ADC saturated), so it counts as over-current whenever full scale is at least
+    /// command plus `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A =
+    /// the ADC's 2.5 A) could never be seen.
+    pub coil_full_scale_a: f32,
     /// Margin invalid for this long raises `MarginUnavailable` [s] (0 disables).
     pub margin_invalid_s: f32,
     /// A fault must be absent this long before it leaves the active set [s].
@@ -367,9 +375,11 @@ impl Default for SupervisorParams {
     /// psi limit 0.8 rad (as the controller); 25 rad/s (module docs); disagreement 0.25 rad
     /// (the Ackermann difference of a road vehicle at full lock is ~0.1-0.2 rad); stuck after
     /// 100 ms with 5 mrad motion on the other side; both-stuck after 2 s; 70 m/s max (the
-    /// analysed range); 0.5 m/s negative tolerance; 15 m/s^2 (1.5 g); gap 5 ms (4 missed
-    /// samples); coil checks above 0.2 A, open < 25 %, short > +0.5 A, for 50 ms (10 L/R);
-    /// margin 10 s; recovery 1 s.
+    /// analysed range); 0.5 m/s negative tolerance; 15 m/s^2 (1.5 g) plus 0.5 m/s
+    /// sample-to-sample noise (10 sigma of the simulator's 0.05 m/s wheel-speed noise; the
+    /// board's tone-wheel `jump_margin_mps` is 0.5 m/s too); gap 5 ms (4 missed samples); coil
+    /// checks above 0.2 A, open < 25 %, short > +0.5 A or a saturated 2.5 A reading, for 50 ms
+    /// (10 L/R); margin 10 s; recovery 1 s.
     fn default() -> Self {
         SupervisorParams {
             psi_limit_rad: 0.8,
@@ -381,11 +391,13 @@ impl Default for SupervisorParams {
             max_speed_mps: 70.0,
             speed_neg_tol_mps: 0.5,
             max_accel_mps2: 15.0,
+            speed_noise_tol_mps: 0.5,
             max_gap_us: 5000,
             coil_min_cmd_a: 0.2,
             coil_open_ratio: 0.25,
             coil_over_a: 0.5,
             coil_fault_s: 0.05,
+            coil_full_scale_a: 2.5,
             margin_invalid_s: 10.0,
             recovery_s: 1.0,
             failsafe_current_a: FAILSAFE_CURRENT_A,
@@ -707,7 +719,8 @@ impl Supervisor {
         if let Some((last, t_last)) = self.speed_last_good {
             let dt_s = f.t_us.wrapping_sub(t_last) as f32 * 1e-6;
             // One extra sample period of slack: speed signals are often held between updates.
-            if !within(abs(v - last), p.max_accel_mps2 * (dt_s + 1e-3)) {
+            let bound = p.max_accel_mps2 * (dt_s + 1e-3) + p.speed_noise_tol_mps;
+            if !within(abs(v - last), bound) {
                 det.insert(FaultKind::SpeedJump);
                 return None;
             }
@@ -728,7 +741,9 @@ impl Supervisor {
         }
         let p = self.p;
         let open = last_cmd_a > p.coil_min_cmd_a && i_meas < p.coil_open_ratio * last_cmd_a;
-        let short = i_meas > last_cmd_a + p.coil_over_a;
+        let over_a = last_cmd_a + p.coil_over_a;
+        let short =
+            i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
         for (acc, cond) in self.coil_mismatch_s.iter_mut().zip([open, short]) {
             *acc = if cond { (*acc + dt_s).min(1e3) } else { 0.0 };
         }

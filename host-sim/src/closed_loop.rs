@@ -1,12 +1,16 @@
 //! The closed loop in lockstep at the control rate (1 kHz): the nonlinear plant (with the MR
-//! damper and its coil lag) -> [`sensors`](crate::sensors) -> `shimmy_core::control::Controller`
-//! -> coil-current command -> plant; the data-driven mode meter
-//! (`shimmy_core::estimator::MarginEstimator`) runs on the same measured encoder angles.
+//! damper and its coil lag) -> [`sensors`](crate::sensors) (+ optional [`faults`](crate::faults))
+//! -> `shimmy_core::supervisor::SafeController` (supervisor + `Controller` + final limiter, the
+//! firmware's 1 kHz call) -> coil-current command -> plant; the data-driven mode meter
+//! (`shimmy_core::estimator::MarginEstimator`) runs on the validated encoder angles.
 //!
 //! Per control period `k` (t = k dt):
-//! 1. the sensors read the true state at t (encoder angles, speed, coil current);
-//! 2. `Controller::step` turns the measurement into a current command;
-//! 3. the mode meter takes the sample (its 100 Hz outputs are recorded);
+//! 1. the sensors read the true state at t (encoder angles with status bits, speed with its
+//!    qualifier, coil current); a fault plan may rewrite the reading or lose the frame (then
+//!    the previous command is held and nothing below runs);
+//! 2. `SafeController::step` validates the raw frame and turns it into a current command
+//!    (`LoopConfig::supervised == false`: the bare `Controller`, for negative tests);
+//! 3. the mode meter takes the validated sample (its 100 Hz outputs are recorded);
 //! 4. observers (e.g. a margin pipeline or a monitor) see everything of the sample;
 //! 5. the plant advances over [t, t + dt) with the command and the scenario's inputs held.
 //!
@@ -14,14 +18,19 @@
 //! needed for metrics and the [`RunMetrics`].
 
 use crate::disturbance::Scenario;
+use crate::faults::{FaultPlan, FaultSpec};
 use crate::integrator::IntegrateError;
 use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
-use crate::sensors::{Measurement, SensorConfig, Sensors, Truth};
+use crate::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
 use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
 use shimmy_core::params::PlantParams;
+use shimmy_core::supervisor::{
+    FaultKind, FaultRecord, FaultSet, MarginStatus, Mode, SafeController, SafeOutput,
+    SupervisorEvent, SupervisorParams,
+};
 
 /// What sits on the track rod and drives it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -75,6 +84,13 @@ pub struct LoopConfig {
     pub coil_resistance_ohm: f64,
     /// Initial plant state.
     pub x0: State,
+    /// Injected faults (none by default).
+    pub faults: Vec<FaultSpec>,
+    /// Supervisor thresholds.
+    pub supervisor: SupervisorParams,
+    /// Run the supervised `SafeController` (default). `false`: the bare `Controller` on the
+    /// measured angles (no validation) -- only to show what the supervisor prevents.
+    pub supervised: bool,
 }
 
 impl LoopConfig {
@@ -95,6 +111,9 @@ impl LoopConfig {
                 shimmy_core::control::actuator::CoilParams::default().r_coil_ohm,
             ),
             x0: [0.0; crate::plant::N_STATE],
+            faults: Vec::new(),
+            supervisor: SupervisorParams::default(),
+            supervised: true,
         }
     }
 }
@@ -112,8 +131,10 @@ pub struct SampleRecord<'a> {
     pub inputs: &'a Inputs,
     /// What the firmware read.
     pub meas: &'a Measurement,
-    /// The controller's output.
+    /// The controller's output (in fail-safe: the fixed command with default fields).
     pub control: &'a ControlOutput,
+    /// The supervised step's output (`None` for a lost frame or an unsupervised run).
+    pub safe: Option<&'a SafeOutput>,
     /// The mode meter's output, on the samples where it produced one.
     pub meter: Option<&'a MeterOutput>,
     /// Damper force at t [N].
@@ -316,6 +337,37 @@ pub fn high_pass(x: &[f64], fc_hz: f64, dt_s: f64) -> Vec<f64> {
         .collect()
 }
 
+/// What the supervisor saw and did during a run.
+#[derive(Clone, Debug, Default)]
+pub struct FaultLog {
+    /// First time a fault was detected in a frame [s].
+    pub first_detect_s: Option<f64>,
+    /// First time the supervisor counted a missed sample [s].
+    pub first_missed_s: Option<f64>,
+    /// First time in Degraded [s].
+    pub first_degraded_s: Option<f64>,
+    /// First time in FailSafe [s].
+    pub first_failsafe_s: Option<f64>,
+    /// Worst mode seen.
+    pub worst_mode: Mode,
+    /// Mode of the last frame.
+    pub final_mode: Mode,
+    /// Every fault detected at least once.
+    pub detected: FaultSet,
+    /// Active faults at the end.
+    pub final_faults: FaultSet,
+    /// Counters of every fault kind that was detected.
+    pub records: Vec<(FaultKind, FaultRecord)>,
+    /// Supervisor events with their simulation time [s].
+    pub events: Vec<(f64, SupervisorEvent)>,
+    /// Frames lost by the fault plan (command held).
+    pub lost_frames: u64,
+    /// Samples the supervisor counted as missing.
+    pub missed_samples: u32,
+    /// Samples whose command was NaN or outside [0, i_max] (the output contract broken).
+    pub invalid_commands: u64,
+}
+
 /// Result of one run.
 #[derive(Clone, Debug, Default)]
 pub struct LoopResult {
@@ -329,6 +381,8 @@ pub struct LoopResult {
     pub sim_s: f64,
     /// Wall-clock time of the run [s].
     pub wall_s: f64,
+    /// Supervisor record (empty for unsupervised runs, except `invalid_commands`).
+    pub faults: FaultLog,
 }
 
 impl LoopResult {
@@ -397,7 +451,18 @@ pub fn run(
     let plant = Plant::new(cfg.plant, damper);
     let mut sim = Simulator::with_method(plant, cfg.x0, cfg.method);
     let mut ctl = Controller::new(kind, cfg.control);
+    let mut safe = SafeController::new(kind, cfg.control, cfg.supervisor);
     let mut sensors = Sensors::new(cfg.sensors);
+    if !cfg.faults.is_empty() {
+        sensors.fault = Some(Box::new(FaultPlan::new(
+            cfg.faults.clone(),
+            cfg.sensors.seed,
+        )));
+    }
+    let no_damper = matches!(cfg.arm, Arm::NoDamper);
+    let i_max = cfg.control.limits.i_max_a;
+    // Command applied over the previous period (held across lost frames).
+    let mut held = ControlOutput::default();
     let mut meter = if cfg.estimator {
         MarginEstimator::<f32>::new(EstimatorConfig::default()).ok()
     } else {
@@ -417,45 +482,80 @@ pub fn run(
     for k in 0..n {
         let t = k as f64 * cfg.dt_s;
         let x = *sim.state();
-        let coil = if matches!(cfg.arm, Arm::NoDamper) {
-            0.0
-        } else {
-            x[idx::U]
+        let coil_state = sensors.coil_state(t);
+        let coil = if no_damper { 0.0 } else { x[idx::U] };
+        // What the shunt sees: the coil current, or with a shorted coil the driver's current
+        // through the short (no L/R lag), `ratio` x the command held over the last period.
+        let coil_meas = match coil_state {
+            CoilState::Short { ratio } if !no_damper => ratio * f64::from(held.current_cmd_a),
+            _ => coil,
         };
         let mut inputs = scenario.inputs(t, cfg.dt_s);
-        let meas = sensors.sample(
+        let mut meas = sensors.sample(
             t,
             &Truth {
                 psi_l_rad: x[idx::PSI_L],
                 psi_r_rad: x[idx::PSI_R],
                 speed_mps: inputs.speed_mps,
-                coil_current_a: coil,
+                coil_current_a: coil_meas,
             },
         );
-        let out = ctl.step(&ControlInput {
-            t_s: t as f32,
-            dt_s: cfg.dt_s as f32,
-            psi_l_rad: meas.psi_l_rad,
-            psi_r_rad: meas.psi_r_rad,
-            speed_mps: meas.speed_mps,
-            coil_current_a: meas.coil_current_a,
-        });
-        inputs.current_cmd_a = if matches!(cfg.arm, Arm::NoDamper) {
-            0.0
+        if no_damper {
+            // No coil, no current sensor.
+            meas.coil_current_a = None;
+        }
+        let mut safe_out = None;
+        let out = if meas.lost {
+            res.faults.lost_frames += 1;
+            held
+        } else if cfg.supervised {
+            let t_us = ((t * 1e6).round() as u64) as u32;
+            let o = safe.step(&meas.raw_frame(t_us), MarginStatus::NotUsed);
+            log_verdict(&mut res.faults, &mut safe, &o, t);
+            safe_out = Some(o);
+            let mut c = o.control.unwrap_or_default();
+            c.current_cmd_a = o.current_cmd_a;
+            c
         } else {
-            f64::from(out.current_cmd_a)
-        };
-        let mo = meter.as_mut().and_then(|m| {
-            m.push(&Sample {
+            ctl.step(&ControlInput {
+                t_s: t as f32,
+                dt_s: cfg.dt_s as f32,
                 psi_l_rad: meas.psi_l_rad,
                 psi_r_rad: meas.psi_r_rad,
-                wheel: WheelOrder::Speed {
-                    speed_mps: meas.speed_mps,
-                    radius_m: radius,
-                },
-                damper_cmd: out.current_cmd_a,
+                speed_mps: meas.speed_mps,
+                coil_current_a: meas.coil_current_a,
             })
-        });
+        };
+        held = out;
+        if !(out.current_cmd_a.is_finite() && (0.0..=i_max).contains(&out.current_cmd_a)) {
+            res.faults.invalid_commands += 1;
+        }
+        // Open or shorted coil: no current through the coil, whatever is commanded. A NaN
+        // command (only possible unsupervised) drives nothing either.
+        inputs.current_cmd_a = match coil_state {
+            _ if no_damper => 0.0,
+            CoilState::Open | CoilState::Short { .. } => 0.0,
+            CoilState::Healthy if out.current_cmd_a.is_finite() => f64::from(out.current_cmd_a),
+            CoilState::Healthy => 0.0,
+        };
+        let wheel = WheelOrder::Speed {
+            speed_mps: meas.speed_mps,
+            radius_m: radius,
+        };
+        let sample = match (&safe_out, meas.lost) {
+            (_, true) => None,
+            (Some(o), _) => SafeController::estimator_sample(o, wheel),
+            (None, _) => Some(Sample {
+                psi_l_rad: meas.psi_l_rad,
+                psi_r_rad: meas.psi_r_rad,
+                wheel,
+                damper_cmd: out.current_cmd_a,
+            }),
+        };
+        let mo = match (meter.as_mut(), sample) {
+            (Some(m), Some(smp)) => m.push(&smp),
+            _ => None,
+        };
         if let Some(o) = &mo {
             if o.slow.valid {
                 zeta = f64::from(o.slow.zeta);
@@ -486,6 +586,7 @@ pub fn run(
                 inputs: &inputs,
                 meas: &meas,
                 control: &out,
+                safe: safe_out.as_ref(),
                 meter: mo.as_ref(),
                 damper_force_n: f_d,
             });
@@ -512,5 +613,52 @@ pub fn run(
     }
     res.sim_s = n as f64 * cfg.dt_s;
     res.wall_s = wall.elapsed().as_secs_f64();
+    if cfg.supervised {
+        let sup = safe.supervisor();
+        res.faults.final_mode = sup.mode();
+        res.faults.final_faults = sup.faults();
+        res.faults.missed_samples = sup.missed_samples();
+        res.faults.records = FaultKind::ALL
+            .into_iter()
+            .map(|k| (k, sup.record(k)))
+            .filter(|(_, r)| r.frames > 0)
+            .collect();
+    }
     Ok(res)
+}
+
+fn mode_rank(m: Mode) -> u8 {
+    match m {
+        Mode::Normal => 0,
+        Mode::Degraded => 1,
+        Mode::FailSafe => 2,
+    }
+}
+
+/// Books one supervised step into the fault log.
+fn log_verdict(log: &mut FaultLog, safe: &mut SafeController, o: &SafeOutput, t_s: f64) {
+    let v = &o.verdict;
+    if !v.detected.is_empty() {
+        log.first_detect_s.get_or_insert(t_s);
+        for k in v.detected.iter() {
+            log.detected.insert(k);
+        }
+    }
+    if safe.supervisor().missed_samples() > 0 {
+        log.first_missed_s.get_or_insert(t_s);
+    }
+    match v.mode {
+        Mode::Degraded => {
+            log.first_degraded_s.get_or_insert(t_s);
+        }
+        Mode::FailSafe => {
+            log.first_failsafe_s.get_or_insert(t_s);
+        }
+        Mode::Normal => {}
+    }
+    if mode_rank(v.mode) > mode_rank(log.worst_mode) {
+        log.worst_mode = v.mode;
+    }
+    log.events
+        .extend(safe.supervisor_mut().drain_events().map(|e| (t_s, e)));
 }

@@ -7,6 +7,8 @@ pub mod compare;
 pub mod damper_equiv;
 pub mod demo;
 pub mod disturbance;
+pub mod fault_campaign;
+pub mod faults;
 pub mod integrator;
 pub mod margin_cmd;
 pub mod paramfile;

@@ -42,6 +42,9 @@ enum Command {
     /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
     /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
     Margin(shimmy_sim::margin_cmd::MarginArgs),
+    /// Fault campaign: every sensor/coil fault (and combinations) injected into the supervised
+    /// ASMC loop inside and outside the Hopf window: detection time, safe state, suppression.
+    Faults(shimmy_sim::fault_campaign::FaultsArgs),
 }
 
 fn main() -> Result<()> {
@@ -56,6 +59,7 @@ fn main() -> Result<()> {
         Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
         Some(Command::Run(a)) => shimmy_sim::run_cmd::command(&a),
         Some(Command::Margin(a)) => shimmy_sim::margin_cmd::command(&a),
+        Some(Command::Faults(a)) => shimmy_sim::fault_campaign::command(&a),
         None => shimmy_sim::demo::command(),
     }
 }

@@ -45,6 +45,7 @@ pub fn loop_config(spec: &ScenarioSpec) -> Result<LoopConfig> {
     cfg.sensors.seed = spec.seed;
     cfg.record_every = spec.trace_every;
     cfg.x0 = initial_yaw(spec.initial_yaw_rad);
+    cfg.faults = spec.faults.clone();
     Ok(cfg)
 }
 
@@ -121,7 +122,42 @@ pub fn command(a: &RunArgs) -> Result<()> {
         time_png.display(),
         margin_png.display()
     );
+    if !spec.faults.is_empty() {
+        print_faults(&spec, &r);
+    }
     Ok(())
+}
+
+/// The injected faults and what the supervisor did about them.
+fn print_faults(spec: &ScenarioSpec, r: &LoopResult) {
+    let log = &r.faults;
+    println!("  injected faults:");
+    for f in &spec.faults {
+        let end = f.end_s.map_or("end".into(), |e| format!("{e} s"));
+        println!("    {:<22} {} s .. {end}", f.mode.label(), f.start_s);
+    }
+    let t = |x: Option<f64>| x.map_or("-".into(), |v| format!("{v:.3} s"));
+    println!(
+        "  supervisor: first detection {}, degraded from {}, fail-safe from {}, worst mode {}, final mode {}",
+        t(log.first_detect_s),
+        t(log.first_degraded_s),
+        t(log.first_failsafe_s),
+        log.worst_mode.name(),
+        log.final_mode.name()
+    );
+    for (k, rec) in &log.records {
+        println!(
+            "    {:<20} {:>6} frames, {} activation(s), active at the end: {}",
+            k.name(),
+            rec.frames,
+            rec.activations,
+            rec.active
+        );
+    }
+    println!(
+        "  lost frames {}, missed samples {}, invalid commands {}",
+        log.lost_frames, log.missed_samples, log.invalid_commands
+    );
 }
 
 /// Mode-meter damping estimate (slow, +- one sigma) over time next to the damping ratio of the

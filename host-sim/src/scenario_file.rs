@@ -45,9 +45,24 @@
 //! [output]
 //! dir = "out/ramp"
 //! trace_every = 5                 # record every n-th 1 ms period
+//!
+//! [[fault]]                       # any number; see `crate::faults` for what each does
+//! kind = "stuck"                  # stuck | noise | dropout | spike | nan | parity | error-flag |
+//!                                 # speed-lost | speed-implausible | frame-loss | coil-open | coil-short
+//! sensor = "left"                 # encoder faults only: left | right | both (default left)
+//! start_s = 5.0                   # active from (0 ..= duration_s)
+//! end_s = 8.0                     # optional, active until (start_s ..= duration_s)
+//! # kind-specific (only allowed with their kind):
+//! # std_deg = 2.0                 noise: standard deviation (0 ..= 90 deg)
+//! # amplitude_deg = 20.0          spike: height (0 ..= 180 deg)
+//! # period_samples = 100          dropout | spike | frame-loss: pattern period (1 ..= 100000)
+//! # length_samples = 3            dropout | frame-loss: bad samples per period (1 ..= period)
+//! # speed_kmh = 300.0             speed-implausible: the reported speed (-500 ..= 1000 km/h)
+//! # ratio = 5.0                   coil-short: measured / commanded current (1 ..= 100)
 //! ```
 
 use crate::disturbance::{DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile};
+use crate::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::paramfile;
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
@@ -92,6 +107,8 @@ pub struct ScenarioSpec {
     pub out_dir: PathBuf,
     /// Trace decimation (every n-th period).
     pub trace_every: usize,
+    /// Injected faults (`[[fault]]`).
+    pub faults: Vec<FaultSpec>,
 }
 
 #[derive(Deserialize)]
@@ -112,6 +129,23 @@ struct File {
     driver: Option<DriverSection>,
     sensors: Option<SensorSection>,
     output: Option<OutputSection>,
+    #[serde(default)]
+    fault: Vec<FaultSection>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FaultSection {
+    kind: String,
+    sensor: Option<String>,
+    start_s: f64,
+    end_s: Option<f64>,
+    std_deg: Option<f64>,
+    amplitude_deg: Option<f64>,
+    period_samples: Option<f64>,
+    length_samples: Option<f64>,
+    speed_kmh: Option<f64>,
+    ratio: Option<f64>,
 }
 
 fn default_seed() -> u64 {
@@ -410,6 +444,12 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         None => (None, 5),
     };
     let out_dir = out_dir.unwrap_or_else(|| PathBuf::from("out").join(sanitize(&name)));
+    let faults = f
+        .fault
+        .iter()
+        .enumerate()
+        .map(|(i, fs)| parse_fault(i, fs, duration_s))
+        .collect::<Result<Vec<_>>>()?;
 
     Ok(ScenarioSpec {
         name,
@@ -424,6 +464,136 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         encoder_noise_lsb,
         out_dir,
         trace_every,
+        faults,
+    })
+}
+
+/// Validates one `[[fault]]` entry.
+fn parse_fault(i: usize, f: &FaultSection, duration_s: f64) -> Result<FaultSpec> {
+    let field = |name: &str| format!("fault[{i}].{name}");
+    let kind = f.kind.as_str();
+    if !KINDS.contains(&kind) {
+        bail!(
+            "field `{}` = {:?}: allowed: {}",
+            field("kind"),
+            f.kind,
+            KINDS.join(", ")
+        );
+    }
+    let encoder = matches!(
+        kind,
+        "stuck" | "noise" | "dropout" | "spike" | "nan" | "parity" | "error-flag"
+    );
+    let side = match (&f.sensor, encoder) {
+        (None, _) => Side::Left,
+        (Some(s), true) => Side::from_name(s).ok_or_else(|| {
+            anyhow::anyhow!(
+                "field `{}` = {s:?}: allowed: left, right, both",
+                field("sensor")
+            )
+        })?,
+        (Some(_), false) => bail!(
+            "field `{}` only applies to encoder faults (stuck, noise, dropout, spike, nan, parity, error-flag), not to `{kind}`",
+            field("sensor")
+        ),
+    };
+    let start_s = in_range(&field("start_s"), f.start_s, 0.0, duration_s, "s")?;
+    let end_s = match f.end_s {
+        Some(e) => Some(in_range(&field("end_s"), e, start_s, duration_s, "s")?),
+        None => None,
+    };
+    // Kind-specific parameters: required for their kind, rejected for every other.
+    let param = |name: &str,
+                 value: Option<f64>,
+                 kinds: &[&str],
+                 default: Option<f64>,
+                 lo: f64,
+                 hi: f64,
+                 unit: &str|
+     -> Result<f64> {
+        match (value, kinds.contains(&kind)) {
+            (Some(v), true) => in_range(&field(name), v, lo, hi, unit),
+            (None, true) => default.ok_or_else(|| {
+                anyhow::anyhow!("field `{}` is required for kind `{kind}`", field(name))
+            }),
+            (Some(_), false) => bail!(
+                "field `{}` only applies to kind {}, not to `{kind}`",
+                field(name),
+                kinds.join(" / ")
+            ),
+            (None, false) => Ok(0.0),
+        }
+    };
+    let std_deg = param("std_deg", f.std_deg, &["noise"], None, 0.0, 90.0, "deg")?;
+    let amp_deg = param(
+        "amplitude_deg",
+        f.amplitude_deg,
+        &["spike"],
+        None,
+        0.0,
+        180.0,
+        "deg",
+    )?;
+    let period = param(
+        "period_samples",
+        f.period_samples,
+        &["dropout", "spike", "frame-loss"],
+        None,
+        1.0,
+        100_000.0,
+        "samples",
+    )?;
+    let length = param(
+        "length_samples",
+        f.length_samples,
+        &["dropout", "frame-loss"],
+        None,
+        1.0,
+        period.max(1.0),
+        "samples (at most period_samples)",
+    )?;
+    for (name, v) in [("period_samples", period), ("length_samples", length)] {
+        if v.fract() != 0.0 {
+            bail!("field `{}` = {v}: must be a whole number", field(name));
+        }
+    }
+    let speed_kmh = param(
+        "speed_kmh",
+        f.speed_kmh,
+        &["speed-implausible"],
+        None,
+        -500.0,
+        1000.0,
+        "km/h",
+    )?;
+    let ratio = param("ratio", f.ratio, &["coil-short"], Some(5.0), 1.0, 100.0, "")?;
+    let (period, length) = (period as u32, length as u32);
+    let mode = match kind {
+        "stuck" => FaultMode::Stuck(side),
+        "noise" => FaultMode::Noise(side, std_deg.to_radians()),
+        "dropout" => FaultMode::Dropout {
+            side,
+            period,
+            length,
+        },
+        "spike" => FaultMode::Spike {
+            side,
+            period,
+            amplitude_rad: amp_deg.to_radians(),
+        },
+        "nan" => FaultMode::Nan(side),
+        "parity" => FaultMode::Parity(side),
+        "error-flag" => FaultMode::ErrorFlag(side),
+        "speed-lost" => FaultMode::SpeedLost,
+        "speed-implausible" => FaultMode::SpeedImplausible(kmh_to_mps(speed_kmh)),
+        "frame-loss" => FaultMode::FrameLoss { period, length },
+        "coil-open" => FaultMode::CoilOpen,
+        _ => FaultMode::CoilShort(ratio),
+    };
+    Ok(FaultSpec {
+        mode,
+        start_s,
+        end_s,
     })
 }
 
@@ -583,6 +753,98 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             "{base}[[impulse]]\nt_s = 20.0\nduration_s = 0.02\npeak_nm = 1.0\n"
         ));
         assert!(e.contains("impulse[0].t_s"), "{e}");
+    }
+
+    #[test]
+    fn fault_entries_parse_and_bad_ones_name_field_and_range() {
+        let base = "duration_s = 10.0\n[speed]\nconstant_kmh = 50.0\n";
+        let s = parse(
+            &format!(
+                "{base}[[fault]]\nkind = \"stuck\"\nsensor = \"right\"\nstart_s = 2.0\nend_s = 4.0\n\
+                 [[fault]]\nkind = \"dropout\"\nstart_s = 1.0\nperiod_samples = 10\nlength_samples = 3\n\
+                 [[fault]]\nkind = \"coil-short\"\nstart_s = 5.0\n"
+            ),
+            "x",
+        )
+        .unwrap();
+        assert_eq!(s.faults.len(), 3);
+        assert_eq!(s.faults[0].mode, FaultMode::Stuck(Side::Right));
+        assert_eq!(s.faults[0].end_s, Some(4.0));
+        assert_eq!(
+            s.faults[1].mode,
+            FaultMode::Dropout {
+                side: Side::Left,
+                period: 10,
+                length: 3
+            }
+        );
+        assert_eq!(s.faults[2].mode, FaultMode::CoilShort(5.0));
+        let cases = [
+            (
+                "kind = \"melt\"\nstart_s = 1.0",
+                "fault[0].kind",
+                "coil-short",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 11.0",
+                "fault[0].start_s",
+                "0 ..= 10",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 5.0\nend_s = 4.0",
+                "fault[0].end_s",
+                "5 ..= 10",
+            ),
+            (
+                "kind = \"nan\"\nsensor = \"middle\"\nstart_s = 1.0",
+                "fault[0].sensor",
+                "both",
+            ),
+            (
+                "kind = \"speed-lost\"\nsensor = \"left\"\nstart_s = 1.0",
+                "fault[0].sensor",
+                "encoder faults",
+            ),
+            (
+                "kind = \"noise\"\nstart_s = 1.0",
+                "fault[0].std_deg",
+                "required",
+            ),
+            (
+                "kind = \"noise\"\nstart_s = 1.0\nstd_deg = 200.0",
+                "fault[0].std_deg",
+                "0 ..= 90",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 1.0\nstd_deg = 1.0",
+                "fault[0].std_deg",
+                "only applies",
+            ),
+            (
+                "kind = \"dropout\"\nstart_s = 1.0\nperiod_samples = 10\nlength_samples = 11",
+                "fault[0].length_samples",
+                "1 ..= 10",
+            ),
+            (
+                "kind = \"frame-loss\"\nstart_s = 1.0\nperiod_samples = 10.5\nlength_samples = 1",
+                "fault[0].period_samples",
+                "whole",
+            ),
+            (
+                "kind = \"coil-short\"\nstart_s = 1.0\nratio = 0.5",
+                "fault[0].ratio",
+                "1 ..= 100",
+            ),
+            (
+                "kind = \"nan\"\nstart_s = 1.0\nside = \"left\"",
+                "side",
+                "unknown",
+            ),
+        ];
+        for (entry, field, range) in cases {
+            let e = err(&format!("{base}[[fault]]\n{entry}\n"));
+            assert!(e.contains(field) && e.contains(range), "{entry}: {e}");
+        }
     }
 
     #[test]

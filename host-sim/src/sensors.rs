@@ -3,7 +3,8 @@
 //!
 //! Everything is seeded (`rand_chacha`), so a run is reproducible bit for bit. Faults (stuck,
 //! dropout, NaN, spikes, ...) are not modelled here: [`Sensors::fault`] is the place where a
-//! [`FaultInjector`] rewrites a [`Measurement`] after the healthy sensor models ran.
+//! [`FaultInjector`] (see [`crate::faults`]) rewrites a [`Measurement`] after the healthy sensor
+//! models ran, and where the closed loop asks for the state of the coil ([`CoilState`]).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -95,8 +96,30 @@ pub struct Truth {
     pub coil_current_a: f64,
 }
 
+/// Status bits of one encoder transaction (as in the AS5047P frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EncoderStatus {
+    /// The bus transaction completed.
+    pub read_ok: bool,
+    /// The frame's parity matched.
+    pub parity_ok: bool,
+    /// The sensor's own error flag.
+    pub error_flag: bool,
+}
+
+impl Default for EncoderStatus {
+    /// A healthy transaction.
+    fn default() -> Self {
+        EncoderStatus {
+            read_ok: true,
+            parity_ok: true,
+            error_flag: false,
+        }
+    }
+}
+
 /// What the firmware reads at one sample (f32, as on the target).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measurement {
     /// Left encoder angle [rad], wrapped to (-pi, pi].
     pub psi_l_rad: f32,
@@ -106,6 +129,68 @@ pub struct Measurement {
     pub speed_mps: f32,
     /// Coil current [A] (`None`: no current sensor or a read failure).
     pub coil_current_a: Option<f32>,
+    /// Left encoder status bits.
+    pub left_status: EncoderStatus,
+    /// Right encoder status bits.
+    pub right_status: EncoderStatus,
+    /// The speed source marks its value valid (CAN signal qualifier / tone-wheel timeout).
+    pub speed_valid: bool,
+    /// The whole frame is lost (the 1 kHz task did not get this sample; the command is held).
+    pub lost: bool,
+}
+
+impl Default for Measurement {
+    /// Zero readings with healthy status bits.
+    fn default() -> Self {
+        Measurement {
+            psi_l_rad: 0.0,
+            psi_r_rad: 0.0,
+            speed_mps: 0.0,
+            coil_current_a: None,
+            left_status: EncoderStatus::default(),
+            right_status: EncoderStatus::default(),
+            speed_valid: true,
+            lost: false,
+        }
+    }
+}
+
+impl Measurement {
+    /// The core's raw frame of this measurement at time stamp `t_us`.
+    pub fn raw_frame(&self, t_us: u32) -> shimmy_core::supervisor::RawFrame {
+        use shimmy_core::supervisor::{EncoderReading, RawFrame};
+        let enc = |a: f32, s: EncoderStatus| EncoderReading {
+            angle_rad: a,
+            read_ok: s.read_ok,
+            parity_ok: s.parity_ok,
+            error_flag: s.error_flag,
+        };
+        RawFrame {
+            t_us,
+            left: enc(self.psi_l_rad, self.left_status),
+            right: enc(self.psi_r_rad, self.right_status),
+            speed_mps: self.speed_mps,
+            speed_valid: self.speed_valid,
+            coil_current_a: self.coil_current_a,
+        }
+    }
+}
+
+/// State of the coil and its drive (a plant-side fault the measurement then shows).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum CoilState {
+    /// The coil carries the commanded current (through its L/R lag).
+    #[default]
+    Healthy,
+    /// Open circuit: no current flows, the damper is passive-off, the shunt reads ~0.
+    Open,
+    /// Terminals shorted: the driver's current bypasses the coil (the damper is passive-off)
+    /// and the shunt reads `ratio` x the command (the short's resistance is `1/ratio` of the
+    /// coil's), up to the ADC's full scale.
+    Short {
+        /// Measured / commanded current.
+        ratio: f64,
+    },
 }
 
 /// A fault injector: rewrites the healthy measurement (sample index `k`, time `t_s`).
@@ -113,6 +198,11 @@ pub struct Measurement {
 pub trait FaultInjector: Send {
     /// Applies the fault(s) active at this sample.
     fn apply(&mut self, k: u64, t_s: f64, m: &mut Measurement);
+
+    /// The coil's state at `t_s` (coil open/short faults; healthy by default).
+    fn coil_state(&self, _t_s: f64) -> CoilState {
+        CoilState::Healthy
+    }
 }
 
 /// The sensor set of one vehicle.
@@ -173,6 +263,13 @@ impl Sensors {
         &self.cfg
     }
 
+    /// The coil's state at `t_s` according to the fault injector (healthy without one).
+    pub fn coil_state(&self, t_s: f64) -> CoilState {
+        self.fault
+            .as_ref()
+            .map_or(CoilState::Healthy, |f| f.coil_state(t_s))
+    }
+
     fn normal(&mut self) -> f64 {
         StandardNormal.sample(&mut self.rng)
     }
@@ -215,6 +312,7 @@ impl Sensors {
             psi_r_rad: enc(pr, n_r),
             speed_mps: v_meas as f32,
             coil_current_a: Some(i_meas as f32),
+            ..Measurement::default()
         };
         if let Some(f) = &mut self.fault {
             f.apply(self.k, t_s, &mut m);

@@ -9,16 +9,20 @@
 //!                                against the budgets (flash <= 96 KiB, static RAM <= 24 KiB)
 //! cargo xtask conformance        replay the committed sensor trace on the host and under QEMU
 //!                                and require bit-identical controller/estimator outputs
+//! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
+//!                                instrumentation on the pinned stable toolchain and run them for
+//!                                N s (default 60); a crash fails and prints the reproducer
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
 //!                                stack high-water mark
 //! ```
 //!
-//! Missing system tools are installed when this runs as root with apt (qemu-system-arm) or
+//! Missing system tools are installed when this runs as root with apt (qemu-system-arm, g++) or
 //! rustup (the thumbv7em target); otherwise it stops and says what to install.
 
 mod conformance;
 mod elf;
+mod fuzz;
 mod qemu;
 
 use std::path::{Path, PathBuf};
@@ -36,8 +40,11 @@ fn main() -> ExitCode {
         Some("size") => size(),
         Some("bench") => bench().map(|_| ()),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
+        Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
-            eprintln!("usage: cargo xtask <test | qemu [BIN] | size | bench | conformance>");
+            eprintln!(
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | fuzz [--seconds N]>"
+            );
             return ExitCode::from(2);
         }
     };
@@ -78,6 +85,7 @@ fn test() -> Result<(), String> {
         ("host tests (cargo test --workspace)", || {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
+        ("fuzz safe_step (libFuzzer, stable, 60 s)", fuzz::step),
         ("firmware release build + size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;

@@ -534,3 +534,70 @@ proptest! {
         }
     }
 }
+
+/// A wheel-speed signal with 0.05 m/s rms noise per 1 ms sample (the simulator's sensor model)
+/// raises no `SpeedJump` with the 0.5 m/s noise tolerance; without it (tolerance 0) the same
+/// signal is flagged almost at once (1.5 g x 2 ms = 0.03 m/s is below the noise).
+#[test]
+fn speed_noise_is_not_a_jump_but_needs_the_tolerance() {
+    // Deterministic pseudo-noise, uniform in +-0.0866 m/s (0.05 m/s rms).
+    let mut state = 12345u32;
+    let mut noise = move || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f32 / (1u32 << 24) as f32 * 0.1732 - 0.0866
+    };
+    let mut jumps = [0u32; 2];
+    for (i, tol) in [0.5f32, 0.0].into_iter().enumerate() {
+        let p = SupervisorParams {
+            speed_noise_tol_mps: tol,
+            ..SupervisorParams::default()
+        };
+        let mut s = SafeController::new(ControllerKind::Asmc, ControlParams::default(), p);
+        for k in 0..2000 {
+            let f = frame(k, 20.0 + noise());
+            let o = s.step(&f, MarginStatus::NotUsed);
+            if o.verdict.detected.contains(FaultKind::SpeedJump) {
+                jumps[i] += 1;
+            }
+        }
+    }
+    assert_eq!(jumps[0], 0, "with the tolerance");
+    assert!(jumps[1] > 100, "without the tolerance: {}", jumps[1]);
+}
+
+/// A short while the command is at its 2 A maximum: the ADC saturates at its 2.5 A full scale
+/// (= command + `coil_over_a`, so never "greater"). The full-scale rule catches it; with the
+/// rule disabled (full scale out of reach) it goes unnoticed.
+#[test]
+fn short_at_max_command_is_seen_through_a_saturated_adc() {
+    for (fs, expect) in [(2.5f32, true), (f32::INFINITY, false)] {
+        let p = SupervisorParams {
+            coil_full_scale_a: fs,
+            ..SupervisorParams::default()
+        };
+        let mut s = SafeController::new(
+            ControllerKind::PassiveOn { current_a: 2.0 },
+            ControlParams::default(),
+            p,
+        );
+        // Reach 2 A with a healthy coil (first-order lag, L/R = 5 ms).
+        let mut i = 0.0f32;
+        for k in 0..300 {
+            let mut f = frame(k, 20.0);
+            i += (s.last_command_a() - i) * 0.2;
+            f.coil_current_a = Some(i);
+            s.step(&f, MarginStatus::NotUsed);
+        }
+        assert!((s.last_command_a() - 2.0).abs() < 1e-6);
+        for k in 300..400 {
+            let mut f = frame(k, 20.0);
+            f.coil_current_a = Some(2.5);
+            s.step(&f, MarginStatus::NotUsed);
+        }
+        assert_eq!(
+            s.supervisor().faults().contains(FaultKind::CoilShort),
+            expect,
+            "full scale {fs}"
+        );
+    }
+}
