@@ -42,6 +42,9 @@ enum Command {
     /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
     /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
     Margin(shimmy_sim::margin_cmd::MarginArgs),
+    /// Run scenario files (default: the standard set in host-sim/scenarios/) and write one
+    /// self-contained report: Markdown page, PNG plots, metrics table and CSV traces.
+    Report(shimmy_sim::report_cmd::ReportArgs),
 }
 
 fn main() -> Result<()> {
@@ -56,6 +59,7 @@ fn main() -> Result<()> {
         Some(Command::Compare(a)) => shimmy_sim::compare::command(&a),
         Some(Command::Run(a)) => shimmy_sim::run_cmd::command(&a),
         Some(Command::Margin(a)) => shimmy_sim::margin_cmd::command(&a),
+        Some(Command::Report(a)) => shimmy_sim::report_cmd::command(&a),
         None => shimmy_sim::demo::command(),
     }
 }
