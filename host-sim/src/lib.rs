@@ -20,3 +20,4 @@ pub mod scenario_file;
 pub mod sensors;
 pub mod stability_cmd;
 pub mod sweep;
+pub mod sweep_td;
