@@ -8,7 +8,9 @@ and eigenvalues the Rust results must match.
 
 usage: plant_scipy.py CASE.toml RESULT.json
 CASE.toml holds [plant] (parameter names as in core/src/params.rs), [damper] (Spencer model,
-already scaled) and [case] (speed, current, initial yaw, duration, sample times, sweep speeds).
+already scaled), [case] (speed, current, initial yaw, duration, sample times, sweep speeds) and
+optionally [ramp] (the demo's drive with a simple current law instead of the controller, for the
+closed-loop speed comparison; see rhs_ramp).
 """
 import json
 import sys
@@ -25,7 +27,7 @@ def tyre_force(p, a):
     return d * np.sin(p["c_s"] * np.arctan(b * a))
 
 
-def rhs(t, x, p, m, v, u_cmd):
+def rhs(t, x, p, m, v, u_cmd, tq=(0.0, 0.0)):
     psi_l, psi_r, phi, th, dpsi_l, dpsi_r, dphi, dth, a_l, a_r, u, y, z = x
     h = p["i_p"] * v / p["r"]
     f_l, f_r = tyre_force(p, a_l), tyre_force(p, a_r)
@@ -49,8 +51,8 @@ def rhs(t, x, p, m, v, u_cmd):
     ktr = p["k_tr"] * (psi_l - psi_r)
     return [
         dpsi_l, dpsi_r, dphi, dth,
-        (-p["c_k"] * dpsi_l - ktr + kd - trail * f_l - h * dphi - tq_d) / p["i_k"],
-        (-p["c_k"] * dpsi_r + ktr - trail * f_r - h * dphi - tq_d) / p["i_k"],
+        (-p["c_k"] * dpsi_l - ktr + kd - trail * f_l - h * dphi - tq_d + tq[0]) / p["i_k"],
+        (-p["c_k"] * dpsi_r + ktr - trail * f_r - h * dphi - tq_d + tq[1]) / p["i_k"],
         (-p["c_phi"] * dphi - p["k_phi"] * phi + p["h_r"] * (f_l + f_r)
          + h * (dpsi_l + dpsi_r)) / p["i_phi"],
         (-p["c_sw"] * dth - kd / p["i_s"]) / p["j_sw"],
@@ -58,6 +60,27 @@ def rhs(t, x, p, m, v, u_cmd):
         (v * (psi_r - a_r) + p["e"] * dpsi_r - p["h_r"] * dphi) / p["sigma"],
         du, dy, dz,
     ]
+
+
+def rhs_ramp(t, x, p, m, r):
+    """The demo's drive without its controller: speed ramp, wheel imbalance and a pothole as
+    yaw torques, and the coil current from a simple continuous state-feedback law
+    I = min(i_max, gain * |mean wheel-yaw rate|) evaluated inside the right-hand side (no
+    sampling, no sensors, no controller code, no estimator, no road noise)."""
+    t_r = r["t_ramp_s"]
+    tc = min(t, t_r)
+    v = r["v0_mps"] + (r["v1_mps"] - r["v0_mps"]) * tc / t_r
+    # Wheel angle: integral of v / R (ramp, then constant speed).
+    dist = r["v0_mps"] * tc + 0.5 * (r["v1_mps"] - r["v0_mps"]) * tc * tc / t_r
+    dist += max(t - t_r, 0.0) * r["v1_mps"]
+    th = dist / p["r"]
+    tq = [r["imbalance_nm"] * np.sin(th + ph) for ph in r["imbalance_phase_rad"]]
+    tau = t - r["pothole_t_s"]
+    if 0.0 <= tau < r["pothole_duration_s"]:
+        bump = r["pothole_nm"] * np.sin(np.pi * tau / r["pothole_duration_s"])
+        tq = [tq[0] + bump, tq[1] + bump]
+    u_cmd = min(r["i_max_a"], r["gain_a_per_radps"] * abs(0.5 * (x[4] + x[5])))
+    return rhs(t, x, p, m, v, u_cmd, tq)
 
 
 def linear_a(p, v):
@@ -109,7 +132,29 @@ def main():
     start = time.perf_counter()
     max_re = [float(np.max(np.linalg.eigvals(linear_a(p, v)).real)) for v in speeds]
     sweep_wall = time.perf_counter() - start
+    ramp = {}
+    if "ramp" in cfg:
+        r = cfg["ramp"]
+        # Three pieces so that the integrator cannot step over the 20 ms pothole.
+        t_p, d_p = r["pothole_t_s"], r["pothole_duration_s"]
+        edges = [0.0, t_p, t_p + d_p, r["duration_s"]]
+        x, nfev, peak = np.zeros(13), 0, 0.0
+        start = time.perf_counter()
+        for t0, t1 in zip(edges[:-1], edges[1:]):
+            sol_r = solve_ivp(rhs_ramp, (t0, t1), x, method=c["method"], rtol=r["rtol"],
+                              atol=r["atol"], args=(r["plant"], m, r))
+            if not sol_r.success:
+                sys.exit(f"solve_ivp (ramp) failed: {sol_r.message}")
+            x, nfev = sol_r.y[:, -1], nfev + int(sol_r.nfev)
+            peak = max(peak, float(np.max(np.abs(sol_r.y[0]))))
+        ramp_wall = time.perf_counter() - start
+        ramp = {
+            "ramp_wall_s": ramp_wall,
+            "ramp_rhs_evals": nfev,
+            "ramp_peak_psi_l_rad": peak,
+        }
     json.dump({
+        **ramp,
         "sim_wall_s": sim_wall,
         "rhs_evals": int(sol.nfev),
         "psi_l_rad": sol.y[0].tolist(),

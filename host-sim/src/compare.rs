@@ -534,15 +534,6 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
     Ok(())
 }
 
-const COLORS: [plotters::style::RGBColor; 6] = [
-    plotters::style::RGBColor(120, 120, 120),
-    plotters::style::RGBColor(220, 50, 32),
-    plotters::style::RGBColor(0, 114, 178),
-    plotters::style::RGBColor(230, 159, 0),
-    plotters::style::RGBColor(0, 158, 115),
-    plotters::style::RGBColor(204, 121, 167),
-];
-
 /// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
 pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
     use plotters::prelude::*;
@@ -587,31 +578,20 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
             .x_label_area_size(35)
             .y_label_area_size(60)
             .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
-        chart
-            .configure_mesh()
-            .x_desc("t [s]")
-            .y_desc(label)
-            .draw()?;
+        crate::plot_util::mesh(&mut chart, "t [s]", label)?;
         for (i, (name, r)) in runs.iter().enumerate() {
-            let c = COLORS[i % COLORS.len()];
+            let c = crate::plot_util::COLORS[i % crate::plot_util::COLORS.len()];
             let s = chart.draw_series(LineSeries::new(
                 r.trace.iter().map(|row| (row.t_s, get(row))),
                 c.stroke_width(1),
             ))?;
             if pi == 0 {
-                let name = name.to_string();
-                s.label(name).legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                });
+                s.label(name.to_string())
+                    .legend(crate::plot_util::line_marker(c, 2));
             }
         }
         if pi == 0 {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
+            crate::plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
     }
     root.present()?;

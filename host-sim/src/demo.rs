@@ -3,13 +3,15 @@
 //! meter running in the loop, and a self-contained Markdown report with plots and metrics.
 
 use crate::closed_loop::{self, Arm, LoopConfig, LoopResult, RunMetrics};
-use crate::compare::{fastest_growth_speed, plot_runs, pothole, road, POTHOLE_NM};
+use crate::compare::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use crate::disturbance::{Scenario, SpeedProfile};
+use crate::plot_util;
+use crate::report::{self, Report, ReportRun, Section};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet};
-use shimmy_core::stability::{hopf_crossings, CrossingKind};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
+use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -65,11 +67,7 @@ fn plot_meter(
             .x_label_area_size(35)
             .y_label_area_size(60)
             .build_cartesian_2d(v_lo..v_hi, lo..hi)?;
-        chart
-            .configure_mesh()
-            .x_desc("speed [km/h]")
-            .y_desc(label)
-            .draw()?;
+        plot_util::mesh(&mut chart, "speed [km/h]", label)?;
         if let Some((w0, w1)) = window_kmh {
             chart.draw_series(std::iter::once(Rectangle::new(
                 [(w0, lo), (w1, hi)],
@@ -87,31 +85,48 @@ fn plot_meter(
             });
             let s = chart.draw_series(pts.map(|p| Circle::new(p, 1, c.filled())))?;
             if pi == 0 {
-                s.label(name.to_string())
-                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+                s.label(name.to_string()).legend(plot_util::dot_marker(c));
             }
         }
         if pi == 0 {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
+            plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
     }
     root.present()?;
     Ok(())
 }
 
-/// Runs the demo and writes `report.md` with its plots into `o.out`.
-pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
-    let wall = std::time::Instant::now();
-    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+/// The demo's case: the nominal plant, the ramp scenario and the facts the report states.
+#[derive(Clone, Debug)]
+pub struct DemoCase {
+    /// The true (and nominal) plant.
+    pub plant: PlantParams,
+    /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
+    pub scenario: Scenario,
+    /// Hopf crossings of the plant without damper (1-50 m/s).
+    pub crossings: Vec<HopfCrossing>,
+    /// The no-damper Hopf window [km/h], when there is one.
+    pub window_kmh: Option<(f64, f64)>,
+    /// Speed of fastest shimmy growth [m/s] (where the pothole hits).
+    pub v_fastest_mps: f64,
+    /// Time of the pothole [s].
+    pub t_pothole_s: f64,
+}
+
+/// The demo's two arms with their report labels: damper off (0 A) and ASMC.
+pub const ARMS: [(&str, Arm); 2] = [
+    ("damper off (0 A)", Arm::Mr(ControllerKind::PassiveOff)),
+    ("ASMC", Arm::Mr(ControllerKind::Asmc)),
+];
+
+/// Builds the demo's case for a ramp of `ramp_s` seconds (all numbers computed).
+pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
     let p = ParamSet::Nominal.params();
-    // The nominal Hopf window (no damper), computed.
-    let crossings = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
-        .map_err(|e| anyhow::anyhow!("hopf_crossings: {e:?}"))?;
+    let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
+        .map_err(|e| anyhow::anyhow!("hopf_crossings: {e:?}"))?
+        .iter()
+        .copied()
+        .collect();
     let onset = crossings.iter().find(|c| c.kind == CrossingKind::Onset);
     let offset = crossings.iter().find(|c| c.kind != CrossingKind::Onset);
     let window_kmh = match (onset, offset) {
@@ -124,57 +139,69 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
         v0_mps: v0,
         v1_mps: v1,
         t0_s: 0.0,
-        t1_s: o.ramp_s,
+        t1_s: ramp_s,
     });
     let (n, im) = road(7, &p);
     sc.noise = Some(n);
     sc.imbalance = Some(im);
-    let t_hit = o.ramp_s * (v_fg - v0) / (v1 - v0);
+    let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
     sc.impulses.push(pothole(t_hit, POTHOLE_NM));
-    let arms = [
-        Arm::Mr(ControllerKind::PassiveOff),
-        Arm::Mr(ControllerKind::Asmc),
-    ];
-    let results: Vec<(LoopConfig, LoopResult)> = arms
+    Ok(DemoCase {
+        plant: p,
+        scenario: sc,
+        crossings,
+        window_kmh,
+        v_fastest_mps: v_fg,
+        t_pothole_s: t_hit,
+    })
+}
+
+/// Runs one arm of the demo (the golden regression trace and the benchmark use the ASMC arm).
+pub fn run_arm(
+    case: &DemoCase,
+    arm: Arm,
+    ramp_s: f64,
+    record_every: usize,
+) -> Result<(LoopConfig, LoopResult)> {
+    let mut cfg = LoopConfig::new(case.plant, arm, ramp_s);
+    cfg.record_every = record_every;
+    let mut s = case.scenario.clone();
+    let r = closed_loop::run(&cfg, &mut s, None)
+        .map_err(|e| anyhow::anyhow!("{}: integration failed: {e:?}", arm.name()))?;
+    Ok((cfg, r))
+}
+
+/// Runs the demo and writes `report.md` with its plots into `o.out` (through
+/// [`crate::report::write`], the same writer as `shimmy-sim report`).
+pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let case = demo_case(o.ramp_s)?;
+    let results: Vec<ReportRun> = ARMS
         .par_iter()
-        .map(|&arm| {
-            let cfg = LoopConfig::new(p, arm, o.ramp_s);
-            let mut s = sc.clone();
-            let r = closed_loop::run(&cfg, &mut s, None)?;
-            Ok((cfg, r))
+        .map(|&(label, arm)| {
+            let (cfg, r) = run_arm(&case, arm, o.ramp_s, 5)?;
+            Ok(ReportRun::new(label, cfg, r, None))
         })
         .collect::<Result<_>>()?;
-    let names = ["damper off (0 A)", "ASMC"];
-    let runs: Vec<(&str, &LoopResult)> = names
+    let runs: Vec<(&str, &LoopResult)> = results
         .iter()
-        .zip(&results)
-        .map(|(n, (_, r))| (*n, r))
+        .map(|r| (r.label.as_str(), &r.result))
         .collect();
-    let p1 = o.out.join("time.png");
-    plot_runs(
-        &p1,
-        "20 -> 120 km/h ramp, road noise, imbalance, pothole: damper off vs ASMC",
-        &runs,
-    )?;
-    let p2 = o.out.join("meter.png");
-    plot_meter(&p2, &runs, window_kmh)?;
-    let m: Vec<RunMetrics> = results.iter().map(|(c, r)| r.metrics(c, None)).collect();
-    let mut md = String::new();
+    plot_meter(&o.out.join("meter.png"), &runs, case.window_kmh)?;
+    let metrics = [results[0].metrics, results[1].metrics];
+
+    let mut intro = String::new();
     let _ = writeln!(
-        md,
-        "# shimmy demo: MR damper off vs adaptive sliding-mode control\n"
-    );
-    let _ = writeln!(
-        md,
+        intro,
         "Plant: `nominal` 4-DOF solid axle with the Spencer MR damper (coil lag included); sensors: 14-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n"
     );
-    let _ = writeln!(md, "## Nominal Hopf window (no damper, eigenvalues)\n");
-    if crossings.is_empty() {
-        let _ = writeln!(md, "No Hopf crossing between 1 and 50 m/s.\n");
+    let _ = writeln!(intro, "## Nominal Hopf window (no damper, eigenvalues)\n");
+    if case.crossings.is_empty() {
+        let _ = writeln!(intro, "No Hopf crossing between 1 and 50 m/s.\n");
     }
-    for c in &crossings {
+    for c in &case.crossings {
         let _ = writeln!(
-            md,
+            intro,
             "- {:?} at {:.2} km/h ({:.2} m/s), {:.2} Hz",
             c.kind,
             mps_to_kmh(c.speed_mps),
@@ -183,60 +210,35 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
         );
     }
     let _ = writeln!(
-        md,
-        "- fastest growth of the shimmy mode at {:.1} km/h\n",
-        mps_to_kmh(v_fg)
+        intro,
+        "- fastest growth of the shimmy mode at {:.1} km/h",
+        mps_to_kmh(case.v_fastest_mps)
     );
-    let _ = writeln!(md, "## Scenario\n");
-    let _ = writeln!(
-        md,
-        "Speed ramp 20 -> 120 km/h in {:.0} s, road yaw-torque noise 4 N m rms (20 Hz), wheel imbalance 3 N m per wheel, pothole ({POTHOLE_NM} N m, 20 ms) at {:.1} s ({:.1} km/h).\n",
+    let description = format!(
+        "Speed ramp 20 -> 120 km/h in {:.0} s, road yaw-torque noise 4 N m rms (20 Hz), wheel imbalance 3 N m per wheel, pothole ({POTHOLE_NM} N m, 20 ms) at {:.1} s ({:.1} km/h).",
         o.ramp_s,
-        t_hit,
-        mps_to_kmh(v_fg)
+        case.t_pothole_s,
+        mps_to_kmh(case.v_fastest_mps)
     );
-    let _ = writeln!(md, "## Metrics\n");
-    let _ = writeln!(
-        md,
-        "| controller | peak yaw [deg] | rms yaw [deg] | shimmy time [s] | peak steering wheel [deg] | rms current [A] | peak current [A] | coil energy [J] | TV(I) [A] |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
-    for (n, x) in names.iter().zip(&m) {
-        let _ = writeln!(
-            md,
-            "| {n} | {:.3} | {:.3} | {:.1} | {:.2} | {:.3} | {:.3} | {:.2} | {:.1} |",
-            x.peak_yaw_rad.to_degrees(),
-            x.rms_yaw_rad.to_degrees(),
-            x.shimmy_s,
-            x.peak_sw_rad.to_degrees(),
-            x.rms_current_a,
-            x.peak_current_a,
-            x.energy_j,
-            x.chatter_a
-        );
-    }
-    let _ = writeln!(
-        md,
-        "\nShimmy time: total length of 0.5 s blocks whose 2 Hz high-passed psi_L amplitude exceeds 0.5 deg.\n"
-    );
-    let _ = writeln!(md, "## Time histories\n\n![time](time.png)\n");
-    let _ = writeln!(
-        md,
-        "## Data-driven mode meter (slow estimate) vs speed\n\nShaded: the nominal no-damper Hopf window.\n\n![meter](meter.png)\n"
-    );
-    let sim: f64 = results.iter().map(|(_, r)| r.sim_s).sum();
-    let _ = writeln!(
-        md,
-        "Run time: {:.1} s simulated in {:.2} s wall.\n",
-        sim,
-        wall.elapsed().as_secs_f64()
-    );
-    let report = o.out.join("report.md");
-    std::fs::write(&report, md)?;
+    let report = Report {
+        title: "shimmy demo: MR damper off vs adaptive sliding-mode control".into(),
+        intro,
+        sections: vec![Section {
+            name: "ramp 20-120 km/h".into(),
+            description,
+            plant: case.plant,
+            runs: results,
+            extra_plots: vec![(
+                "Data-driven mode meter (slow estimate) vs speed; shaded: the nominal no-damper Hopf window".into(),
+                "meter.png".into(),
+            )],
+        }],
+    };
+    let w = report::write(&o.out, &report)?;
     Ok(DemoOutput {
-        report,
-        plots: vec![p1, p2],
-        metrics: [m[0], m[1]],
+        report: w.report,
+        plots: w.plots,
+        metrics,
     })
 }
 

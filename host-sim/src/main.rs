@@ -45,6 +45,9 @@ enum Command {
     /// Fault campaign: every sensor/coil fault (and combinations) injected into the supervised
     /// ASMC loop inside and outside the Hopf window: detection time, safe state, suppression.
     Faults(shimmy_sim::fault_campaign::FaultsArgs),
+    /// Run scenario files (default: the standard set in host-sim/scenarios/) and write one
+    /// self-contained report: Markdown page, PNG plots, metrics table and CSV traces.
+    Report(shimmy_sim::report_cmd::ReportArgs),
 }
 
 fn main() -> Result<()> {
@@ -60,6 +63,7 @@ fn main() -> Result<()> {
         Some(Command::Run(a)) => shimmy_sim::run_cmd::command(&a),
         Some(Command::Margin(a)) => shimmy_sim::margin_cmd::command(&a),
         Some(Command::Faults(a)) => shimmy_sim::fault_campaign::command(&a),
+        Some(Command::Report(a)) => shimmy_sim::report_cmd::command(&a),
         None => shimmy_sim::demo::command(),
     }
 }

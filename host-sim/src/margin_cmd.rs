@@ -362,7 +362,7 @@ fn panel(
         .x_label_area_size(30)
         .y_label_area_size(55)
         .build_cartesian_2d(t.0..t.1, range.0..range.1)?;
-    chart.configure_mesh().x_desc("t [s]").draw()?;
+    crate::plot_util::mesh(&mut chart, "t [s]", "")?;
     for (name, col, pts) in series {
         let col = *col;
         chart
@@ -373,7 +373,7 @@ fn panel(
                 col,
             ))?
             .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col));
+            .legend(crate::plot_util::line_marker(col, 1));
     }
     for (x, col) in vlines {
         chart.draw_series(LineSeries::new(
@@ -381,11 +381,7 @@ fn panel(
             col.stroke_width(2),
         ))?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    crate::plot_util::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
     Ok(())
 }
 

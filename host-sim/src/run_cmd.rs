@@ -9,10 +9,8 @@ use crate::disturbance::initial_yaw;
 use crate::scenario_file::{self, ScenarioSpec};
 use anyhow::{anyhow, Context, Result};
 use clap::Args;
-use plotters::prelude::*;
-use shimmy_core::stability::{self, ModeSelect};
 use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Options of `shimmy-sim run`.
 #[derive(Args, Debug)]
@@ -58,6 +56,15 @@ pub fn run(spec: &ScenarioSpec) -> Result<(LoopConfig, LoopResult)> {
     Ok((cfg, result))
 }
 
+/// When settling is measured from: the initial perturbation (t = 0), else the first impulse.
+pub fn disturbance_time(spec: &ScenarioSpec) -> Option<f64> {
+    if spec.initial_yaw_rad != 0.0 {
+        Some(0.0)
+    } else {
+        spec.scenario.impulses.first().map(|i| i.t0_s)
+    }
+}
+
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
@@ -74,20 +81,19 @@ pub fn command(a: &RunArgs) -> Result<()> {
     let out = a.out.clone().unwrap_or_else(|| spec.out_dir.clone());
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let (cfg, r) = run(&spec)?;
-    // Settling is measured from the disturbance: the initial perturbation, else the first impulse.
-    let t_dist_s = if spec.initial_yaw_rad != 0.0 {
-        Some(0.0)
-    } else {
-        spec.scenario.impulses.first().map(|i| i.t0_s)
-    };
-    let m = r.metrics(&cfg, t_dist_s);
+    let m = r.metrics(&cfg, disturbance_time(&spec));
 
     let trace = out.join("trace.csv");
     r.write_trace_csv(&trace)?;
     let time_png = out.join("time.png");
     plot_runs(&time_png, &spec.name, &[(spec.controller.as_str(), &r)])?;
     let margin_png = out.join("margin.png");
-    plot_margin(&margin_png, &spec, &r)?;
+    crate::report::plot_margin(
+        &margin_png,
+        &spec.name,
+        &spec.params,
+        &[(spec.controller.as_str(), &r)],
+    )?;
 
     let deg = 180.0 / PI;
     println!(
@@ -158,72 +164,6 @@ fn print_faults(spec: &ScenarioSpec, r: &LoopResult) {
         "  lost frames {}, missed samples {}, invalid commands {}",
         log.lost_frames, log.missed_samples, log.invalid_commands
     );
-}
-
-/// Mode-meter damping estimate (slow, +- one sigma) over time next to the damping ratio of the
-/// plant's shimmy mode from A(V) at the true speed (no damper: the margin the plant has on its
-/// own; the measured closed-loop damping lies above it when the damper works).
-fn plot_margin(path: &Path, spec: &ScenarioSpec, r: &LoopResult) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let t_end = spec.duration_s;
-    let (lo, hi) = (-0.15, 0.3);
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("{}: damping ratio of the shimmy mode (meter: dots +- sigma; A(V) without damper: line)", spec.name),
-            ("sans-serif", 16),
-        )
-        .margin(8)
-        .x_label_area_size(35)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..t_end, lo..hi)?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc("zeta [-]")
-        .draw()?;
-    chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
-    let mut model = Vec::new();
-    for row in r.meter.iter().step_by(10) {
-        if let Ok(mode) = stability::mode_at(
-            &spec.params,
-            row.speed_mps.max(0.1),
-            0.0,
-            ModeSelect::Shimmy,
-        ) {
-            model.push((row.t_s, mode.zeta.clamp(lo, hi)));
-        }
-    }
-    chart
-        .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))?
-        .label("A(V), no damper")
-        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE));
-    let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
-    chart.draw_series(valid.iter().map(|m| {
-        PathElement::new(
-            [
-                (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi)),
-                (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)),
-            ],
-            RGBColor(150, 150, 150),
-        )
-    }))?;
-    chart
-        .draw_series(
-            valid
-                .iter()
-                .map(|m| Circle::new((m.t_s, m.zeta_slow.clamp(lo, hi)), 1, RED.filled())),
-        )?
-        .label("mode meter (slow)")
-        .legend(|(x, y)| Circle::new((x + 10, y), 3, RED.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }
 
 #[cfg(test)]

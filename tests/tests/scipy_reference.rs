@@ -17,6 +17,8 @@ fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
         scipy_method: "LSODA".into(),
         python: "python3".into(),
         out: out.clone(),
+        cl_ramp_s: 6.0,
+        cl_gain_a_per_radps: 4.0,
     };
     let r = compare(&args).expect("the SciPy reference runs (python3 with numpy and scipy)");
     let _ = std::fs::remove_dir_all(&out);
@@ -26,4 +28,13 @@ fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
     assert!(r.max_traj_diff_rad < 1e-6, "{r:?}");
     // Two eigen-solvers (nalgebra Schur, LAPACK geev) on matrices built independently.
     assert!(r.max_eig_diff < 1e-9, "{r:?}");
+    // Closed-loop row: the Python side rebuilt the demo's drive (ramp, imbalance, pothole) from
+    // the case file. The largest wheel yaw of both runs is the response to the 1000 N m pothole,
+    // set by the plant and the pulse more than by the current law, so both sides must see it at
+    // the same size (within 25 %); a pothole at the wrong time or of the wrong size, or a
+    // missing one (< 0.5 deg otherwise), fails.
+    let (rust, py) = r.cl_peak_psi_rad;
+    assert!(rust.to_degrees() > 1.0 && py.to_degrees() > 1.0, "{r:?}");
+    assert!((rust - py).abs() < 0.25 * rust, "{r:?}");
+    assert!(r.rust_cl_rate > 0.0 && r.scipy_cl_rate > 0.0);
 }

@@ -14,7 +14,10 @@
 //!                                N s (default 60); a crash fails and prints the reproducer
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
-//!                                stack high-water mark
+//!                                stack high-water mark; then the host simulator next to the
+//!                                NumPy/SciPy reference (`shimmy-sim reference-bench`, release:
+//!                                time domain, closed loop, eigenvalue sweep), skipped with a
+//!                                message when python3 with numpy and scipy is missing
 //! ```
 //!
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm, g++) or
@@ -38,7 +41,10 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
         Some("size") => size(),
-        Some("bench") => bench().map(|_| ()),
+        Some("bench") => bench().and_then(|s| {
+            println!("on-target benchmark: {s}");
+            host_reference_bench()
+        }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
@@ -213,6 +219,39 @@ fn on_target_failure_is_caught() -> Step {
 /// fails if the counter calibration failed or an entry is over its budget.
 fn bench() -> Step {
     run_bench(&["qemu"])
+}
+
+/// The simulator's speed next to the NumPy/SciPy reference implementation of the plant
+/// (`shimmy-sim reference-bench` in release), or a clear skip when python3 with numpy and
+/// scipy is not available.
+fn host_reference_bench() -> Result<(), String> {
+    let probe = Command::new("python3")
+        .args(["-c", "import numpy, scipy"])
+        .output();
+    match probe {
+        Ok(o) if o.status.success() => {}
+        Ok(o) => {
+            println!(
+                "host reference bench SKIPPED: python3 has no numpy/scipy ({}); install them with `pip install numpy scipy`",
+                String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("").trim()
+            );
+            return Ok(());
+        }
+        Err(e) => {
+            println!("host reference bench SKIPPED: cannot run python3 ({e})");
+            return Ok(());
+        }
+    }
+    println!("host simulator vs the NumPy/SciPy reference (release build):");
+    cargo(&[
+        "run",
+        "--release",
+        "--quiet",
+        "-p",
+        "shimmy-sim",
+        "--",
+        "reference-bench",
+    ])
 }
 
 fn run_bench(features: &[&str]) -> Step {

@@ -1,0 +1,327 @@
+//! Self-contained run reports (Markdown page + PNG plots + trace CSVs + metrics table), written
+//! in one place for the no-argument demo and for `shimmy-sim report SCENARIO.toml...`.
+//!
+//! A [`Report`] is a title, an introduction and [`Section`]s (one scenario each) holding the
+//! closed-loop runs of one or more controllers. [`write`] produces in the output folder:
+//! `report.md`, `metrics.csv` (every run, units in the header), per section `<name>-time.png`
+//! (wheel yaw, coil current, gain vs time), `<name>-margin.png` (the mode meter's damping
+//! estimate next to the true eigenvalue of the plant's shimmy mode at the same speed, when the
+//! meter ran) and one trace CSV per run.
+
+use crate::closed_loop::{LoopConfig, LoopResult, RunMetrics};
+use crate::compare::{plot_runs, sanitize};
+use crate::plot_util::{self, COLORS};
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+use shimmy_core::params::PlantParams;
+use shimmy_core::stability::{self, ModeSelect};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// One closed-loop run of a report.
+#[derive(Clone, Debug)]
+pub struct ReportRun {
+    /// Legend and table label (usually the controller).
+    pub label: String,
+    /// Its configuration.
+    pub cfg: LoopConfig,
+    /// Its result.
+    pub result: LoopResult,
+    /// Its metrics.
+    pub metrics: RunMetrics,
+}
+
+impl ReportRun {
+    /// A run with its metrics (settling measured from `t_dist_s`).
+    pub fn new(label: &str, cfg: LoopConfig, result: LoopResult, t_dist_s: Option<f64>) -> Self {
+        let metrics = result.metrics(&cfg, t_dist_s);
+        ReportRun {
+            label: label.to_string(),
+            cfg,
+            result,
+            metrics,
+        }
+    }
+}
+
+/// One scenario with its runs.
+#[derive(Clone, Debug)]
+pub struct Section {
+    /// Scenario name (heading; file names use a sanitised form).
+    pub name: String,
+    /// Markdown text under the heading.
+    pub description: String,
+    /// The true plant (for the eigenvalue line of the margin plot).
+    pub plant: PlantParams,
+    /// The runs, one per controller.
+    pub runs: Vec<ReportRun>,
+    /// Further plots already written into the output folder: (caption, file name).
+    pub extra_plots: Vec<(String, String)>,
+}
+
+/// A whole report.
+#[derive(Clone, Debug, Default)]
+pub struct Report {
+    /// Page title.
+    pub title: String,
+    /// Markdown under the title.
+    pub intro: String,
+    /// The scenarios.
+    pub sections: Vec<Section>,
+}
+
+/// What [`write`] produced.
+#[derive(Clone, Debug)]
+pub struct Written {
+    /// `report.md`.
+    pub report: PathBuf,
+    /// Every PNG written.
+    pub plots: Vec<PathBuf>,
+    /// `metrics.csv` and the trace CSVs.
+    pub csv: Vec<PathBuf>,
+}
+
+/// Column headings and units of the metrics table.
+const METRIC_COLUMNS: [(&str, &str); 11] = [
+    ("peak yaw", "deg"),
+    ("rms yaw", "deg"),
+    ("2 % settling", "s"),
+    ("peak steering wheel", "deg"),
+    ("rms current", "A"),
+    ("peak current", "A"),
+    ("coil energy", "J"),
+    ("TV(I)", "A"),
+    ("rms force", "N"),
+    ("shimmy time", "s"),
+    ("shimmy at end", "-"),
+];
+
+fn metric_cells(m: &RunMetrics) -> [String; 11] {
+    [
+        format!("{:.3}", m.peak_yaw_rad.to_degrees()),
+        format!("{:.3}", m.rms_yaw_rad.to_degrees()),
+        m.settle_s.map_or("-".into(), |s| format!("{s:.2}")),
+        format!("{:.2}", m.peak_sw_rad.to_degrees()),
+        format!("{:.3}", m.rms_current_a),
+        format!("{:.3}", m.peak_current_a),
+        format!("{:.2}", m.energy_j),
+        format!("{:.1}", m.chatter_a),
+        format!("{:.1}", m.rms_force_n),
+        format!("{:.1}", m.shimmy_s),
+        if m.shimmies() { "YES" } else { "no" }.into(),
+    ]
+}
+
+/// The Markdown metrics table of `rows` (scenario, run).
+pub fn metrics_table(rows: &[(&str, &ReportRun)]) -> String {
+    let mut s = String::from("| scenario | controller |");
+    for (h, u) in METRIC_COLUMNS {
+        let _ = write!(s, " {h} [{u}] |");
+    }
+    s.push_str("\n|---|---|");
+    s.push_str(&"---|".repeat(METRIC_COLUMNS.len()));
+    s.push('\n');
+    for (sc, r) in rows {
+        let _ = write!(s, "| {sc} | {} |", r.label);
+        for c in metric_cells(&r.metrics) {
+            let _ = write!(s, " {c} |");
+        }
+        s.push('\n');
+    }
+    s
+}
+
+fn write_metrics_csv(path: &Path, report: &Report) -> Result<()> {
+    let mut s = String::from(
+        "scenario,controller,peak_yaw_deg,rms_yaw_deg,settle_s,peak_sw_deg,rms_current_a,peak_current_a,energy_j,chatter_a,rms_force_n,shimmy_s,amp_end_deg,amp_max_deg,shimmies,sim_s,wall_s\n",
+    );
+    for sec in &report.sections {
+        for r in &sec.runs {
+            let m = &r.metrics;
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                sec.name,
+                r.label,
+                m.peak_yaw_rad.to_degrees(),
+                m.rms_yaw_rad.to_degrees(),
+                m.settle_s.map_or(String::new(), |x| x.to_string()),
+                m.peak_sw_rad.to_degrees(),
+                m.rms_current_a,
+                m.peak_current_a,
+                m.energy_j,
+                m.chatter_a,
+                m.rms_force_n,
+                m.shimmy_s,
+                m.amp_end_rad.to_degrees(),
+                m.amp_max_rad.to_degrees(),
+                m.shimmies(),
+                r.result.sim_s,
+                r.result.wall_s
+            );
+        }
+    }
+    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to the
+/// damping ratio of the plant's shimmy mode from A(V) at the true speed without damper (the
+/// margin the plant has on its own; the measured closed-loop damping lies above it when the
+/// damper works).
+pub fn plot_margin(
+    path: &Path,
+    title: &str,
+    plant: &PlantParams,
+    runs: &[(&str, &LoopResult)],
+) -> Result<()> {
+    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let t_end = runs
+        .iter()
+        .filter_map(|(_, r)| r.meter.last().map(|m| m.t_s))
+        .fold(0.1f64, f64::max);
+    let (lo, hi) = (-0.15, 0.3);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("{title}: damping ratio of the shimmy mode (meter: dots +- sigma; A(V) without damper: line)"),
+            ("sans-serif", 16),
+        )
+        .margin(8)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..t_end, lo..hi)?;
+    plot_util::mesh(&mut chart, "time [s]", "zeta [-]")?;
+    chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
+    if let Some((_, r)) = runs.first() {
+        let model: Vec<(f64, f64)> = r
+            .meter
+            .iter()
+            .step_by(10)
+            .filter_map(|row| {
+                stability::mode_at(plant, row.speed_mps.max(0.1), 0.0, ModeSelect::Shimmy)
+                    .ok()
+                    .map(|m| (row.t_s, m.zeta.clamp(lo, hi)))
+            })
+            .collect();
+        chart
+            .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))?
+            .label("A(V), no damper")
+            .legend(plot_util::line_marker(BLUE, 2));
+    }
+    for (i, (name, r)) in runs.iter().enumerate() {
+        let c = COLORS[(i + 1) % COLORS.len()];
+        let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
+        chart.draw_series(valid.iter().map(|m| {
+            PathElement::new(
+                [
+                    (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi)),
+                    (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)),
+                ],
+                c.mix(0.25),
+            )
+        }))?;
+        chart
+            .draw_series(
+                valid
+                    .iter()
+                    .map(|m| Circle::new((m.t_s, m.zeta_slow.clamp(lo, hi)), 1, c.filled())),
+            )?
+            .label(format!("mode meter (slow), {name}"))
+            .legend(plot_util::dot_marker(c));
+    }
+    plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+    root.present()?;
+    Ok(())
+}
+
+/// Writes the report into `out` (created if missing).
+pub fn write(out: &Path, report: &Report) -> Result<Written> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut plots = Vec::new();
+    let mut csv = Vec::new();
+    let mut md = String::new();
+    let _ = writeln!(md, "# {}\n", report.title);
+    let _ = writeln!(md, "{}\n", report.intro.trim_end());
+    let _ = writeln!(md, "## Metrics\n");
+    let rows: Vec<(&str, &ReportRun)> = report
+        .sections
+        .iter()
+        .flat_map(|s| s.runs.iter().map(move |r| (s.name.as_str(), r)))
+        .collect();
+    let _ = writeln!(md, "{}", metrics_table(&rows));
+    let _ = writeln!(
+        md,
+        "Peak/rms yaw: left wheel psi_L; 2 % settling: after the disturbance, about the final value; \
+         TV(I): total variation of the current command (chattering); shimmy time: total length of \
+         0.5 s blocks whose 2 Hz high-passed psi_L amplitude exceeds 0.5 deg; shimmy at end: above \
+         0.5 deg in the last 0.5 s or for 3 s or longer. All runs also in `metrics.csv`.\n"
+    );
+    let metrics_csv = out.join("metrics.csv");
+    write_metrics_csv(&metrics_csv, report)?;
+    csv.push(metrics_csv);
+    for sec in &report.sections {
+        let slug = sanitize(&sec.name);
+        let _ = writeln!(md, "## {}\n", sec.name);
+        let _ = writeln!(md, "{}\n", sec.description.trim_end());
+        let runs: Vec<(&str, &LoopResult)> = sec
+            .runs
+            .iter()
+            .map(|r| (r.label.as_str(), &r.result))
+            .collect();
+        let time_png = format!("{slug}-time.png");
+        plot_runs(&out.join(&time_png), &sec.name, &runs)?;
+        plots.push(out.join(&time_png));
+        let _ = writeln!(
+            md,
+            "Wheel yaw, coil current and switching gain:\n\n![{} time histories]({time_png})\n",
+            sec.name
+        );
+        let with_meter: Vec<(&str, &LoopResult)> = runs
+            .iter()
+            .copied()
+            .filter(|(_, r)| r.meter.iter().any(|m| m.valid))
+            .collect();
+        if !with_meter.is_empty() {
+            let margin_png = format!("{slug}-margin.png");
+            plot_margin(&out.join(&margin_png), &sec.name, &sec.plant, &with_meter)?;
+            plots.push(out.join(&margin_png));
+            let _ = writeln!(
+                md,
+                "Mode meter (data) vs the true eigenvalue of the plant's shimmy mode without damper:\n\n![{} margin]({margin_png})\n",
+                sec.name
+            );
+        }
+        for (caption, file) in &sec.extra_plots {
+            plots.push(out.join(file));
+            let _ = writeln!(md, "{caption}\n\n![{caption}]({file})\n");
+        }
+        let mut traces = Vec::new();
+        for r in &sec.runs {
+            let f = format!("{slug}_{}.csv", sanitize(&r.label));
+            r.result
+                .write_trace_csv(&out.join(&f))
+                .with_context(|| format!("writing {f}"))?;
+            csv.push(out.join(&f));
+            traces.push(format!("[{}]({f})", r.label));
+        }
+        let _ = writeln!(
+            md,
+            "Traces (CSV, units in the column names): {}\n",
+            traces.join(", ")
+        );
+    }
+    let sim: f64 = rows.iter().map(|(_, r)| r.result.sim_s).sum();
+    let wall: f64 = rows.iter().map(|(_, r)| r.result.wall_s).sum();
+    let _ = writeln!(
+        md,
+        "Run time: {sim:.1} s simulated in {wall:.2} s of summed run wall time ({:.0} simulated s per wall s per core).\n",
+        sim / wall.max(1e-9)
+    );
+    let report_md = out.join("report.md");
+    std::fs::write(&report_md, md).with_context(|| format!("writing {}", report_md.display()))?;
+    Ok(Written {
+        report: report_md,
+        plots,
+        csv,
+    })
+}

@@ -1,0 +1,267 @@
+//! `shimmy-sim report [SCENARIO.toml...] [--out DIR] [--controllers a,b]`: runs scenario files
+//! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
+//! report (see [`crate::report`]). Every file is parsed and validated before anything runs.
+
+use crate::report::{self, Report, ReportRun, Section};
+use crate::run_cmd;
+use crate::scenario_file::{self, ScenarioSpec};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Options of `shimmy-sim report`.
+#[derive(Args, Debug, Clone)]
+pub struct ReportArgs {
+    /// Scenario files (TOML); none = every `*.toml` in host-sim/scenarios/.
+    pub scenarios: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "out/report")]
+    pub out: PathBuf,
+    /// Controllers to run on every scenario (comma separated: no-damper, passive-off,
+    /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
+    #[arg(long, value_delimiter = ',')]
+    pub controllers: Vec<String>,
+    /// Fixed current of `passive-on` when given in `--controllers` [A].
+    #[arg(long, default_value_t = 1.0)]
+    pub on_current_a: f64,
+}
+
+/// The shipped standard scenario folder: `host-sim/scenarios` below the working directory if it
+/// exists, else the one this binary was built from.
+pub fn standard_dir() -> PathBuf {
+    let local = Path::new("host-sim/scenarios");
+    if local.is_dir() {
+        local.to_path_buf()
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios")
+    }
+}
+
+/// The `*.toml` files of `dir`, sorted by name.
+pub fn scenario_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!("no scenario files (*.toml) in {}", dir.display());
+    }
+    Ok(v)
+}
+
+/// Loads and validates every file (nothing runs if one is bad), expands the controller list.
+pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
+    let files = if a.scenarios.is_empty() {
+        scenario_files(&standard_dir())?
+    } else {
+        a.scenarios.clone()
+    };
+    for c in &a.controllers {
+        if !scenario_file::CONTROLLERS.contains(&c.as_str()) {
+            bail!(
+                "--controllers {c}: allowed: {}",
+                scenario_file::CONTROLLERS.join(", ")
+            );
+        }
+    }
+    files
+        .into_iter()
+        .map(|f| {
+            let spec = scenario_file::load(&f)?;
+            let specs = if a.controllers.is_empty() {
+                vec![spec]
+            } else {
+                a.controllers
+                    .iter()
+                    .map(|c| {
+                        let mut s = spec.clone();
+                        s.controller = c.clone();
+                        s.on_current_a = a.on_current_a;
+                        s
+                    })
+                    .collect()
+            };
+            Ok((f, specs))
+        })
+        .collect()
+}
+
+/// Runs the plan (all runs in parallel) and builds the report.
+pub fn build(a: &ReportArgs) -> Result<Report> {
+    let plan = plan(a)?;
+    let jobs: Vec<(usize, &ScenarioSpec)> = plan
+        .iter()
+        .enumerate()
+        .flat_map(|(i, (_, specs))| specs.iter().map(move |s| (i, s)))
+        .collect();
+    let runs: Vec<(usize, ReportRun)> = jobs
+        .par_iter()
+        .map(|&(i, spec)| {
+            let (cfg, r) = run_cmd::run(spec)
+                .with_context(|| format!("{} / {}", spec.name, spec.controller))?;
+            Ok((
+                i,
+                ReportRun::new(&spec.controller, cfg, r, run_cmd::disturbance_time(spec)),
+            ))
+        })
+        .collect::<Result<_>>()?;
+    let mut sections: Vec<Section> = plan
+        .iter()
+        .map(|(file, specs)| {
+            let s = &specs[0];
+            Section {
+                name: s.name.clone(),
+                description: format!(
+                    "File `{}`: {} s, seed {}, initial in-phase wheel yaw {:.2} deg, encoder {} bit.",
+                    file.display(),
+                    s.duration_s,
+                    s.seed,
+                    s.initial_yaw_rad.to_degrees(),
+                    s.encoder_bits
+                ),
+                plant: s.params,
+                runs: Vec::new(),
+                extra_plots: Vec::new(),
+            }
+        })
+        .collect();
+    for (i, r) in runs {
+        sections[i].runs.push(r);
+    }
+    Ok(Report {
+        title: "shimmy-sim scenario report".into(),
+        intro: format!(
+            "{} scenario file(s), closed loop at 1 kHz: nonlinear 4-DOF plant with the Spencer MR damper, simulated sensors, the firmware's `shimmy-core` controller and mode meter. Controllers: {}.",
+            sections.len(),
+            if a.controllers.is_empty() {
+                "each file's own".to_string()
+            } else {
+                a.controllers.join(", ")
+            }
+        ),
+        sections,
+    })
+}
+
+/// The command.
+pub fn command(a: &ReportArgs) -> Result<()> {
+    let report = build(a)?;
+    let w = report::write(&a.out, &report)?;
+    let rows: Vec<(&str, &ReportRun)> = report
+        .sections
+        .iter()
+        .flat_map(|s| s.runs.iter().map(move |r| (s.name.as_str(), r)))
+        .collect();
+    println!("{}", report::metrics_table(&rows));
+    println!(
+        "wrote {} plots and {} CSV files; report: {}",
+        w.plots.len(),
+        w.csv.len(),
+        w.report.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plot_util::assert_real_plot;
+
+    fn tmp(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("shimmy-report-{name}-{}", std::process::id()))
+    }
+
+    #[test]
+    fn report_of_two_files_and_two_controllers() {
+        let dir = tmp("ok");
+        std::fs::create_dir_all(&dir).unwrap();
+        let f1 = dir.join("kick.toml");
+        std::fs::write(
+            &f1,
+            "name = \"kick\"\nduration_s = 8.0\n[speed]\nconstant_kmh = 55.0\n[initial]\nyaw_deg = 1.0\n[road_noise]\nstd_nm = 10.0\ncorner_hz = 20.0\ncommon = 0.5\n",
+        )
+        .unwrap();
+        let f2 = dir.join("bump.toml");
+        std::fs::write(
+            &f2,
+            "name = \"bump\"\nduration_s = 2.0\n[speed]\nconstant_kmh = 60.0\n[[impulse]]\nt_s = 0.5\nduration_s = 0.02\npeak_nm = 400.0\n",
+        )
+        .unwrap();
+        let out = dir.join("out");
+        let a = ReportArgs {
+            scenarios: vec![f1, f2],
+            out: out.clone(),
+            controllers: vec!["passive-off".into(), "asmc".into()],
+            on_current_a: 1.0,
+        };
+        command(&a).unwrap();
+        let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        for needle in [
+            "## kick",
+            "## bump",
+            "| kick | asmc |",
+            "| bump | passive-off |",
+        ] {
+            assert!(md.contains(needle), "report lacks `{needle}`");
+        }
+        // Every referenced plot exists and is a real picture.
+        for png in ["kick-time.png", "kick-margin.png", "bump-time.png"] {
+            assert!(md.contains(png), "{png} not referenced");
+            assert_real_plot(&out.join(png), 8).unwrap();
+        }
+        // metrics.csv: header + 4 runs; the ASMC kick settles, and the same runs as `run`
+        // (one place computes both).
+        let csv = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 5, "{csv}");
+        let mut spec = scenario_file::load(&dir.join("kick.toml")).unwrap();
+        spec.controller = "asmc".into();
+        let (cfg, r) = run_cmd::run(&spec).unwrap();
+        let m = r.metrics(&cfg, Some(0.0));
+        let row = csv.lines().find(|l| l.starts_with("kick,asmc,")).unwrap();
+        let peak: f64 = row.split(',').nth(2).unwrap().parse().unwrap();
+        assert_eq!(peak, m.peak_yaw_rad.to_degrees());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_bad_file_stops_the_report_before_anything_runs() {
+        let dir = tmp("bad");
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.toml");
+        std::fs::write(&good, "duration_s = 1.0\n[speed]\nconstant_kmh = 40.0\n").unwrap();
+        let bad = dir.join("bad.toml");
+        std::fs::write(&bad, "duration_s = -1.0\n[speed]\nconstant_kmh = 40.0\n").unwrap();
+        let out = dir.join("out");
+        let a = ReportArgs {
+            scenarios: vec![good, bad],
+            out: out.clone(),
+            controllers: vec![],
+            on_current_a: 1.0,
+        };
+        let e = format!("{:#}", command(&a).unwrap_err());
+        assert!(e.contains("duration_s"), "{e}");
+        assert!(!out.exists(), "nothing may be written");
+        let a = ReportArgs {
+            controllers: vec!["pid".into()],
+            scenarios: vec![dir.join("good.toml")],
+            ..a
+        };
+        assert!(format!("{:#}", command(&a).unwrap_err()).contains("--controllers pid"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_standard_set_is_found_and_valid() {
+        let a = ReportArgs {
+            scenarios: vec![],
+            out: tmp("std"),
+            controllers: vec![],
+            on_current_a: 1.0,
+        };
+        let plan = plan(&a).unwrap();
+        assert!(plan.len() >= 7, "{} files", plan.len());
+    }
+}
