@@ -33,7 +33,8 @@ enum Command {
     /// (needs python3 with numpy and scipy).
     ReferenceBench(shimmy_sim::reference_bench::ReferenceBenchArgs),
     /// Stability maps over speed x one parameter (x damper current): growth-rate heat map with
-    /// the Hopf boundary (PNG) and CSV, computed in parallel.
+    /// the Hopf boundary (PNG) and CSV, computed in parallel; with `--controllers off,asmc`
+    /// time-domain maps per controller instead.
     Sweep(shimmy_sim::sweep::SweepArgs),
     /// Every controller over the standard scenario set: one table, CSV and PNG plots.
     Compare(shimmy_sim::compare::CompareArgs),
