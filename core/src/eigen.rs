@@ -209,52 +209,57 @@ pub type CVector = SVector<Complex<f64>, N_STATES>;
 /// (A - mu I), mu = lambda slightly perturbed (so the factor is not exactly singular). Three
 /// fixed iterations; normalised to unit 2-norm with the largest entry real and positive.
 pub fn eigenvector(a: &StateMatrix, lambda: Complex<f64>) -> Result<CVector, EigenError> {
-    inverse_iteration(a, lambda, false)
+    eigenvector_in(a, lambda, Precision::F64)
 }
 
 /// Left eigenvector w of `a` for `lambda` (w^H A = lambda w^H): conj(w) is a right eigenvector
 /// of A^T for the same lambda; same method as [`eigenvector`].
 pub fn left_eigenvector(a: &StateMatrix, lambda: Complex<f64>) -> Result<CVector, EigenError> {
-    inverse_iteration(a, lambda, true)
+    left_eigenvector_in(a, lambda, Precision::F64)
+}
+
+/// [`eigenvector`] with the LU and the iteration in the requested precision.
+pub fn eigenvector_in(
+    a: &StateMatrix,
+    lambda: Complex<f64>,
+    precision: Precision,
+) -> Result<CVector, EigenError> {
+    inverse_iteration(a, lambda, false, precision)
+}
+
+/// [`left_eigenvector`] with the LU and the iteration in the requested precision.
+pub fn left_eigenvector_in(
+    a: &StateMatrix,
+    lambda: Complex<f64>,
+    precision: Precision,
+) -> Result<CVector, EigenError> {
+    inverse_iteration(a, lambda, true, precision)
 }
 
 fn inverse_iteration(
     a: &StateMatrix,
     lambda: Complex<f64>,
     left: bool,
+    precision: Precision,
 ) -> Result<CVector, EigenError> {
     if a.iter().any(|v| !v.is_finite()) || !(lambda.re.is_finite() && lambda.im.is_finite()) {
         return Err(EigenError::NonFinite);
     }
     let scale = a.amax().max(1.0);
-    // Left: conj(w) is a right eigenvector of A^T for the same lambda.
-    let mu = lambda + Complex::new(scale * 1e-11, scale * 1e-11);
-    let mut shifted: SMatrix<Complex<f64>, N_STATES, N_STATES> = a.map(|v| Complex::new(v, 0.0));
-    if left {
-        shifted.transpose_mut();
-    }
-    for i in 0..N_STATES {
-        shifted[(i, i)] -= mu;
-    }
-    let lu = shifted.lu();
-    let mut v = CVector::from_element(Complex::new(1.0, 0.0));
-    // A fixed start vector with varied entries (not orthogonal to any eigenvector in practice).
-    for (i, e) in v.iter_mut().enumerate() {
-        *e = Complex::new(1.0 + 0.1 * i as f64, 0.05 * i as f64);
-    }
-    for _ in 0..3 {
-        let Some(next) = lu.solve(&v) else {
-            return Err(EigenError::Singular);
-        };
-        let n = next.norm();
-        if !(n.is_finite() && n > 0.0) {
-            return Err(EigenError::Singular);
+    let v = match precision {
+        // The shift keeps (A - mu I) from being exactly singular; in f32 it must also survive
+        // rounding of A's entries (eps_f32 ~ 1e-7 relative), hence the larger offset there.
+        Precision::F64 => {
+            let mu = lambda + Complex::new(scale * 1e-11, scale * 1e-11);
+            iterate_shifted::<f64>(a, mu, left)?
         }
-        v = next / Complex::new(n, 0.0);
-    }
-    if left {
-        v = v.map(|c| c.conj());
-    }
+        Precision::F32 => {
+            let mu = lambda + Complex::new(scale * 1e-6, scale * 1e-6);
+            iterate_shifted::<f32>(a, mu, left)?
+        }
+    };
+    // Left: conj(w) is a right eigenvector of A^T for the same lambda.
+    let mut v = if left { v.map(|c| c.conj()) } else { v };
     // Phase normalisation: largest entry real positive.
     let (imax, _) = v.iter().enumerate().fold((0, -1.0), |(bi, bn), (i, c)| {
         let n = cabs(*c);
@@ -271,6 +276,45 @@ fn inverse_iteration(
         v = v.map(|c| c * rot);
     }
     Ok(v)
+}
+
+/// Three steps of inverse iteration with (A - mu I) (A^T when `left`) factored in `T`; the
+/// result is widened to f64.
+fn iterate_shifted<T: nalgebra::RealField + Copy>(
+    a: &StateMatrix,
+    mu: Complex<f64>,
+    left: bool,
+) -> Result<CVector, EigenError> {
+    let t = |x: f64| nalgebra::convert::<f64, T>(x);
+    let mut shifted: SMatrix<Complex<T>, N_STATES, N_STATES> =
+        a.map(|v| Complex::new(t(v), T::zero()));
+    if left {
+        shifted.transpose_mut();
+    }
+    let mu_t = Complex::new(t(mu.re), t(mu.im));
+    for i in 0..N_STATES {
+        shifted[(i, i)] -= mu_t;
+    }
+    let lu = shifted.lu();
+    // A fixed start vector with varied entries (not orthogonal to any eigenvector in practice).
+    let mut v: SVector<Complex<T>, N_STATES> =
+        SVector::from_fn(|i, _| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
+    for _ in 0..3 {
+        let Some(next) = lu.solve(&v) else {
+            return Err(EigenError::Singular);
+        };
+        let n = next.norm();
+        if !(n.is_finite() && n > T::zero()) {
+            return Err(EigenError::Singular);
+        }
+        v = next / Complex::new(n, T::zero());
+    }
+    Ok(v.map(|c| {
+        Complex::new(
+            nalgebra::try_convert::<T, f64>(c.re).unwrap_or(f64::NAN),
+            nalgebra::try_convert::<T, f64>(c.im).unwrap_or(f64::NAN),
+        )
+    }))
 }
 
 /// |c| via libm (num-complex's `norm` is std-only).
@@ -384,7 +428,17 @@ pub fn mode_shape(
     a: &StateMatrix,
     lambda: Complex<f64>,
 ) -> Result<ModeShapeInfo, EigenError> {
-    let v = eigenvector(a, lambda)?;
+    mode_shape_in(p, a, lambda, Precision::F64)
+}
+
+/// [`mode_shape`] with the eigenvector computed in the requested precision.
+pub fn mode_shape_in(
+    p: &crate::params::PlantParams,
+    a: &StateMatrix,
+    lambda: Complex<f64>,
+    precision: Precision,
+) -> Result<ModeShapeInfo, EigenError> {
+    let v = eigenvector_in(a, lambda, precision)?;
     Ok(classify(&v, p.i_k, p.i_phi, p.j_sw, p.i_s))
 }
 

@@ -125,6 +125,17 @@ pub fn select_mode(
     vals: &Eigenvalues,
     select: ModeSelect,
 ) -> Result<Mode, EigenError> {
+    select_mode_in(p, a, vals, select, eigen::Precision::F64)
+}
+
+/// [`select_mode`] with the mode-shape eigenvectors computed in the requested precision.
+pub fn select_mode_in(
+    p: &PlantParams,
+    a: &crate::eigen::StateMatrix,
+    vals: &Eigenvalues,
+    select: ModeSelect,
+    precision: eigen::Precision,
+) -> Result<Mode, EigenError> {
     match select {
         ModeSelect::LeastDamped => least_damped_mode(vals),
         ModeSelect::Critical => critical_oscillatory_mode(vals),
@@ -134,7 +145,7 @@ pub fn select_mode(
                 .iter()
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
             {
-                let shape = eigen::mode_shape(p, a, *l)?;
+                let shape = eigen::mode_shape_in(p, a, *l, precision)?;
                 if shape.shape == ModeShape::InPhaseWheelYaw {
                     let m = Mode::from_eigenvalue(*l);
                     if best.is_none_or(|b| m.zeta < b.zeta) {

@@ -180,16 +180,23 @@ fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
 #[test]
 fn slope_agrees_with_central_differences_of_faer_eigenvalues() {
     // dzeta/dV of the shimmy mode vs a central difference (h = 1e-3 m/s) of the damping of the
-    // faer eigenvalue nearest to it: O(h^2) truncation ~1e-8, tolerance 1e-5 absolute.
+    // faer eigenvalue nearest to it: O(h^2) truncation ~1e-8, tolerance 1e-5 absolute, in both
+    // precisions (f32: eigenvalue and eigenvectors from f32 solves, the firmware's setting).
+    for precision in [Precision::F64, Precision::F32] {
+        let cfg = ModelMarginConfig {
+            eigen_precision: precision,
+            ..ModelMarginConfig::default()
+        };
+        slope_agrees(cfg);
+    }
+}
+
+fn slope_agrees(cfg: ModelMarginConfig) {
     let p = ParamSet::Nominal.params();
+    let mut worst = 0.0f64;
     for kmh in [10.0, 20.0, 28.0, 50.0] {
         let v = kmh_to_mps(kmh);
-        let (pt, _) = cycle(
-            &mut ModelMarginTracker::new(p, ModelMarginConfig::default()),
-            0.0,
-            v,
-            0.0,
-        );
+        let (pt, _) = cycle(&mut ModelMarginTracker::new(p, cfg), 0.0, v, 0.0);
         let l0 = pt.shimmy.eigenvalue();
         let zeta_near = |vv: f64| {
             let l = faer_eigs(&p, vv, 0.0)
@@ -200,6 +207,7 @@ fn slope_agrees_with_central_differences_of_faer_eigenvalues() {
         };
         let h = 1e-3;
         let fd = (zeta_near(v + h) - zeta_near(v - h)) / (2.0 * h);
+        worst = worst.max((fd - pt.dzeta_dv_per_mps).abs());
         assert!(pt.slope_valid);
         assert!(
             (fd - pt.dzeta_dv_per_mps).abs() < 1e-5,
@@ -214,6 +222,10 @@ fn slope_agrees_with_central_differences_of_faer_eigenvalues() {
             assert!(m.v_crit_onset_mps.unwrap() > v);
         }
     }
+    println!(
+        "{:?}: worst |dzeta/dV - central difference| {worst:.1e} per m/s",
+        cfg.eigen_precision
+    );
 }
 
 #[test]

@@ -514,11 +514,16 @@ impl ModelMarginTracker {
         let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
         let ok = eigen::eigenvalues_in(&a, self.cfg.eigen_precision).and_then(|vals| {
             let crit = eigen::critical_oscillatory_mode(&vals)?;
-            let (shimmy, found) =
-                match stability::select_mode(&self.p, &a, &vals, ModeSelect::Shimmy) {
-                    Ok(m) => (m, true),
-                    Err(_) => (crit, false),
-                };
+            let (shimmy, found) = match stability::select_mode_in(
+                &self.p,
+                &a,
+                &vals,
+                ModeSelect::Shimmy,
+                self.cfg.eigen_precision,
+            ) {
+                Ok(m) => (m, true),
+                Err(_) => (crit, false),
+            };
             Ok((crit, shimmy, found, eigen::max_real_part(&vals)))
         });
         match ok {
@@ -540,8 +545,8 @@ impl ModelMarginTracker {
         let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
         let lambda = self.work.shimmy.eigenvalue();
         let r = (|| {
-            let v = eigen::eigenvector(&a, lambda).ok()?;
-            let w = eigen::left_eigenvector(&a, lambda).ok()?;
+            let v = eigen::eigenvector_in(&a, lambda, self.cfg.eigen_precision).ok()?;
+            let w = eigen::left_eigenvector_in(&a, lambda, self.cfg.eigen_precision).ok()?;
             let da = dlinearise_dv(&self.p).map(|x| Complex::new(x, 0.0));
             let num = (w.adjoint() * da * v)[(0, 0)];
             let den = (w.adjoint() * v)[(0, 0)];
