@@ -142,7 +142,8 @@ impl Default for ControlParams {
             asmc: AsmcParams::default(),
             skyhook_ns_per_m: 1000.0,
             limits: CurrentLimits::default(),
-            fallback_current_a: 1.0,
+            // the supervisor's fail-safe current (one place: chosen from the stability analysis)
+            fallback_current_a: crate::supervisor::FAILSAFE_CURRENT_A,
             min_speed_mps: 2.0,
             psi_limit_rad: 0.8,
         }
