@@ -66,17 +66,28 @@ pub fn eigenvalues_bounded(
     {
         return Err(EigenError::NonFinite);
     }
-    let mut m = *a;
+    balanced_schur_eigenvalues(*a, eps, max_niter)
+}
+
+/// Balancing (power-of-two diagonal similarity, exact in any float type) and the bounded real
+/// Schur decomposition of `m` in its own float type; eigenvalues widened to f64.
+fn balanced_schur_eigenvalues<T: nalgebra::RealField + Copy>(
+    mut m: SMatrix<T, N_STATES, N_STATES>,
+    eps: T,
+    max_niter: usize,
+) -> Result<Eigenvalues, EigenError> {
     let _scaling = nalgebra::linalg::balancing::balance_parlett_reinsch(&mut m);
     let schur =
         nalgebra::linalg::Schur::try_new(m, eps, max_niter).ok_or(EigenError::NotConverged)?;
     let vals = schur.complex_eigenvalues();
     let mut out = [Complex::new(0.0, 0.0); N_STATES];
     for (o, v) in out.iter_mut().zip(vals.iter()) {
-        if !(v.re.is_finite() && v.im.is_finite()) {
+        let re = nalgebra::try_convert::<T, f64>(v.re).unwrap_or(f64::NAN);
+        let im = nalgebra::try_convert::<T, f64>(v.im).unwrap_or(f64::NAN);
+        if !(re.is_finite() && im.is_finite()) {
             return Err(EigenError::NonFiniteResult);
         }
-        *o = *v;
+        *o = Complex::new(re, im);
     }
     Ok(out)
 }
@@ -113,19 +124,7 @@ fn eigenvalues_f32(a: &StateMatrix) -> Result<Eigenvalues, EigenError> {
     {
         return Err(EigenError::NonFinite);
     }
-    let mut m: SMatrix<f32, N_STATES, N_STATES> = a.map(|v| v as f32);
-    let _scaling = nalgebra::linalg::balancing::balance_parlett_reinsch(&mut m);
-    let schur = nalgebra::linalg::Schur::try_new(m, f32::EPSILON, DEFAULT_MAX_NITER)
-        .ok_or(EigenError::NotConverged)?;
-    let vals = schur.complex_eigenvalues();
-    let mut out = [Complex::new(0.0, 0.0); N_STATES];
-    for (o, v) in out.iter_mut().zip(vals.iter()) {
-        if !(v.re.is_finite() && v.im.is_finite()) {
-            return Err(EigenError::NonFiniteResult);
-        }
-        *o = Complex::new(v.re as f64, v.im as f64);
-    }
-    Ok(out)
+    balanced_schur_eigenvalues(a.map(|v| v as f32), f32::EPSILON, DEFAULT_MAX_NITER)
 }
 
 /// Continuous-time mode of one eigenvalue s = re + j im.
