@@ -115,7 +115,7 @@ fn host_digest() {
     let n = (trace.len() / SAMPLE_BYTES) as u32;
     assert_eq!(d.samples, n);
     // Record counts: every sample (command, supervisor), every 10th (meter, report, level),
-    // one model cycle per refresh period (1 s: 6 in the 6 s trace).
+    // one model cycle per refresh period (`MODEL_REFRESH_S`).
     let cycles = (f64::from(n) * 1e-3 / f64::from(MODEL_REFRESH_S)).round() as u32;
     let expect = [n, n, n / 10, n / 10, n / 10, n / 10, cycles];
     for ((name, c), e) in CHANNELS.iter().zip(d.channels.iter()).zip(expect) {
