@@ -47,8 +47,8 @@ pub trait Real:
     fn atan2(self, x: Self) -> Self;
     /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
-    /// Relative step below which the root finder has converged (64 ulps in f32, ~450 in f64), so the
-    /// roots carry no more error than the coefficients' own rounding puts into them.
+    /// Relative step below which the root finder has converged (64 ulps in f32, ~450 in f64):
+    /// the roots then carry no more error than the coefficients' own rounding puts into them.
     const ROOT_TOL: Self;
 }
 
