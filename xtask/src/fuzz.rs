@@ -111,29 +111,11 @@ fn ensure_cxx() -> Result<(), String> {
     if works(&cxx) || works("g++") || works("clang++") {
         return Ok(());
     }
-    let is_root = Command::new("id")
-        .arg("-u")
-        .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
-    let hint = "install a C++ compiler, e.g. apt-get install g++ (Debian/Ubuntu)";
-    if !is_root {
-        return Err(format!(
-            "no C++ compiler (libFuzzer is C++) and this is not root; {hint}"
-        ));
-    }
-    println!("xtask: installing g++ with apt-get (libFuzzer is compiled from C++)");
-    let apt = |args: &[&str]| {
-        Command::new("apt-get")
-            .args(args)
-            .env("DEBIAN_FRONTEND", "noninteractive")
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", "g++"]) {
-        Ok(())
-    } else {
-        Err(format!("apt-get could not install g++; {hint}"))
-    }
+    crate::apt_install(
+        "g++",
+        "no C++ compiler (libFuzzer is C++)",
+        "install a C++ compiler, e.g. apt-get install g++ (Debian/Ubuntu)",
+    )
 }
 
 /// Builds the instrumented fuzz target; returns the binary.

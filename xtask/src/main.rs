@@ -350,6 +350,31 @@ pub fn cargo(args: &[&str]) -> Result<(), String> {
     run(Command::new(cargo).args(args).current_dir(root()))
 }
 
+/// Installs the Debian package `package` with apt-get when we are root; otherwise, or when
+/// apt-get fails, an error that names `missing` and ends with `hint` (how to install by hand).
+fn apt_install(package: &str, missing: &str, hint: &str) -> Result<(), String> {
+    let is_root = Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
+    if !is_root {
+        return Err(format!("{missing} and this is not root; {hint}"));
+    }
+    println!("xtask: installing {package} with apt-get");
+    let apt = |args: &[&str]| {
+        Command::new("apt-get")
+            .args(args)
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", package]) {
+        Ok(())
+    } else {
+        Err(format!("apt-get could not install {package}; {hint}"))
+    }
+}
+
 fn run(cmd: &mut Command) -> Result<(), String> {
     let shown = format!("{cmd:?}");
     let status = cmd

@@ -19,27 +19,11 @@ pub fn ensure_installed() -> Result<(), String> {
     {
         return Ok(());
     }
-    let is_root = Command::new("id")
-        .arg("-u")
-        .output()
-        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0");
-    let hint = "install it with: apt-get install qemu-system-arm (Debian/Ubuntu)";
-    if !is_root {
-        return Err(format!("{QEMU} is missing and this is not root; {hint}"));
-    }
-    println!("xtask: installing {QEMU} with apt-get");
-    let apt = |args: &[&str]| {
-        Command::new("apt-get")
-            .args(args)
-            .env("DEBIAN_FRONTEND", "noninteractive")
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", "qemu-system-arm"]) {
-        Ok(())
-    } else {
-        Err(format!("apt-get could not install {QEMU}; {hint}"))
-    }
+    crate::apt_install(
+        "qemu-system-arm",
+        &format!("{QEMU} is missing"),
+        "install it with: apt-get install qemu-system-arm (Debian/Ubuntu)",
+    )
 }
 
 /// Deterministic time for the application: 8 ns of virtual time per instruction (a 125 MIPS
