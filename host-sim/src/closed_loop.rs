@@ -254,6 +254,29 @@ pub const SHIMMY_AMP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 pub const SHIMMY_MIN_S: f64 = 3.0;
 
 impl RunMetrics {
+    /// CSV column names of [`RunMetrics::csv_fields`] (units in the names).
+    pub const CSV_HEADER: &'static str = "peak_yaw_deg,rms_yaw_deg,settle_s,peak_sw_deg,rms_current_a,peak_current_a,energy_j,chatter_a,rms_force_n,shimmy_s,amp_end_deg,amp_max_deg";
+
+    /// The metrics as comma-separated CSV fields (angles in degrees, an empty field for a
+    /// missing settling time), in the order of [`RunMetrics::CSV_HEADER`].
+    pub fn csv_fields(&self) -> String {
+        format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            self.peak_yaw_rad.to_degrees(),
+            self.rms_yaw_rad.to_degrees(),
+            self.settle_s.map_or(String::new(), |x| x.to_string()),
+            self.peak_sw_rad.to_degrees(),
+            self.rms_current_a,
+            self.peak_current_a,
+            self.energy_j,
+            self.chatter_a,
+            self.rms_force_n,
+            self.shimmy_s,
+            self.amp_end_rad.to_degrees(),
+            self.amp_max_rad.to_degrees(),
+        )
+    }
+
     /// A limit cycle / sustained shimmy was seen: the shimmy-band amplitude is above
     /// [`SHIMMY_AMP_RAD`] in the last 0.5 s, or it was above it for [`SHIMMY_MIN_S`] or longer
     /// (a shimmy that a speed ramp leaves behind at its end). A decaying transient of a

@@ -507,26 +507,18 @@ pub fn verdict(rows: &[RunRow], specs: &[ScenarioSpec]) -> (String, bool) {
 /// Writes the per-run summary CSV.
 pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-    writeln!(w, "scenario,controller,peak_yaw_deg,rms_yaw_deg,settle_s,peak_sw_deg,rms_current_a,peak_current_a,energy_j,chatter_a,rms_force_n,shimmy_s,amp_end_deg,amp_max_deg,sim_per_wall")?;
+    writeln!(
+        w,
+        "scenario,controller,{},sim_per_wall",
+        RunMetrics::CSV_HEADER
+    )?;
     for r in rows {
-        let m = &r.m;
         writeln!(
             w,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{}",
             r.scenario,
             r.arm.name(),
-            m.peak_yaw_rad.to_degrees(),
-            m.rms_yaw_rad.to_degrees(),
-            m.settle_s.map_or(String::new(), |x| x.to_string()),
-            m.peak_sw_rad.to_degrees(),
-            m.rms_current_a,
-            m.peak_current_a,
-            m.energy_j,
-            m.chatter_a,
-            m.rms_force_n,
-            m.shimmy_s,
-            m.amp_end_rad.to_degrees(),
-            m.amp_max_rad.to_degrees(),
+            r.m.csv_fields(),
             r.speedup
         )?;
     }

@@ -132,30 +132,19 @@ pub fn metrics_table(rows: &[(&str, &ReportRun)]) -> String {
 }
 
 fn write_metrics_csv(path: &Path, report: &Report) -> Result<()> {
-    let mut s = String::from(
-        "scenario,controller,peak_yaw_deg,rms_yaw_deg,settle_s,peak_sw_deg,rms_current_a,peak_current_a,energy_j,chatter_a,rms_force_n,shimmy_s,amp_end_deg,amp_max_deg,shimmies,sim_s,wall_s\n",
+    let mut s = format!(
+        "scenario,controller,{},shimmies,sim_s,wall_s\n",
+        RunMetrics::CSV_HEADER
     );
     for sec in &report.sections {
         for r in &sec.runs {
-            let m = &r.metrics;
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{}",
                 sec.name,
                 r.label,
-                m.peak_yaw_rad.to_degrees(),
-                m.rms_yaw_rad.to_degrees(),
-                m.settle_s.map_or(String::new(), |x| x.to_string()),
-                m.peak_sw_rad.to_degrees(),
-                m.rms_current_a,
-                m.peak_current_a,
-                m.energy_j,
-                m.chatter_a,
-                m.rms_force_n,
-                m.shimmy_s,
-                m.amp_end_rad.to_degrees(),
-                m.amp_max_rad.to_degrees(),
-                m.shimmies(),
+                r.metrics.csv_fields(),
+                r.metrics.shimmies(),
                 r.result.sim_s,
                 r.result.wall_s
             );
