@@ -43,6 +43,37 @@ pub fn dot_marker(color: RGBColor) -> impl Fn((i32, i32)) -> Circle<(i32, i32), 
     move |(x, y)| Circle::new((x + 10, y), 3, color.filled())
 }
 
+/// Cells of a heat map on a regular grid: each sample is the centre of a dx x dy cell, and the
+/// axes reach half a cell beyond the first and last samples.
+pub struct Cells {
+    /// Cell width (x step).
+    pub dx: f64,
+    /// Cell height (y step; 10 % of |y| or 0.1 for a single row).
+    pub dy: f64,
+    /// x axis range.
+    pub x: std::ops::Range<f64>,
+    /// y axis range.
+    pub y: std::ops::Range<f64>,
+}
+
+/// The cells of samples at `xs` (at least two, increasing) by `ny` rows from `y_first` to
+/// `y_last`.
+pub fn cells(xs: &[f64], y_first: f64, y_last: f64, ny: usize) -> Cells {
+    let (x0, x1) = (xs[0], xs[xs.len() - 1]);
+    let dx = xs[1] - xs[0];
+    let dy = if ny > 1 {
+        (y_last - y_first) / (ny - 1) as f64
+    } else {
+        y_first.abs().max(1.0) * 0.1
+    };
+    Cells {
+        dx,
+        dy,
+        x: x0 - dx / 2.0..x1 + dx / 2.0,
+        y: y_first - dy / 2.0..y_last + dy / 2.0,
+    }
+}
+
 /// Colour-blind-safe palette (Okabe-Ito based) used for runs in every plot.
 pub const COLORS: [RGBColor; 6] = [
     RGBColor(120, 120, 120),

@@ -4,6 +4,7 @@
 //! it, and CSV. Rows run in parallel (rayon) with a progress bar; the result does not depend on
 //! the number of threads (each grid point is computed independently, rows are written in order).
 
+use crate::plot_util;
 use crate::stability_cmd::damper_equivalent;
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -317,14 +318,13 @@ fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Resu
 fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
     let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE)?;
-    let (v0, v1) = (map.speeds_kmh[0], map.speeds_kmh[map.speeds_kmh.len() - 1]);
-    let (p0, p1) = (map.rows[0].value, map.rows[map.rows.len() - 1].value);
-    let dp = if map.rows.len() > 1 {
-        (p1 - p0) / (map.rows.len() - 1) as f64
-    } else {
-        p0.abs().max(1.0) * 0.1
-    };
-    let dv = map.speeds_kmh[1] - map.speeds_kmh[0];
+    let cells = plot_util::cells(
+        &map.speeds_kmh,
+        map.rows[0].value,
+        map.rows[map.rows.len() - 1].value,
+        map.rows.len(),
+    );
+    let (dv, dp) = (cells.dx, cells.dy);
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
@@ -336,7 +336,7 @@ fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(80)
-        .build_cartesian_2d(v0 - dv / 2.0..v1 + dv / 2.0, p0 - dp / 2.0..p1 + dp / 2.0)?;
+        .build_cartesian_2d(cells.x, cells.y)?;
     chart
         .configure_mesh()
         .x_desc("speed [km/h]")

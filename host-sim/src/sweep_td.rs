@@ -235,14 +235,13 @@ fn boundary_csv(g: &TdGrid) -> String {
 pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Result<()> {
     let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
     root.fill(&WHITE)?;
-    let (v0, v1) = (g.speeds_kmh[0], g.speeds_kmh[g.speeds_kmh.len() - 1]);
-    let (p0, p1) = (g.values[0], g.values[g.values.len() - 1]);
-    let dp = if g.values.len() > 1 {
-        (p1 - p0) / (g.values.len() - 1) as f64
-    } else {
-        p0.abs().max(1.0) * 0.1
-    };
-    let dv = g.speeds_kmh[1] - g.speeds_kmh[0];
+    let cells = plot_util::cells(
+        &g.speeds_kmh,
+        g.values[0],
+        g.values[g.values.len() - 1],
+        g.values.len(),
+    );
+    let (dv, dp) = (cells.dx, cells.dy);
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
@@ -254,7 +253,7 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
         .margin(10)
         .x_label_area_size(40)
         .y_label_area_size(80)
-        .build_cartesian_2d(v0 - dv / 2.0..v1 + dv / 2.0, p0 - dp / 2.0..p1 + dp / 2.0)?;
+        .build_cartesian_2d(cells.x, cells.y)?;
     plot_util::mesh(
         &mut chart,
         "speed [km/h]",
