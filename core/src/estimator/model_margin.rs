@@ -638,23 +638,8 @@ impl ModelMarginTracker {
                     } else {
                         CrossingKind::Offset
                     };
-                    let mut brent = ResumableBrent::new(a, b, fa, fb, self.cfg.tol_mps);
-                    return match brent.propose() {
-                        BrentStep::Done(r, lo, hi) => self.finish(
-                            Some(Crossing {
-                                speed_mps: r,
-                                kind,
-                                bracket_mps: hi - lo,
-                                converged: true,
-                            }),
-                            up,
-                        ),
-                        BrentStep::Eval(p) => Some(Search::Refine {
-                            brent,
-                            kind,
-                            pending: p,
-                        }),
-                    };
+                    let brent = ResumableBrent::new(a, b, fa, fb, self.cfg.tol_mps);
+                    return self.refine(brent, kind, up);
                 }
                 Some(Search::Probe {
                     x: xn,
@@ -684,23 +669,33 @@ impl ModelMarginTracker {
                     return self.finish(None, up);
                 };
                 brent.tell(gp);
-                match brent.propose() {
-                    BrentStep::Done(r, lo, hi) => self.finish(
-                        Some(Crossing {
-                            speed_mps: r,
-                            kind,
-                            bracket_mps: hi - lo,
-                            converged: true,
-                        }),
-                        up,
-                    ),
-                    BrentStep::Eval(p) => Some(Search::Refine {
-                        brent,
-                        kind,
-                        pending: p,
-                    }),
-                }
+                self.refine(brent, kind, up)
             }
+        }
+    }
+
+    /// The next Brent step on a bracketed crossing: finished (stored) or the point to evaluate.
+    fn refine(
+        &mut self,
+        mut brent: ResumableBrent,
+        kind: CrossingKind,
+        up: bool,
+    ) -> Option<Search> {
+        match brent.propose() {
+            BrentStep::Done(r, lo, hi) => self.finish(
+                Some(Crossing {
+                    speed_mps: r,
+                    kind,
+                    bracket_mps: hi - lo,
+                    converged: true,
+                }),
+                up,
+            ),
+            BrentStep::Eval(p) => Some(Search::Refine {
+                brent,
+                kind,
+                pending: p,
+            }),
         }
     }
 
