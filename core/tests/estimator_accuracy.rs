@@ -8,8 +8,9 @@
 //! estimator. Samples are taken every T_eff (correlation between consecutive samples ~
 //! exp(-2) = 0.13) after a 30 s warm-up: 30 runs x 10 samples = 300 per case, so the standard
 //! error of the measured bias is ~ sd / sqrt(300) ~ 0.06 sigma_b, well inside the 0.25
-//! tolerance. The fast (warning) instance is reported for information only (its short window
-//! gives a finite-memory bias of ~0.3-0.5 sigma_b; it is judged by the step-detection test).
+//! tolerance. The fast (warning) instance is reported for information only (it is judged by the
+//! step-detection test). Both instances have their finite-memory (forgetting) bias removed
+//! (`roots::ForgettingBias`); `estimator_negative.rs` shows the bias without it.
 //! Larger runs: `SHIMMY_MC_RUNS=200 cargo test -p shimmy-core --release --test estimator_accuracy -- --nocapture`.
 
 mod common;
@@ -117,18 +118,13 @@ fn m(zeta: f64, f_hz: f64) -> ModeSpec {
 
 #[test]
 fn one_mode_ambient_bias_and_spread_within_bound() {
-    // Deviations from (0.25 b, 1.5 b), measured and kept visible rather than hidden:
-    // - zeta = 0.01: the exponentially weighted LS has a positive finite-memory bias of ~0.002
-    //   (0.37-0.38 b, 20 % resp. 11 % of zeta) at T_eff = 10 s; tolerance 0.45 b.
-    // - zeta = 0.1 at 18 Hz: spread 1.59 b (the bound is the light-damping asymptote and the
-    //   18 Hz pole is only 5.5 samples per cycle at 100 Hz); tolerance 1.75 b.
     check(
         &[
             Case {
                 modes: vec![m(0.01, 5.0)],
                 snr_db: 40.0,
                 target: m(0.01, 5.0),
-                bias_tol: 0.45,
+                bias_tol: 0.25,
                 spread_tol: 1.5,
             },
             Case {
@@ -152,6 +148,15 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
 
 /// The upper end of the band (split from the test above so the harness can run it in parallel;
 /// same seeds as before the split).
+///
+/// One deviation from (0.25 b, 1.5 b), measured and kept visible rather than hidden: at
+/// zeta = 0.1, 18 Hz the spread is 1.67 b (200 runs), tolerance 1.75 b. The broad 18 Hz mode
+/// puts a large share of its variance into the 25-50 Hz skirt, which the four non-modal AR(6)
+/// poles must shape (sampling zero, anti-alias roll-off, folded tail), and their estimation
+/// error leaks into the modal damping. Measured alternatives (30-40 runs each): AR(2) at
+/// 60 dB SNR has spread 0.90 b but bias -2.3 b; AR(4) 1.59 b / bias +0.75 b; AR(8)
+/// 2.16 b; decimating to 200 Hz 1.23 b but +1.07 b noise bias at 10 dB SNR; a 60-70 Hz
+/// anti-alias stop edge 0.93-1.32 b with -1.3 to -3.5 b bias.
 #[test]
 fn one_mode_ambient_bias_and_spread_within_bound_18hz() {
     check(
@@ -167,7 +172,7 @@ fn one_mode_ambient_bias_and_spread_within_bound_18hz() {
                 modes: vec![m(0.01, 18.0)],
                 snr_db: 10.0,
                 target: m(0.01, 18.0),
-                bias_tol: 0.45,
+                bias_tol: 0.25,
                 spread_tol: 1.5,
             },
         ],

@@ -195,3 +195,42 @@ fn ar4_fitted_at_1khz_in_f32_fails_where_decimated_passes() {
         "1 kHz f32 estimator unexpectedly accurate: {ef}"
     );
 }
+
+/// The forgetting-bias correction is needed: on a lightly damped mode (zeta = 0.01, 5 Hz, the
+/// mode lives ~3 s against the slow window's 10 s) the uncorrected RLS roots sit inside the unit
+/// circle by the finite-memory shrink, and the slow damping is biased high by ~0.4 of the
+/// accuracy bound (outside the 0.25 requirement); the same seeds with the correction are
+/// within it. 30 runs x 10 estimates each way.
+#[test]
+fn forgetting_bias_correction_is_needed_for_light_damping() {
+    let sc = Scenario {
+        modes: vec![ModeSpec {
+            zeta: 0.01,
+            f_hz: 5.0,
+            gain: 1.0,
+        }],
+        snr_db: 40.0,
+        y_rms_rad: 2e-3,
+        line: None,
+        give_phase: false,
+    };
+    let with = EstimatorConfig::default();
+    let without = EstimatorConfig {
+        forgetting_bias_correction: false,
+        ..with
+    };
+    let b = bound(0.01, 5.0, with.lambda_slow as f64, 100.0);
+    let (zw, _) = slow_zetas::<f32>(with, &sc, 30, 130.0, None);
+    let (zn, _) = slow_zetas::<f32>(without, &sc, 30, 130.0, None);
+    let (mw, sw) = mean_sd(&zw);
+    let (mn, _) = mean_sd(&zn);
+    let se = sw / (zw.len() as f64).sqrt();
+    println!(
+        "zeta 0.01 at 5 Hz: corrected bias {:+.2} b, uncorrected {:+.2} b (standard error {:.2} b)",
+        (mw - 0.01) / b,
+        (mn - 0.01) / b,
+        se / b
+    );
+    assert!((mn - 0.01) / b > 0.25 + 2.0 * se / b);
+    assert!((mw - 0.01).abs() / b < 0.25);
+}

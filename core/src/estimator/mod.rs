@@ -11,7 +11,8 @@
 //!    `y[k] = sum_i a_i y[k-i] + b_c cos(theta_k) + b_s sin(theta_k) + c + d u[k-1] + e[k]`
 //!    where theta is the wheel-order phase (imbalance forcing at f_w = V / (2 pi R)), c an offset
 //!    (steering angle) and u the damper command (optional);
-//! 4. roots of `z^p - a_1 z^(p-1) - ... - a_p` ([`roots`]), s = ln(z) f_s, zeta = -Re(s)/|s|; the
+//! 4. roots of `z^p - a_1 z^(p-1) - ... - a_p` ([`roots`]), each with the forgetting bias of
+//!    its RLS undone ([`roots::ForgettingBias`]), s = ln(z) f_s, zeta = -Re(s)/|s|; the
 //!    least-damped pair in the shimmy band, tracked for continuity, with
 //!    sigma_zeta = sqrt(max(zeta, zeta_floor) / (w_n T_eff)), T_eff = 2 / ((1 - lambda) f_s)
 //!    (the ambient-data accuracy bound; the covariance-based root sensitivity is not used);
@@ -48,7 +49,7 @@ pub use real::Real;
 
 use decimate::Decimator;
 use rls::{Rls, N_MAX};
-use roots::{aberth, select_mode, Cx, MAX_ORDER};
+use roots::{aberth, select_mode, Cx, ForgettingBias, MAX_ORDER};
 
 /// Configuration of the mode meter. `Default` is the tested design point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +75,9 @@ pub struct EstimatorConfig {
     pub lambda_fast: f32,
     /// Forgetting factor of the slow (margin) RLS at the decimated rate.
     pub lambda_slow: f32,
+    /// Undo the finite-memory (forgetting) bias of each RLS on its AR roots
+    /// ([`roots::ForgettingBias`]); `false` only for the negative test.
+    pub forgetting_bias_correction: bool,
     /// Initial covariance P0 = p0 I (regressors are O(1) after scaling).
     pub p0: f32,
     /// Bound on tr(P) (`None` disables the safeguard: negative tests only).
@@ -125,6 +129,7 @@ impl Default for EstimatorConfig {
             damper_input_regressor: false,
             lambda_fast: 0.995,
             lambda_slow: 0.998,
+            forgetting_bias_correction: true,
             p0: 100.0,
             trace_max: Some(1.0e5),
             signal_scale_rad: 1.0e-3,
@@ -265,6 +270,7 @@ struct Track<T> {
     last_freq_hz: Option<f64>,
     est: ModeEstimate,
     t_eff_s: f64,
+    bias: ForgettingBias<T>,
     warmup_updates: u32,
 }
 
@@ -277,6 +283,7 @@ impl<T: Real> Track<T> {
             last_freq_hz: None,
             est: ModeEstimate::default(),
             t_eff_s: 2.0 / ((1.0 - lambda) * fs_dec_hz),
+            bias: ForgettingBias::new(lambda),
             warmup_updates: libm::ceil(warmup_tc * tc) as u32,
         }
     }
@@ -637,8 +644,15 @@ impl<T: Real> MarginEstimator<T> {
             }
             Ok(_) => {
                 tr.roots_ok = true;
+                // corrected copy: the raw roots stay the warm start of the next solve
+                let mut roots = tr.roots;
+                if cfg.forgetting_bias_correction {
+                    for z in roots.iter_mut() {
+                        *z = tr.bias.correct(*z);
+                    }
+                }
                 match select_mode(
-                    tr.roots.get(..p).unwrap_or(&[]),
+                    roots.get(..p).unwrap_or(&[]),
                     fs,
                     cfg.band_lo_hz as f64,
                     cfg.band_hi_hz as f64,
