@@ -521,7 +521,7 @@ mod tests {
     fn forgetting_bias_matches_weighted_ls_monte_carlo() {
         use rand::SeedableRng;
         use rand_distr::{Distribution, StandardNormal};
-        // (pole radius, angle, lambda): 5 Hz / 18 Hz poles at 100 Hz, slow and fast lambda
+        // (pole radius, angle, lambda): the 5 Hz, zeta 0.01 and 8 Hz, zeta 0.05 poles at 100 Hz
         let cases = [
             (libm::exp(-0.01 * 0.1 * core::f64::consts::PI), 0.314, 0.998),
             (libm::exp(-0.01 * 0.1 * core::f64::consts::PI), 0.314, 0.995),
