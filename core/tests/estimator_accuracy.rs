@@ -41,13 +41,7 @@ fn check(cases: &[Case], first_case: usize) {
     let t_eff = 2.0 / ((1.0 - cfg.lambda_slow as f64) * fs);
     let mut failures = Vec::new();
     for (ci, c) in cases.iter().enumerate().map(|(i, c)| (i + first_case, c)) {
-        let sc = Scenario {
-            modes: c.modes.clone(),
-            snr_db: c.snr_db,
-            y_rms_rad: 2e-3,
-            line: None,
-            give_phase: false,
-        };
+        let sc = Scenario::ambient(c.modes.clone(), c.snr_db);
         let (mut zs, mut zf, mut fr) = (Vec::new(), Vec::new(), Vec::new());
         let mut invalid = 0;
         for seed in 0..runs() {
@@ -108,36 +102,28 @@ fn check(cases: &[Case], first_case: usize) {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
-fn m(zeta: f64, f_hz: f64) -> ModeSpec {
-    ModeSpec {
-        zeta,
-        f_hz,
-        gain: 1.0,
-    }
-}
-
 #[test]
 fn one_mode_ambient_bias_and_spread_within_bound() {
     check(
         &[
             Case {
-                modes: vec![m(0.01, 5.0)],
+                modes: vec![ModeSpec::unit(0.01, 5.0)],
                 snr_db: 40.0,
-                target: m(0.01, 5.0),
+                target: ModeSpec::unit(0.01, 5.0),
                 bias_tol: 0.25,
                 spread_tol: 1.5,
             },
             Case {
-                modes: vec![m(0.05, 8.0)],
+                modes: vec![ModeSpec::unit(0.05, 8.0)],
                 snr_db: 10.0,
-                target: m(0.05, 8.0),
+                target: ModeSpec::unit(0.05, 8.0),
                 bias_tol: 0.25,
                 spread_tol: 1.5,
             },
             Case {
-                modes: vec![m(0.02, 12.0)],
+                modes: vec![ModeSpec::unit(0.02, 12.0)],
                 snr_db: 30.0,
-                target: m(0.02, 12.0),
+                target: ModeSpec::unit(0.02, 12.0),
                 bias_tol: 0.25,
                 spread_tol: 1.5,
             },
@@ -167,16 +153,16 @@ fn one_mode_ambient_bias_and_spread_within_bound_18hz() {
     check(
         &[
             Case {
-                modes: vec![m(0.1, 18.0)],
+                modes: vec![ModeSpec::unit(0.1, 18.0)],
                 snr_db: 20.0,
-                target: m(0.1, 18.0),
+                target: ModeSpec::unit(0.1, 18.0),
                 bias_tol: 0.25,
                 spread_tol: 1.75,
             },
             Case {
-                modes: vec![m(0.01, 18.0)],
+                modes: vec![ModeSpec::unit(0.01, 18.0)],
                 snr_db: 10.0,
-                target: m(0.01, 18.0),
+                target: ModeSpec::unit(0.01, 18.0),
                 bias_tol: 0.25,
                 spread_tol: 1.5,
             },
@@ -196,9 +182,9 @@ fn two_mode_ambient_bias_and_spread_within_bound() {
     };
     check(
         &[Case {
-            modes: vec![m(0.04, 16.0), w(0.1, 5.0)],
+            modes: vec![ModeSpec::unit(0.04, 16.0), w(0.1, 5.0)],
             snr_db: 30.0,
-            target: m(0.04, 16.0),
+            target: ModeSpec::unit(0.04, 16.0),
             bias_tol: 0.25,
             spread_tol: 1.5,
         }],
@@ -216,13 +202,10 @@ fn two_mode_ambient_bias_and_spread_within_bound() {
 #[test]
 fn two_mode_equal_participation_is_a_known_limitation() {
     let cfg = EstimatorConfig::default();
-    let sc = Scenario {
-        modes: vec![m(0.03, 8.0), m(0.08, 15.0)],
-        snr_db: 20.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(
+        vec![ModeSpec::unit(0.03, 8.0), ModeSpec::unit(0.08, 15.0)],
+        20.0,
+    );
     let mut z = Vec::new();
     for seed in 0..5 {
         for o in collect::<f32>(cfg, &sc, 77 + seed, 80.0, 30.0, 10.0) {
@@ -282,10 +265,10 @@ fn yule_walker_zeta(modes: &[ModeSpec], ord: usize, f_target: f64) -> f64 {
 /// at equal gain -> 0.131 (AR(8): 0.084).
 #[test]
 fn two_mode_bias_is_structural_yule_walker_check() {
-    let one = yule_walker_zeta(&[m(0.03, 8.0)], 6, 8.0);
+    let one = yule_walker_zeta(&[ModeSpec::unit(0.03, 8.0)], 6, 8.0);
     let weak = yule_walker_zeta(
         &[
-            m(0.03, 8.0),
+            ModeSpec::unit(0.03, 8.0),
             ModeSpec {
                 zeta: 0.08,
                 f_hz: 15.0,
@@ -295,7 +278,11 @@ fn two_mode_bias_is_structural_yule_walker_check() {
         6,
         8.0,
     );
-    let equal = yule_walker_zeta(&[m(0.03, 8.0), m(0.08, 15.0)], 6, 8.0);
+    let equal = yule_walker_zeta(
+        &[ModeSpec::unit(0.03, 8.0), ModeSpec::unit(0.08, 15.0)],
+        6,
+        8.0,
+    );
     println!("Yule-Walker AR(6) asymptotic zeta (true 0.03): one mode {one:.4}, weak second mode {weak:.4}, equal second mode {equal:.4}");
     assert!((one - 0.03).abs() < 1e-3);
     assert!(equal - 0.03 > 0.05);

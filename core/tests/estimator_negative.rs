@@ -53,11 +53,7 @@ fn wheel_order_regressors_are_needed_for_a_forced_line() {
     let f_w = 9.0f64;
     let speed = (f_w * PI2 * radius as f64) as f32;
     let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.05,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
+        modes: vec![ModeSpec::unit(0.05, 8.0)],
         snr_db: 20.0,
         y_rms_rad: 2e-3,
         line: Some((f_w, 2.0)),
@@ -146,17 +142,7 @@ fn f32_coefficient_rounding_ruins_ar4_at_1khz_but_not_at_100hz() {
 /// same data where the decimated AR(4) f32 estimator passes. 4 runs x 70 s.
 #[test]
 fn ar4_fitted_at_1khz_in_f32_fails_where_decimated_passes() {
-    let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.05,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
-        snr_db: 40.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(vec![ModeSpec::unit(0.05, 8.0)], 40.0);
     let dec = EstimatorConfig {
         ar_order: 4,
         ..EstimatorConfig::default()
@@ -203,17 +189,7 @@ fn ar4_fitted_at_1khz_in_f32_fails_where_decimated_passes() {
 /// within it. 30 runs x 10 estimates each way.
 #[test]
 fn forgetting_bias_correction_is_needed_for_light_damping() {
-    let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.01,
-            f_hz: 5.0,
-            gain: 1.0,
-        }],
-        snr_db: 40.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(vec![ModeSpec::unit(0.01, 5.0)], 40.0);
     let with = EstimatorConfig::default();
     let without = EstimatorConfig {
         forgetting_bias_correction: false,

@@ -27,17 +27,7 @@ fn finite_out(o: &MeterOutput) -> bool {
 #[test]
 fn one_hour_f32_matches_f64_reference_without_nan() {
     let cfg = EstimatorConfig::default();
-    let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.04,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
-        snr_db: 20.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(vec![ModeSpec::unit(0.04, 8.0)], 20.0);
     let mut run = Run::new(&sc, 4242);
     let mut e32 = MarginEstimator::<f32>::new(cfg).unwrap();
     let mut e64 = MarginEstimator::<f64>::new(cfg).unwrap();
@@ -128,17 +118,7 @@ fn feed<T: Real>(est: &mut MarginEstimator<T>, run: &mut Run<'_>, secs: f64, zer
 /// (> 1e6 x in 60 s at lambda = 0.995).
 #[test]
 fn covariance_stays_bounded_through_60_s_of_zero_excitation_and_grows_without_safeguards() {
-    let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.05,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
-        snr_db: 20.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(vec![ModeSpec::unit(0.05, 8.0)], 20.0);
     let on = EstimatorConfig::default();
     let off = EstimatorConfig {
         freeze_enabled: false,
@@ -188,11 +168,7 @@ fn covariance_stays_bounded_through_60_s_of_zero_excitation_and_grows_without_sa
 #[test]
 fn nan_and_inf_inputs_never_produce_non_finite_outputs() {
     let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.05,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
+        modes: vec![ModeSpec::unit(0.05, 8.0)],
         snr_db: 20.0,
         y_rms_rad: 2e-3,
         line: Some((9.0, 0.5)),

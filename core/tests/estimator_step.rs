@@ -14,23 +14,9 @@ fn damping_step_detected_within_1_5_s_median_with_at_most_1_percent_false_time()
     let cfg = EstimatorConfig::default();
     let b = bound(0.08, 8.0, cfg.lambda_fast as f64, 100.0);
     let thr = (0.08 - 2.326 * b) as f32;
-    let before = vec![ModeSpec {
-        zeta: 0.08,
-        f_hz: 8.0,
-        gain: 1.0,
-    }];
-    let after = vec![ModeSpec {
-        zeta: 0.02,
-        f_hz: 8.0,
-        gain: 1.0,
-    }];
-    let sc = Scenario {
-        modes: before,
-        snr_db: 20.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let before = vec![ModeSpec::unit(0.08, 8.0)];
+    let after = vec![ModeSpec::unit(0.02, 8.0)];
+    let sc = Scenario::ambient(before, 20.0);
     let t_step = 60.0;
     let (mut delays, mut flagged, mut prior) = (Vec::new(), 0usize, 0usize);
     for seed in 0..30 {

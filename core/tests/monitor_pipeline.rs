@@ -12,17 +12,7 @@ use shimmy_core::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 
 #[test]
 fn subcritical_burst_raises_shimmy_present_and_is_logged() {
-    let sc = Scenario {
-        modes: vec![ModeSpec {
-            zeta: 0.08,
-            f_hz: 8.0,
-            gain: 1.0,
-        }],
-        snr_db: 30.0,
-        y_rms_rad: 2e-3,
-        line: None,
-        give_phase: false,
-    };
+    let sc = Scenario::ambient(vec![ModeSpec::unit(0.08, 8.0)], 30.0);
     let mut run = Run::new(&sc, 3);
     let mut est = MarginEstimator::<f32>::new(EstimatorConfig::default()).unwrap();
     let mut fusion = Fusion::new(FusionParams::default());

@@ -23,6 +23,17 @@ pub struct ModeSpec {
     pub gain: f64,
 }
 
+impl ModeSpec {
+    /// A mode with unit output gain.
+    pub fn unit(zeta: f64, f_hz: f64) -> Self {
+        Self {
+            zeta,
+            f_hz,
+            gain: 1.0,
+        }
+    }
+}
+
 type M4 = nalgebra::SMatrix<f64, 4, 4>;
 type V4 = nalgebra::SVector<f64, 4>;
 
@@ -126,6 +137,19 @@ pub struct Scenario {
     pub line: Option<(f64, f64)>,
     /// Pass the wheel phase to the estimator.
     pub give_phase: bool,
+}
+
+impl Scenario {
+    /// Ambient (road-noise) excitation only: no wheel-order line, modal yaw RMS 2 mrad.
+    pub fn ambient(modes: Vec<ModeSpec>, snr_db: f64) -> Self {
+        Self {
+            modes,
+            snr_db,
+            y_rms_rad: 2e-3,
+            line: None,
+            give_phase: false,
+        }
+    }
 }
 
 pub struct Run<'a> {
