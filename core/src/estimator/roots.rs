@@ -362,16 +362,20 @@ mod tests {
         c[1..].iter().map(|v| v.re).collect()
     }
 
-    #[test]
-    fn aberth_agrees_with_schur_on_random_ar_polynomials() {
-        // Pole sets like a decimated mode meter sees: pairs near the unit circle + real poles.
-        let mut seed = 12345u64;
-        let mut rnd = || {
+    /// Deterministic uniform [0, 1) numbers (64-bit LCG): the polynomial sets stay fixed.
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        }
+    }
+
+    #[test]
+    fn aberth_agrees_with_schur_on_random_ar_polynomials() {
+        // Pole sets like a decimated mode meter sees: pairs near the unit circle + real poles.
+        let mut rnd = uniform(12345u64);
         for _ in 0..200 {
             let mut r = Vec::new();
             for _ in 0..2 {
@@ -402,13 +406,7 @@ mod tests {
         // coefficients of decimated-rate AR(6) models, the in-band damping must match the f64
         // root within a small fraction of the ambient accuracy bound (~0.005 at best).
         let fs = 100.0;
-        let mut seed = 777u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = uniform(777u64);
         let mut worst = 0.0f64;
         for _ in 0..300 {
             let pole = |zeta: f64, f: f64| {
