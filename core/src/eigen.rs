@@ -24,19 +24,26 @@ pub const DEFAULT_MAX_NITER: usize = 30 * N_STATES;
 const MAX_ABS_ENTRY: f64 = 1e150;
 
 /// Why an eigen-solve failed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum EigenError {
     /// The matrix holds NaN or +-Inf (or entries too large to balance safely).
+    #[error("matrix holds NaN, infinite or too large entries")]
     NonFinite,
     /// `max_niter` was 0 (nalgebra would then iterate without bound).
+    #[error("eigen-solve iteration bound is 0")]
     ZeroIterationBound,
     /// The QR iteration did not converge within `max_niter` iterations.
+    #[error("QR iteration did not converge within its iteration bound")]
     NotConverged,
     /// The result held NaN/Inf (should not happen for finite input; reported, not trusted).
+    #[error("eigen-solve produced a non-finite result")]
     NonFiniteResult,
     /// Inverse iteration for an eigenvector met an exactly singular pivot twice.
+    #[error("inverse iteration met a singular pivot twice")]
     Singular,
     /// No eigenvalue matched the request (e.g. no oscillatory mode).
+    #[error("no eigenvalue matches the request (e.g. no oscillatory mode)")]
     NoMode,
 }
 

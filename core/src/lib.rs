@@ -5,7 +5,6 @@
 //! Rules for everything in here: no heap, no panics on the control path, time is an input,
 //! units are in the names.
 #![cfg_attr(not(test), no_std)]
-#![warn(missing_docs)]
 
 #[macro_use]
 mod fmt;

@@ -28,17 +28,23 @@ pub const V_SEARCH_MIN_MPS: f64 = 0.1;
 pub const V_SEARCH_MAX_MPS: f64 = 70.0;
 
 /// Errors of the stability analysis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StabilityError {
     /// An eigen-solve failed.
+    #[error("eigen-solve failed: {0}")]
     Eigen(EigenError),
     /// Speed range or step not finite/positive/ordered.
+    #[error("speed range or step is not finite, positive and ordered")]
     BadRange,
     /// More crossings than [`MAX_CROSSINGS`].
+    #[error("more Hopf crossings than MAX_CROSSINGS")]
     TooManyCrossings,
     /// No sign change of g(V) found within the budget and range.
+    #[error("no sign change of the growth rate within the budget and range")]
     NotFound,
     /// The evaluation budget is too small to do anything (< 2).
+    #[error("evaluation budget below 2")]
     BudgetTooSmall,
 }
 

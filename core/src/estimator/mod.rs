@@ -153,15 +153,20 @@ impl Default for EstimatorConfig {
 }
 
 /// Invalid configuration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
     /// ar_order outside 2..=8.
+    #[error("estimator ar_order outside 2..=8")]
     ArOrder,
     /// A forgetting factor outside (0, 1).
+    #[error("estimator forgetting factor outside (0, 1)")]
     Lambda,
     /// Decimation 0 or anti-alias cut-off not below the input Nyquist.
+    #[error("estimator decimation is 0 or the anti-alias cut-off is not below the input Nyquist frequency")]
     Decimation,
     /// A non-positive scale, rate, or time constant, or an empty band.
+    #[error("estimator scale, rate or time constant not positive, or empty band")]
     Range,
 }
 

@@ -17,13 +17,17 @@ use super::real::Real;
 pub const N_MAX: usize = 12;
 
 /// Why an RLS update was refused (the state is unchanged in every case).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RlsError {
     /// Regressor or target was NaN/Inf.
+    #[error("RLS regressor or target is NaN or infinite")]
     NonFiniteInput,
     /// lambda + phi' P phi was not positive and finite.
+    #[error("RLS denominator lambda + phi' P phi is not positive and finite")]
     BadDenominator,
     /// The updated state was non-finite or P lost positive diagonal; P was reset.
+    #[error("RLS state diverged (non-finite or lost positive diagonal); covariance reset")]
     Diverged,
 }
 

@@ -68,13 +68,17 @@ impl<T: Real> Cx<T> {
 }
 
 /// Root-finding failure.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RootError {
     /// Order 0 or above `MAX_ORDER`.
+    #[error("polynomial order is 0 or above MAX_ORDER")]
     BadOrder,
     /// Non-finite coefficient.
+    #[error("a polynomial coefficient is NaN or infinite")]
     NonFinite,
     /// The iteration bound was reached without convergence.
+    #[error("root iteration did not converge within its bound")]
     NoConvergence,
 }
 
