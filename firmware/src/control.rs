@@ -15,7 +15,7 @@ use shimmy_core::supervisor::{
     EncoderReading, MarginStatus, Mode, RawFrame, SafeController, SafeOutput,
 };
 
-/// Control period [us] (the supervisor's time stamps advance by this per step).
+/// Control period, us (the supervisor's time stamps advance by this per step).
 pub const PERIOD_US: u32 = 1000;
 
 /// Counters of the control loop. Every fault increments one; nothing is silent. Logged by the

@@ -4,7 +4,7 @@
 //! |---|---|---|---|
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> coil PWM; pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f64 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -38,7 +38,7 @@ mod app {
         health: Health,
         /// Newest model margin (written by the background loop, read by `meter`).
         model: Option<ModelMargin>,
-        /// Time [s] and trusted speed [m/s] of the newest meter sample (for the model loop).
+        /// Time (s) and trusted speed (m/s) of the newest meter sample (for the model loop).
         now: (f32, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,

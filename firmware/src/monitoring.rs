@@ -10,7 +10,7 @@
 //!   `DataPipeline`: mode meter -> fusion with the newest model margin -> monitor, with the
 //!   tuned `PipelineParams`), which answers every 10th sample;
 //! - background loop (idle, lowest priority): [`ModelTask::step`] (the core's
-//!   `ModelMarginTracker`, at most one f64 eigen-solve per call), publishing each completed
+//!   `ModelMarginTracker`, at most one eigen-solve per call, in f32 (`Precision::F32`)), publishing each completed
 //!   model margin to the meter task.
 //!
 //! Why the queue and not the per-sample push inside the 1 kHz task: nine of ten `push` calls
@@ -29,15 +29,15 @@ use shimmy_core::monitor::Level;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::{MarginStatus, SafeController, SafeOutput, SupervisorParams};
 
-/// Control period [s].
+/// Control period, s.
 pub const DT_S: f32 = 1e-3;
 /// Meter samples per meter-task run (1 kHz / 100 Hz).
 pub const METER_DECIMATION: u32 = 10;
-/// Rolling radius used for the wheel-order phase [m] (the reference board's tone wheel).
+/// Rolling radius used for the wheel-order phase, m (the reference board's tone wheel).
 pub const ROLLING_RADIUS_M: f32 = crate::calibration::WHEEL_SPEED.rolling_radius_m;
 /// Capacity of the monitor's event log.
 pub const EVENT_LOG: usize = 8;
-/// Requirement on the model margin's refresh period [s]: a new cycle starts every this long and
+/// Requirement on the model margin's refresh period, s: a new cycle starts every this long and
 /// must complete within it (the tracker's `overruns` count the misses).
 ///
 /// 10 Hz, the rate the margin issue asks for. What it buys: the tuned monitor
@@ -64,13 +64,13 @@ pub fn safe_controller() -> SafeController {
 pub struct MeterSample {
     /// Control step number.
     pub step: u32,
-    /// Left wheel yaw [rad] (NaN when the supervisor trusted no wheel yaw: the meter holds).
+    /// Left wheel yaw, rad (NaN when the supervisor trusted no wheel yaw: the meter holds).
     pub psi_l_rad: f32,
-    /// Right wheel yaw [rad] (the left one again when only the left encoder is trusted).
+    /// Right wheel yaw, rad (the left one again when only the left encoder is trusted).
     pub psi_r_rad: f32,
     /// Trusted vehicle speed [m/s] (NaN when the supervisor does not trust it).
     pub speed_mps: f32,
-    /// Coil current command of the step [A].
+    /// Coil current command of the step, A.
     pub cmd_a: f32,
 }
 

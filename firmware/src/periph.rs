@@ -42,7 +42,7 @@ impl ControlTimer {
         self.tim.cnt().read().bits()
     }
 
-    /// How late the control step started [ticks]: the counter at entry (ticks since the
+    /// How late the control step started, ticks: the counter at entry (ticks since the
     /// update event). Board only: QEMU 7.2's STM32 timer model neither restarts CNT at the
     /// update event (it counts since the last CNT write) nor keeps the ARR period exactly
     /// (measured ~1.8 ms between update interrupts for a 1 ms period), so the `qemu` build

@@ -44,13 +44,13 @@ impl<E> From<coil_current::Error<E>> for SensorFault {
 /// Raw results of one sampling of every sensor.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleSet {
-    /// Left wheel yaw [rad].
+    /// Left wheel yaw, rad.
     pub psi_l_rad: Result<f32, SensorFault>,
-    /// Right wheel yaw [rad].
+    /// Right wheel yaw, rad.
     pub psi_r_rad: Result<f32, SensorFault>,
     /// Vehicle speed.
     pub speed: SpeedReading,
-    /// Measured coil current [A].
+    /// Measured coil current, A.
     pub coil_current_a: Result<f32, SensorFault>,
 }
 

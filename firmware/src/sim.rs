@@ -27,9 +27,9 @@ use core::convert::Infallible;
 use core::sync::atomic::{AtomicU32, Ordering};
 use embedded_hal::spi::{ErrorType, Operation, SpiDevice};
 
-/// Shimmy frequency of the simulated wheels [Hz].
+/// Shimmy frequency of the simulated wheels, Hz.
 pub const SHIMMY_HZ: f32 = 8.0;
-/// Amplitude of the simulated wheel yaw [rad].
+/// Amplitude of the simulated wheel yaw, rad.
 pub const SHIMMY_AMPLITUDE_RAD: f32 = 0.02;
 /// Raw count of straight ahead (calibrated zero) of both encoders.
 pub const ZERO_COUNTS: u16 = 16_380;
@@ -105,7 +105,7 @@ impl SimWorld {
         f32::from_bits(self.duty_bits.load(Ordering::Relaxed))
     }
 
-    /// Simulated wheel yaw of wheel `side` (0 left, 1 right) at the current step [rad].
+    /// Simulated wheel yaw of wheel `side` (0 left, 1 right) at the current step, rad.
     pub fn yaw_rad(&self, side: u8) -> f32 {
         let i = usize::from(side.min(1));
         f32::from_bits(self.yaw_bits[i].load(Ordering::Relaxed))
@@ -215,7 +215,7 @@ impl SimPulses {
             last_edge_index: None,
         }
     }
-    /// Nominal pulse period [ticks].
+    /// Nominal pulse period, ticks.
     pub fn period_ticks() -> u32 {
         let m_per_pulse = 2.0 * core::f32::consts::PI * SPEED_CONFIG.rolling_radius_m
             / f32::from(SPEED_CONFIG.pulses_per_rev);

@@ -27,7 +27,7 @@ use std::process::{Command, Stdio};
 /// The fuzz targets (binaries of `fuzz/Cargo.toml`).
 pub const TARGETS: &[&str] = &["safe_step"];
 
-/// Default length of the run in `cargo xtask test` [s].
+/// Default length of the run in `cargo xtask test`, s.
 pub const CI_SECONDS: u64 = 60;
 
 const SANCOV_FLAGS: &[&str] = &[

@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
+/// The firmware's target triple (Cortex-M4F with hardware floating point).
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 const FIRMWARE: &str = "shimmy-firmware";
 
@@ -88,6 +89,7 @@ fn test() -> Result<(), String> {
             .map(|_| String::new())
         }),
         ("clippy (firmware, thumbv7em)", clippy_firmware),
+        ("rustdoc (workspace, -D warnings)", rustdoc),
         ("host tests (cargo test --workspace)", || {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
@@ -161,6 +163,17 @@ fn test() -> Result<(), String> {
     } else {
         Err(format!("{failed} step(s) failed"))
     }
+}
+
+/// The API docs build without a warning: every public item documented, every intra-doc link
+/// resolves (a unit written as `[rad]` would read as a broken link).
+fn rustdoc() -> Step {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    run(Command::new(cargo)
+        .args(["doc", "--workspace", "--no-deps"])
+        .env("RUSTDOCFLAGS", "-D warnings")
+        .current_dir(root()))?;
+    Ok(String::new())
 }
 
 fn clippy_firmware() -> Step {
@@ -345,6 +358,7 @@ pub fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
     Ok(copy)
 }
 
+/// Runs the cargo that runs xtask (same toolchain) with `args` in the workspace root.
 pub fn cargo(args: &[&str]) -> Result<(), String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     run(Command::new(cargo).args(args).current_dir(root()))
@@ -368,7 +382,8 @@ fn apt_install(package: &str, missing: &str, hint: &str) -> Result<(), String> {
             .status()
             .is_ok_and(|s| s.success())
     };
-    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", package]) {
+    if apt(&["update", "-qq"]) && apt(&["install", "-y", "-qq", "--no-install-recommends", package])
+    {
         Ok(())
     } else {
         Err(format!("apt-get could not install {package}; {hint}"))

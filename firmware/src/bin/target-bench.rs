@@ -11,7 +11,7 @@
 //! differ; count roughly 1-1.5 cycles per instruction.
 //!
 //! Adding an entry is one line in `ENTRIES`: a name, a budget (or `None` to only report) and a
-//! function that calls [`measure`] on the code under test.
+//! function that calls `measure` on the code under test.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]

@@ -14,13 +14,13 @@ pub trait AdcChannel {
 /// The analog chain: shunt, current-sense amplifier, ADC.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShuntConfig {
-    /// Shunt resistance [ohm].
+    /// Shunt resistance, ohm.
     pub shunt_ohm: f32,
     /// Voltage gain of the current-sense amplifier [V/V].
     pub amp_gain: f32,
-    /// ADC reference voltage [V].
+    /// ADC reference voltage, V.
     pub vref_v: f32,
-    /// ADC resolution [bits].
+    /// ADC resolution, bits.
     pub bits: u8,
     /// Counts read at zero current (amplifier offset, measured at calibration).
     pub offset_counts: f32,
@@ -70,7 +70,7 @@ impl<A: AdcChannel> CoilCurrentSensor<A> {
         (f32::from(counts) - self.cfg.offset_counts) * self.amps_per_count
     }
 
-    /// Reads the coil current [A].
+    /// Reads the coil current, A.
     pub fn read_a(&mut self) -> Result<f32, Error<A::Error>> {
         let c = self.adc.read_counts().map_err(Error::Adc)?;
         if c >= self.cfg.full_scale_counts() {

@@ -13,18 +13,18 @@
 
 use embedded_hal::pwm::SetDutyCycle;
 
-/// Coil current commanded while the loop has no valid command [A]: the supervisor's fail-safe
+/// Coil current commanded while the loop has no valid command, A: the supervisor's fail-safe
 /// current (one definition, in core).
 pub const FAILSAFE_CURRENT_A: f32 = shimmy_core::supervisor::FAILSAFE_CURRENT_A;
 
 /// Electrical data of the coil drive.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoilConfig {
-    /// Coil resistance (hot) [ohm].
+    /// Coil resistance (hot), ohm.
     pub coil_ohm: f32,
-    /// Supply voltage of the switch [V].
+    /// Supply voltage of the switch, V.
     pub supply_v: f32,
-    /// Largest current the coil may carry [A] (thermal / damper saturation).
+    /// Largest current the coil may carry, A (thermal / damper saturation).
     pub max_current_a: f32,
 }
 
@@ -53,7 +53,7 @@ impl<P: SetDutyCycle> CoilDriver<P> {
         (i * self.cfg.coil_ohm / self.cfg.supply_v).clamp(0.0, 1.0)
     }
 
-    /// Commands a coil current [A]. NaN commands the fail-safe current; values outside
+    /// Commands a coil current, A. NaN commands the fail-safe current; values outside
     /// [0, max] are clamped (a semi-active damper cannot use negative current).
     pub fn set_current_a(&mut self, current_a: f32) -> Result<(), P::Error> {
         let i = if current_a.is_nan() {
@@ -75,7 +75,7 @@ impl<P: SetDutyCycle> CoilDriver<P> {
         self.set_current_a(FAILSAFE_CURRENT_A)
     }
 
-    /// The current last commanded (after clamping) [A].
+    /// The current last commanded (after clamping), A.
     pub fn commanded_a(&self) -> f32 {
         self.commanded_a
     }

@@ -31,11 +31,11 @@ pub trait PulseCapture {
 pub struct SpeedConfig {
     /// Pulses per wheel revolution (tone-wheel teeth).
     pub pulses_per_rev: u16,
-    /// Dynamic rolling radius [m].
+    /// Dynamic rolling radius, m.
     pub rolling_radius_m: f32,
-    /// Input-capture timer tick rate [Hz].
+    /// Input-capture timer tick rate, Hz.
     pub tick_hz: u32,
-    /// No edge for this long means standstill [s].
+    /// No edge for this long means standstill, s.
     pub timeout_s: f32,
     /// Largest plausible |acceleration| [m/s^2] (braking and traction of a road vehicle stay
     /// below ~12 m/s^2; a larger jump is a missing or extra tooth or electrical noise).
