@@ -10,8 +10,8 @@
 //!   `DataPipeline`: mode meter -> fusion with the newest model margin -> monitor, with the
 //!   tuned `PipelineParams`), which answers every 10th sample;
 //! - background loop (idle, lowest priority): [`ModelTask::step`] (the core's
-//!   `ModelMarginTracker`, at most one eigen-solve per call, in f32 (`Precision::F32`)), publishing each completed
-//!   model margin to the meter task.
+//!   `ModelMarginTracker`, at most one f32 eigen-solve per call), publishing each completed model
+//!   margin to the meter task.
 //!
 //! Why the queue and not the per-sample push inside the 1 kHz task: nine of ten `push` calls
 //! are a decimation-filter step (a few hundred instructions), but the tenth runs the RLS
