@@ -1,5 +1,6 @@
 //! The board layer: everything that differs between the STM32F405RG board and QEMU.
-//! The application (`main.rs`) sees only [`Board`] and the types in it.
+//! The application (`main.rs`) sees only [`Board`] (the variant's [`parts::BoardParts`]) and
+//! the types in it.
 //!
 //! - board build (`stm32f405.rs`): 168 MHz from an 8 MHz HSE, two AS5047P on SPI1/SPI2,
 //!   wheel-speed input capture on TIM5, coil current on ADC1, coil PWM on TIM4;
@@ -7,27 +8,14 @@
 //!   QEMU's 1 GHz), and the sensors are the simulated devices of [`crate::sim`]; the run ends
 //!   after [`QEMU_STEPS`] control steps.
 
-use crate::drivers::coil_pwm::CoilDriver;
-use crate::periph::{ControlTimer, Watchdog};
+pub mod parts;
 
 #[cfg(not(feature = "qemu"))]
 mod stm32f405;
 #[cfg(not(feature = "qemu"))]
-pub use stm32f405::{init, BoardSensors, Pwm};
+pub use stm32f405::{init, Board, BoardSensors, Pwm};
 
 #[cfg(feature = "qemu")]
 mod qemu;
 #[cfg(feature = "qemu")]
-pub use qemu::{init, BoardSensors, Pwm, QEMU_STEPS, WORLD};
-
-/// What the application gets from the board layer.
-pub struct Board {
-    /// All sensors of the control loop.
-    pub sensors: BoardSensors,
-    /// The coil driver (already at the fail-safe current).
-    pub coil: CoilDriver<Pwm>,
-    /// The 1 kHz period timer (interrupt TIM2).
-    pub timer: ControlTimer,
-    /// The independent watchdog (running).
-    pub watchdog: Watchdog,
-}
+pub use qemu::{init, Board, BoardSensors, Pwm, QEMU_STEPS, WORLD};

@@ -1,6 +1,6 @@
 //! QEMU (netduinoplus2) board layer: no clock setup, simulated sensors.
 
-use super::Board;
+use super::parts::BoardParts;
 use crate::drivers::coil_pwm::CoilDriver;
 use crate::hal::pac;
 use crate::periph::{ControlTimer, Watchdog};
@@ -20,6 +20,9 @@ pub const QEMU_STEPS: u32 = sim::SCENARIO_STEPS;
 /// QEMU's stm32f405 clocks its timers at 1 GHz (verified by `cargo xtask bench`'s
 /// calibration: TIM2 at prescaler 0 counts one per instruction at `-icount shift=0`).
 const TIMER_CLOCK_HZ: u32 = 1_000_000_000;
+
+/// The parts of this variant the application gets.
+pub type Board = BoardParts<BoardSensors, Pwm>;
 
 /// Brings up the simulated board.
 pub fn init(dp: pac::Peripherals) -> Board {

@@ -10,7 +10,7 @@
 //! | coil PWM (gate driver input) | TIM4 CH1, 20 kHz | PB6                                   |
 //! | control period               | TIM2 (internal)  | -                                     |
 
-use super::Board;
+use super::parts::BoardParts;
 use crate::drivers::as5047p::{AngleTracker, As5047p};
 use crate::drivers::coil_current::{AdcChannel, CoilCurrentSensor};
 use crate::drivers::coil_pwm::{CoilConfig, CoilDriver};
@@ -103,6 +103,9 @@ impl AdcChannel for BoardAdc {
         Ok(self.adc.convert(&self.pin, SampleTime::Cycles_84))
     }
 }
+
+/// The parts of this variant the application gets.
+pub type Board = BoardParts<BoardSensors, Pwm>;
 
 /// Brings up the board: 168 MHz from the 8 MHz HSE, peripherals, coil at the fail-safe
 /// current, watchdog running, control timer started (its interrupt fires once `init` returns).

@@ -1,0 +1,371 @@
+//! The module graph of the library crates, read from their sources with `syn`:
+//!
+//! - no file imports a file that imports it back, directly or through others (the file graph
+//!   of `core`, `host-sim` and `firmware` has no cycle);
+//! - host-sim's layers are used only downwards (`model` < `sim` < `out` < `cmd`), and no
+//!   command imports another command.
+//!
+//! File X imports file Y when X names a path (in a `use`, a type, an expression, a pattern)
+//! that resolves into Y's module: `crate::a::b::Item`, `super::...`, `self::child::...`, or a
+//! bare `child::...` of a child module X declares. A `mod child;` declaration alone is not an
+//! import, a `pub use child::Item` re-export is. Doc comments and strings are not code and do
+//! not count. An inline `mod tests { use super::*; }` stays inside its file.
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use syn::visit::Visit;
+
+type ModPath = Vec<String>;
+
+/// One library crate's source files by module path (`[]` is `lib.rs`).
+struct Crate {
+    name: &'static str,
+    files: BTreeMap<ModPath, PathBuf>,
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ sits in the workspace root")
+        .to_path_buf()
+}
+
+/// Every module file reachable by the directory convention from `src/lib.rs` (binaries,
+/// `main.rs` and `bin/` are crate roots of their own and left out).
+fn load(name: &'static str, dir: &str) -> Crate {
+    let src = root().join(dir).join("src");
+    let mut files = BTreeMap::new();
+    let mut stack = vec![src.clone()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let rel = p.strip_prefix(&src).unwrap().to_path_buf();
+            if p.is_dir() {
+                if rel != Path::new("bin") {
+                    stack.push(p);
+                }
+                continue;
+            }
+            if p.extension().is_none_or(|x| x != "rs") || rel == Path::new("main.rs") {
+                continue;
+            }
+            let mut m: ModPath = rel
+                .with_extension("")
+                .components()
+                .map(|c| c.as_os_str().to_string_lossy().into_owned())
+                .collect();
+            if m.last().is_some_and(|l| l == "mod" || l == "lib") {
+                m.pop();
+            }
+            files.insert(m, p);
+        }
+    }
+    Crate { name, files }
+}
+
+/// Collects the module paths a file names, resolved to absolute module paths.
+struct Imports<'a> {
+    /// Module path of the file.
+    file: &'a [String],
+    /// Inline modules entered inside the file (`mod tests { ... }`).
+    inline: Vec<String>,
+    /// Child modules declared by the file as `mod x;` (a bare `x::...` path means them).
+    children: BTreeSet<String>,
+    found: BTreeSet<ModPath>,
+}
+
+impl Imports<'_> {
+    fn scope(&self) -> ModPath {
+        let mut s = self.file.to_vec();
+        s.extend(self.inline.iter().cloned());
+        s
+    }
+
+    /// Resolves a path's leading segments; `None` for paths into other crates or local names.
+    fn resolve(&self, segs: &[String]) -> Option<ModPath> {
+        let first = segs.first()?;
+        let mut base = self.scope();
+        let mut rest = segs;
+        match first.as_str() {
+            "crate" => {
+                base.clear();
+                rest = &segs[1..];
+            }
+            "self" => rest = &segs[1..],
+            "super" => {
+                while rest.first().is_some_and(|s| s == "super") {
+                    base.pop()?;
+                    rest = &rest[1..];
+                }
+            }
+            s if self.inline.is_empty() && self.children.contains(s) && segs.len() > 1 => {}
+            _ => return None,
+        }
+        base.extend(rest.iter().cloned());
+        Some(base)
+    }
+
+    fn record(&mut self, segs: &[String]) {
+        if let Some(p) = self.resolve(segs) {
+            self.found.insert(p);
+        }
+    }
+}
+
+fn use_paths(tree: &syn::UseTree, prefix: &mut Vec<String>, out: &mut Vec<Vec<String>>) {
+    match tree {
+        syn::UseTree::Path(p) => {
+            prefix.push(p.ident.to_string());
+            use_paths(&p.tree, prefix, out);
+            prefix.pop();
+        }
+        syn::UseTree::Name(n) => {
+            let mut v = prefix.clone();
+            if n.ident != "self" {
+                v.push(n.ident.to_string());
+            }
+            out.push(v);
+        }
+        syn::UseTree::Rename(r) => {
+            let mut v = prefix.clone();
+            v.push(r.ident.to_string());
+            out.push(v);
+        }
+        syn::UseTree::Glob(_) => out.push(prefix.clone()),
+        syn::UseTree::Group(g) => g.items.iter().for_each(|t| use_paths(t, prefix, out)),
+    }
+}
+
+impl<'ast> Visit<'ast> for Imports<'_> {
+    fn visit_item_mod(&mut self, m: &'ast syn::ItemMod) {
+        if let Some((_, items)) = &m.content {
+            self.inline.push(m.ident.to_string());
+            items.iter().for_each(|i| self.visit_item(i));
+            self.inline.pop();
+        }
+    }
+
+    fn visit_item_use(&mut self, u: &'ast syn::ItemUse) {
+        let mut paths = Vec::new();
+        use_paths(&u.tree, &mut Vec::new(), &mut paths);
+        paths.iter().for_each(|p| self.record(p));
+    }
+
+    fn visit_path(&mut self, p: &'ast syn::Path) {
+        let segs: Vec<String> = p.segments.iter().map(|s| s.ident.to_string()).collect();
+        self.record(&segs);
+        syn::visit::visit_path(self, p);
+    }
+
+    fn visit_macro(&mut self, m: &'ast syn::Macro) {
+        // Paths inside macro calls (`format!("{}", crate::x::y())`) are code too.
+        if let Ok(e) = m.parse_body_with(
+            syn::punctuated::Punctuated::<syn::Expr, syn::Token![,]>::parse_terminated,
+        ) {
+            e.iter().for_each(|x| self.visit_expr(x));
+        }
+        syn::visit::visit_macro(self, m);
+    }
+}
+
+/// The file a module path lives in: its longest prefix that is a file of the crate.
+fn owner<'a>(c: &'a Crate, p: &[String]) -> Option<&'a ModPath> {
+    (0..=p.len())
+        .rev()
+        .find_map(|n| c.files.get_key_value(&p[..n]).map(|(k, _)| k))
+}
+
+/// File-level import graph: module path -> module paths of the files it imports.
+fn graph(c: &Crate) -> BTreeMap<ModPath, BTreeSet<ModPath>> {
+    let mut g = BTreeMap::new();
+    for (m, path) in &c.files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let ast = syn::parse_file(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let children = ast
+            .items
+            .iter()
+            .filter_map(|i| match i {
+                syn::Item::Mod(m) if m.content.is_none() => Some(m.ident.to_string()),
+                _ => None,
+            })
+            .collect();
+        let mut v = Imports {
+            file: m,
+            inline: Vec::new(),
+            children,
+            found: BTreeSet::new(),
+        };
+        v.visit_file(&ast);
+        let deps = v
+            .found
+            .iter()
+            .filter_map(|p| owner(c, p))
+            .filter(|o| *o != m)
+            .cloned()
+            .collect();
+        g.insert(m.clone(), deps);
+    }
+    g
+}
+
+fn show(c: &Crate, m: &ModPath) -> String {
+    let f = &c.files[m];
+    f.strip_prefix(root()).unwrap_or(f).display().to_string()
+}
+
+/// Every cycle's files, as strongly connected components of more than one file.
+fn cycles(c: &Crate, g: &BTreeMap<ModPath, BTreeSet<ModPath>>) -> Vec<Vec<String>> {
+    // Reachability by depth-first search from every node: small graphs, clarity over speed.
+    let reach = |from: &ModPath| {
+        let mut seen = BTreeSet::new();
+        let mut stack = vec![from.clone()];
+        while let Some(n) = stack.pop() {
+            for d in &g[&n] {
+                if seen.insert(d.clone()) {
+                    stack.push(d.clone());
+                }
+            }
+        }
+        seen
+    };
+    let reachable: BTreeMap<&ModPath, BTreeSet<ModPath>> =
+        g.keys().map(|k| (k, reach(k))).collect();
+    let mut done = BTreeSet::new();
+    let mut out = Vec::new();
+    for a in g.keys() {
+        if done.contains(a) || !reachable[a].contains(a) {
+            continue;
+        }
+        let comp: Vec<&ModPath> = g
+            .keys()
+            .filter(|b| reachable[a].contains(*b) && reachable[*b].contains(a))
+            .collect();
+        comp.iter().for_each(|b| {
+            done.insert((*b).clone());
+        });
+        let mut names: Vec<String> = comp.iter().map(|b| show(c, b)).collect();
+        names.sort();
+        // Name one edge pair per component so the message says where to look.
+        let edges: Vec<String> = comp
+            .iter()
+            .flat_map(|b| {
+                g[*b]
+                    .iter()
+                    .filter(|d| comp.contains(d))
+                    .map(move |d| (b, d))
+            })
+            .map(|(b, d)| format!("{} -> {}", show(c, b), show(c, d)))
+            .collect();
+        names.push(format!("edges: {}", edges.join(", ")));
+        out.push(names);
+    }
+    out
+}
+
+fn crates() -> Vec<Crate> {
+    vec![
+        load("shimmy-core", "core"),
+        load("shimmy-sim", "host-sim"),
+        load("shimmy-firmware", "firmware"),
+    ]
+}
+
+#[test]
+fn no_file_imports_a_file_that_imports_it_back() {
+    let mut bad = Vec::new();
+    for c in crates() {
+        let g = graph(&c);
+        for cyc in cycles(&c, &g) {
+            bad.push(format!("{}: {}", c.name, cyc.join(" <-> ")));
+        }
+    }
+    assert!(bad.is_empty(), "import cycles:\n{}", bad.join("\n"));
+}
+
+/// The checker itself must see a cycle where there is one (else the test above proves
+/// nothing): two files of a scratch crate that name each other, one through `use`, one
+/// through a path in an expression; a third file importing its sibling only is no cycle.
+#[test]
+fn the_checker_finds_a_planted_cycle() {
+    let dir = std::env::temp_dir().join(format!("shimmy-arch-{}", std::process::id()));
+    let src = dir.join("src");
+    std::fs::create_dir_all(src.join("a")).unwrap();
+    std::fs::write(src.join("lib.rs"), "pub mod a;\npub mod c;\n").unwrap();
+    std::fs::write(
+        src.join("a/mod.rs"),
+        "pub mod b;\npub use b::B;\npub struct A;\n",
+    )
+    .unwrap();
+    std::fs::write(
+        src.join("a/b.rs"),
+        "/// [`crate::c`] in a doc is no import.\npub struct B;\npub fn f() -> usize { core::mem::size_of::<super::A>() }\n",
+    )
+    .unwrap();
+    std::fs::write(src.join("c.rs"), "use crate::a::b::B;\npub fn g(_: B) {}\n").unwrap();
+    let mut files = BTreeMap::new();
+    for (m, f) in [
+        (vec![], "lib.rs"),
+        (vec!["a"], "a/mod.rs"),
+        (vec!["a", "b"], "a/b.rs"),
+        (vec!["c"], "c.rs"),
+    ] {
+        files.insert(m.into_iter().map(String::from).collect(), src.join(f));
+    }
+    let scratch = Crate {
+        name: "scratch",
+        files,
+    };
+    let g = graph(&scratch);
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<ModPath>();
+    assert_eq!(g[&s(&["c"])], BTreeSet::from([s(&["a", "b"])]));
+    assert_eq!(g[&s(&[])], BTreeSet::new(), "`pub mod` alone is no import");
+    let found: Vec<Vec<String>> = cycles(&scratch, &g)
+        .into_iter()
+        .map(|mut c| {
+            c.pop();
+            c
+        })
+        .collect();
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_eq!(found[0].len(), 2);
+    assert!(found[0][0].ends_with("a/b.rs") && found[0][1].ends_with("a/mod.rs"));
+}
+
+#[test]
+fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
+    const LAYERS: [&str; 4] = ["model", "sim", "out", "cmd"];
+    let c = load("shimmy-sim", "host-sim");
+    let layer = |m: &ModPath| m.first().and_then(|t| LAYERS.iter().position(|l| l == t));
+    let mut bad = Vec::new();
+    for (m, deps) in graph(&c) {
+        let Some(lm) = layer(&m) else {
+            // Only the crate root (the map) may sit outside the layers.
+            if !m.is_empty() {
+                bad.push(format!("{} is in no layer", show(&c, &m)));
+            }
+            continue;
+        };
+        for d in &deps {
+            match layer(d) {
+                Some(ld) if ld > lm => bad.push(format!(
+                    "{} ({}) uses the higher layer {} ({})",
+                    show(&c, &m),
+                    LAYERS[lm],
+                    show(&c, d),
+                    LAYERS[ld]
+                )),
+                // Two different commands: cmd/<a>... and cmd/<b>...
+                Some(3) if lm == 3 && m.get(1) != d.get(1) && m.len() > 1 && d.len() > 1 => bad
+                    .push(format!(
+                        "command {} imports command {}",
+                        show(&c, &m),
+                        show(&c, d)
+                    )),
+                None => bad.push(format!("{} uses the crate root", show(&c, &m))),
+                _ => {}
+            }
+        }
+    }
+    assert!(bad.is_empty(), "layer violations:\n{}", bad.join("\n"));
+}
