@@ -167,6 +167,15 @@ impl WheelSpeed {
 mod tests {
     use super::*;
 
+    /// One capture sample: the newest complete period (if an edge came) and the ticks since
+    /// the last edge.
+    fn pulse(new_period_ticks: Option<u32>, ticks_since_edge: u32) -> PulseSample {
+        PulseSample {
+            new_period_ticks,
+            ticks_since_edge,
+        }
+    }
+
     fn cfg() -> SpeedConfig {
         SpeedConfig {
             pulses_per_rev: 48,
@@ -192,23 +201,11 @@ mod tests {
     #[test]
     fn timeout_gives_standstill() {
         let mut w = WheelSpeed::new(cfg());
-        let r = w.update(
-            PulseSample {
-                new_period_ticks: Some(2291),
-                ticks_since_edge: 10,
-            },
-            1000,
-        );
+        let r = w.update(pulse(Some(2291), 10), 1000);
         assert_eq!(r.status, SpeedStatus::Valid);
         assert!(r.speed_mps > 19.9);
         // No edges for 0.5 s + 1 tick: standstill.
-        let r = w.update(
-            PulseSample {
-                new_period_ticks: None,
-                ticks_since_edge: 500_001,
-            },
-            1000,
-        );
+        let r = w.update(pulse(None, 500_001), 1000);
         assert_eq!(r.status, SpeedStatus::Standstill);
         assert_eq!(r.speed_mps, 0.0);
     }
@@ -216,21 +213,9 @@ mod tests {
     #[test]
     fn decays_between_edges() {
         let mut w = WheelSpeed::new(cfg());
-        w.update(
-            PulseSample {
-                new_period_ticks: Some(2291),
-                ticks_since_edge: 0,
-            },
-            1000,
-        );
+        w.update(pulse(Some(2291), 0), 1000);
         // 10 ms without an edge: at most 45.8 mm / 10 ms = 4.58 m/s.
-        let r = w.update(
-            PulseSample {
-                new_period_ticks: None,
-                ticks_since_edge: 10_000,
-            },
-            1000,
-        );
+        let r = w.update(pulse(None, 10_000), 1000);
         let bound = 2.0 * PI * 0.35 / 48.0 / 0.01;
         assert!((r.speed_mps - bound).abs() < 1e-4, "{}", r.speed_mps);
     }
@@ -238,32 +223,14 @@ mod tests {
     #[test]
     fn implausible_jump_is_flagged_and_held() {
         let mut w = WheelSpeed::new(cfg());
-        let first = w.update(
-            PulseSample {
-                new_period_ticks: Some(2291),
-                ticks_since_edge: 0,
-            },
-            1000,
-        );
+        let first = w.update(pulse(Some(2291), 0), 1000);
         // Half the period one step later: 40 m/s after 1 ms is 20,000 m/s^2.
-        let r = w.update(
-            PulseSample {
-                new_period_ticks: Some(1145),
-                ticks_since_edge: 0,
-            },
-            1000,
-        );
+        let r = w.update(pulse(Some(1145), 0), 1000);
         assert_eq!(r.status, SpeedStatus::Implausible);
         assert_eq!(r.speed_mps, first.speed_mps);
         assert_eq!(w.implausible_count(), 1);
         // A slightly faster period (within 12 m/s^2 * 2 ms + 0.5 m/s) is accepted.
-        let r = w.update(
-            PulseSample {
-                new_period_ticks: Some(2250),
-                ticks_since_edge: 0,
-            },
-            1000,
-        );
+        let r = w.update(pulse(Some(2250), 0), 1000);
         assert_eq!(r.status, SpeedStatus::Valid);
         assert!(r.speed_mps > first.speed_mps);
     }
