@@ -110,7 +110,7 @@ mod tests {
 
     #[test]
     fn default_duty_is_the_failsafe_current() {
-        // 1 A * 4 ohm / 12 V = 1/3 of 1000 = 333.
+        // 2 A * 4 ohm / 12 V = 2/3 of 1000 = 667.
         let expect = (FAILSAFE_CURRENT_A * 4.0 / 12.0 * 1000.0).round() as u16;
         let mut pwm = Mock::new(&[
             Transaction::max_duty_cycle(1000),
