@@ -1,4 +1,4 @@
-//! `shimmy-sim faults`: the fault campaign. Every sensor/actuator fault of [`crate::faults`]
+//! `shimmy-sim faults`: the fault campaign. Every sensor/actuator fault of [`crate::model::faults`]
 //! (and a few combinations) is injected into the closed loop (nominal plant, ASMC under the
 //! core's `SafeController`) at speeds inside the nominal Hopf window (29.35-84.15 km/h) and
 //! outside it, with road noise and a yaw kick shortly after the fault that starts shimmy
@@ -8,9 +8,9 @@
 //! Runs are independent and go in parallel (rayon). Output: a table on stdout, `faults.csv` and
 //! `faults.md` under `--out` (default `out/faults/`).
 
-use crate::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
-use crate::faults::{FaultMode, FaultSpec, Side};
+use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
+use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use anyhow::{anyhow, Context, Result};
 use clap::Args;
 use rayon::prelude::*;

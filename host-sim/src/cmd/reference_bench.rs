@@ -16,7 +16,7 @@
 //! cannot step over it). So the Rust side does strictly more work per
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
-use crate::plant::{idx, Inputs, Plant, Simulator, N_STATE};
+use crate::model::plant::{idx, Inputs, Plant, Simulator, N_STATE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -93,7 +93,7 @@ pub struct ReferenceResult {
 
 /// Runs both implementations and compares them.
 pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
-    let params = crate::paramfile::load(&a.params)?;
+    let params = crate::sim::paramfile::load(&a.params)?;
     let damper = SpencerParams::steering();
     let v_mps = kmh_to_mps(a.speed_kmh);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -145,8 +145,9 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     if !(ramp_s.is_finite() && ramp_s >= 1.0) {
         bail!("--cl-ramp-s {ramp_s}: at least 1 s");
     }
-    let demo_case = crate::demo::demo_case(ramp_s)?;
-    let (_, cl) = crate::demo::run_arm(&demo_case, crate::demo::ARMS[1].1, ramp_s, 5)?;
+    let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
+    let (_, cl) =
+        crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
     let cl_peak = cl
         .series
         .psi_l_rad
@@ -215,8 +216,8 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
 
 /// The `[ramp]` section: the demo's drive (nominal plant parameters are the `[plant]` section
 /// only when `--params nominal`; the demo always uses nominal, so its plant is written here).
-fn ramp_toml(case: &crate::demo::DemoCase, ramp_s: f64, gain: f64) -> Result<String> {
-    use crate::disturbance::SpeedProfile;
+fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> Result<String> {
+    use crate::model::disturbance::SpeedProfile;
     let SpeedProfile::Ramp {
         v0_mps,
         v1_mps,

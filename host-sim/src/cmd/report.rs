@@ -1,10 +1,10 @@
 //! `shimmy-sim report [SCENARIO.toml...] [--out DIR] [--controllers a,b]`: runs scenario files
 //! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
-//! report (see [`crate::report`]). Every file is parsed and validated before anything runs.
+//! report (see [`report`]). Every file is parsed and validated before anything runs.
 
-use crate::report::{self, Report, ReportRun, Section};
-use crate::run_cmd;
-use crate::scenario_file::{self, ScenarioSpec};
+use crate::out::report::{self, Report, ReportRun, Section};
+use crate::sim::scenario::{self, ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -60,11 +60,8 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
         a.scenarios.clone()
     };
     for c in &a.controllers {
-        if !scenario_file::CONTROLLERS.contains(&c.as_str()) {
-            bail!(
-                "--controllers {c}: allowed: {}",
-                scenario_file::CONTROLLERS.join(", ")
-            );
+        if !CONTROLLERS.contains(&c.as_str()) {
+            bail!("--controllers {c}: allowed: {}", CONTROLLERS.join(", "));
         }
     }
     files
@@ -100,12 +97,9 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     let runs: Vec<(usize, ReportRun)> = jobs
         .par_iter()
         .map(|&(i, spec)| {
-            let (cfg, r) = run_cmd::run(spec)
+            let (cfg, r) = scenario::run(spec)
                 .with_context(|| format!("{} / {}", spec.name, spec.controller))?;
-            Ok((
-                i,
-                ReportRun::new(&spec.controller, cfg, r, run_cmd::disturbance_time(spec)),
-            ))
+            Ok((i, ReportRun::new(&spec.controller, cfg, r, spec.t_dist_s)))
         })
         .collect::<Result<_>>()?;
     let mut sections: Vec<Section> = plan
@@ -118,11 +112,11 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
                     "File `{}`: {} s, seed {}, initial in-phase wheel yaw {:.2} deg, encoder {} bit.",
                     file.display(),
                     s.duration_s,
-                    s.seed,
+                    s.sensors.seed,
                     s.initial_yaw_rad.to_degrees(),
-                    s.encoder_bits
+                    s.sensors.encoder_bits
                 ),
-                plant: s.params,
+                plant: s.plant,
                 runs: Vec::new(),
                 extra_plots: Vec::new(),
             }
@@ -168,7 +162,7 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plot_util::assert_real_plot;
+    use crate::out::plot_util::assert_real_plot;
 
     fn tmp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("shimmy-report-{name}-{}", std::process::id()))
@@ -218,7 +212,7 @@ mod tests {
         assert_eq!(csv.lines().count(), 5, "{csv}");
         let mut spec = scenario_file::load(&dir.join("kick.toml")).unwrap();
         spec.controller = "asmc".into();
-        let (cfg, r) = run_cmd::run(&spec).unwrap();
+        let (cfg, r) = scenario::run(&spec).unwrap();
         let m = r.metrics(&cfg, Some(0.0));
         let row = csv.lines().find(|l| l.starts_with("kick,asmc,")).unwrap();
         let peak: f64 = row.split(',').nth(2).unwrap().parse().unwrap();

@@ -3,7 +3,7 @@
 //!
 //! Everything is seeded (`rand_chacha`), so a run is reproducible bit for bit. Faults (stuck,
 //! dropout, NaN, spikes, ...) are not modelled here: [`Sensors::fault`] is the place where a
-//! [`FaultInjector`] (see [`crate::faults`]) rewrites a [`Measurement`] after the healthy sensor
+//! [`FaultInjector`] (see [`crate::model::faults`]) rewrites a [`Measurement`] after the healthy sensor
 //! models ran, and where the closed loop asks for the state of the coil ([`CoilState`]).
 
 use rand::SeedableRng;

@@ -10,10 +10,10 @@
 //! computed in parallel (rayon) and collected in grid order, so the CSV does not depend on the
 //! number of threads.
 
-use crate::closed_loop::{self, Arm, LoopConfig, RunMetrics};
-use crate::disturbance::{initial_yaw, Scenario};
-use crate::plot_util;
-use crate::sweep::SweepArgs;
+use super::args::{axes, SweepArgs};
+use crate::model::disturbance::{initial_yaw, Scenario};
+use crate::out::plot_util;
+use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -80,8 +80,8 @@ pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
 }
 
 fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
-    let base = crate::paramfile::load(&a.params)?;
-    let (speeds_kmh, values, param) = crate::sweep::axes(a, &base, DEFAULT_STEPS)?;
+    let base = crate::sim::paramfile::load(&a.params)?;
+    let (speeds_kmh, values, param) = axes(a, &base, DEFAULT_STEPS)?;
     if !(a.duration_s.is_finite() && a.duration_s >= 1.0 && a.duration_s <= 600.0) {
         bail!("--duration-s {}: allowed 1 to 600 s", a.duration_s);
     }
@@ -459,7 +459,7 @@ mod tests {
             .iter()
             .filter(|f| f.extension().is_some_and(|e| e == "png"))
         {
-            crate::plot_util::assert_real_plot(f, 4).unwrap();
+            crate::out::plot_util::assert_real_plot(f, 4).unwrap();
         }
         let text = std::fs::read_to_string(out.join("td-k_d-asmc.csv")).unwrap();
         assert!(text.starts_with("k_d [N m/rad],speed [km/h],controller,peak yaw [deg]"));

@@ -7,7 +7,7 @@
 //! first-order low-pass, reproducible with `rand_chacha`), and wheel imbalance (once per wheel
 //! revolution, f_w = V / (2 pi R), with amplitude and phase per wheel).
 
-use crate::plant::{idx, Inputs, State, N_STATE};
+use crate::model::plant::{idx, Inputs, State, N_STATE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};

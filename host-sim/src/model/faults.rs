@@ -1,5 +1,5 @@
 //! Fault injection for the closed loop: sensor faults that rewrite the healthy
-//! [`Measurement`] (through the [`FaultInjector`] hook of [`crate::sensors::Sensors`]) and coil
+//! [`Measurement`] (through the [`FaultInjector`] hook of [`crate::model::sensors::Sensors`]) and coil
 //! faults that change the plant's actuator ([`CoilState`]).
 //!
 //! Each [`FaultSpec`] is active over `[start_s, end_s)` (no end: to the end of the run), on one
@@ -22,7 +22,7 @@
 //! | `coil-open` | coil carries no current (damper passive-off), shunt reads ~0 | `CoilOpen` (latched) |
 //! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x command | `CoilShort` (latched) |
 
-use crate::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
+use crate::model::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};

@@ -8,11 +8,10 @@
 //! Without a damper the last three states stay at zero.
 //!
 //! [`Simulator`] integrates it one control period at a time with the inputs held (zero-order
-//! hold); [`simulate`] runs an open-loop [`Scenario`](crate::disturbance::Scenario) and records a
-//! [`Trace`]; [`jacobian_fd`] linearises the right-hand side numerically.
+//! hold); [`jacobian_fd`] linearises the right-hand side numerically. Open-loop runs of a
+//! scenario live one layer up, in `sim::open_loop`.
 
-use crate::disturbance::Scenario;
-use crate::integrator::{rk4_step, Ark436, Dopri5, ImexSystem, IntegrateError, StepStats};
+use crate::model::integrator::{rk4_step, Ark436, Dopri5, ImexSystem, IntegrateError, StepStats};
 use nalgebra::{DMatrix, SMatrix};
 use shimmy_core::mr_damper::{self, SpencerParams, SpencerState};
 use shimmy_core::params::PlantParams;
@@ -479,96 +478,6 @@ impl Simulator {
     }
 }
 
-/// A recorded run.
-#[derive(Clone, Debug, Default)]
-pub struct Trace {
-    /// Time [s].
-    pub t_s: Vec<f64>,
-    /// States.
-    pub x: Vec<State>,
-    /// Damper force [N].
-    pub damper_force_n: Vec<f64>,
-    /// Coil current command [A].
-    pub current_cmd_a: Vec<f64>,
-    /// Forward speed [m/s].
-    pub speed_mps: Vec<f64>,
-    /// Driver torque [N m].
-    pub driver_torque_nm: Vec<f64>,
-}
-
-impl Trace {
-    fn push(&mut self, t: f64, x: &State, f: &Forces, u: &Inputs) {
-        self.t_s.push(t);
-        self.x.push(*x);
-        self.damper_force_n.push(f.damper_n);
-        self.current_cmd_a.push(u.current_cmd_a);
-        self.speed_mps.push(u.speed_mps);
-        self.driver_torque_nm.push(u.driver_torque_nm);
-    }
-
-    /// One state over time.
-    pub fn series(&self, i: usize) -> Vec<f64> {
-        self.x.iter().map(|x| x[i]).collect()
-    }
-
-    /// Writes the trace as CSV (units in the header).
-    pub fn write_csv(&self, path: &std::path::Path) -> std::io::Result<()> {
-        use std::io::Write;
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-        write!(w, "t_s")?;
-        for n in STATE_NAMES {
-            write!(w, ",{n}")?;
-        }
-        writeln!(
-            w,
-            ",damper_force_n,current_cmd_a,speed_mps,driver_torque_nm"
-        )?;
-        for k in 0..self.t_s.len() {
-            write!(w, "{}", self.t_s[k])?;
-            for v in &self.x[k] {
-                write!(w, ",{v:e}")?;
-            }
-            writeln!(
-                w,
-                ",{},{},{},{}",
-                self.damper_force_n[k],
-                self.current_cmd_a[k],
-                self.speed_mps[k],
-                self.driver_torque_nm[k]
-            )?;
-        }
-        w.flush()
-    }
-}
-
-/// Runs `scenario` open loop for `duration_s` with control period `dt_s`, recording every
-/// `record_every`-th period (and the start). The scenario supplies speed, current, driver torque
-/// and yaw torques per period.
-pub fn simulate(
-    sim: &mut Simulator,
-    scenario: &mut Scenario,
-    duration_s: f64,
-    dt_s: f64,
-    record_every: usize,
-) -> Result<Trace, IntegrateError> {
-    let n = (duration_s / dt_s).round() as usize;
-    let every = record_every.max(1);
-    let mut trace = Trace::default();
-    for k in 0..n {
-        let t = sim.time_s();
-        let u = scenario.inputs(t, dt_s);
-        if k % every == 0 {
-            let f = sim.forces(&u);
-            trace.push(t, sim.state(), &f, &u);
-        }
-        sim.advance(dt_s, &u)?;
-    }
-    let u = scenario.inputs(sim.time_s(), dt_s);
-    let f = sim.forces(&u);
-    trace.push(sim.time_s(), sim.state(), &f, &u);
-    Ok(trace)
-}
-
 /// Finite-difference Jacobian (central differences) of the plant right-hand side with respect to
 /// the 10 plant states, about straight running (`x = 0`) at speed `v_mps`, without damper
 /// (F_d = 0) and in the tyres' linear region. Column j is `(f(x + h e_j) - f(x - h e_j)) / 2h`
@@ -705,7 +614,9 @@ mod tests {
     #[test]
     fn fsal_across_periods_is_exact() {
         let plant = Plant::with_mr_damper(PlantParams::nominal());
-        let x0 = crate::disturbance::initial_yaw(0.05);
+        let mut x0 = [0.0; N_STATE];
+        x0[idx::PSI_L] = 0.05;
+        x0[idx::PSI_R] = 0.05;
         let u = Inputs {
             current_cmd_a: 0.3,
             speed_mps: 15.0,

@@ -19,9 +19,9 @@ use shimmy_core::monitor::Level;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind, ModeSelect};
 
-use crate::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
-use crate::paramfile;
-use crate::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
+use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::sim::paramfile;
 
 /// Control period [s].
 pub const DT_S: f64 = 1e-3;
@@ -362,7 +362,7 @@ fn panel(
         .x_label_area_size(30)
         .y_label_area_size(55)
         .build_cartesian_2d(t.0..t.1, range.0..range.1)?;
-    crate::plot_util::mesh(&mut chart, "t [s]", "")?;
+    crate::out::plot_util::mesh(&mut chart, "t [s]", "")?;
     for (name, col, pts) in series {
         let col = *col;
         chart
@@ -373,7 +373,7 @@ fn panel(
                 col,
             ))?
             .label(*name)
-            .legend(crate::plot_util::line_marker(col, 1));
+            .legend(crate::out::plot_util::line_marker(col, 1));
     }
     for (x, col) in vlines {
         chart.draw_series(LineSeries::new(
@@ -381,7 +381,7 @@ fn panel(
             col.stroke_width(2),
         ))?;
     }
-    crate::plot_util::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
+    crate::out::plot_util::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
     Ok(())
 }
 

@@ -1,5 +1,5 @@
 //! The closed loop in lockstep at the control rate (1 kHz): the nonlinear plant (with the MR
-//! damper and its coil lag) -> [`sensors`](crate::sensors) (+ optional [`faults`](crate::faults))
+//! damper and its coil lag) -> [`sensors`](crate::model::sensors) (+ optional [`faults`](crate::model::faults))
 //! -> `shimmy_core::supervisor::SafeController` (supervisor + `Controller` + final limiter, the
 //! firmware's 1 kHz call) -> coil-current command -> plant; the data-driven mode meter
 //! (`shimmy_core::estimator::MarginEstimator`) runs on the validated encoder angles.
@@ -17,11 +17,11 @@
 //! [`run`] returns a decimated [`TraceRow`] trace, the meter outputs, the full-rate series
 //! needed for metrics and the [`RunMetrics`].
 
-use crate::disturbance::Scenario;
-use crate::faults::{FaultPlan, FaultSpec};
-use crate::integrator::IntegrateError;
-use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
-use crate::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
+use crate::model::disturbance::Scenario;
+use crate::model::faults::{FaultPlan, FaultSpec};
+use crate::model::integrator::IntegrateError;
+use crate::model::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
+use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
@@ -110,7 +110,7 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(
                 shimmy_core::control::actuator::CoilParams::default().r_coil_ohm,
             ),
-            x0: [0.0; crate::plant::N_STATE],
+            x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
             supervisor: SupervisorParams::default(),
             supervised: true,
