@@ -285,8 +285,8 @@ pub struct BifurcationArgs {
     #[arg(long, default_value = "nominal")]
     pub params: String,
     /// Fit the MR damper and hold this coil current [A]; without it there is no damper (F_d = 0).
-    #[arg(long)]
-    pub damper_current: Option<f64>,
+    #[arg(long, alias = "damper-current")]
+    pub damper_current_a: Option<f64>,
     /// Lowest speed [km/h].
     #[arg(long, default_value_t = 5.0)]
     pub v_min_kmh: f64,
@@ -320,7 +320,7 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.duration_s >= 2.0 * a.window_s && a.window_s > 0.0,
         "--duration-s must be at least twice --window-s"
     );
-    let damper = match a.damper_current {
+    let damper = match a.damper_current_a {
         None => DamperSetting::Off,
         Some(i) => {
             anyhow::ensure!(i.is_finite() && i >= 0.0, "--damper-current must be >= 0 A");

@@ -28,8 +28,8 @@ pub struct CompareArgs {
     pub controllers: Vec<String>,
     /// Current of `passive-on` [A]; default: the least constant current (bisection to 0.02 A)
     /// with which no scenario of the set shimmies.
-    #[arg(long)]
-    pub on_current: Option<f32>,
+    #[arg(long, alias = "on-current")]
+    pub on_current_a: Option<f32>,
     /// Short runs (a few seconds each).
     #[arg(long)]
     pub quick: bool,
@@ -355,7 +355,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
     if let Some(f) = &a.only {
         specs.retain(|s| s.name.contains(f.as_str()));
     }
-    let on_current = match a.on_current {
+    let on_current = match a.on_current_a {
         Some(i) => {
             println!("passive-on current: {i} A (given)");
             i

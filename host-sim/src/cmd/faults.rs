@@ -11,7 +11,7 @@
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use anyhow::{anyhow, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
@@ -286,7 +286,7 @@ pub fn run_case(
     let (mut cfg, mut sc) = build(setup, arm, &c.faults, speed_kmh);
     cfg.supervised = supervised;
     let r = closed_loop::run(&cfg, &mut sc, None)
-        .map_err(|e| anyhow!("{} at {speed_kmh} km/h: integration failed: {e:?}", c.name))?;
+        .with_context(|| format!("{} at {speed_kmh} km/h: integration failed", c.name))?;
     let k_f = ((setup.fault_s / cfg.dt_s).round() as usize).min(r.series.psi_l_rad.len());
     let peak_after_rad = r.series.psi_l_rad[k_f..]
         .iter()
@@ -356,14 +356,19 @@ pub struct FaultsArgs {
     #[arg(long, default_value = "out/faults")]
     pub out: PathBuf,
     /// Speeds [km/h] (comma separated): two inside the 29.35-84.15 km/h window, two outside.
-    #[arg(long, value_delimiter = ',', default_value = "20,45,70,100")]
-    pub speeds: Vec<f64>,
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "20,45,70,100",
+        alias = "speeds"
+    )]
+    pub speeds_kmh: Vec<f64>,
     /// Only cases whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
     /// Run length [s] (fault at 1.0 s, kick at 1.1 s).
-    #[arg(long, default_value_t = 5.0)]
-    pub duration: f64,
+    #[arg(long, default_value_t = 5.0, alias = "duration")]
+    pub duration_s: f64,
 }
 
 fn fmt_opt(x: Option<f64>) -> String {
@@ -482,7 +487,7 @@ pub fn check(rows: &[CaseResult]) -> Vec<String> {
 /// The command.
 pub fn command(a: &FaultsArgs) -> Result<()> {
     let setup = Setup {
-        duration_s: a.duration,
+        duration_s: a.duration_s,
         ..Setup::default()
     };
     let cases: Vec<Case> = standard_cases()
@@ -490,7 +495,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
         .filter(|c| a.only.as_deref().is_none_or(|o| c.name.contains(o)))
         .collect();
     let wall = std::time::Instant::now();
-    let rows = campaign(&setup, &cases, &a.speeds)?;
+    let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
     println!(
         "fault campaign: ASMC under SafeController, nominal plant, fault at {} s, kick {} N m x {} ms at {} s, road noise {} N m; {} runs in {:.1} s wall",

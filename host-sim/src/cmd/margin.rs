@@ -221,8 +221,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
     let p = sc.params;
     let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
     let mut scen = sc.scenario();
-    let mut pipe =
-        ShimmyPipeline::<16>::new(p, pp).map_err(|e| anyhow::anyhow!("pipeline config: {e:?}"))?;
+    let mut pipe = ShimmyPipeline::<16>::new(p, pp).context("pipeline config")?;
     let onset = onset_kmh(&p);
     let n = (sc.duration_s / DT_S).round() as usize;
     let mut rows = Vec::with_capacity(n / 10 + 1);
@@ -235,7 +234,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
         let t = k as f64 * DT_S;
         let u = scen.inputs(t, DT_S);
         sim.advance(DT_S, &u)
-            .map_err(|e| anyhow::anyhow!("integration failed at t = {t}: {e:?}"))?;
+            .with_context(|| format!("integration failed at t = {t}"))?;
         let t1 = t + DT_S;
         let x = sim.state();
         let v = sc.speed.at(t1);

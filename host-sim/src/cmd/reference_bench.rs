@@ -38,8 +38,9 @@ pub struct ReferenceBenchArgs {
     /// Forward speed [km/h] (inside the Hopf window by default).
     #[arg(long, default_value_t = 60.0)]
     pub speed_kmh: f64,
-    /// Constant coil current [A].
-    #[arg(long, default_value_t = 0.5)]
+    /// Constant coil current, in A (`--damper-current-a` as in `stability` and `bifurcation`;
+    /// the field keeps its name for callers that build the arguments).
+    #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5)]
     pub current_a: f64,
     /// Initial in-phase wheel yaw [deg] (large enough for the damper to slide).
     #[arg(long, default_value_t = 3.0)]
@@ -122,8 +123,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let mut psi_rust = vec![sim.state()[idx::PSI_L]];
     let start = Instant::now();
     for k in 1..=n_periods {
-        sim.advance(1e-3, &inputs)
-            .map_err(|e| anyhow::anyhow!("simulator: {e:?}"))?;
+        sim.advance(1e-3, &inputs).context("simulator")?;
         if k % sample_every == 0 {
             psi_rust.push(sim.state()[idx::PSI_L]);
         }
@@ -134,8 +134,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let mut max_re_rust = Vec::with_capacity(sweep.len());
     for &v in &sweep {
         let m = shimmy_core::plant::linearise(&params, v, 0.0);
-        let ev =
-            shimmy_core::eigen::eigenvalues(&m).map_err(|e| anyhow::anyhow!("eigen: {e:?}"))?;
+        let ev = shimmy_core::eigen::eigenvalues(&m).context("eigen")?;
         max_re_rust.push(ev.iter().map(|l| l.re).fold(f64::NEG_INFINITY, f64::max));
     }
     let rust_sweep_wall = start.elapsed().as_secs_f64();

@@ -3,7 +3,7 @@
 //! report (see [`report`]). Every file is parsed and validated before anything runs.
 
 use crate::out::report::{self, Report, ReportRun, Section};
-use crate::sim::scenario::{self, ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
 use crate::sim::scenario_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -22,8 +22,8 @@ pub struct ReportArgs {
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Fixed current of `passive-on` when given in `--controllers` [A].
-    #[arg(long, default_value_t = 1.0)]
+    /// Fixed current of `passive-on` when given in `--controllers`, in A.
+    #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
 }
 
@@ -52,6 +52,17 @@ pub fn scenario_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// The `--controllers` list by their one name each (short forms accepted).
+fn controllers(a: &ReportArgs) -> Result<Vec<&'static str>> {
+    a.controllers
+        .iter()
+        .map(|c| match controller_name(c) {
+            Some(n) => Ok(n),
+            None => bail!("--controllers {c}: allowed: {}", CONTROLLERS.join(", ")),
+        })
+        .collect()
+}
+
 /// Loads and validates every file (nothing runs if one is bad), expands the controller list.
 pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     let files = if a.scenarios.is_empty() {
@@ -59,23 +70,19 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     } else {
         a.scenarios.clone()
     };
-    for c in &a.controllers {
-        if !CONTROLLERS.contains(&c.as_str()) {
-            bail!("--controllers {c}: allowed: {}", CONTROLLERS.join(", "));
-        }
-    }
+    let controllers = controllers(a)?;
     files
         .into_iter()
         .map(|f| {
             let spec = scenario_file::load(&f)?;
-            let specs = if a.controllers.is_empty() {
+            let specs = if controllers.is_empty() {
                 vec![spec]
             } else {
-                a.controllers
+                controllers
                     .iter()
                     .map(|c| {
                         let mut s = spec.clone();
-                        s.controller = c.clone();
+                        s.controller = c.to_string();
                         s.on_current_a = a.on_current_a;
                         s
                     })
@@ -133,7 +140,7 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
             if a.controllers.is_empty() {
                 "each file's own".to_string()
             } else {
-                a.controllers.join(", ")
+                controllers(a)?.join(", ")
             }
         ),
         sections,

@@ -6,7 +6,7 @@
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop::LoopResult;
-use crate::sim::scenario::{self, ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
 use crate::sim::scenario_file;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -24,8 +24,8 @@ pub struct RunArgs {
     /// Controller (overrides the file's `controller.kind`; passive-on needs `--on-current-a`).
     #[arg(long)]
     pub controller: Option<String>,
-    /// Fixed current for `--controller passive-on` [A].
-    #[arg(long, default_value_t = 1.0)]
+    /// Fixed current for `--controller passive-on`, in A.
+    #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
 }
 
@@ -42,10 +42,10 @@ pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
     if let Some(c) = &a.controller {
-        if !CONTROLLERS.contains(&c.as_str()) {
+        let Some(c) = controller_name(c) else {
             anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", "));
-        }
-        spec.controller = c.clone();
+        };
+        spec.controller = c.to_string();
         spec.on_current_a = a.on_current_a;
     }
     let out = out_dir(a, &spec);

@@ -5,7 +5,7 @@ use std::fs;
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
 
@@ -57,7 +57,7 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
         kmh_to_mps(1.0),
         DEFAULT_TOL_MPS,
     )
-    .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    .context("Hopf search")?;
     let on = xs.iter().find(|x| x.kind == stability::CrossingKind::Onset);
     let off = xs
         .iter()

@@ -21,8 +21,8 @@ pub struct StabilityArgs {
     pub params: String,
     /// Constant MR-damper coil current [A]; the damper enters as its energy-equivalent viscous
     /// coefficient (describing function). Without it there is no damper force.
-    #[arg(long)]
-    pub damper_current: Option<f64>,
+    #[arg(long, alias = "damper-current")]
+    pub damper_current_a: Option<f64>,
     /// Reference wheel-yaw amplitude for the describing function [deg].
     #[arg(long, default_value_t = 0.5)]
     pub ref_amplitude_deg: f64,
@@ -45,7 +45,7 @@ fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<V
     (0..=n)
         .map(|i| {
             let v = kmh_to_mps(v_min + i as f64 * step);
-            stability::mode_summary(p, v, c).map_err(|e| anyhow::anyhow!("eigen at {v} m/s: {e:?}"))
+            stability::mode_summary(p, v, c).with_context(|| format!("eigen at {v} m/s"))
         })
         .collect()
 }
@@ -58,7 +58,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     );
     let p = paramfile::load(&args.params)?;
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
-    let (c, damper) = match args.damper_current {
+    let (c, damper) = match args.damper_current_a {
         None => (0.0, None),
         Some(i) => {
             let d = damper_equivalent(&p, i, args.ref_amplitude_deg, v_min, v_max)?;
@@ -90,7 +90,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         kmh_to_mps(args.step_kmh),
         DEFAULT_TOL_MPS,
     )
-    .map_err(|e| anyhow::anyhow!("Hopf search: {e:?}"))?;
+    .context("Hopf search")?;
 
     println!();
     println!(

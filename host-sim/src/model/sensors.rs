@@ -3,8 +3,9 @@
 //!
 //! Everything is seeded (`rand_chacha`), so a run is reproducible bit for bit. Faults (stuck,
 //! dropout, NaN, spikes, ...) are not modelled here: [`Sensors::fault`] is the place where a
-//! [`FaultInjector`] (see [`crate::model::faults`]) rewrites a [`Measurement`] after the healthy sensor
-//! models ran, and where the closed loop asks for the state of the coil ([`CoilState`]).
+//! [`FaultInjector`] rewrites a [`Measurement`] after the healthy sensor models ran, and where
+//! the closed loop asks for the state of the coil ([`CoilState`]). The fault models implement
+//! that trait in the sibling `faults` module, which depends on this one (not the other way).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -12,8 +12,9 @@ use shimmy_core::control::ControlParams;
 use shimmy_core::params::PlantParams;
 use std::path::PathBuf;
 
-/// Controller names a scenario may use (`no-damper` = no damper force at all); the closed loop
-/// also accepts the short forms `off`, `on` and `none`.
+/// The controller names, one per controller, as they appear in tables, legends and file names
+/// (`no-damper` = no damper force at all). Every command and scenario file also accepts the
+/// short forms `none`, `off` and `on` (see [`controller_name`]).
 pub const CONTROLLERS: [&str; 6] = [
     "no-damper",
     "passive-off",
@@ -22,6 +23,12 @@ pub const CONTROLLERS: [&str; 6] = [
     "asmc",
     "skyhook",
 ];
+
+/// The one name of the controller called `name` (one of [`CONTROLLERS`] or a short form:
+/// `none` = `no-damper`, `off` = `passive-off`, `on` = `passive-on`); `None` if unknown.
+pub fn controller_name(name: &str) -> Option<&'static str> {
+    Arm::from_name(name, 0.0).map(|a| a.name())
+}
 
 /// A validated scenario, ready to run.
 #[derive(Clone, Debug)]

@@ -67,7 +67,7 @@ use crate::model::disturbance::{
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
 use crate::sim::paramfile;
-use crate::sim::scenario::{ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
 use shimmy_core::params::{kmh_to_mps, Param};
@@ -266,14 +266,14 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
 
     let (controller, on_current_a) = match &f.controller {
         Some(c) => {
-            if !CONTROLLERS.contains(&c.kind.as_str()) {
+            let Some(kind) = controller_name(&c.kind) else {
                 bail!(
                     "field `controller.kind` = {:?}: allowed: {}",
                     c.kind,
                     CONTROLLERS.join(", ")
                 );
-            }
-            let on = match (c.kind.as_str(), c.on_current_a) {
+            };
+            let on = match (kind, c.on_current_a) {
                 ("passive-on", Some(i)) => in_range("controller.on_current_a", i, 0.0, 2.0, "A")?,
                 ("passive-on", None) => {
                     bail!("field `controller.on_current_a` is required for passive-on")
@@ -281,7 +281,7 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
                 (_, Some(_)) => bail!("field `controller.on_current_a` only applies to passive-on"),
                 (_, None) => 0.0,
             };
-            (c.kind.clone(), on)
+            (kind.to_string(), on)
         }
         None => ("asmc".to_string(), 0.0),
     };
@@ -413,11 +413,12 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         .enumerate()
         .map(|(i, fs)| parse_fault(i, fs, duration_s))
         .collect::<Result<Vec<_>>>()?;
-    let mut sensors = SensorConfig::default();
-    sensors.encoder_bits = encoder_bits;
-    sensors.encoder_noise_rad =
-        encoder_noise_lsb * 2.0 * PI / f64::from(1u32 << encoder_bits.min(31));
-    sensors.seed = f.seed;
+    let sensors = SensorConfig {
+        encoder_bits,
+        encoder_noise_rad: encoder_noise_lsb * 2.0 * PI / f64::from(1u32 << encoder_bits.min(31)),
+        seed: f.seed,
+        ..SensorConfig::default()
+    };
     // Settling is measured from the initial perturbation (t = 0), else from the first impulse.
     let t_dist_s = if initial_yaw_rad != 0.0 {
         Some(0.0)

@@ -34,8 +34,8 @@ pub struct SweepArgs {
     #[arg(long)]
     pub v_steps: Option<usize>,
     /// MR damper currents [A] (one map each, as an equivalent viscous damper); none = no damper.
-    #[arg(long, value_delimiter = ',')]
-    pub damper_currents: Vec<f64>,
+    #[arg(long, value_delimiter = ',', alias = "damper-currents")]
+    pub damper_current_a: Vec<f64>,
     /// Wheel-yaw amplitude of the damper's describing function [deg].
     #[arg(long, default_value_t = 0.5)]
     pub ref_amplitude_deg: f64,
@@ -46,12 +46,13 @@ pub struct SweepArgs {
     #[arg(long)]
     pub quiet: bool,
     /// Time-domain sweep over this controller axis instead of the eigenvalue map (comma
-    /// separated: no-damper, off, on, smc, asmc, skyhook): one closed-loop run per grid point
+    /// separated: no-damper, passive-off, passive-on, smc, asmc, skyhook; short forms none,
+    /// off, on): one closed-loop run per grid point
     /// and controller, map of the final wheel-yaw amplitude with the linear Hopf boundary.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Time-domain sweep: fixed current of `on` (passive-on) [A].
-    #[arg(long, default_value_t = 1.0)]
+    /// Time-domain sweep: fixed current of `passive-on`, in A.
+    #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
     /// Time-domain sweep: simulated time per run [s].
     #[arg(long, default_value_t = 6.0)]

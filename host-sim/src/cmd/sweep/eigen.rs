@@ -7,7 +7,7 @@
 use super::args::{axes, SweepArgs};
 use crate::model::damper_equiv::damper_equivalent;
 use crate::out::plot_util;
-use anyhow::{anyhow, Context, Result};
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -45,10 +45,10 @@ pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
     let base = crate::sim::paramfile::load(&a.params)?;
     let (speeds_kmh, values, param) = axes(a, &base, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
-    if a.damper_currents.is_empty() {
+    if a.damper_current_a.is_empty() {
         dampers.push(("no damper".into(), 0.0));
     }
-    for &i in &a.damper_currents {
+    for &i in &a.damper_current_a {
         let d = damper_equivalent(
             &base,
             i,
@@ -95,7 +95,7 @@ fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -
         .map(|&v| {
             stability::critical_mode_at(p, kmh_to_mps(v), c)
                 .map(|m| m.re)
-                .map_err(|e| anyhow!("eigenvalues at {v} km/h, {} = {value}: {e:?}", a.param))
+                .with_context(|| format!("eigenvalues at {v} km/h, {} = {value}", a.param))
         })
         .collect::<Result<Vec<f64>>>()?;
     let step = kmh_to_mps(speeds_kmh[1] - speeds_kmh[0]);
@@ -107,7 +107,7 @@ fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -
         step,
         1e-4,
     )
-    .map_err(|e| anyhow!("Hopf crossings, {} = {value}: {e:?}", a.param))?
+    .with_context(|| format!("Hopf crossings, {} = {value}", a.param))?
     .iter()
     .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
     .collect();
@@ -286,7 +286,7 @@ mod tests {
             v_min_kmh: 5.0,
             v_max_kmh: 120.0,
             v_steps: Some(47),
-            damper_currents: vec![],
+            damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
             out: out.to_path_buf(),
             quiet: true,

@@ -14,7 +14,7 @@ use super::args::{axes, SweepArgs};
 use crate::model::disturbance::{initial_yaw, Scenario};
 use crate::out::plot_util;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -67,13 +67,13 @@ pub struct TdGrid {
     pub hopf: Vec<Vec<(f64, bool)>>,
 }
 
-/// Parses `--controllers` (`off`/`on` are short for `passive-off`/`passive-on`).
+/// Parses `--controllers` (the short forms `none`, `off`, `on` are accepted).
 pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
     a.controllers
         .iter()
         .map(|n| {
-            Arm::from_name(n, a.on_current_a as f32).ok_or_else(|| {
-                anyhow!("--controllers {n}: allowed: no-damper, off (passive-off), on (passive-on), smc, asmc, skyhook")
+            Arm::from_name(n, a.on_current_a as f32).with_context(|| {
+                format!("--controllers {n}: allowed: no-damper, passive-off, passive-on, smc, asmc, skyhook (or none, off, on)")
             })
         })
         .collect()
@@ -105,7 +105,7 @@ fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
                     .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
                     .collect()
             })
-            .map_err(|e| anyhow!("Hopf crossings at {} = {v}: {e:?}", param.name()))
+            .with_context(|| format!("Hopf crossings at {} = {v}", param.name()))
         })
         .collect::<Result<_>>()?;
     Ok((
@@ -134,9 +134,9 @@ fn point(
     cfg.sensors.seed = a.seed;
     cfg.x0 = initial_yaw(a.kick_deg.to_radians());
     let mut sc = Scenario::constant_speed(kmh_to_mps(v_kmh));
-    let r = closed_loop::run(&cfg, &mut sc, None).map_err(|e| {
-        anyhow!(
-            "{} at {v_kmh} km/h, {} = {value}: {e:?}",
+    let r = closed_loop::run(&cfg, &mut sc, None).with_context(|| {
+        format!(
+            "{} at {v_kmh} km/h, {} = {value}",
             arm.name(),
             g.param.name()
         )
@@ -392,7 +392,7 @@ mod tests {
             v_min_kmh: 20.0,
             v_max_kmh: 130.0,
             v_steps: Some(3), // 20, 75, 130 km/h
-            damper_currents: vec![],
+            damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
             out: out.to_path_buf(),
             quiet: true,
