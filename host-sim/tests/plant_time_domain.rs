@@ -383,7 +383,7 @@ fn damper_at_2a_suppresses_shimmy_at_every_speed() {
     }
 }
 
-/// Growth rate [1/s] of a small disturbance (1e-5 rad in-phase start) in the time domain at
+/// Growth rate (1/s) of a small disturbance (1e-5 rad in-phase start) in the time domain at
 /// `v_mps`, no damper: after 3 s of transients, ln of the ratio of the peak in-phase wheel yaw
 /// |psi_L + psi_R| over [4, 5] s to that over [3, 4] s. The in-phase sum hides the anti-phase
 /// 47 Hz wheel mode, which is the least damped mode outside the window.

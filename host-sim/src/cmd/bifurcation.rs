@@ -20,19 +20,19 @@ pub struct BifurcationOptions {
     pub params_name: String,
     /// Damper setting.
     pub damper: DamperSetting,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub v_min_kmh: f64,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub v_max_kmh: f64,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub step_kmh: f64,
-    /// Small start [deg].
+    /// Small start, deg.
     pub small_deg: f64,
-    /// Large start [deg].
+    /// Large start, deg.
     pub large_deg: f64,
-    /// Run length [s].
+    /// Run length, s.
     pub duration_s: f64,
-    /// Measurement window [s].
+    /// Measurement window, s.
     pub window_s: f64,
     /// Output directory.
     pub out: PathBuf,
@@ -41,13 +41,13 @@ pub struct BifurcationOptions {
 /// One row of the study.
 #[derive(Clone, Copy, Debug)]
 pub struct BifurcationRow {
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub v_kmh: f64,
     /// From the small start.
     pub small: RunSummary,
     /// From the large start.
     pub large: RunSummary,
-    /// Real part [1/s] of the least-damped oscillatory eigenvalue of the FD Jacobian at this
+    /// Real part (1/s) of the least-damped oscillatory eigenvalue of the FD Jacobian at this
     /// speed (no damper, linear tyres): the linear prediction to compare with.
     pub eig_re_per_s: f64,
 }
@@ -284,28 +284,28 @@ pub struct BifurcationArgs {
     /// Named parameter set or TOML file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Fit the MR damper and hold this coil current [A]; without it there is no damper (F_d = 0).
+    /// Fit the MR damper and hold this coil current in A; without it there is no damper (F_d = 0).
     #[arg(long, alias = "damper-current")]
     pub damper_current_a: Option<f64>,
-    /// Lowest speed [km/h].
+    /// Lowest speed, km/h.
     #[arg(long, default_value_t = 5.0)]
     pub v_min_kmh: f64,
-    /// Highest speed [km/h].
+    /// Highest speed, km/h.
     #[arg(long, default_value_t = 130.0)]
     pub v_max_kmh: f64,
-    /// Speed step [km/h].
+    /// Speed step, km/h.
     #[arg(long, default_value_t = 2.5)]
     pub step_kmh: f64,
-    /// Small initial in-phase wheel yaw [deg].
+    /// Small initial in-phase wheel yaw, deg.
     #[arg(long, default_value_t = 0.05)]
     pub small_deg: f64,
-    /// Large initial in-phase wheel yaw [deg].
+    /// Large initial in-phase wheel yaw, deg.
     #[arg(long, default_value_t = 3.0)]
     pub large_deg: f64,
-    /// Length of each run [s].
+    /// Length of each run, s.
     #[arg(long, default_value_t = 40.0)]
     pub duration_s: f64,
-    /// Amplitude window at the end of each run [s] (the trend compares it with the one before).
+    /// Amplitude window at the end of each run, s (the trend compares it with the one before).
     #[arg(long, default_value_t = 3.0)]
     pub window_s: f64,
     /// Output directory.

@@ -26,7 +26,7 @@ pub struct CompareArgs {
         default_value = "no-damper,passive-off,passive-on,smc,asmc,skyhook"
     )]
     pub controllers: Vec<String>,
-    /// Current of `passive-on` [A]; default: the least constant current (bisection to 0.02 A)
+    /// Current of `passive-on` in A; default: the least constant current (bisection to 0.02 A)
     /// with which no scenario of the set shimmies.
     #[arg(long, alias = "on-current")]
     pub on_current_a: Option<f32>,
@@ -36,25 +36,25 @@ pub struct CompareArgs {
     /// Only scenarios whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Override the ASMC dead zone [rad/s] (gain studies).
+    /// Override the ASMC dead zone, rad/s (gain studies).
     #[arg(long)]
     pub dead_zone: Option<f32>,
     /// Override the ASMC adaptation rate gamma.
     #[arg(long)]
     pub gamma: Option<f32>,
-    /// Override the ASMC leakage sigma [1/s].
+    /// Override the ASMC leakage sigma, 1/s.
     #[arg(long)]
     pub leak: Option<f32>,
-    /// Override the sliding-surface slope lambda [1/s].
+    /// Override the sliding-surface slope lambda, 1/s.
     #[arg(long)]
     pub lambda: Option<f32>,
-    /// Override the boundary layer phi [rad/s].
+    /// Override the boundary layer phi, rad/s.
     #[arg(long)]
     pub phi: Option<f32>,
-    /// Override the fixed SMC gain K [rad/s^2].
+    /// Override the fixed SMC gain K, rad/s^2.
     #[arg(long)]
     pub smc_k: Option<f32>,
-    /// Override the ASMC K_min (= K_init) [rad/s^2].
+    /// Override the ASMC K_min (= K_init), rad/s^2.
     #[arg(long)]
     pub k_min: Option<f32>,
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 pub struct DemoOptions {
     /// Output directory.
     pub out: PathBuf,
-    /// Ramp duration [s] (20 -> 120 km/h).
+    /// Ramp duration, s (20 -> 120 km/h).
     pub ramp_s: f64,
 }
 

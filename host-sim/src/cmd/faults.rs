@@ -23,7 +23,7 @@ use std::path::PathBuf;
 /// Peak wheel yaw after the fault below which shimmy counts as suppressed: 0.5 deg.
 pub const SUPPRESSED_BELOW_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
-/// Nominal Hopf window without damper [km/h] (`shimmy-sim stability`).
+/// Nominal Hopf window without damper, km/h (`shimmy-sim stability`).
 pub const WINDOW_KMH: (f64, f64) = (29.35, 84.15);
 
 /// One campaign case: a name and its faults (empty: the healthy reference).
@@ -167,17 +167,17 @@ pub fn standard_cases() -> Vec<Case> {
 pub struct Setup {
     /// The true plant.
     pub plant: PlantParams,
-    /// Fault injection time [s].
+    /// Fault injection time, s.
     pub fault_s: f64,
-    /// Yaw kick (half-sine torque on both wheels) time [s].
+    /// Yaw kick (half-sine torque on both wheels) time, s.
     pub kick_s: f64,
-    /// Kick peak torque [N m].
+    /// Kick peak torque, N m.
     pub kick_nm: f64,
-    /// Kick duration [s].
+    /// Kick duration, s.
     pub kick_duration_s: f64,
-    /// Road noise standard deviation [N m].
+    /// Road noise standard deviation, N m.
     pub noise_nm: f64,
-    /// Run length [s].
+    /// Run length, s.
     pub duration_s: f64,
     /// Seed (road and sensor noise).
     pub seed: u64,
@@ -207,13 +207,13 @@ pub struct CaseResult {
     pub case: String,
     /// Arm (controller) name.
     pub arm: String,
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub speed_kmh: f64,
     /// Inside the no-damper Hopf window.
     pub in_window: bool,
     /// Faults injected.
     pub injected: bool,
-    /// Detection time after the injection [ms] (first detected fault or missed sample).
+    /// Detection time after the injection, ms (first detected fault or missed sample).
     pub detect_ms: Option<f64>,
     /// The detected fault kinds (names, `+`-joined).
     pub detected: String,
@@ -221,13 +221,13 @@ pub struct CaseResult {
     pub worst_mode: Mode,
     /// Mode at the end of the run.
     pub final_mode: Mode,
-    /// Coil command at the end [A].
+    /// Coil command at the end, A.
     pub final_cmd_a: f64,
-    /// Mean true coil current over the last 0.5 s [A].
+    /// Mean true coil current over the last 0.5 s, A.
     pub final_coil_a: f64,
-    /// Peak |wheel yaw| after the fault [rad].
+    /// Peak |wheel yaw| after the fault, rad.
     pub peak_after_rad: f64,
-    /// Shimmy-band amplitude over the last 0.5 s [rad].
+    /// Shimmy-band amplitude over the last 0.5 s, rad.
     pub amp_end_rad: f64,
     /// Commands that broke the output contract (NaN or outside [0, i_max]).
     pub invalid_commands: u64,
@@ -355,7 +355,7 @@ pub struct FaultsArgs {
     /// Output directory (faults.csv, faults.md).
     #[arg(long, default_value = "out/faults")]
     pub out: PathBuf,
-    /// Speeds [km/h] (comma separated): two inside the 29.35-84.15 km/h window, two outside.
+    /// Speeds, km/h (comma separated): two inside the 29.35-84.15 km/h window, two outside.
     #[arg(
         long,
         value_delimiter = ',',
@@ -366,7 +366,7 @@ pub struct FaultsArgs {
     /// Only cases whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Run length [s] (fault at 1.0 s, kick at 1.1 s).
+    /// Run length, s (fault at 1.0 s, kick at 1.1 s).
     #[arg(long, default_value_t = 5.0, alias = "duration")]
     pub duration_s: f64,
 }

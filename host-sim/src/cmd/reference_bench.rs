@@ -1,5 +1,5 @@
 //! `shimmy-sim reference-bench`: the simulator next to an independent NumPy/SciPy implementation
-//! of the same plant (`host-sim/reference/plant_scipy.py`, written from reference-plant.md), run
+//! of the same plant (`host-sim/reference/plant_scipy.py`, written from `docs/plant-model.md`), run
 //! in one command: speed ratios for the time-domain run and the eigenvalue sweep, and agreement
 //! of the two implementations' trajectories and eigenvalues.
 //!
@@ -32,17 +32,17 @@ pub struct ReferenceBenchArgs {
     /// Parameter set (name or TOML file).
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Simulated time of the time-domain run [s].
+    /// Simulated time of the time-domain run, s.
     #[arg(long, default_value_t = 10.0)]
     pub duration_s: f64,
-    /// Forward speed [km/h] (inside the Hopf window by default).
+    /// Forward speed, km/h (inside the Hopf window by default).
     #[arg(long, default_value_t = 60.0)]
     pub speed_kmh: f64,
     /// Constant coil current, in A (`--damper-current-a` as in `stability` and `bifurcation`;
     /// the field keeps its name for callers that build the arguments).
     #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5)]
     pub current_a: f64,
-    /// Initial in-phase wheel yaw [deg] (large enough for the damper to slide).
+    /// Initial in-phase wheel yaw, deg (large enough for the damper to slide).
     #[arg(long, default_value_t = 3.0)]
     pub initial_yaw_deg: f64,
     /// Points of the eigenvalue sweep (1-150 km/h).
@@ -54,10 +54,10 @@ pub struct ReferenceBenchArgs {
     /// Python interpreter with numpy and scipy.
     #[arg(long, default_value = "python3")]
     pub python: String,
-    /// Ramp length of the closed-loop row [s] (the demo's is 30 s).
+    /// Ramp length of the closed-loop row, s (the demo's is 30 s).
     #[arg(long, default_value_t = 30.0)]
     pub cl_ramp_s: f64,
-    /// Gain of the Python side's current law in the closed-loop row [A per rad/s].
+    /// Gain of the Python side's current law in the closed-loop row, A per rad/s.
     #[arg(long, default_value_t = 4.0)]
     pub cl_gain_a_per_radps: f64,
     /// Output folder (case file, SciPy result, summary).
@@ -76,19 +76,19 @@ pub struct ReferenceResult {
     pub rust_sweep_rate: f64,
     /// Eigen-sweep points per wall second, NumPy.
     pub numpy_sweep_rate: f64,
-    /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times [rad].
+    /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times, rad.
     pub max_traj_diff_rad: f64,
-    /// Largest |psi_L| of the run [rad] (scale of the difference).
+    /// Largest |psi_L| of the run, rad (scale of the difference).
     pub max_psi_rad: f64,
-    /// Largest |max Re lambda (Rust) - max Re lambda (NumPy)| over the sweep [1/s].
+    /// Largest |max Re lambda (Rust) - max Re lambda (NumPy)| over the sweep, 1/s.
     pub max_eig_diff: f64,
     /// Closed loop (the demo's ASMC run): simulated seconds per wall second, Rust.
     pub rust_cl_rate: f64,
     /// The same drive in SciPy with a simple current law: simulated seconds per wall second.
     pub scipy_cl_rate: f64,
-    /// Simulated time of the closed-loop row [s].
+    /// Simulated time of the closed-loop row, s.
     pub cl_duration_s: f64,
-    /// Peak |psi_L| of the closed-loop runs [rad]: (Rust with ASMC, SciPy with the simple law).
+    /// Peak |psi_L| of the closed-loop runs in rad: (Rust with ASMC, SciPy with the simple law).
     pub cl_peak_psi_rad: (f64, f64),
 }
 

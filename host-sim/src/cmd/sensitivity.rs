@@ -17,7 +17,7 @@ pub struct SensitivityArgs {
     /// Named set (nominal, gentle, hard) or TOML parameter file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Relative change applied down and up [%].
+    /// Relative change applied down and up in %.
     #[arg(long, default_value_t = 20.0)]
     pub percent: f64,
     /// Output directory (CSV).
@@ -46,7 +46,7 @@ pub const SENSITIVITY_PARAMS: [Param; 15] = [
     Param::IPhi,
 ];
 
-/// Onset/offset speeds [km/h] and onset frequency [Hz] of a parameter set (None where absent),
+/// Onset/offset speeds (km/h) and onset frequency (Hz) of a parameter set (None where absent),
 /// searching 1..250 km/h.
 pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f64>)> {
     let xs = stability::hopf_crossings(

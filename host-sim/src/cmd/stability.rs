@@ -19,20 +19,20 @@ pub struct StabilityArgs {
     /// Named set (nominal, gentle, hard) or TOML parameter file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Constant MR-damper coil current [A]; the damper enters as its energy-equivalent viscous
+    /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
     /// coefficient (describing function). Without it there is no damper force.
     #[arg(long, alias = "damper-current")]
     pub damper_current_a: Option<f64>,
-    /// Reference wheel-yaw amplitude for the describing function [deg].
+    /// Reference wheel-yaw amplitude for the describing function, deg.
     #[arg(long, default_value_t = 0.5)]
     pub ref_amplitude_deg: f64,
-    /// Lowest speed [km/h].
+    /// Lowest speed, km/h.
     #[arg(long, default_value_t = 5.0)]
     pub v_min_kmh: f64,
-    /// Highest speed [km/h].
+    /// Highest speed, km/h.
     #[arg(long, default_value_t = 150.0)]
     pub v_max_kmh: f64,
-    /// Grid step for the sweep and for bracketing crossings [km/h].
+    /// Grid step for the sweep and for bracketing crossings, km/h.
     #[arg(long, default_value_t = 1.0)]
     pub step_kmh: f64,
     /// Output directory (CSV, PNG).

@@ -18,7 +18,7 @@ use shimmy_core::mr_damper::{rates, SpencerParams, SpencerState};
 use shimmy_core::params::PlantParams;
 use shimmy_core::stability::{self, ModeSelect};
 
-/// Default reference wheel-yaw amplitude [rad] (0.5 deg).
+/// Default reference wheel-yaw amplitude, rad (0.5 deg).
 pub const REF_WHEEL_YAW_AMPL_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
 /// Cycles driven before the measured one (internal states settle in ~1 cycle).
@@ -27,7 +27,7 @@ const SETTLE_CYCLES: usize = 4;
 /// 1/s at these strokes); 20 000 steps per ~0.15 s cycle keeps |lambda dt| < 0.1.
 const STEPS_PER_CYCLE: usize = 20_000;
 
-/// Energy-equivalent viscous coefficient [N s/m] of any force law driven by
+/// Energy-equivalent viscous coefficient (N s/m) of any force law driven by
 /// `x(t) = amp sin(w t)`. `force(t, dt)` must advance its own state from `t - dt` to `t` (calls
 /// come in increasing `t`, first with `t = 0, dt = 0`) and return the force at `t`, positive
 /// when resisting positive stroke rate. Trapezoidal quadrature of F v over the last cycle.
@@ -55,7 +55,7 @@ pub fn equivalent_viscous(
     energy / (std::f64::consts::PI * omega_radps * amp_m * amp_m)
 }
 
-/// Energy-equivalent viscous coefficient [N s/m] of the Spencer MR damper `p` at constant coil
+/// Energy-equivalent viscous coefficient (N s/m) of the Spencer MR damper `p` at constant coil
 /// current `current_a` (coil state settled: u = I), stroke amplitude `amp_m`, frequency `freq_hz`.
 pub fn mr_equivalent_viscous(p: &SpencerParams, current_a: f64, freq_hz: f64, amp_m: f64) -> f64 {
     let u = current_a.clamp(0.0, p.u_max);
@@ -98,7 +98,7 @@ pub fn mr_equivalent_viscous(p: &SpencerParams, current_a: f64, freq_hz: f64, am
     })
 }
 
-/// Stroke amplitude [m] of an in-phase wheel-yaw oscillation of amplitude `psi0_rad` on both
+/// Stroke amplitude (m) of an in-phase wheel-yaw oscillation of amplitude `psi0_rad` on both
 /// wheels: X = l_t psi0.
 pub fn stroke_amplitude_m(l_t_m: f64, psi0_rad: f64) -> f64 {
     l_t_m * psi0_rad
@@ -108,13 +108,13 @@ pub fn stroke_amplitude_m(l_t_m: f64, psi0_rad: f64) -> f64 {
 /// evaluated at.
 #[derive(Clone, Copy, Debug)]
 pub struct DamperEquivalent {
-    /// Coil current [A].
+    /// Coil current, A.
     pub current_a: f64,
-    /// Mode frequency the describing function was evaluated at [Hz].
+    /// Mode frequency the describing function was evaluated at, Hz.
     pub freq_hz: f64,
-    /// Stroke amplitude [m].
+    /// Stroke amplitude, m.
     pub stroke_amp_m: f64,
-    /// Equivalent viscous coefficient [N s/m].
+    /// Equivalent viscous coefficient, N s/m.
     pub c_eq_nspm: f64,
 }
 

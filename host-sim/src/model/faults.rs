@@ -71,24 +71,24 @@ impl Side {
 pub enum FaultMode {
     /// Encoder angle frozen at its value when the fault starts.
     Stuck(Side),
-    /// Gaussian noise of this standard deviation added to the encoder angle [rad].
+    /// Gaussian noise of this standard deviation added to the encoder angle, rad.
     Noise(Side, f64),
     /// `length` failed reads out of every `period` samples (angle held).
     Dropout {
         /// Encoder(s).
         side: Side,
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
-        /// Failed reads per period [samples].
+        /// Failed reads per period, samples.
         length: u32,
     },
     /// A spike of `amplitude_rad` (alternating sign) on one sample of every `period`.
     Spike {
         /// Encoder(s).
         side: Side,
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
-        /// Spike height [rad].
+        /// Spike height, rad.
         amplitude_rad: f64,
     },
     /// NaN angle.
@@ -99,11 +99,11 @@ pub enum FaultMode {
     ErrorFlag(Side),
     /// Speed signal lost: value 0, qualifier invalid.
     SpeedLost,
-    /// Speed replaced by an implausible value [m/s] (qualifier valid).
+    /// Speed replaced by an implausible value, m/s (qualifier valid).
     SpeedImplausible(f64),
     /// `length` whole frames lost out of every `period`.
     FrameLoss {
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
         /// Lost frames per period.
         length: u32,
@@ -177,9 +177,9 @@ impl FaultMode {
 pub struct FaultSpec {
     /// What goes wrong.
     pub mode: FaultMode,
-    /// Active from [s].
+    /// Active from, s.
     pub start_s: f64,
-    /// Active until [s] (`None`: to the end of the run).
+    /// Active until, s (`None`: to the end of the run).
     pub end_s: Option<f64>,
 }
 

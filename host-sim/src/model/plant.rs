@@ -1,10 +1,10 @@
-//! The nonlinear 4-DOF solid-axle steering plant of `shared/reference-plant.md` (std, f64):
+//! The nonlinear 4-DOF solid-axle steering plant of `docs/plant-model.md` (std, f64):
 //! Magic-Formula tyres with first-order lag, gyroscopic coupling, the Spencer MR damper with coil
 //! lag (or no damper), driver torque at the steering wheel and forward speed as an input.
 //!
 //! State (13): the 10 plant states
 //! `[psi_L, psi_R, phi, theta_sw, dpsi_L, dpsi_R, dphi, dtheta_sw, a_L, a_R]` followed by the
-//! damper's `(u, y, z)` (coil input [V = A], internal displacement [m], Bouc-Wen variable [m]).
+//! damper's `(u, y, z)` (coil input (V = A), internal displacement in m, Bouc-Wen variable in m).
 //! Without a damper the last three states stay at zero.
 //!
 //! [`Simulator`] integrates it one control period at a time with the inputs held (zero-order
@@ -29,11 +29,11 @@ pub mod idx {
     pub use shimmy_core::plant::{
         A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, PHI, PSI_L, PSI_R, THETA_SW,
     };
-    /// Damper filtered coil input u [V] (1 V per A).
+    /// Damper filtered coil input u, V (1 V per A).
     pub const U: usize = shimmy_core::plant::N_STATES;
-    /// Damper internal displacement y [m].
+    /// Damper internal displacement y, m.
     pub const Y: usize = U + 1;
-    /// Damper Bouc-Wen variable z [m].
+    /// Damper Bouc-Wen variable z, m.
     pub const Z: usize = U + 2;
 }
 
@@ -75,22 +75,22 @@ pub enum TyreLaw {
 /// Inputs held over one control period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Inputs {
-    /// Coil current command [A] (= damper input in V-equivalent; clamped to [0, u_max]).
+    /// Coil current command, A (= damper input in V-equivalent; clamped to [0, u_max]).
     pub current_cmd_a: f64,
-    /// Driver torque at the steering wheel [N m].
+    /// Driver torque at the steering wheel, N m.
     pub driver_torque_nm: f64,
-    /// External yaw torques about the kingpins [N m], `[left, right]` (disturbances).
+    /// External yaw torques about the kingpins in N m, `[left, right]` (disturbances).
     pub yaw_torque_nm: [f64; 2],
-    /// Forward speed V [m/s].
+    /// Forward speed V, m/s.
     pub speed_mps: f64,
 }
 
 /// Forces at one instant (outputs).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Forces {
-    /// Tyre lateral forces [N], `[left, right]`.
+    /// Tyre lateral forces in N, `[left, right]`.
     pub tyre_n: [f64; 2],
-    /// Damper force [N] along the track rod, positive resisting a positive stroke rate.
+    /// Damper force (N) along the track rod, positive resisting a positive stroke rate.
     pub damper_n: f64,
 }
 
@@ -131,7 +131,7 @@ impl Plant {
         self
     }
 
-    /// Tyre lateral force [N] at lagged slip angle `a_rad`.
+    /// Tyre lateral force (N) at lagged slip angle `a_rad`.
     #[inline]
     pub fn tyre_force_n(&self, a_rad: f64) -> f64 {
         match self.tyre {
@@ -142,7 +142,7 @@ impl Plant {
         }
     }
 
-    /// sigma * integral_0^a F(s) ds [J]: the elastic energy stored in one tyre's lagged
+    /// sigma * integral_0^a F(s) ds in J: the elastic energy stored in one tyre's lagged
     /// deformation (see the energy test), by composite Simpson with 256 intervals.
     pub fn tyre_strain_energy_j(&self, a_rad: f64) -> f64 {
         let n = 256;
@@ -155,7 +155,7 @@ impl Plant {
         self.params.sigma * s * h / 3.0
     }
 
-    /// Damper stroke x_d = (l_t/2)(psi_L + psi_R) [m] and stroke rate [m/s].
+    /// Damper stroke x_d = (l_t/2)(psi_L + psi_R), m and stroke rate, m/s.
     #[inline]
     pub fn damper_stroke(&self, x: &State) -> (f64, f64) {
         let half = 0.5 * self.params.l_t;
@@ -228,7 +228,7 @@ impl Plant {
         self.rhs(x, u, &mut dx)
     }
 
-    /// Mechanical energy [J]: kinetic + spring potentials (K_tr, K_d, K_phi).
+    /// Mechanical energy in J: kinetic + spring potentials (K_tr, K_d, K_phi).
     pub fn mechanical_energy_j(&self, x: &State) -> f64 {
         let p = &self.params;
         let kin = 0.5
@@ -254,7 +254,7 @@ pub enum Method {
         /// Steps per call.
         substeps: u32,
     },
-    /// Adaptive additive Runge-Kutta ARK4(3)6L[2]SA (IMEX, [`Ark436`]) with relative tolerance
+    /// Adaptive additive Runge-Kutta ARK4(3)6L\[2\]SA (IMEX, [`Ark436`]) with relative tolerance
     /// `rtol`: the stiff Bouc-Wen variable z of the MR damper goes through the L-stable ESDIRK
     /// tableau (a scalar Newton solve per stage), everything else through the explicit tableau.
     /// The step size is then set by accuracy, not by z's relaxation rate (up to ~2e4 /s when
@@ -458,7 +458,7 @@ impl Simulator {
         self.last_inputs = None;
     }
 
-    /// Simulated time [s].
+    /// Simulated time, s.
     pub fn time_s(&self) -> f64 {
         self.t_s
     }
@@ -513,14 +513,14 @@ pub fn eigenvalues(a: &DMatrix<f64>) -> Option<Vec<(f64, f64)>> {
     Some(ev.iter().map(|c| (c.re, c.im)).collect())
 }
 
-/// Eigenvalues `(re [1/s], im [rad/s])` of the FD Jacobian at `v_mps`.
+/// Eigenvalues `(re in 1/s, im in rad/s)` of the FD Jacobian at `v_mps`.
 pub fn fd_eigenvalues(params: &PlantParams, v_mps: f64) -> Option<Vec<(f64, f64)>> {
     let j = jacobian_fd(params, v_mps);
     eigenvalues(&DMatrix::from_column_slice(N_PLANT, N_PLANT, j.as_slice()))
 }
 
 /// The least-damped oscillatory eigenvalue (largest real part among those with imaginary part
-/// > 1 rad/s) of the FD Jacobian at `v_mps`: `(re [1/s], im [rad/s])`.
+/// > 1 rad/s) of the FD Jacobian at `v_mps`: `(re in 1/s, im in rad/s)`.
 pub fn least_damped_mode(params: &PlantParams, v_mps: f64) -> Option<(f64, f64)> {
     fd_eigenvalues(params, v_mps)?
         .into_iter()
@@ -532,7 +532,7 @@ pub fn least_damped_mode(params: &PlantParams, v_mps: f64) -> Option<(f64, f64)>
 mod tests {
     use super::*;
 
-    /// Entries of the FD Jacobian against the equations of reference-plant.md read off by hand
+    /// Entries of the FD Jacobian against the equations of docs/plant-model.md read off by hand
     /// (relative 1e-6: central differences with h = 1e-7).
     #[test]
     fn fd_jacobian_matches_hand_derived_entries() {

@@ -2,7 +2,7 @@
 //! in one place for the no-argument demo and for `shimmy-sim report SCENARIO.toml...`.
 //!
 //! A [`Report`] is a title, an introduction and [`Section`]s (one scenario each) holding the
-//! closed-loop runs of one or more controllers. [`write`] produces in the output folder:
+//! closed-loop runs of one or more controllers. [`write()`] produces in the output folder:
 //! `report.md`, `metrics.csv` (every run, units in the header), per section `<name>-time.png`
 //! (wheel yaw, coil current, gain vs time), `<name>-margin.png` (the mode meter's damping
 //! estimate next to the true eigenvalue of the plant's shimmy mode at the same speed, when the
@@ -68,7 +68,7 @@ pub struct Report {
     pub sections: Vec<Section>,
 }
 
-/// What [`write`] produced.
+/// What [`write()`] produced.
 #[derive(Clone, Debug)]
 pub struct Written {
     /// `report.md`.

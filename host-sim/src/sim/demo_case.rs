@@ -19,11 +19,11 @@ pub struct DemoCase {
     pub scenario: Scenario,
     /// Hopf crossings of the plant without damper (1-50 m/s).
     pub crossings: Vec<HopfCrossing>,
-    /// The no-damper Hopf window [km/h], when there is one.
+    /// The no-damper Hopf window in km/h, when there is one.
     pub window_kmh: Option<(f64, f64)>,
-    /// Speed of fastest shimmy growth [m/s] (where the pothole hits).
+    /// Speed of fastest shimmy growth, m/s (where the pothole hits).
     pub v_fastest_mps: f64,
-    /// Time of the pothole [s].
+    /// Time of the pothole, s.
     pub t_pothole_s: f64,
 }
 

@@ -9,7 +9,7 @@ use crate::model::plant::{idx, Damper, Forces, Inputs, Plant, Simulator, State, 
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 
-/// Control period of the runs [s] (inputs held per period, as in closed loop).
+/// Control period of the runs, s (inputs held per period, as in closed loop).
 pub const DT_S: f64 = 1e-3;
 
 /// What a run's oscillation does at its end.
@@ -37,13 +37,13 @@ impl Trend {
 /// Result of one run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RunSummary {
-    /// Speed [m/s].
+    /// Speed, m/s.
     pub v_mps: f64,
-    /// Initial in-phase wheel yaw [rad].
+    /// Initial in-phase wheel yaw, rad.
     pub psi0_rad: f64,
-    /// Peak |psi_L| over the last window [rad].
+    /// Peak |psi_L| over the last window, rad.
     pub amp_end_rad: f64,
-    /// Peak |psi_L| over the window before it [rad].
+    /// Peak |psi_L| over the window before it, rad.
     pub amp_prev_rad: f64,
     /// Classification of the end.
     pub trend: Trend,
@@ -62,7 +62,7 @@ impl RunSummary {
 pub enum DamperSetting {
     /// No damper (F_d = 0).
     Off,
-    /// The MR damper with a constant coil current [A].
+    /// The MR damper with a constant coil current, A.
     Current(f64),
 }
 
@@ -124,7 +124,7 @@ pub fn run_speed(
 }
 
 /// Local maxima of a uniformly sampled signal, refined by a parabola through the three samples
-/// around each: `(time [s], value)`.
+/// around each: `(time in s, value)`.
 pub fn peaks(t0_s: f64, dt_s: f64, s: &[f64]) -> Vec<(f64, f64)> {
     let mut out = Vec::new();
     for k in 1..s.len().saturating_sub(1) {
@@ -139,7 +139,7 @@ pub fn peaks(t0_s: f64, dt_s: f64, s: &[f64]) -> Vec<(f64, f64)> {
     out
 }
 
-/// Growth rate [1/s] and angular frequency [rad/s] from successive positive peaks: least-squares
+/// Growth rate, 1/s and angular frequency (rad/s) from successive positive peaks: least-squares
 /// line through ln(peak) over time, and the mean peak spacing. `None` with fewer than 3 peaks.
 pub fn fit_growth(pk: &[(f64, f64)]) -> Option<(f64, f64)> {
     if pk.len() < 3 || pk.iter().any(|p| p.1 <= 0.0) {
@@ -161,17 +161,17 @@ pub fn fit_growth(pk: &[(f64, f64)]) -> Option<(f64, f64)> {
 /// A recorded run.
 #[derive(Clone, Debug, Default)]
 pub struct Trace {
-    /// Time [s].
+    /// Time, s.
     pub t_s: Vec<f64>,
     /// States.
     pub x: Vec<State>,
-    /// Damper force [N].
+    /// Damper force, N.
     pub damper_force_n: Vec<f64>,
-    /// Coil current command [A].
+    /// Coil current command, A.
     pub current_cmd_a: Vec<f64>,
-    /// Forward speed [m/s].
+    /// Forward speed, m/s.
     pub speed_mps: Vec<f64>,
-    /// Driver torque [N m].
+    /// Driver torque, N m.
     pub driver_torque_nm: Vec<f64>,
 }
 

@@ -9,7 +9,7 @@ use crate::sim::scenario::ScenarioSpec;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{mode_at, ModeSelect};
 
-/// The speed [m/s] where the no-damper shimmy mode grows fastest (largest real part of the
+/// The speed (m/s) where the no-damper shimmy mode grows fastest (largest real part of the
 /// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
 pub fn fastest_growth_speed(p: &PlantParams) -> f64 {
     let mut best = (f64::NEG_INFINITY, 15.0);
@@ -34,9 +34,9 @@ pub fn pothole(t0_s: f64, peak_nm: f64) -> Impulse {
     }
 }
 
-/// Peak torque of the standard pothole [N m].
+/// Peak torque of the standard pothole, N m.
 pub const POTHOLE_NM: f64 = 1000.0;
-/// Initial yaw of the "large" kick [deg] (breaks through the 0 A damper's friction).
+/// Initial yaw of the "large" kick, deg (breaks through the 0 A damper's friction).
 pub const BIG_KICK_DEG: f64 = 3.0;
 
 /// Road noise + imbalance used in the ramp and the demo.

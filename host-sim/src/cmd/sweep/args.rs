@@ -24,19 +24,19 @@ pub struct SweepArgs {
     /// Number of parameter values [default: 41; 9 with --controllers].
     #[arg(long)]
     pub factor_steps: Option<usize>,
-    /// Lowest speed [km/h].
+    /// Lowest speed, km/h.
     #[arg(long, default_value_t = 2.0)]
     pub v_min_kmh: f64,
-    /// Highest speed [km/h].
+    /// Highest speed, km/h.
     #[arg(long, default_value_t = 150.0)]
     pub v_max_kmh: f64,
     /// Number of speeds [default: 149; 25 with --controllers].
     #[arg(long)]
     pub v_steps: Option<usize>,
-    /// MR damper currents [A] (one map each, as an equivalent viscous damper); none = no damper.
+    /// MR damper currents, A (one map each, as an equivalent viscous damper); none = no damper.
     #[arg(long, value_delimiter = ',', alias = "damper-currents")]
     pub damper_current_a: Vec<f64>,
-    /// Wheel-yaw amplitude of the damper's describing function [deg].
+    /// Wheel-yaw amplitude of the damper's describing function, deg.
     #[arg(long, default_value_t = 0.5)]
     pub ref_amplitude_deg: f64,
     /// Output folder.
@@ -54,10 +54,10 @@ pub struct SweepArgs {
     /// Time-domain sweep: fixed current of `passive-on`, in A.
     #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
-    /// Time-domain sweep: simulated time per run [s].
+    /// Time-domain sweep: simulated time per run, s.
     #[arg(long, default_value_t = 6.0)]
     pub duration_s: f64,
-    /// Time-domain sweep: initial in-phase wheel-yaw kick [deg] (3 deg breaks through the
+    /// Time-domain sweep: initial in-phase wheel-yaw kick, deg (3 deg breaks through the
     /// damper's friction at 0 A).
     #[arg(long, default_value_t = 3.0)]
     pub kick_deg: f64,
@@ -66,7 +66,7 @@ pub struct SweepArgs {
     pub seed: u64,
 }
 
-/// The grid axes: speeds [km/h], parameter values and the parameter, validated
+/// The grid axes: speeds in km/h, parameter values and the parameter, validated
 /// (`default_steps` = (speeds, values) when not given).
 pub fn axes(
     a: &SweepArgs,

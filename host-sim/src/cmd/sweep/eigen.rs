@@ -21,9 +21,9 @@ use std::path::Path;
 pub struct SweepRow {
     /// Parameter value.
     pub value: f64,
-    /// Largest real part of the oscillatory eigenvalues at each speed [1/s].
+    /// Largest real part of the oscillatory eigenvalues at each speed, 1/s.
     pub max_re: Vec<f64>,
-    /// Hopf crossings in the speed range: (speed [km/h], onset?).
+    /// Hopf crossings in the speed range: (speed in km/h, onset?).
     pub crossings: Vec<(f64, bool)>,
 }
 
@@ -32,9 +32,9 @@ pub struct SweepRow {
 pub struct SweepMap {
     /// Label of the damper setting.
     pub damper: String,
-    /// Equivalent viscous damper coefficient [N s/m].
+    /// Equivalent viscous damper coefficient, N s/m.
     pub c_nspm: f64,
-    /// Speeds [km/h].
+    /// Speeds, km/h.
     pub speeds_kmh: Vec<f64>,
     /// Rows, by increasing parameter value.
     pub rows: Vec<SweepRow>,

@@ -31,17 +31,17 @@ pub const DEFAULT_STEPS: (usize, usize) = (25, 9);
 pub struct TdPoint {
     /// Parameter value.
     pub value: f64,
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub speed_kmh: f64,
-    /// Peak |psi_L| over the run, kick included [rad].
+    /// Peak |psi_L| over the run, kick included, rad.
     pub peak_yaw_rad: f64,
-    /// Shimmy-band amplitude in the last 0.5 s [rad].
+    /// Shimmy-band amplitude in the last 0.5 s, rad.
     pub amp_end_rad: f64,
-    /// Largest shimmy-band block amplitude [rad].
+    /// Largest shimmy-band block amplitude, rad.
     pub amp_max_rad: f64,
     /// Sustained shimmy ([`RunMetrics::shimmies`]).
     pub shimmy: bool,
-    /// Coil energy [J].
+    /// Coil energy, J.
     pub energy_j: f64,
 }
 
@@ -59,11 +59,11 @@ pub struct TdMap {
 pub struct TdGrid {
     /// Varied parameter.
     pub param: Param,
-    /// Speeds [km/h].
+    /// Speeds, km/h.
     pub speeds_kmh: Vec<f64>,
     /// Parameter values.
     pub values: Vec<f64>,
-    /// Linear Hopf crossings of the undamped plant per value: (speed [km/h], onset?).
+    /// Linear Hopf crossings of the undamped plant per value: (speed in km/h, onset?).
     pub hopf: Vec<Vec<(f64, bool)>>,
 }
 
