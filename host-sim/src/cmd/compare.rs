@@ -4,6 +4,7 @@
 use crate::model::sensors::SensorConfig;
 use crate::out::file_name::sanitize;
 use crate::out::plots::plot_runs;
+use crate::out::table::opt;
 use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
 use crate::sim::scenario::{self, ScenarioSpec};
 use crate::sim::standard::standard_scenarios;
@@ -178,10 +179,6 @@ pub fn least_suppressing_current(
         }
     }
     Ok((hi, beyond))
-}
-
-fn opt(v: Option<f64>, prec: usize) -> String {
-    v.map_or("-".into(), |x| format!("{x:.prec$}"))
 }
 
 /// Formats the table.

@@ -10,6 +10,7 @@
 
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::out::table::opt;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -371,10 +372,6 @@ pub struct FaultsArgs {
     pub duration_s: f64,
 }
 
-fn fmt_opt(x: Option<f64>) -> String {
-    x.map_or("-".into(), |v| format!("{v:.0}"))
-}
-
 fn suppressed_cell(r: &CaseResult) -> &'static str {
     if r.arm == "no-damper" {
         return if r.amp_end_rad > SUPPRESSED_BELOW_RAD {
@@ -403,7 +400,7 @@ pub fn markdown(rows: &[CaseResult]) -> String {
             r.arm,
             r.speed_kmh,
             if r.in_window { "in" } else { "out" },
-            fmt_opt(r.detect_ms),
+            opt(r.detect_ms, 0),
             if r.detected.is_empty() { "-" } else { &r.detected },
             r.worst_mode.name(),
             r.final_mode.name(),

@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
 
+use crate::out::table::opt;
 use crate::sim::paramfile;
 
 /// Options of `shimmy-sim sensitivity`.
@@ -69,10 +70,6 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
     ))
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map_or("-".to_string(), |x| format!("{x:.2}"))
-}
-
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     let p = paramfile::load(&args.params)?;
@@ -83,9 +80,9 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
     );
     println!(
         "base: onset {} km/h, offset {} km/h, onset frequency {} Hz",
-        fmt_opt(on0),
-        fmt_opt(off0),
-        fmt_opt(f0)
+        opt(on0, 2),
+        opt(off0, 2),
+        opt(f0, 2)
     );
     println!(
         "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
@@ -127,12 +124,12 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         println!(
             "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
             q.name(),
-            fmt_opt(res[0].0),
-            fmt_opt(res[0].1),
-            fmt_opt(res[0].2),
-            fmt_opt(res[1].0),
-            fmt_opt(res[1].1),
-            fmt_opt(res[1].2),
+            opt(res[0].0, 2),
+            opt(res[0].1, 2),
+            opt(res[0].2, 2),
+            opt(res[1].0, 2),
+            opt(res[1].1, 2),
+            opt(res[1].2, 2),
             slope(res[0].0, res[1].0),
             slope(res[0].1, res[1].1)
         );

@@ -7,3 +7,4 @@ pub mod file_name;
 pub mod plot_util;
 pub mod plots;
 pub mod report;
+pub mod table;

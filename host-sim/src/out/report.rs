@@ -10,6 +10,7 @@
 
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
+use crate::out::table::opt;
 use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use anyhow::{Context, Result};
 use shimmy_core::params::PlantParams;
@@ -98,7 +99,7 @@ fn metric_cells(m: &RunMetrics) -> [String; 11] {
     [
         format!("{:.3}", m.peak_yaw_rad.to_degrees()),
         format!("{:.3}", m.rms_yaw_rad.to_degrees()),
-        m.settle_s.map_or("-".into(), |s| format!("{s:.2}")),
+        opt(m.settle_s, 2),
         format!("{:.2}", m.peak_sw_rad.to_degrees()),
         format!("{:.3}", m.rms_current_a),
         format!("{:.3}", m.peak_current_a),
