@@ -1,4 +1,4 @@
-//! `shimmy-sim sweep --controllers off,asmc`: the time-domain map over speed x parameter x
+//! `shimmy-sim sweep --controllers passive-off,asmc`: the time-domain map over speed x parameter x
 //! controller. Every grid point is one closed-loop run (nonlinear plant with the MR damper,
 //! simulated sensors, the core's controller at 1 kHz) at constant speed from an in-phase
 //! wheel-yaw kick; the result is the shimmy-band wheel-yaw amplitude at the end of the run and a
