@@ -5,8 +5,8 @@
 //! Real-time factor = 1 s / (time per iteration).
 use criterion::{criterion_group, criterion_main, Criterion};
 use shimmy_core::params::{kmh_to_mps, PlantParams};
-use shimmy_sim::disturbance::initial_yaw;
-use shimmy_sim::plant::{Damper, Inputs, Method, Plant, Simulator};
+use shimmy_sim::model::disturbance::initial_yaw;
+use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator};
 use std::hint::black_box;
 
 /// The explicit baseline (the previous default).

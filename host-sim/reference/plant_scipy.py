@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Reference implementation of the shimmy plant in NumPy/SciPy, written from
-shared/reference-plant.md independently of the Rust code.
+docs/plant-model.md independently of the Rust code.
 
 Used by `shimmy-sim reference-bench` as (1) a speed reference (solve_ivp for the time-domain run,
 numpy.linalg.eigvals for the eigenvalue sweep) and (2) a second implementation whose trajectory

@@ -4,9 +4,11 @@
 //! mode meter); 10 s of simulated time costs ~0.1 s in the dev profile.
 
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_sim::closed_loop::{self, Arm, LoopConfig, SHIMMY_AMP_RAD};
-use shimmy_sim::compare::{self, standard_scenarios, ScenarioSpec};
-use shimmy_sim::sensors::SensorConfig;
+use shimmy_sim::cmd::compare;
+use shimmy_sim::model::sensors::SensorConfig;
+use shimmy_sim::sim::closed_loop::{self, Arm, LoopConfig, SHIMMY_AMP_RAD};
+use shimmy_sim::sim::scenario::ScenarioSpec;
+use shimmy_sim::sim::standard::standard_scenarios;
 
 fn spec(name: &str) -> ScenarioSpec {
     standard_scenarios(false)
@@ -27,7 +29,7 @@ fn closed_loop_is_deterministic() {
             seed,
             ..SensorConfig::default()
         };
-        cfg.x0 = shimmy_sim::disturbance::initial_yaw(0.02);
+        cfg.x0 = shimmy_sim::model::disturbance::initial_yaw(0.02);
         closed_loop::run(&cfg, &mut s.scenario.clone(), None).unwrap()
     };
     let (a, b, c) = (run(5), run(5), run(6));
@@ -107,7 +109,7 @@ fn asmc_needs_less_energy_than_the_least_passive_current() {
 #[test]
 fn demo_report_is_written() {
     let dir = std::env::temp_dir().join(format!("shimmy-demo-test-{}", std::process::id()));
-    let out = shimmy_sim::demo::run_demo(&shimmy_sim::demo::DemoOptions {
+    let out = shimmy_sim::cmd::demo::run_demo(&shimmy_sim::cmd::demo::DemoOptions {
         out: dir.clone(),
         ramp_s: 6.0,
     })

@@ -7,9 +7,9 @@
 
 use shimmy_core::control::ControllerKind;
 use shimmy_core::supervisor::{FaultKind, Mode, FAILSAFE_CURRENT_A};
-use shimmy_sim::closed_loop::{Arm, SHIMMY_AMP_RAD};
-use shimmy_sim::fault_campaign::{self, standard_cases, Case, Setup};
-use shimmy_sim::faults::{FaultMode, Side};
+use shimmy_sim::cmd::faults::{self as fault_campaign, standard_cases, Case, Setup};
+use shimmy_sim::model::faults::{FaultMode, Side};
+use shimmy_sim::sim::closed_loop::{Arm, SHIMMY_AMP_RAD};
 
 const V_KMH: f64 = 45.0;
 
@@ -189,9 +189,9 @@ fn nan_encoder_is_caught_by_both_layers() {
 fn the_sensor_faults_scenario_detects_each_fault() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/sensor-faults.toml");
-    let spec = shimmy_sim::scenario_file::load(&path).unwrap();
+    let spec = shimmy_sim::sim::scenario_file::load(&path).unwrap();
     assert_eq!(spec.faults.len(), 4);
-    let (_, r) = shimmy_sim::run_cmd::run(&spec).unwrap();
+    let (_, r) = shimmy_sim::sim::scenario::run(&spec).unwrap();
     let log = &r.faults;
     for k in [
         FaultKind::LeftStuck,

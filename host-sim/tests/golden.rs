@@ -19,9 +19,10 @@
 //! absorb (an initial wheel-yaw offset of 1e-12 rad, far above ulp effects on the state) and
 //! shows that a small real change (ASMC adaptation rate +5 %) leaves the band.
 
-use shimmy_sim::closed_loop::{self, LoopConfig, LoopResult, TraceRow};
-use shimmy_sim::demo::{self, DemoOptions, ARMS};
-use shimmy_sim::plant::idx;
+use shimmy_sim::cmd::demo::{self, DemoOptions};
+use shimmy_sim::model::plant::idx;
+use shimmy_sim::sim::closed_loop::{self, LoopConfig, LoopResult, TraceRow};
+use shimmy_sim::sim::demo_case::{self, ARMS};
 use std::path::PathBuf;
 
 const EVERY: usize = 20; // 1 kHz -> 50 Hz
@@ -75,7 +76,7 @@ fn parse(text: &str) -> Vec<[f64; 7]> {
 
 fn demo_asmc(change: impl FnOnce(&mut LoopConfig)) -> LoopResult {
     let ramp_s = DemoOptions::default().ramp_s;
-    let case = demo::demo_case(ramp_s).unwrap();
+    let case = demo_case::demo_case(ramp_s).unwrap();
     let (mut cfg, _) = (LoopConfig::new(case.plant, ARMS[1].1, ramp_s), ());
     cfg.record_every = EVERY;
     change(&mut cfg);
@@ -120,9 +121,9 @@ fn worst(reference: &[[f64; 7]], got: &[[f64; 7]]) -> (f64, usize, usize) {
 #[test]
 fn demo_asmc_trace_matches_the_golden_reference() {
     let ramp_s = DemoOptions::default().ramp_s;
-    let case = demo::demo_case(ramp_s).unwrap();
+    let case = demo_case::demo_case(ramp_s).unwrap();
     // The demo's own run function (the one the report uses).
-    let (_, r) = demo::run_arm(&case, ARMS[1].1, ramp_s, EVERY).unwrap();
+    let (_, r) = demo_case::run_arm(&case, ARMS[1].1, ramp_s, EVERY).unwrap();
     let text = to_csv(&r.trace);
     let path = golden_path();
     if std::env::var("SHIMMY_BLESS").is_ok_and(|v| v == "1") {
@@ -179,7 +180,7 @@ fn demo_plots_are_real_pictures() {
     .unwrap();
     assert!(out.plots.len() >= 3, "{:?}", out.plots);
     for p in &out.plots {
-        let c = shimmy_sim::plot_util::assert_real_plot(p, 8).unwrap();
+        let c = shimmy_sim::out::plot_util::assert_real_plot(p, 8).unwrap();
         assert!(c.size_px.0 >= 800 && c.size_px.1 >= 400, "{c:?}");
     }
     // The checker itself fails on a single-colour image.
@@ -187,7 +188,7 @@ fn demo_plots_are_real_pictures() {
     image::RgbImage::from_pixel(800, 600, image::Rgb([255, 255, 255]))
         .save(&blank)
         .unwrap();
-    assert!(shimmy_sim::plot_util::assert_real_plot(&blank, 8).is_err());
-    assert!(shimmy_sim::plot_util::check_png(&dir.join("report.md")).is_err());
+    assert!(shimmy_sim::out::plot_util::assert_real_plot(&blank, 8).is_err());
+    assert!(shimmy_sim::out::plot_util::check_png(&dir.join("report.md")).is_err());
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -6,12 +6,12 @@
 //! `shimmy-sim bifurcation` command.
 
 use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
-use shimmy_sim::bifurcation::{fit_growth, peaks, run_speed, DamperSetting, Trend};
-use shimmy_sim::disturbance::initial_yaw;
-use shimmy_sim::plant::{
+use shimmy_sim::model::disturbance::initial_yaw;
+use shimmy_sim::model::plant::{
     fd_eigenvalues, idx, jacobian_fd, least_damped_mode, Damper, Inputs, Method, Plant, Simulator,
     State, N_PLANT, N_STATE,
 };
+use shimmy_sim::sim::open_loop::{fit_growth, peaks, run_speed, DamperSetting, Trend};
 
 const DT: f64 = 1e-3;
 
@@ -383,7 +383,7 @@ fn damper_at_2a_suppresses_shimmy_at_every_speed() {
     }
 }
 
-/// Growth rate [1/s] of a small disturbance (1e-5 rad in-phase start) in the time domain at
+/// Growth rate (1/s) of a small disturbance (1e-5 rad in-phase start) in the time domain at
 /// `v_mps`, no damper: after 3 s of transients, ln of the ratio of the peak in-phase wheel yaw
 /// |psi_L + psi_R| over [4, 5] s to that over [3, 4] s. The in-phase sum hides the anti-phase
 /// 47 Hz wheel mode, which is the least damped mode outside the window.
@@ -468,10 +468,10 @@ fn hopf_window_from_time_domain() {
 /// bit-for-bit reproducible with the same seed (and differs with another seed).
 #[test]
 fn scenario_runs_are_reproducible_and_record_the_trace() {
-    use shimmy_sim::disturbance::{
+    use shimmy_sim::model::disturbance::{
         DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
     };
-    use shimmy_sim::plant::simulate;
+    use shimmy_sim::sim::open_loop::simulate;
     let p = PlantParams::nominal();
     let make = |seed: u64| {
         let mut s = Scenario::new(SpeedProfile::Ramp {

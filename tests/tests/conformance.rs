@@ -19,8 +19,8 @@
 use shimmy_core::params::PlantParams;
 use shimmy_firmware::monitoring::MODEL_REFRESH_S;
 use shimmy_firmware::replay::{self, CHANNELS, SAMPLE_BYTES, ZERO_COUNTS};
-use shimmy_sim::disturbance::{initial_yaw, RoadNoise, Scenario, SpeedProfile};
-use shimmy_sim::plant::{idx, Plant, Simulator};
+use shimmy_sim::model::disturbance::{initial_yaw, RoadNoise, Scenario, SpeedProfile};
+use shimmy_sim::model::plant::{idx, Plant, Simulator};
 use std::path::PathBuf;
 
 const DURATION_S: f64 = 6.0;

@@ -5,7 +5,7 @@
 //!    C_a, sigma, e scaled by 0.8 and 1.2 one at a time (14 plants).
 //! 2. The MR damper at a constant current I enters the linear analysis through its
 //!    energy-equivalent viscous coefficient (describing function,
-//!    `shimmy_sim::damper_equiv::mr_equivalent_viscous`). The MR damper is friction-like, so
+//!    `shimmy_sim::model::damper_equiv::mr_equivalent_viscous`). The MR damper is friction-like, so
 //!    c_eq falls with amplitude and changes with frequency: the coefficient used is the least
 //!    over the shimmy frequencies of the variants' Hopf crossings (no damper) and wheel-yaw
 //!    amplitudes 0.5, 1, 2 and 3 deg (3 deg is the time-domain check's start).
@@ -28,8 +28,8 @@ use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{critical_mode_at, hopf_crossings, V_SEARCH_MIN_MPS};
 use shimmy_core::supervisor::{FAILSAFE_CURRENT_A, ZERO_CURRENT_SAFE_BELOW_MPS};
-use shimmy_sim::bifurcation::{run_speed, DamperSetting};
-use shimmy_sim::damper_equiv::mr_equivalent_viscous;
+use shimmy_sim::model::damper_equiv::mr_equivalent_viscous;
+use shimmy_sim::sim::open_loop::{run_speed, DamperSetting};
 
 /// Safety margin on the current.
 const MARGIN: f64 = 1.25;

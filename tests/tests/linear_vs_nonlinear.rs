@@ -10,7 +10,7 @@ fn analytic_a_of_v_equals_the_jacobian_of_the_nonlinear_plant() {
         for v_kmh in [0.5, 10.0, 29.35, 55.0, 84.15, 130.0] {
             let v = kmh_to_mps(v_kmh);
             let a = shimmy_core::plant::linearise(&p, v, 0.0);
-            let j = shimmy_sim::plant::jacobian_fd(&p, v);
+            let j = shimmy_sim::model::plant::jacobian_fd(&p, v);
             for r in 0..10 {
                 for c in 0..10 {
                     // Central differences with h = 1e-7: truncation ~h^2 |f'''|, rounding

@@ -12,7 +12,7 @@
 use shimmy_core::estimator::{DataMarginUse, PipelineParams};
 use shimmy_core::monitor::Level;
 use shimmy_core::params::ParamSet;
-use shimmy_sim::margin_cmd::{run, MarginScenario};
+use shimmy_sim::cmd::margin::{run, MarginScenario};
 
 /// Constant-speed drive per speed: 10 minutes [s].
 const DRIVE_S: f64 = 600.0;

@@ -2,7 +2,7 @@
 //! reference-plant.md (`host-sim/reference/plant_scipy.py`). Trajectories of the nonlinear plant
 //! with the MR damper sliding and the eigenvalues of the linearisation must agree.
 //! Needs python3 with numpy and scipy (`cargo xtask test` installs them).
-use shimmy_sim::reference_bench::{compare, ReferenceBenchArgs};
+use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};
 
 #[test]
 fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {

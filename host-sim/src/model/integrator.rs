@@ -24,7 +24,7 @@ pub struct StepStats {
 /// Why an integration failed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum IntegrateError {
-    /// The step size fell below the floor at time `t` [s].
+    /// The step size fell below the floor at time `t`, s.
     StepTooSmall {
         /// Time at which it happened.
         t: f64,
@@ -87,9 +87,9 @@ pub struct Dopri5<const N: usize> {
     pub rtol: f64,
     /// Absolute tolerance per component (in the component's unit).
     pub atol: [f64; N],
-    /// Largest step [s] (also capped by each call's interval).
+    /// Largest step, s (also capped by each call's interval).
     pub h_max: f64,
-    /// Step-size floor [s]: below it the integration fails instead of crawling.
+    /// Step-size floor in s: below it the integration fails instead of crawling.
     pub h_min: f64,
     h: f64,
     err_old: f64,
@@ -113,7 +113,7 @@ impl<const N: usize> Dopri5<N> {
         }
     }
 
-    /// The step size the next step will try [s] (0 before the first step).
+    /// The step size the next step will try, s (0 before the first step).
     pub fn step_size(&self) -> f64 {
         self.h
     }
@@ -289,7 +289,7 @@ pub trait ImexSystem<const N: usize> {
     fn solve_implicit(&self, y: &mut [f64; N], h_gamma: f64, diag: &mut [f64; N]) -> bool;
 }
 
-// ARK4(3)6L[2]SA of Kennedy & Carpenter (2003, Appl. Numer. Math. 44, 139-181): an explicit
+// ARK4(3)6L\[2\]SA of Kennedy & Carpenter (2003, Appl. Numer. Math. 44, 139-181): an explicit
 // 6-stage tableau (AE) paired with an L-stable, stiffly accurate ESDIRK (AI, diagonal 1/4), both
 // sharing c, b and the embedded 3rd-order weights bh. The order conditions (including the
 // coupling conditions between AE and AI) are checked in the tests below.
@@ -371,7 +371,7 @@ const ARK_BH: [f64; 6] = [
     61727.0 / 225920.0,
 ];
 
-/// Adaptive additive Runge-Kutta (IMEX) stepper ARK4(3)6L[2]SA for an `N`-dimensional state:
+/// Adaptive additive Runge-Kutta (IMEX) stepper ARK4(3)6L\[2\]SA for an `N`-dimensional state:
 /// the components an [`ImexSystem`] flags as implicit go through the L-stable ESDIRK tableau,
 /// the others through the explicit one. For a system whose stiffness sits in a few components
 /// whose implicit stage equations are cheap to solve (here: the scalar Bouc-Wen variable of the
@@ -383,9 +383,9 @@ pub struct Ark436<const N: usize> {
     pub rtol: f64,
     /// Absolute tolerance per component (in the component's unit).
     pub atol: [f64; N],
-    /// Largest step [s] (also capped by each call's interval).
+    /// Largest step, s (also capped by each call's interval).
     pub h_max: f64,
-    /// Step-size floor [s]: below it the integration fails instead of crawling.
+    /// Step-size floor in s: below it the integration fails instead of crawling.
     pub h_min: f64,
     h: f64,
     err_old: f64,
@@ -407,7 +407,7 @@ impl<const N: usize> Ark436<N> {
         }
     }
 
-    /// The step size the next step will try [s] (0 before the first step).
+    /// The step size the next step will try, s (0 before the first step).
     pub fn step_size(&self) -> f64 {
         self.h
     }
@@ -669,7 +669,7 @@ mod tests {
         assert!((y[0] - slow).abs() < 1e-7, "{} vs {}", y[0], slow);
     }
 
-    /// The ARK4(3)6L[2]SA tableaux as typed satisfy the order conditions of an additive RK
+    /// The ARK4(3)6L\[2\]SA tableaux as typed satisfy the order conditions of an additive RK
     /// method up to order 4 (every mix of the explicit and implicit A, since b and c are shared),
     /// the embedded weights those up to order 3, both A have row sums c, the implicit tableau is
     /// stiffly accurate (b = its last row) with diagonal 1/4. Tolerance 1e-11: the published

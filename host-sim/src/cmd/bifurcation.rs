@@ -1,167 +1,15 @@
-//! Time-domain bifurcation study of the nonlinear plant: for each speed, runs from a small and a
-//! large initial wheel-yaw disturbance and measures the settled oscillation amplitude (peak
-//! |psi_L| over the last window) and whether it still grows or decays. Also the peak-tracking
-//! analysis used to compare time-domain growth rates with eigenvalues.
+//! `shimmy-sim bifurcation`: time-domain bifurcation study of the nonlinear plant. For each
+//! speed, open-loop runs ([`run_speed`]) from a small and a large initial wheel-yaw disturbance
+//! measure the settled oscillation amplitude (peak |psi_L| over the last window) and whether it
+//! still grows or decays; table, CSV and PNG.
 
-use crate::disturbance::initial_yaw;
-use crate::integrator::IntegrateError;
-use crate::plant::{idx, Damper, Inputs, Plant, Simulator};
+use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
-use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, PlantParams};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-/// Control period of the runs [s] (inputs held per period, as in closed loop).
-pub const DT_S: f64 = 1e-3;
-
-/// What a run's oscillation does at its end.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Trend {
-    /// Amplitude in the last window > 1.02 x the window before.
-    Growing,
-    /// Amplitude in the last window < 0.98 x the window before.
-    Decaying,
-    /// Within +-2 %: a settled limit cycle (or rest).
-    Steady,
-}
-
-impl Trend {
-    /// Label for tables and CSV.
-    pub fn name(self) -> &'static str {
-        match self {
-            Trend::Growing => "growing",
-            Trend::Decaying => "decaying",
-            Trend::Steady => "steady",
-        }
-    }
-}
-
-/// Result of one run.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RunSummary {
-    /// Speed [m/s].
-    pub v_mps: f64,
-    /// Initial in-phase wheel yaw [rad].
-    pub psi0_rad: f64,
-    /// Peak |psi_L| over the last window [rad].
-    pub amp_end_rad: f64,
-    /// Peak |psi_L| over the window before it [rad].
-    pub amp_prev_rad: f64,
-    /// Classification of the end.
-    pub trend: Trend,
-}
-
-impl RunSummary {
-    /// Shimmy at the end of the run: an oscillation that is not dying out and is larger than
-    /// 1e-4 rad (0.006 deg; below the default small start of 0.05 deg = 8.7e-4 rad).
-    pub fn shimmies(&self) -> bool {
-        self.trend != Trend::Decaying && self.amp_end_rad > 1e-4
-    }
-}
-
-/// The damper configuration of a study.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum DamperSetting {
-    /// No damper (F_d = 0).
-    Off,
-    /// The MR damper with a constant coil current [A].
-    Current(f64),
-}
-
-impl DamperSetting {
-    fn plant(self, params: &PlantParams) -> (Plant, f64) {
-        match self {
-            DamperSetting::Off => (Plant::new(*params, Damper::None), 0.0),
-            DamperSetting::Current(i) => (
-                Plant::new(*params, Damper::Mr(SpencerParams::steering())),
-                i,
-            ),
-        }
-    }
-}
-
-/// Runs the plant at constant speed `v_mps` from an in-phase wheel-yaw start `psi0_rad` for
-/// `duration_s` and summarises the last two windows of `window_s`.
-pub fn run_speed(
-    params: &PlantParams,
-    damper: DamperSetting,
-    v_mps: f64,
-    psi0_rad: f64,
-    duration_s: f64,
-    window_s: f64,
-) -> Result<RunSummary, IntegrateError> {
-    let (plant, current) = damper.plant(params);
-    let mut sim = Simulator::new(plant, initial_yaw(psi0_rad));
-    let u = Inputs {
-        current_cmd_a: current,
-        speed_mps: v_mps,
-        ..Inputs::default()
-    };
-    let n = (duration_s / DT_S).round() as usize;
-    let w = (window_s / DT_S).round() as usize;
-    let (mut amp_end, mut amp_prev) = (0.0f64, 0.0f64);
-    for k in 0..n {
-        sim.advance(DT_S, &u)?;
-        let a = sim.state()[idx::PSI_L].abs();
-        if k + w >= n {
-            amp_end = amp_end.max(a);
-        } else if k + 2 * w >= n {
-            amp_prev = amp_prev.max(a);
-        }
-    }
-    let trend = if amp_end > 1.02 * amp_prev {
-        Trend::Growing
-    } else if amp_end < 0.98 * amp_prev {
-        Trend::Decaying
-    } else {
-        Trend::Steady
-    };
-    Ok(RunSummary {
-        v_mps,
-        psi0_rad,
-        amp_end_rad: amp_end,
-        amp_prev_rad: amp_prev,
-        trend,
-    })
-}
-
-/// Local maxima of a uniformly sampled signal, refined by a parabola through the three samples
-/// around each: `(time [s], value)`.
-pub fn peaks(t0_s: f64, dt_s: f64, s: &[f64]) -> Vec<(f64, f64)> {
-    let mut out = Vec::new();
-    for k in 1..s.len().saturating_sub(1) {
-        let (a, b, c) = (s[k - 1], s[k], s[k + 1]);
-        if b > a && b >= c {
-            let den = a - 2.0 * b + c;
-            let off = if den != 0.0 { 0.5 * (a - c) / den } else { 0.0 };
-            let val = b - 0.25 * (a - c) * off;
-            out.push((t0_s + (k as f64 + off) * dt_s, val));
-        }
-    }
-    out
-}
-
-/// Growth rate [1/s] and angular frequency [rad/s] from successive positive peaks: least-squares
-/// line through ln(peak) over time, and the mean peak spacing. `None` with fewer than 3 peaks.
-pub fn fit_growth(pk: &[(f64, f64)]) -> Option<(f64, f64)> {
-    if pk.len() < 3 || pk.iter().any(|p| p.1 <= 0.0) {
-        return None;
-    }
-    let n = pk.len() as f64;
-    let mt = pk.iter().map(|p| p.0).sum::<f64>() / n;
-    let ml = pk.iter().map(|p| p.1.ln()).sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for p in pk {
-        sxy += (p.0 - mt) * (p.1.ln() - ml);
-        sxx += (p.0 - mt) * (p.0 - mt);
-    }
-    let rate = sxy / sxx;
-    let period = (pk[pk.len() - 1].0 - pk[0].0) / (n - 1.0);
-    Some((rate, 2.0 * std::f64::consts::PI / period))
-}
 
 /// Options of the `bifurcation` command.
 #[derive(Clone, Debug)]
@@ -172,19 +20,19 @@ pub struct BifurcationOptions {
     pub params_name: String,
     /// Damper setting.
     pub damper: DamperSetting,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub v_min_kmh: f64,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub v_max_kmh: f64,
-    /// Speed grid [km/h].
+    /// Speed grid, km/h.
     pub step_kmh: f64,
-    /// Small start [deg].
+    /// Small start, deg.
     pub small_deg: f64,
-    /// Large start [deg].
+    /// Large start, deg.
     pub large_deg: f64,
-    /// Run length [s].
+    /// Run length, s.
     pub duration_s: f64,
-    /// Measurement window [s].
+    /// Measurement window, s.
     pub window_s: f64,
     /// Output directory.
     pub out: PathBuf,
@@ -193,13 +41,13 @@ pub struct BifurcationOptions {
 /// One row of the study.
 #[derive(Clone, Copy, Debug)]
 pub struct BifurcationRow {
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub v_kmh: f64,
     /// From the small start.
     pub small: RunSummary,
     /// From the large start.
     pub large: RunSummary,
-    /// Real part [1/s] of the least-damped oscillatory eigenvalue of the FD Jacobian at this
+    /// Real part (1/s) of the least-damped oscillatory eigenvalue of the FD Jacobian at this
     /// speed (no damper, linear tyres): the linear prediction to compare with.
     pub eig_re_per_s: f64,
 }
@@ -262,8 +110,8 @@ pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRo
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let eig_re_per_s =
-                crate::plant::least_damped_mode(&o.params, kmh_to_mps(v)).map_or(f64::NAN, |e| e.0);
+            let eig_re_per_s = crate::model::plant::least_damped_mode(&o.params, kmh_to_mps(v))
+                .map_or(f64::NAN, |e| e.0);
             Ok(BifurcationRow {
                 eig_re_per_s,
                 v_kmh: v,
@@ -436,28 +284,28 @@ pub struct BifurcationArgs {
     /// Named parameter set or TOML file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Fit the MR damper and hold this coil current [A]; without it there is no damper (F_d = 0).
-    #[arg(long)]
-    pub damper_current: Option<f64>,
-    /// Lowest speed [km/h].
+    /// Fit the MR damper and hold this coil current in A; without it there is no damper (F_d = 0).
+    #[arg(long, alias = "damper-current")]
+    pub damper_current_a: Option<f64>,
+    /// Lowest speed, km/h.
     #[arg(long, default_value_t = 5.0)]
     pub v_min_kmh: f64,
-    /// Highest speed [km/h].
+    /// Highest speed, km/h.
     #[arg(long, default_value_t = 130.0)]
     pub v_max_kmh: f64,
-    /// Speed step [km/h].
+    /// Speed step, km/h.
     #[arg(long, default_value_t = 2.5)]
     pub step_kmh: f64,
-    /// Small initial in-phase wheel yaw [deg].
+    /// Small initial in-phase wheel yaw, deg.
     #[arg(long, default_value_t = 0.05)]
     pub small_deg: f64,
-    /// Large initial in-phase wheel yaw [deg].
+    /// Large initial in-phase wheel yaw, deg.
     #[arg(long, default_value_t = 3.0)]
     pub large_deg: f64,
-    /// Length of each run [s].
+    /// Length of each run, s.
     #[arg(long, default_value_t = 40.0)]
     pub duration_s: f64,
-    /// Amplitude window at the end of each run [s] (the trend compares it with the one before).
+    /// Amplitude window at the end of each run, s (the trend compares it with the one before).
     #[arg(long, default_value_t = 3.0)]
     pub window_s: f64,
     /// Output directory.
@@ -467,12 +315,12 @@ pub struct BifurcationArgs {
 
 /// Entry point of `shimmy-sim bifurcation`.
 pub fn command(a: &BifurcationArgs) -> Result<()> {
-    let params = crate::paramfile::load(&a.params)?;
+    let params = crate::sim::paramfile::load(&a.params)?;
     anyhow::ensure!(
         a.duration_s >= 2.0 * a.window_s && a.window_s > 0.0,
         "--duration-s must be at least twice --window-s"
     );
-    let damper = match a.damper_current {
+    let damper = match a.damper_current_a {
         None => DamperSetting::Off,
         Some(i) => {
             anyhow::ensure!(i.is_finite() && i >= 0.0, "--damper-current must be >= 0 A");
@@ -497,23 +345,6 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn peak_fit_recovers_a_damped_sine() {
-        let (sigma, w) = (-0.7, 2.0 * std::f64::consts::PI * 6.3);
-        let dt = 1e-3;
-        let s: Vec<f64> = (0..3000)
-            .map(|k| {
-                let t = k as f64 * dt;
-                (sigma * t).exp() * (w * t + 0.3).sin()
-            })
-            .collect();
-        let (r, om) = fit_growth(&peaks(0.0, dt, &s)).expect("fit");
-        // Peaks of e^{st} sin(wt) are spaced exactly 2 pi / w and decay by e^{s T}: the fit is
-        // exact up to the parabolic refinement (~1e-5 here).
-        assert!((r - sigma).abs() < 1e-3 * sigma.abs(), "{r}");
-        assert!((om - w).abs() < 1e-4 * w, "{om}");
-    }
 
     #[test]
     fn command_writes_table_csv_and_png() {

@@ -19,11 +19,11 @@ use shimmy_core::monitor::Level;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind, ModeSelect};
 
-use crate::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
-use crate::paramfile;
-use crate::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
+use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::sim::paramfile;
 
-/// Control period [s].
+/// Control period, s.
 pub const DT_S: f64 = 1e-3;
 
 /// Arguments of `shimmy-sim margin`.
@@ -32,31 +32,31 @@ pub struct MarginArgs {
     /// Parameter set name or TOML file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Ramp start speed [km/h].
+    /// Ramp start speed, km/h.
     #[arg(long, default_value_t = 15.0)]
     pub ramp_from_kmh: f64,
-    /// Ramp end speed [km/h].
+    /// Ramp end speed, km/h.
     #[arg(long, default_value_t = 40.0)]
     pub ramp_to_kmh: f64,
-    /// Ramp rate [km/h per s].
+    /// Ramp rate, km/h per s.
     #[arg(long, default_value_t = 1.0)]
     pub rate_kmh_per_s: f64,
-    /// Constant-speed lead-in before the ramp (estimator warm-up) [s].
+    /// Constant-speed lead-in before the ramp (estimator warm-up), s.
     #[arg(long, default_value_t = 30.0)]
     pub settle_s: f64,
-    /// Road-noise yaw torque standard deviation per wheel [N m].
+    /// Road-noise yaw torque standard deviation per wheel, N m.
     #[arg(long, default_value_t = 5.0)]
     pub noise_nm: f64,
-    /// Wheel imbalance yaw torque amplitude per wheel [N m].
+    /// Wheel imbalance yaw torque amplitude per wheel, N m.
     #[arg(long, default_value_t = 2.0)]
     pub imbalance_nm: f64,
     /// Random seed of the road noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Instead of the ramp: a constant-speed drive at this speed [km/h] for `--duration-s`.
+    /// Instead of the ramp: a constant-speed drive at this speed (km/h) for `--duration-s`.
     #[arg(long)]
     pub constant_kmh: Option<f64>,
-    /// Duration of the constant-speed drive [s].
+    /// Duration of the constant-speed drive, s.
     #[arg(long, default_value_t = 600.0)]
     pub duration_s: f64,
     /// Output directory.
@@ -71,11 +71,11 @@ pub struct MarginScenario {
     pub params: PlantParams,
     /// Speed profile.
     pub speed: SpeedProfile,
-    /// Simulated duration [s].
+    /// Simulated duration, s.
     pub duration_s: f64,
-    /// Road-noise std per wheel [N m] (corner 30 Hz, half common to both wheels).
+    /// Road-noise std per wheel, N m (corner 30 Hz, half common to both wheels).
     pub noise_nm: f64,
-    /// Imbalance amplitude per wheel [N m] (phases 0 and 1 rad).
+    /// Imbalance amplitude per wheel, N m (phases 0 and 1 rad).
     pub imbalance_nm: f64,
     /// Noise seed.
     pub seed: u64,
@@ -132,15 +132,15 @@ impl MarginScenario {
 /// One recorded row (every decimated pipeline output, 100 Hz).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MarginRow {
-    /// Time [s].
+    /// Time, s.
     pub t_s: f64,
-    /// True speed [km/h].
+    /// True speed, km/h.
     pub speed_kmh: f64,
     /// True shimmy-mode damping of A(V) at the true speed (filled every `true_every` rows).
     pub zeta_true: f64,
-    /// True shimmy-mode frequency [Hz].
+    /// True shimmy-mode frequency, Hz.
     pub freq_true_hz: f64,
-    /// True speed margin to the onset [km/h] (onset - V; negative inside the window).
+    /// True speed margin to the onset, km/h (onset - V; negative inside the window).
     pub margin_true_kmh: f64,
     /// Slow data damping.
     pub zeta_data: f64,
@@ -154,17 +154,17 @@ pub struct MarginRow {
     pub fast_valid: bool,
     /// Model damping (pipeline's model margin).
     pub zeta_model: f64,
-    /// Data frequency [Hz].
+    /// Data frequency, Hz.
     pub freq_data_hz: f64,
-    /// Reported speed margin [km/h] (NaN when none).
+    /// Reported speed margin, km/h (NaN when none).
     pub margin_kmh: f64,
-    /// Time to critical [s] (NaN when none).
+    /// Time to critical, s (NaN when none).
     pub ttc_s: f64,
     /// Monitor level.
     pub level: Level,
-    /// Yaw envelope amplitude [deg].
+    /// Yaw envelope amplitude, deg.
     pub amplitude_deg: f64,
-    /// Mean wheel yaw [deg].
+    /// Mean wheel yaw, deg.
     pub yaw_deg: f64,
 }
 
@@ -173,19 +173,19 @@ pub struct MarginRow {
 pub struct MarginRun {
     /// Rows at 100 Hz.
     pub rows: Vec<MarginRow>,
-    /// Linear onset speed of the simulated plant, from an independent scan [km/h].
+    /// Linear onset speed of the simulated plant, from an independent scan, km/h.
     pub onset_kmh: Option<f64>,
     /// First time the level left Normal: (t, speed km/h, level).
     pub first_warning: Option<(f64, f64, Level)>,
     /// Highest level reached.
     pub max_level: Level,
-    /// Time at which the true speed crosses the onset [s].
+    /// Time at which the true speed crosses the onset, s.
     pub onset_time_s: Option<f64>,
     /// Largest eigen-solves done in one pipeline call.
     pub max_solves_per_call: u8,
     /// Model cycles completed.
     pub model_cycles: u32,
-    /// Wall-clock time of the run [s].
+    /// Wall-clock time of the run, s.
     pub wall_s: f64,
 }
 
@@ -221,8 +221,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
     let p = sc.params;
     let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
     let mut scen = sc.scenario();
-    let mut pipe =
-        ShimmyPipeline::<16>::new(p, pp).map_err(|e| anyhow::anyhow!("pipeline config: {e:?}"))?;
+    let mut pipe = ShimmyPipeline::<16>::new(p, pp).context("pipeline config")?;
     let onset = onset_kmh(&p);
     let n = (sc.duration_s / DT_S).round() as usize;
     let mut rows = Vec::with_capacity(n / 10 + 1);
@@ -235,7 +234,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
         let t = k as f64 * DT_S;
         let u = scen.inputs(t, DT_S);
         sim.advance(DT_S, &u)
-            .map_err(|e| anyhow::anyhow!("integration failed at t = {t}: {e:?}"))?;
+            .with_context(|| format!("integration failed at t = {t}"))?;
         let t1 = t + DT_S;
         let x = sim.state();
         let v = sc.speed.at(t1);
@@ -362,7 +361,7 @@ fn panel(
         .x_label_area_size(30)
         .y_label_area_size(55)
         .build_cartesian_2d(t.0..t.1, range.0..range.1)?;
-    crate::plot_util::mesh(&mut chart, "t [s]", "")?;
+    crate::out::plot_util::mesh(&mut chart, "t [s]", "")?;
     for (name, col, pts) in series {
         let col = *col;
         chart
@@ -373,7 +372,7 @@ fn panel(
                 col,
             ))?
             .label(*name)
-            .legend(crate::plot_util::line_marker(col, 1));
+            .legend(crate::out::plot_util::line_marker(col, 1));
     }
     for (x, col) in vlines {
         chart.draw_series(LineSeries::new(
@@ -381,7 +380,7 @@ fn panel(
             col.stroke_width(2),
         ))?;
     }
-    crate::plot_util::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
+    crate::out::plot_util::legend(&mut chart, SeriesLabelPosition::MiddleRight)?;
     Ok(())
 }
 

@@ -1,18 +1,17 @@
-//! The nonlinear 4-DOF solid-axle steering plant of `shared/reference-plant.md` (std, f64):
+//! The nonlinear 4-DOF solid-axle steering plant of `docs/plant-model.md` (std, f64):
 //! Magic-Formula tyres with first-order lag, gyroscopic coupling, the Spencer MR damper with coil
 //! lag (or no damper), driver torque at the steering wheel and forward speed as an input.
 //!
 //! State (13): the 10 plant states
 //! `[psi_L, psi_R, phi, theta_sw, dpsi_L, dpsi_R, dphi, dtheta_sw, a_L, a_R]` followed by the
-//! damper's `(u, y, z)` (coil input [V = A], internal displacement [m], Bouc-Wen variable [m]).
+//! damper's `(u, y, z)` (coil input (V = A), internal displacement in m, Bouc-Wen variable in m).
 //! Without a damper the last three states stay at zero.
 //!
 //! [`Simulator`] integrates it one control period at a time with the inputs held (zero-order
-//! hold); [`simulate`] runs an open-loop [`Scenario`](crate::disturbance::Scenario) and records a
-//! [`Trace`]; [`jacobian_fd`] linearises the right-hand side numerically.
+//! hold); [`jacobian_fd`] linearises the right-hand side numerically. Open-loop runs of a
+//! scenario live one layer up, in `sim::open_loop`.
 
-use crate::disturbance::Scenario;
-use crate::integrator::{rk4_step, Ark436, Dopri5, ImexSystem, IntegrateError, StepStats};
+use crate::model::integrator::{rk4_step, Ark436, Dopri5, ImexSystem, IntegrateError, StepStats};
 use nalgebra::{DMatrix, SMatrix};
 use shimmy_core::mr_damper::{self, SpencerParams, SpencerState};
 use shimmy_core::params::PlantParams;
@@ -30,11 +29,11 @@ pub mod idx {
     pub use shimmy_core::plant::{
         A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, PHI, PSI_L, PSI_R, THETA_SW,
     };
-    /// Damper filtered coil input u [V] (1 V per A).
+    /// Damper filtered coil input u, V (1 V per A).
     pub const U: usize = shimmy_core::plant::N_STATES;
-    /// Damper internal displacement y [m].
+    /// Damper internal displacement y, m.
     pub const Y: usize = U + 1;
-    /// Damper Bouc-Wen variable z [m].
+    /// Damper Bouc-Wen variable z, m.
     pub const Z: usize = U + 2;
 }
 
@@ -76,22 +75,22 @@ pub enum TyreLaw {
 /// Inputs held over one control period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Inputs {
-    /// Coil current command [A] (= damper input in V-equivalent; clamped to [0, u_max]).
+    /// Coil current command, A (= damper input in V-equivalent; clamped to [0, u_max]).
     pub current_cmd_a: f64,
-    /// Driver torque at the steering wheel [N m].
+    /// Driver torque at the steering wheel, N m.
     pub driver_torque_nm: f64,
-    /// External yaw torques about the kingpins [N m], `[left, right]` (disturbances).
+    /// External yaw torques about the kingpins in N m, `[left, right]` (disturbances).
     pub yaw_torque_nm: [f64; 2],
-    /// Forward speed V [m/s].
+    /// Forward speed V, m/s.
     pub speed_mps: f64,
 }
 
 /// Forces at one instant (outputs).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Forces {
-    /// Tyre lateral forces [N], `[left, right]`.
+    /// Tyre lateral forces in N, `[left, right]`.
     pub tyre_n: [f64; 2],
-    /// Damper force [N] along the track rod, positive resisting a positive stroke rate.
+    /// Damper force (N) along the track rod, positive resisting a positive stroke rate.
     pub damper_n: f64,
 }
 
@@ -132,7 +131,7 @@ impl Plant {
         self
     }
 
-    /// Tyre lateral force [N] at lagged slip angle `a_rad`.
+    /// Tyre lateral force (N) at lagged slip angle `a_rad`.
     #[inline]
     pub fn tyre_force_n(&self, a_rad: f64) -> f64 {
         match self.tyre {
@@ -143,7 +142,7 @@ impl Plant {
         }
     }
 
-    /// sigma * integral_0^a F(s) ds [J]: the elastic energy stored in one tyre's lagged
+    /// sigma * integral_0^a F(s) ds in J: the elastic energy stored in one tyre's lagged
     /// deformation (see the energy test), by composite Simpson with 256 intervals.
     pub fn tyre_strain_energy_j(&self, a_rad: f64) -> f64 {
         let n = 256;
@@ -156,7 +155,7 @@ impl Plant {
         self.params.sigma * s * h / 3.0
     }
 
-    /// Damper stroke x_d = (l_t/2)(psi_L + psi_R) [m] and stroke rate [m/s].
+    /// Damper stroke x_d = (l_t/2)(psi_L + psi_R), m and stroke rate, m/s.
     #[inline]
     pub fn damper_stroke(&self, x: &State) -> (f64, f64) {
         let half = 0.5 * self.params.l_t;
@@ -229,7 +228,7 @@ impl Plant {
         self.rhs(x, u, &mut dx)
     }
 
-    /// Mechanical energy [J]: kinetic + spring potentials (K_tr, K_d, K_phi).
+    /// Mechanical energy in J: kinetic + spring potentials (K_tr, K_d, K_phi).
     pub fn mechanical_energy_j(&self, x: &State) -> f64 {
         let p = &self.params;
         let kin = 0.5
@@ -255,7 +254,7 @@ pub enum Method {
         /// Steps per call.
         substeps: u32,
     },
-    /// Adaptive additive Runge-Kutta ARK4(3)6L[2]SA (IMEX, [`Ark436`]) with relative tolerance
+    /// Adaptive additive Runge-Kutta ARK4(3)6L\[2\]SA (IMEX, [`Ark436`]) with relative tolerance
     /// `rtol`: the stiff Bouc-Wen variable z of the MR damper goes through the L-stable ESDIRK
     /// tableau (a scalar Newton solve per stage), everything else through the explicit tableau.
     /// The step size is then set by accuracy, not by z's relaxation rate (up to ~2e4 /s when
@@ -459,7 +458,7 @@ impl Simulator {
         self.last_inputs = None;
     }
 
-    /// Simulated time [s].
+    /// Simulated time, s.
     pub fn time_s(&self) -> f64 {
         self.t_s
     }
@@ -477,96 +476,6 @@ impl Simulator {
         s.evaluations += self.ark.stats.evaluations + self.rk4_evals;
         s
     }
-}
-
-/// A recorded run.
-#[derive(Clone, Debug, Default)]
-pub struct Trace {
-    /// Time [s].
-    pub t_s: Vec<f64>,
-    /// States.
-    pub x: Vec<State>,
-    /// Damper force [N].
-    pub damper_force_n: Vec<f64>,
-    /// Coil current command [A].
-    pub current_cmd_a: Vec<f64>,
-    /// Forward speed [m/s].
-    pub speed_mps: Vec<f64>,
-    /// Driver torque [N m].
-    pub driver_torque_nm: Vec<f64>,
-}
-
-impl Trace {
-    fn push(&mut self, t: f64, x: &State, f: &Forces, u: &Inputs) {
-        self.t_s.push(t);
-        self.x.push(*x);
-        self.damper_force_n.push(f.damper_n);
-        self.current_cmd_a.push(u.current_cmd_a);
-        self.speed_mps.push(u.speed_mps);
-        self.driver_torque_nm.push(u.driver_torque_nm);
-    }
-
-    /// One state over time.
-    pub fn series(&self, i: usize) -> Vec<f64> {
-        self.x.iter().map(|x| x[i]).collect()
-    }
-
-    /// Writes the trace as CSV (units in the header).
-    pub fn write_csv(&self, path: &std::path::Path) -> std::io::Result<()> {
-        use std::io::Write;
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
-        write!(w, "t_s")?;
-        for n in STATE_NAMES {
-            write!(w, ",{n}")?;
-        }
-        writeln!(
-            w,
-            ",damper_force_n,current_cmd_a,speed_mps,driver_torque_nm"
-        )?;
-        for k in 0..self.t_s.len() {
-            write!(w, "{}", self.t_s[k])?;
-            for v in &self.x[k] {
-                write!(w, ",{v:e}")?;
-            }
-            writeln!(
-                w,
-                ",{},{},{},{}",
-                self.damper_force_n[k],
-                self.current_cmd_a[k],
-                self.speed_mps[k],
-                self.driver_torque_nm[k]
-            )?;
-        }
-        w.flush()
-    }
-}
-
-/// Runs `scenario` open loop for `duration_s` with control period `dt_s`, recording every
-/// `record_every`-th period (and the start). The scenario supplies speed, current, driver torque
-/// and yaw torques per period.
-pub fn simulate(
-    sim: &mut Simulator,
-    scenario: &mut Scenario,
-    duration_s: f64,
-    dt_s: f64,
-    record_every: usize,
-) -> Result<Trace, IntegrateError> {
-    let n = (duration_s / dt_s).round() as usize;
-    let every = record_every.max(1);
-    let mut trace = Trace::default();
-    for k in 0..n {
-        let t = sim.time_s();
-        let u = scenario.inputs(t, dt_s);
-        if k % every == 0 {
-            let f = sim.forces(&u);
-            trace.push(t, sim.state(), &f, &u);
-        }
-        sim.advance(dt_s, &u)?;
-    }
-    let u = scenario.inputs(sim.time_s(), dt_s);
-    let f = sim.forces(&u);
-    trace.push(sim.time_s(), sim.state(), &f, &u);
-    Ok(trace)
 }
 
 /// Finite-difference Jacobian (central differences) of the plant right-hand side with respect to
@@ -604,14 +513,14 @@ pub fn eigenvalues(a: &DMatrix<f64>) -> Option<Vec<(f64, f64)>> {
     Some(ev.iter().map(|c| (c.re, c.im)).collect())
 }
 
-/// Eigenvalues `(re [1/s], im [rad/s])` of the FD Jacobian at `v_mps`.
+/// Eigenvalues `(re in 1/s, im in rad/s)` of the FD Jacobian at `v_mps`.
 pub fn fd_eigenvalues(params: &PlantParams, v_mps: f64) -> Option<Vec<(f64, f64)>> {
     let j = jacobian_fd(params, v_mps);
     eigenvalues(&DMatrix::from_column_slice(N_PLANT, N_PLANT, j.as_slice()))
 }
 
 /// The least-damped oscillatory eigenvalue (largest real part among those with imaginary part
-/// > 1 rad/s) of the FD Jacobian at `v_mps`: `(re [1/s], im [rad/s])`.
+/// > 1 rad/s) of the FD Jacobian at `v_mps`: `(re in 1/s, im in rad/s)`.
 pub fn least_damped_mode(params: &PlantParams, v_mps: f64) -> Option<(f64, f64)> {
     fd_eigenvalues(params, v_mps)?
         .into_iter()
@@ -623,7 +532,7 @@ pub fn least_damped_mode(params: &PlantParams, v_mps: f64) -> Option<(f64, f64)>
 mod tests {
     use super::*;
 
-    /// Entries of the FD Jacobian against the equations of reference-plant.md read off by hand
+    /// Entries of the FD Jacobian against the equations of docs/plant-model.md read off by hand
     /// (relative 1e-6: central differences with h = 1e-7).
     #[test]
     fn fd_jacobian_matches_hand_derived_entries() {
@@ -705,7 +614,9 @@ mod tests {
     #[test]
     fn fsal_across_periods_is_exact() {
         let plant = Plant::with_mr_damper(PlantParams::nominal());
-        let x0 = crate::disturbance::initial_yaw(0.05);
+        let mut x0 = [0.0; N_STATE];
+        x0[idx::PSI_L] = 0.05;
+        x0[idx::PSI_R] = 0.05;
         let u = Inputs {
             current_cmd_a: 0.3,
             speed_mps: 15.0,

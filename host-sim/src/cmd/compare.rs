@@ -1,212 +1,18 @@
 //! `shimmy-sim compare`: every controller over a standard scenario set, one table (plus CSV and
 //! PNG plots of wheel yaw, coil current and adaptive gain vs time per scenario).
 
-use crate::closed_loop::{self, Arm, LoopConfig, LoopResult, RunMetrics};
-use crate::disturbance::{
-    initial_yaw, DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
-};
-use crate::plant::State;
+use crate::model::sensors::SensorConfig;
+use crate::out::file_name::sanitize;
+use crate::out::plots::plot_runs;
+use crate::out::table::opt;
+use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
+use crate::sim::scenario::{self, ScenarioSpec};
+use crate::sim::standard::standard_scenarios;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
-use shimmy_core::stability::{mode_at, ModeSelect};
 use std::io::Write;
 use std::path::{Path, PathBuf};
-
-/// One scenario of the standard set.
-#[derive(Clone, Debug)]
-pub struct ScenarioSpec {
-    /// Short name (file names, table).
-    pub name: String,
-    /// What it is.
-    pub description: String,
-    /// The true plant (controllers know only the nominal set).
-    pub plant: PlantParams,
-    /// Initial state.
-    pub x0: State,
-    /// Inputs.
-    pub scenario: Scenario,
-    /// Length [s].
-    pub duration_s: f64,
-    /// Disturbance time for the settling metric.
-    pub t_dist_s: Option<f64>,
-    /// A driving manoeuvre: the damper force here is "added steering effort".
-    pub manoeuvre: bool,
-}
-
-/// The speed [m/s] where the no-damper shimmy mode grows fastest (largest real part of the
-/// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
-pub fn fastest_growth_speed(p: &PlantParams) -> f64 {
-    let mut best = (f64::NEG_INFINITY, 15.0);
-    let mut v = 2.0;
-    while v <= 45.0 {
-        if let Ok(m) = mode_at(p, v, 0.0, ModeSelect::Shimmy) {
-            if m.re > best.0 {
-                best = (m.re, v);
-            }
-        }
-        v += 0.25;
-    }
-    best.1
-}
-
-/// Pothole: a 20 ms half-sine yaw-torque pulse on both wheels.
-pub fn pothole(t0_s: f64, peak_nm: f64) -> Impulse {
-    Impulse {
-        t0_s,
-        duration_s: 0.02,
-        peak_nm: [peak_nm, peak_nm],
-    }
-}
-
-/// Peak torque of the standard pothole [N m].
-pub const POTHOLE_NM: f64 = 1000.0;
-/// Initial yaw of the "large" kick [deg] (breaks through the 0 A damper's friction).
-pub const BIG_KICK_DEG: f64 = 3.0;
-
-/// Road noise + imbalance used in the ramp and the demo.
-pub fn road(seed: u64, p: &PlantParams) -> (RoadNoise, Imbalance) {
-    (
-        RoadNoise::new(4.0, 20.0, 0.5, seed),
-        Imbalance {
-            amplitude_nm: [3.0, 3.0],
-            phase_rad: [0.0, 1.0],
-            radius_m: p.r,
-        },
-    )
-}
-
-/// The standard scenario set. `quick` shortens the runs (for tests).
-pub fn standard_scenarios(quick: bool) -> Vec<ScenarioSpec> {
-    let nominal = ParamSet::Nominal.params();
-    let v_fg = fastest_growth_speed(&nominal);
-    let dur = if quick { 4.0 } else { 10.0 };
-    let kick = |deg: f64| initial_yaw(deg.to_radians());
-    let mut out = vec![
-        ScenarioSpec {
-            name: "kick-0.5deg".into(),
-            description: format!(
-                "0.5 deg in-phase wheel-yaw disturbance at {:.1} km/h (fastest growth)",
-                mps_to_kmh(v_fg)
-            ),
-            plant: nominal,
-            x0: kick(0.5),
-            scenario: Scenario::constant_speed(v_fg),
-            duration_s: dur,
-            t_dist_s: Some(0.0),
-            manoeuvre: false,
-        },
-        ScenarioSpec {
-            name: "kick-3deg".into(),
-            description: format!(
-                "{BIG_KICK_DEG} deg wheel-yaw disturbance at {:.1} km/h",
-                mps_to_kmh(v_fg)
-            ),
-            plant: nominal,
-            x0: kick(BIG_KICK_DEG),
-            scenario: Scenario::constant_speed(v_fg),
-            duration_s: dur,
-            t_dist_s: Some(0.0),
-            manoeuvre: false,
-        },
-        {
-            let mut s = Scenario::constant_speed(v_fg);
-            s.impulses.push(pothole(0.5, POTHOLE_NM));
-            ScenarioSpec {
-                name: "pothole".into(),
-                description: format!(
-                    "pothole: 20 ms half-sine, {POTHOLE_NM} N m per wheel at {:.1} km/h",
-                    mps_to_kmh(v_fg)
-                ),
-                plant: nominal,
-                x0: [0.0; crate::plant::N_STATE],
-                scenario: s,
-                duration_s: dur,
-                t_dist_s: Some(0.5),
-                manoeuvre: false,
-            }
-        },
-    ];
-    // Speed ramp 20 -> 120 km/h with road noise, imbalance and a pothole inside the window.
-    {
-        let t_ramp = if quick { 8.0 } else { 30.0 };
-        let mut s = Scenario::new(SpeedProfile::Ramp {
-            v0_mps: kmh_to_mps(20.0),
-            v1_mps: kmh_to_mps(120.0),
-            t0_s: 0.0,
-            t1_s: t_ramp,
-        });
-        let (n, im) = road(11, &nominal);
-        s.noise = Some(n);
-        s.imbalance = Some(im);
-        // The pothole where the ramp passes the fastest-growth speed.
-        let t_hit = t_ramp * (v_fg - kmh_to_mps(20.0)) / kmh_to_mps(100.0);
-        s.impulses.push(pothole(t_hit, POTHOLE_NM));
-        out.push(ScenarioSpec {
-            name: "ramp".into(),
-            description: format!(
-                "speed ramp 20 -> 120 km/h in {t_ramp} s, road noise 4 N m rms, imbalance 3 N m, pothole at {:.1} km/h",
-                mps_to_kmh(v_fg)
-            ),
-            plant: nominal,
-            x0: [0.0; crate::plant::N_STATE],
-            scenario: s,
-            duration_s: t_ramp,
-            t_dist_s: None,
-            manoeuvre: false,
-        });
-    }
-    // Slalom with driver torque inside the window (road noise on).
-    {
-        let mut s = Scenario::constant_speed(kmh_to_mps(60.0));
-        s.driver = DriverTorque::Slalom {
-            amplitude_nm: 4.0,
-            freq_hz: 0.5,
-            t0_s: 0.5,
-        };
-        s.noise = Some(RoadNoise::new(2.0, 20.0, 0.5, 12));
-        out.push(ScenarioSpec {
-            name: "slalom".into(),
-            description: "slalom at 60 km/h: 4 N m, 0.5 Hz steering-wheel torque, road noise"
-                .into(),
-            plant: nominal,
-            x0: [0.0; crate::plant::N_STATE],
-            scenario: s,
-            duration_s: dur,
-            t_dist_s: None,
-            manoeuvre: true,
-        });
-    }
-    // Robustness: the hard set and +-20 % on C_a, sigma, e (3 deg kick at the perturbed
-    // plant's fastest-growth speed; the controllers keep the nominal model).
-    let mut variants: Vec<(String, PlantParams)> = vec![("hard".into(), ParamSet::Hard.params())];
-    for q in [Param::CA, Param::Sigma, Param::E] {
-        for f in [0.8, 1.2] {
-            variants.push((
-                format!("{}{:+.0}%", q.name(), (f - 1.0) * 100.0),
-                nominal.scaled(q, f),
-            ));
-        }
-    }
-    for (name, p) in variants {
-        let v = fastest_growth_speed(&p);
-        out.push(ScenarioSpec {
-            name: format!("kick-3deg-{name}"),
-            description: format!(
-                "{BIG_KICK_DEG} deg disturbance, plant `{name}` at its fastest-growth speed {:.1} km/h",
-                mps_to_kmh(v)
-            ),
-            plant: p,
-            x0: kick(BIG_KICK_DEG),
-            scenario: Scenario::constant_speed(v),
-            duration_s: dur,
-            t_dist_s: Some(0.0),
-            manoeuvre: false,
-        });
-    }
-    out
-}
 
 /// Command-line arguments of `shimmy-sim compare`.
 #[derive(clap::Args, Clone, Debug)]
@@ -221,35 +27,35 @@ pub struct CompareArgs {
         default_value = "no-damper,passive-off,passive-on,smc,asmc,skyhook"
     )]
     pub controllers: Vec<String>,
-    /// Current of `passive-on` [A]; default: the least constant current (bisection to 0.02 A)
+    /// Current of `passive-on` in A; default: the least constant current (bisection to 0.02 A)
     /// with which no scenario of the set shimmies.
-    #[arg(long)]
-    pub on_current: Option<f32>,
+    #[arg(long, alias = "on-current")]
+    pub on_current_a: Option<f32>,
     /// Short runs (a few seconds each).
     #[arg(long)]
     pub quick: bool,
     /// Only scenarios whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Override the ASMC dead zone [rad/s] (gain studies).
+    /// Override the ASMC dead zone, rad/s (gain studies).
     #[arg(long)]
     pub dead_zone: Option<f32>,
     /// Override the ASMC adaptation rate gamma.
     #[arg(long)]
     pub gamma: Option<f32>,
-    /// Override the ASMC leakage sigma [1/s].
+    /// Override the ASMC leakage sigma, 1/s.
     #[arg(long)]
     pub leak: Option<f32>,
-    /// Override the sliding-surface slope lambda [1/s].
+    /// Override the sliding-surface slope lambda, 1/s.
     #[arg(long)]
     pub lambda: Option<f32>,
-    /// Override the boundary layer phi [rad/s].
+    /// Override the boundary layer phi, rad/s.
     #[arg(long)]
     pub phi: Option<f32>,
-    /// Override the fixed SMC gain K [rad/s^2].
+    /// Override the fixed SMC gain K, rad/s^2.
     #[arg(long)]
     pub smc_k: Option<f32>,
-    /// Override the ASMC K_min (= K_init) [rad/s^2].
+    /// Override the ASMC K_min (= K_init), rad/s^2.
     #[arg(long)]
     pub k_min: Option<f32>,
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
@@ -302,25 +108,14 @@ pub struct RunRow {
     pub result: LoopResult,
 }
 
-/// Set by `compare --ideal-sensors` (a study switch, off by default).
-static IDEAL_SENSORS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Runs one scenario with one arm.
+/// Runs one scenario with one arm: its metrics (settling from the scenario's disturbance time)
+/// and the run.
 pub fn run_one(
     spec: &ScenarioSpec,
     arm: Arm,
     control: &ControlParams,
 ) -> Result<(RunMetrics, LoopResult)> {
-    let mut cfg = LoopConfig::new(spec.plant, arm, spec.duration_s);
-    cfg.control = *control;
-    if IDEAL_SENSORS.load(std::sync::atomic::Ordering::Relaxed) {
-        cfg.sensors = crate::sensors::SensorConfig::ideal();
-    }
-    cfg.x0 = spec.x0;
-    cfg.record_every = 5;
-    let mut sc = spec.scenario.clone();
-    let r = closed_loop::run(&cfg, &mut sc, None)
-        .with_context(|| format!("{} / {}", spec.name, arm.name()))?;
+    let (cfg, r) = scenario::run_arm(spec, arm, control)?;
     Ok((r.metrics(&cfg, spec.t_dist_s), r))
 }
 
@@ -384,10 +179,6 @@ pub fn least_suppressing_current(
         }
     }
     Ok((hi, beyond))
-}
-
-fn opt(v: Option<f64>, prec: usize) -> String {
-    v.map_or("-".into(), |x| format!("{x:.prec$}"))
 }
 
 /// Formats the table.
@@ -526,70 +317,6 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
     Ok(())
 }
 
-/// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
-pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
-    use plotters::prelude::*;
-    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (top, rest) = root.split_vertically(40);
-    top.draw(&Text::new(
-        title.to_string(),
-        (15, 10),
-        ("sans-serif", 20).into_font(),
-    ))?;
-    let panels = rest.split_evenly((3, 1));
-    let t_max = runs
-        .iter()
-        .filter_map(|(_, r)| r.trace.last().map(|x| x.t_s))
-        .fold(0.1f64, f64::max);
-    type Get = fn(&closed_loop::TraceRow) -> f64;
-    let specs: [(&str, Get); 3] = [
-        ("psi_L [deg]", |r| r.psi_l_rad.to_degrees()),
-        ("coil current [A]", |r| r.coil_a),
-        ("adaptive / switching gain [rad/s^2]", |r| r.gain_radps2),
-    ];
-    for (pi, (area, (label, get))) in panels.iter().zip(specs).enumerate() {
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (_, r) in runs {
-            for row in &r.trace {
-                let y = get(row);
-                if y.is_finite() {
-                    lo = lo.min(y);
-                    hi = hi.max(y);
-                }
-            }
-        }
-        if !(lo.is_finite() && hi.is_finite()) {
-            (lo, hi) = (0.0, 1.0);
-        } else if hi - lo < 1e-9 {
-            (lo, hi) = (lo - 0.5, lo + 0.5);
-        }
-        let pad = 0.05 * (hi - lo);
-        let mut chart = ChartBuilder::on(area)
-            .margin(8)
-            .x_label_area_size(35)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
-        crate::plot_util::mesh(&mut chart, "t [s]", label)?;
-        for (i, (name, r)) in runs.iter().enumerate() {
-            let c = crate::plot_util::COLORS[i % crate::plot_util::COLORS.len()];
-            let s = chart.draw_series(LineSeries::new(
-                r.trace.iter().map(|row| (row.t_s, get(row))),
-                c.stroke_width(1),
-            ))?;
-            if pi == 0 {
-                s.label(name.to_string())
-                    .legend(crate::plot_util::line_marker(c, 2));
-            }
-        }
-        if pi == 0 {
-            crate::plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-        }
-    }
-    root.present()?;
-    Ok(())
-}
-
 /// Runs every arm over every scenario (in parallel).
 pub fn run_all(
     specs: &[ScenarioSpec],
@@ -616,12 +343,16 @@ pub fn run_all(
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    IDEAL_SENSORS.store(a.ideal_sensors, std::sync::atomic::Ordering::Relaxed);
     let mut specs = standard_scenarios(a.quick);
+    if a.ideal_sensors {
+        for s in &mut specs {
+            s.sensors = SensorConfig::ideal();
+        }
+    }
     if let Some(f) = &a.only {
         specs.retain(|s| s.name.contains(f.as_str()));
     }
-    let on_current = match a.on_current {
+    let on_current = match a.on_current_a {
         Some(i) => {
             println!("passive-on current: {i} A (given)");
             i
@@ -694,16 +425,4 @@ pub fn command(a: &CompareArgs) -> Result<()> {
     }
     println!("wrote {}", a.out.display());
     Ok(())
-}
-
-/// File-name-safe version of a scenario name.
-pub fn sanitize(s: &str) -> String {
-    s.chars()
-        .map(|c| match c {
-            'a'..='z' | 'A'..='Z' | '0'..='9' | '-' | '_' | '.' => c,
-            '+' => 'p',
-            '%' => 'c',
-            _ => '_',
-        })
-        .collect()
 }

@@ -1,5 +1,5 @@
 //! Fault injection for the closed loop: sensor faults that rewrite the healthy
-//! [`Measurement`] (through the [`FaultInjector`] hook of [`crate::sensors::Sensors`]) and coil
+//! [`Measurement`] (through the [`FaultInjector`] hook of [`crate::model::sensors::Sensors`]) and coil
 //! faults that change the plant's actuator ([`CoilState`]).
 //!
 //! Each [`FaultSpec`] is active over `[start_s, end_s)` (no end: to the end of the run), on one
@@ -22,7 +22,7 @@
 //! | `coil-open` | coil carries no current (damper passive-off), shunt reads ~0 | `CoilOpen` (latched) |
 //! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x command | `CoilShort` (latched) |
 
-use crate::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
+use crate::model::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -71,24 +71,24 @@ impl Side {
 pub enum FaultMode {
     /// Encoder angle frozen at its value when the fault starts.
     Stuck(Side),
-    /// Gaussian noise of this standard deviation added to the encoder angle [rad].
+    /// Gaussian noise of this standard deviation added to the encoder angle, rad.
     Noise(Side, f64),
     /// `length` failed reads out of every `period` samples (angle held).
     Dropout {
         /// Encoder(s).
         side: Side,
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
-        /// Failed reads per period [samples].
+        /// Failed reads per period, samples.
         length: u32,
     },
     /// A spike of `amplitude_rad` (alternating sign) on one sample of every `period`.
     Spike {
         /// Encoder(s).
         side: Side,
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
-        /// Spike height [rad].
+        /// Spike height, rad.
         amplitude_rad: f64,
     },
     /// NaN angle.
@@ -99,11 +99,11 @@ pub enum FaultMode {
     ErrorFlag(Side),
     /// Speed signal lost: value 0, qualifier invalid.
     SpeedLost,
-    /// Speed replaced by an implausible value [m/s] (qualifier valid).
+    /// Speed replaced by an implausible value, m/s (qualifier valid).
     SpeedImplausible(f64),
     /// `length` whole frames lost out of every `period`.
     FrameLoss {
-        /// Pattern period [samples].
+        /// Pattern period, samples.
         period: u32,
         /// Lost frames per period.
         length: u32,
@@ -177,9 +177,9 @@ impl FaultMode {
 pub struct FaultSpec {
     /// What goes wrong.
     pub mode: FaultMode,
-    /// Active from [s].
+    /// Active from, s.
     pub start_s: f64,
-    /// Active until [s] (`None`: to the end of the run).
+    /// Active until, s (`None`: to the end of the run).
     pub end_s: Option<f64>,
 }
 

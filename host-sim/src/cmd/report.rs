@@ -1,10 +1,10 @@
 //! `shimmy-sim report [SCENARIO.toml...] [--out DIR] [--controllers a,b]`: runs scenario files
 //! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
-//! report (see [`crate::report`]). Every file is parsed and validated before anything runs.
+//! report (see [`report`]). Every file is parsed and validated before anything runs.
 
-use crate::report::{self, Report, ReportRun, Section};
-use crate::run_cmd;
-use crate::scenario_file::{self, ScenarioSpec};
+use crate::out::report::{self, Report, ReportRun, Section};
+use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -22,8 +22,8 @@ pub struct ReportArgs {
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Fixed current of `passive-on` when given in `--controllers` [A].
-    #[arg(long, default_value_t = 1.0)]
+    /// Fixed current of `passive-on` when given in `--controllers`, in A.
+    #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
 }
 
@@ -52,6 +52,17 @@ pub fn scenario_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
+/// The `--controllers` list by their one name each (short forms accepted).
+fn controllers(a: &ReportArgs) -> Result<Vec<&'static str>> {
+    a.controllers
+        .iter()
+        .map(|c| match controller_name(c) {
+            Some(n) => Ok(n),
+            None => bail!("--controllers {c}: allowed: {}", CONTROLLERS.join(", ")),
+        })
+        .collect()
+}
+
 /// Loads and validates every file (nothing runs if one is bad), expands the controller list.
 pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     let files = if a.scenarios.is_empty() {
@@ -59,26 +70,19 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     } else {
         a.scenarios.clone()
     };
-    for c in &a.controllers {
-        if !scenario_file::CONTROLLERS.contains(&c.as_str()) {
-            bail!(
-                "--controllers {c}: allowed: {}",
-                scenario_file::CONTROLLERS.join(", ")
-            );
-        }
-    }
+    let controllers = controllers(a)?;
     files
         .into_iter()
         .map(|f| {
             let spec = scenario_file::load(&f)?;
-            let specs = if a.controllers.is_empty() {
+            let specs = if controllers.is_empty() {
                 vec![spec]
             } else {
-                a.controllers
+                controllers
                     .iter()
                     .map(|c| {
                         let mut s = spec.clone();
-                        s.controller = c.clone();
+                        s.controller = c.to_string();
                         s.on_current_a = a.on_current_a;
                         s
                     })
@@ -100,12 +104,9 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     let runs: Vec<(usize, ReportRun)> = jobs
         .par_iter()
         .map(|&(i, spec)| {
-            let (cfg, r) = run_cmd::run(spec)
+            let (cfg, r) = scenario::run(spec)
                 .with_context(|| format!("{} / {}", spec.name, spec.controller))?;
-            Ok((
-                i,
-                ReportRun::new(&spec.controller, cfg, r, run_cmd::disturbance_time(spec)),
-            ))
+            Ok((i, ReportRun::new(&spec.controller, cfg, r, spec.t_dist_s)))
         })
         .collect::<Result<_>>()?;
     let mut sections: Vec<Section> = plan
@@ -118,11 +119,11 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
                     "File `{}`: {} s, seed {}, initial in-phase wheel yaw {:.2} deg, encoder {} bit.",
                     file.display(),
                     s.duration_s,
-                    s.seed,
+                    s.sensors.seed,
                     s.initial_yaw_rad.to_degrees(),
-                    s.encoder_bits
+                    s.sensors.encoder_bits
                 ),
-                plant: s.params,
+                plant: s.plant,
                 runs: Vec::new(),
                 extra_plots: Vec::new(),
             }
@@ -139,7 +140,7 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
             if a.controllers.is_empty() {
                 "each file's own".to_string()
             } else {
-                a.controllers.join(", ")
+                controllers(a)?.join(", ")
             }
         ),
         sections,
@@ -168,7 +169,7 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plot_util::assert_real_plot;
+    use crate::out::plot_util::assert_real_plot;
 
     fn tmp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("shimmy-report-{name}-{}", std::process::id()))
@@ -218,7 +219,7 @@ mod tests {
         assert_eq!(csv.lines().count(), 5, "{csv}");
         let mut spec = scenario_file::load(&dir.join("kick.toml")).unwrap();
         spec.controller = "asmc".into();
-        let (cfg, r) = run_cmd::run(&spec).unwrap();
+        let (cfg, r) = scenario::run(&spec).unwrap();
         let m = r.metrics(&cfg, Some(0.0));
         let row = csv.lines().find(|l| l.starts_with("kick,asmc,")).unwrap();
         let peak: f64 = row.split(',').nth(2).unwrap().parse().unwrap();

@@ -1,5 +1,5 @@
 //! The closed loop in lockstep at the control rate (1 kHz): the nonlinear plant (with the MR
-//! damper and its coil lag) -> [`sensors`](crate::sensors) (+ optional [`faults`](crate::faults))
+//! damper and its coil lag) -> [`sensors`](crate::model::sensors) (+ optional [`faults`](crate::model::faults))
 //! -> `shimmy_core::supervisor::SafeController` (supervisor + `Controller` + final limiter, the
 //! firmware's 1 kHz call) -> coil-current command -> plant; the data-driven mode meter
 //! (`shimmy_core::estimator::MarginEstimator`) runs on the validated encoder angles.
@@ -17,11 +17,11 @@
 //! [`run`] returns a decimated [`TraceRow`] trace, the meter outputs, the full-rate series
 //! needed for metrics and the [`RunMetrics`].
 
-use crate::disturbance::Scenario;
-use crate::faults::{FaultPlan, FaultSpec};
-use crate::integrator::IntegrateError;
-use crate::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
-use crate::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
+use crate::model::disturbance::Scenario;
+use crate::model::faults::{FaultPlan, FaultSpec};
+use crate::model::integrator::IntegrateError;
+use crate::model::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
+use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
@@ -70,9 +70,9 @@ pub struct LoopConfig {
     pub control: ControlParams,
     /// Sensor models.
     pub sensors: SensorConfig,
-    /// Control period [s].
+    /// Control period, s.
     pub dt_s: f64,
-    /// Length of the run [s].
+    /// Length of the run, s.
     pub duration_s: f64,
     /// Record every n-th period in the trace (metrics always use every period).
     pub record_every: usize,
@@ -80,7 +80,7 @@ pub struct LoopConfig {
     pub estimator: bool,
     /// Plant integrator.
     pub method: Method,
-    /// Coil resistance for the energy metric [Ohm].
+    /// Coil resistance for the energy metric, Ohm.
     pub coil_resistance_ohm: f64,
     /// Initial plant state.
     pub x0: State,
@@ -110,7 +110,7 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(
                 shimmy_core::control::actuator::CoilParams::default().r_coil_ohm,
             ),
-            x0: [0.0; crate::plant::N_STATE],
+            x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
             supervisor: SupervisorParams::default(),
             supervised: true,
@@ -123,7 +123,7 @@ impl LoopConfig {
 pub struct SampleRecord<'a> {
     /// Sample index.
     pub k: u64,
-    /// Time [s].
+    /// Time, s.
     pub t_s: f64,
     /// True plant state at t.
     pub state: &'a State,
@@ -137,7 +137,7 @@ pub struct SampleRecord<'a> {
     pub safe: Option<&'a SafeOutput>,
     /// The mode meter's output, on the samples where it produced one.
     pub meter: Option<&'a MeterOutput>,
-    /// Damper force at t [N].
+    /// Damper force at t, N.
     pub damper_force_n: f64,
 }
 
@@ -150,43 +150,43 @@ pub trait LoopObserver {
 /// One recorded row of the trace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TraceRow {
-    /// Time [s].
+    /// Time, s.
     pub t_s: f64,
-    /// Left wheel yaw [rad].
+    /// Left wheel yaw, rad.
     pub psi_l_rad: f64,
-    /// Right wheel yaw [rad].
+    /// Right wheel yaw, rad.
     pub psi_r_rad: f64,
-    /// Steering-wheel angle [rad].
+    /// Steering-wheel angle, rad.
     pub theta_sw_rad: f64,
-    /// Speed [m/s].
+    /// Speed, m/s.
     pub speed_mps: f64,
-    /// Driver torque [N m].
+    /// Driver torque, N m.
     pub driver_torque_nm: f64,
-    /// Coil current command [A].
+    /// Coil current command, A.
     pub current_cmd_a: f64,
-    /// Actual coil input (the damper's filtered u, 1 V per A) [A].
+    /// Actual coil input (the damper's filtered u, 1 V per A), A.
     pub coil_a: f64,
-    /// Damper force [N].
+    /// Damper force, N.
     pub damper_force_n: f64,
-    /// Sliding variable [rad/s].
+    /// Sliding variable, rad/s.
     pub s_radps: f64,
-    /// Switching gain in use [rad/s^2].
+    /// Switching gain in use, rad/s^2.
     pub gain_radps2: f64,
     /// Control flags as bits: clipped 1, saturated 2, slew 4, invalid 8, below speed 16,
     /// adapting 32.
     pub flags: u8,
     /// Latest mode-meter slow damping ratio (NaN before the first valid one).
     pub zeta: f64,
-    /// Latest mode-meter frequency [Hz] (NaN before the first valid one).
+    /// Latest mode-meter frequency, Hz (NaN before the first valid one).
     pub freq_hz: f64,
 }
 
 /// One 100 Hz output of the mode meter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeterRow {
-    /// Time [s].
+    /// Time, s.
     pub t_s: f64,
-    /// True speed [m/s].
+    /// True speed, m/s.
     pub speed_mps: f64,
     /// Slow (margin) estimate.
     pub zeta_slow: f64,
@@ -194,9 +194,9 @@ pub struct MeterRow {
     pub sigma_zeta_slow: f64,
     /// Fast (warning) estimate.
     pub zeta_fast: f64,
-    /// Frequency of the slow estimate [Hz].
+    /// Frequency of the slow estimate, Hz.
     pub freq_hz: f64,
-    /// In-band amplitude [rad].
+    /// In-band amplitude, rad.
     pub amplitude_rad: f64,
     /// Slow estimate valid.
     pub valid: bool,
@@ -205,52 +205,52 @@ pub struct MeterRow {
 /// Full-rate series used for metrics.
 #[derive(Clone, Debug, Default)]
 pub struct Series {
-    /// Left wheel yaw [rad].
+    /// Left wheel yaw, rad.
     pub psi_l_rad: Vec<f64>,
-    /// Steering-wheel angle [rad].
+    /// Steering-wheel angle, rad.
     pub theta_sw_rad: Vec<f64>,
-    /// Current command [A].
+    /// Current command, A.
     pub cmd_a: Vec<f64>,
-    /// Actual coil current [A].
+    /// Actual coil current, A.
     pub coil_a: Vec<f64>,
-    /// Damper force [N].
+    /// Damper force, N.
     pub force_n: Vec<f64>,
 }
 
 /// Metrics of one run.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RunMetrics {
-    /// Peak |psi_L| [rad].
+    /// Peak |psi_L|, rad.
     pub peak_yaw_rad: f64,
-    /// RMS psi_L [rad].
+    /// RMS psi_L, rad.
     pub rms_yaw_rad: f64,
-    /// 2 % settling time after the disturbance [s] (`None` if no disturbance time was given or
+    /// 2 % settling time after the disturbance, s (`None` if no disturbance time was given or
     /// it never settled).
     pub settle_s: Option<f64>,
-    /// Peak |theta_sw| [rad].
+    /// Peak |theta_sw|, rad.
     pub peak_sw_rad: f64,
-    /// RMS coil current [A].
+    /// RMS coil current, A.
     pub rms_current_a: f64,
-    /// Peak coil current [A].
+    /// Peak coil current, A.
     pub peak_current_a: f64,
-    /// Coil energy R * integral i^2 dt [J].
+    /// Coil energy R * integral i^2 dt, J.
     pub energy_j: f64,
-    /// Total variation of the current command sum |i_k - i_{k-1}| [A].
+    /// Total variation of the current command sum |i_k - i_{k-1}|, A.
     pub chatter_a: f64,
-    /// RMS damper force [N].
+    /// RMS damper force, N.
     pub rms_force_n: f64,
-    /// Shimmy-band (high-passed at 2 Hz) amplitude of psi_L over the last 0.5 s [rad].
+    /// Shimmy-band (high-passed at 2 Hz) amplitude of psi_L over the last 0.5 s, rad.
     pub amp_end_rad: f64,
-    /// Time [s] in 0.5 s blocks whose shimmy-band amplitude exceeds [`SHIMMY_AMP_RAD`].
+    /// Time, s in 0.5 s blocks whose shimmy-band amplitude exceeds [`SHIMMY_AMP_RAD`].
     pub shimmy_s: f64,
-    /// Largest shimmy-band block amplitude [rad].
+    /// Largest shimmy-band block amplitude, rad.
     pub amp_max_rad: f64,
 }
 
 /// Shimmy-band amplitude above which a block counts as shimmy: 0.5 deg.
 pub const SHIMMY_AMP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
-/// Sustained shimmy: at least this long above [`SHIMMY_AMP_RAD`] [s].
+/// Sustained shimmy: at least this long above [`SHIMMY_AMP_RAD`], s.
 pub const SHIMMY_MIN_S: f64 = 3.0;
 
 impl RunMetrics {
@@ -363,13 +363,13 @@ pub fn high_pass(x: &[f64], fc_hz: f64, dt_s: f64) -> Vec<f64> {
 /// What the supervisor saw and did during a run.
 #[derive(Clone, Debug, Default)]
 pub struct FaultLog {
-    /// First time a fault was detected in a frame [s].
+    /// First time a fault was detected in a frame, s.
     pub first_detect_s: Option<f64>,
-    /// First time the supervisor counted a missed sample [s].
+    /// First time the supervisor counted a missed sample, s.
     pub first_missed_s: Option<f64>,
-    /// First time in Degraded [s].
+    /// First time in Degraded, s.
     pub first_degraded_s: Option<f64>,
-    /// First time in FailSafe [s].
+    /// First time in FailSafe, s.
     pub first_failsafe_s: Option<f64>,
     /// Worst mode seen.
     pub worst_mode: Mode,
@@ -381,7 +381,7 @@ pub struct FaultLog {
     pub final_faults: FaultSet,
     /// Counters of every fault kind that was detected.
     pub records: Vec<(FaultKind, FaultRecord)>,
-    /// Supervisor events with their simulation time [s].
+    /// Supervisor events with their simulation time, s.
     pub events: Vec<(f64, SupervisorEvent)>,
     /// Frames lost by the fault plan (command held).
     pub lost_frames: u64,
@@ -400,9 +400,9 @@ pub struct LoopResult {
     pub meter: Vec<MeterRow>,
     /// Full-rate series.
     pub series: Series,
-    /// Simulated time [s].
+    /// Simulated time, s.
     pub sim_s: f64,
-    /// Wall-clock time of the run [s].
+    /// Wall-clock time of the run, s.
     pub wall_s: f64,
     /// Supervisor record (empty for unsupervised runs, except `invalid_commands`).
     pub faults: FaultLog,

@@ -1,4 +1,4 @@
-//! `shimmy-sim sweep --controllers off,asmc`: the time-domain map over speed x parameter x
+//! `shimmy-sim sweep --controllers passive-off,asmc`: the time-domain map over speed x parameter x
 //! controller. Every grid point is one closed-loop run (nonlinear plant with the MR damper,
 //! simulated sensors, the core's controller at 1 kHz) at constant speed from an in-phase
 //! wheel-yaw kick; the result is the shimmy-band wheel-yaw amplitude at the end of the run and a
@@ -10,11 +10,11 @@
 //! computed in parallel (rayon) and collected in grid order, so the CSV does not depend on the
 //! number of threads.
 
-use crate::closed_loop::{self, Arm, LoopConfig, RunMetrics};
-use crate::disturbance::{initial_yaw, Scenario};
-use crate::plot_util;
-use crate::sweep::SweepArgs;
-use anyhow::{anyhow, bail, Context, Result};
+use super::args::{axes, SweepArgs};
+use crate::model::disturbance::{initial_yaw, Scenario};
+use crate::out::plot_util;
+use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -31,17 +31,17 @@ pub const DEFAULT_STEPS: (usize, usize) = (25, 9);
 pub struct TdPoint {
     /// Parameter value.
     pub value: f64,
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub speed_kmh: f64,
-    /// Peak |psi_L| over the run, kick included [rad].
+    /// Peak |psi_L| over the run, kick included, rad.
     pub peak_yaw_rad: f64,
-    /// Shimmy-band amplitude in the last 0.5 s [rad].
+    /// Shimmy-band amplitude in the last 0.5 s, rad.
     pub amp_end_rad: f64,
-    /// Largest shimmy-band block amplitude [rad].
+    /// Largest shimmy-band block amplitude, rad.
     pub amp_max_rad: f64,
     /// Sustained shimmy ([`RunMetrics::shimmies`]).
     pub shimmy: bool,
-    /// Coil energy [J].
+    /// Coil energy, J.
     pub energy_j: f64,
 }
 
@@ -59,29 +59,29 @@ pub struct TdMap {
 pub struct TdGrid {
     /// Varied parameter.
     pub param: Param,
-    /// Speeds [km/h].
+    /// Speeds, km/h.
     pub speeds_kmh: Vec<f64>,
     /// Parameter values.
     pub values: Vec<f64>,
-    /// Linear Hopf crossings of the undamped plant per value: (speed [km/h], onset?).
+    /// Linear Hopf crossings of the undamped plant per value: (speed in km/h, onset?).
     pub hopf: Vec<Vec<(f64, bool)>>,
 }
 
-/// Parses `--controllers` (`off`/`on` are short for `passive-off`/`passive-on`).
+/// Parses `--controllers` (the short forms `none`, `off`, `on` are accepted).
 pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
     a.controllers
         .iter()
         .map(|n| {
-            Arm::from_name(n, a.on_current_a as f32).ok_or_else(|| {
-                anyhow!("--controllers {n}: allowed: no-damper, off (passive-off), on (passive-on), smc, asmc, skyhook")
+            Arm::from_name(n, a.on_current_a as f32).with_context(|| {
+                format!("--controllers {n}: allowed: no-damper, passive-off, passive-on, smc, asmc, skyhook (or none, off, on)")
             })
         })
         .collect()
 }
 
 fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
-    let base = crate::paramfile::load(&a.params)?;
-    let (speeds_kmh, values, param) = crate::sweep::axes(a, &base, DEFAULT_STEPS)?;
+    let base = crate::sim::paramfile::load(&a.params)?;
+    let (speeds_kmh, values, param) = axes(a, &base, DEFAULT_STEPS)?;
     if !(a.duration_s.is_finite() && a.duration_s >= 1.0 && a.duration_s <= 600.0) {
         bail!("--duration-s {}: allowed 1 to 600 s", a.duration_s);
     }
@@ -105,7 +105,7 @@ fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
                     .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
                     .collect()
             })
-            .map_err(|e| anyhow!("Hopf crossings at {} = {v}: {e:?}", param.name()))
+            .with_context(|| format!("Hopf crossings at {} = {v}", param.name()))
         })
         .collect::<Result<_>>()?;
     Ok((
@@ -134,9 +134,9 @@ fn point(
     cfg.sensors.seed = a.seed;
     cfg.x0 = initial_yaw(a.kick_deg.to_radians());
     let mut sc = Scenario::constant_speed(kmh_to_mps(v_kmh));
-    let r = closed_loop::run(&cfg, &mut sc, None).map_err(|e| {
-        anyhow!(
-            "{} at {v_kmh} km/h, {} = {value}: {e:?}",
+    let r = closed_loop::run(&cfg, &mut sc, None).with_context(|| {
+        format!(
+            "{} at {v_kmh} km/h, {} = {value}",
             arm.name(),
             g.param.name()
         )
@@ -392,7 +392,7 @@ mod tests {
             v_min_kmh: 20.0,
             v_max_kmh: 130.0,
             v_steps: Some(3), // 20, 75, 130 km/h
-            damper_currents: vec![],
+            damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
             out: out.to_path_buf(),
             quiet: true,
@@ -459,7 +459,7 @@ mod tests {
             .iter()
             .filter(|f| f.extension().is_some_and(|e| e == "png"))
         {
-            crate::plot_util::assert_real_plot(f, 4).unwrap();
+            crate::out::plot_util::assert_real_plot(f, 4).unwrap();
         }
         let text = std::fs::read_to_string(out.join("td-k_d-asmc.csv")).unwrap();
         assert!(text.starts_with("k_d [N m/rad],speed [km/h],controller,peak yaw [deg]"));

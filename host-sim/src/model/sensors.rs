@@ -3,8 +3,9 @@
 //!
 //! Everything is seeded (`rand_chacha`), so a run is reproducible bit for bit. Faults (stuck,
 //! dropout, NaN, spikes, ...) are not modelled here: [`Sensors::fault`] is the place where a
-//! [`FaultInjector`] (see [`crate::faults`]) rewrites a [`Measurement`] after the healthy sensor
-//! models ran, and where the closed loop asks for the state of the coil ([`CoilState`]).
+//! [`FaultInjector`] rewrites a [`Measurement`] after the healthy sensor models ran, and where
+//! the closed loop asks for the state of the coil ([`CoilState`]). The fault models implement
+//! that trait in the sibling `faults` module, which depends on this one (not the other way).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -15,23 +16,23 @@ use std::f64::consts::PI;
 /// Sensor configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorConfig {
-    /// Encoder resolution [bits] (quantisation 2 pi / 2^bits). 0 = no quantisation.
+    /// Encoder resolution, bits (quantisation 2 pi / 2^bits). 0 = no quantisation.
     pub encoder_bits: u32,
-    /// Gaussian encoder noise before quantisation, standard deviation [rad].
+    /// Gaussian encoder noise before quantisation, standard deviation, rad.
     pub encoder_noise_rad: f64,
-    /// Encoder delay [samples] (SPI read + filtering in the sensor).
+    /// Encoder delay, samples (SPI read + filtering in the sensor).
     pub encoder_delay_samples: usize,
-    /// Wheel-speed noise, standard deviation [m/s].
+    /// Wheel-speed noise, standard deviation, m/s.
     pub speed_noise_mps: f64,
     /// Wheel-speed scale error (tyre wear, pressure): measured = (1 + this) V.
     pub speed_scale_error: f64,
-    /// Wheel-speed delay [samples].
+    /// Wheel-speed delay, samples.
     pub speed_delay_samples: usize,
-    /// Coil-current measurement: ADC full scale [A].
+    /// Coil-current measurement: ADC full scale, A.
     pub current_full_scale_a: f64,
-    /// Coil-current ADC resolution [bits] (0 = no quantisation).
+    /// Coil-current ADC resolution, bits (0 = no quantisation).
     pub current_adc_bits: u32,
-    /// Shunt amplifier + ADC noise, standard deviation [A].
+    /// Shunt amplifier + ADC noise, standard deviation, A.
     pub current_noise_a: f64,
     /// Seed of the noise generator.
     pub seed: u64,
@@ -73,7 +74,7 @@ impl SensorConfig {
         }
     }
 
-    /// Encoder quantum 2 pi / 2^bits [rad] (0 without quantisation).
+    /// Encoder quantum 2 pi / 2^bits, rad (0 without quantisation).
     pub fn encoder_lsb_rad(&self) -> f64 {
         if self.encoder_bits == 0 {
             0.0
@@ -86,13 +87,13 @@ impl SensorConfig {
 /// The true quantities the sensors look at, at one sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Truth {
-    /// Left wheel yaw [rad].
+    /// Left wheel yaw, rad.
     pub psi_l_rad: f64,
-    /// Right wheel yaw [rad].
+    /// Right wheel yaw, rad.
     pub psi_r_rad: f64,
-    /// Vehicle speed [m/s].
+    /// Vehicle speed, m/s.
     pub speed_mps: f64,
-    /// Coil current [A] (the damper's filtered coil input).
+    /// Coil current, A (the damper's filtered coil input).
     pub coil_current_a: f64,
 }
 
@@ -121,13 +122,13 @@ impl Default for EncoderStatus {
 /// What the firmware reads at one sample (f32, as on the target).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measurement {
-    /// Left encoder angle [rad], wrapped to (-pi, pi].
+    /// Left encoder angle in rad, wrapped to (-pi, pi].
     pub psi_l_rad: f32,
-    /// Right encoder angle [rad].
+    /// Right encoder angle, rad.
     pub psi_r_rad: f32,
-    /// Speed [m/s].
+    /// Speed, m/s.
     pub speed_mps: f32,
-    /// Coil current [A] (`None`: no current sensor or a read failure).
+    /// Coil current, A (`None`: no current sensor or a read failure).
     pub coil_current_a: Option<f32>,
     /// Left encoder status bits.
     pub left_status: EncoderStatus,

@@ -13,9 +13,12 @@
 //! stroke amplitude `X = (l_t/2)(psi0 + psi0) = l_t psi0` (the damper stroke definition of the
 //! reference plant). The default is psi0 = 0.5 deg, a small but developed shimmy.
 
+use shimmy_core::eigen::EigenError;
 use shimmy_core::mr_damper::{rates, SpencerParams, SpencerState};
+use shimmy_core::params::PlantParams;
+use shimmy_core::stability::{self, ModeSelect};
 
-/// Default reference wheel-yaw amplitude [rad] (0.5 deg).
+/// Default reference wheel-yaw amplitude, rad (0.5 deg).
 pub const REF_WHEEL_YAW_AMPL_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
 /// Cycles driven before the measured one (internal states settle in ~1 cycle).
@@ -24,7 +27,7 @@ const SETTLE_CYCLES: usize = 4;
 /// 1/s at these strokes); 20 000 steps per ~0.15 s cycle keeps |lambda dt| < 0.1.
 const STEPS_PER_CYCLE: usize = 20_000;
 
-/// Energy-equivalent viscous coefficient [N s/m] of any force law driven by
+/// Energy-equivalent viscous coefficient (N s/m) of any force law driven by
 /// `x(t) = amp sin(w t)`. `force(t, dt)` must advance its own state from `t - dt` to `t` (calls
 /// come in increasing `t`, first with `t = 0, dt = 0`) and return the force at `t`, positive
 /// when resisting positive stroke rate. Trapezoidal quadrature of F v over the last cycle.
@@ -52,7 +55,7 @@ pub fn equivalent_viscous(
     energy / (std::f64::consts::PI * omega_radps * amp_m * amp_m)
 }
 
-/// Energy-equivalent viscous coefficient [N s/m] of the Spencer MR damper `p` at constant coil
+/// Energy-equivalent viscous coefficient (N s/m) of the Spencer MR damper `p` at constant coil
 /// current `current_a` (coil state settled: u = I), stroke amplitude `amp_m`, frequency `freq_hz`.
 pub fn mr_equivalent_viscous(p: &SpencerParams, current_a: f64, freq_hz: f64, amp_m: f64) -> f64 {
     let u = current_a.clamp(0.0, p.u_max);
@@ -95,10 +98,62 @@ pub fn mr_equivalent_viscous(p: &SpencerParams, current_a: f64, freq_hz: f64, am
     })
 }
 
-/// Stroke amplitude [m] of an in-phase wheel-yaw oscillation of amplitude `psi0_rad` on both
+/// Stroke amplitude (m) of an in-phase wheel-yaw oscillation of amplitude `psi0_rad` on both
 /// wheels: X = l_t psi0.
 pub fn stroke_amplitude_m(l_t_m: f64, psi0_rad: f64) -> f64 {
     l_t_m * psi0_rad
+}
+
+/// The equivalent viscous damper coefficient for a coil current, with the frequency it was
+/// evaluated at.
+#[derive(Clone, Copy, Debug)]
+pub struct DamperEquivalent {
+    /// Coil current, A.
+    pub current_a: f64,
+    /// Mode frequency the describing function was evaluated at, Hz.
+    pub freq_hz: f64,
+    /// Stroke amplitude, m.
+    pub stroke_amp_m: f64,
+    /// Equivalent viscous coefficient, N s/m.
+    pub c_eq_nspm: f64,
+}
+
+/// Energy-equivalent viscous coefficient of the MR damper at `current_a`, evaluated at the
+/// frequency of the shimmy (in-phase wheel-yaw) mode at the speed where the damper-free growth
+/// rate of the critical mode is largest in [v_min, v_max]; the frequency is updated once with
+/// the damper in place (a two-pass fixed point: the mode frequency moves little with c).
+pub fn damper_equivalent(
+    p: &PlantParams,
+    current_a: f64,
+    ref_amp_deg: f64,
+    v_min_mps: f64,
+    v_max_mps: f64,
+) -> Result<DamperEquivalent, EigenError> {
+    let sp = SpencerParams::steering();
+    let amp = stroke_amplitude_m(p.l_t, ref_amp_deg.to_radians());
+    let n = 100;
+    let mut v_ref = v_min_mps;
+    let mut g_best = f64::NEG_INFINITY;
+    for i in 0..=n {
+        let v = v_min_mps + (v_max_mps - v_min_mps) * i as f64 / n as f64;
+        let m = stability::critical_mode_at(p, v, 0.0)?;
+        if m.re > g_best {
+            g_best = m.re;
+            v_ref = v;
+        }
+    }
+    let mut freq = stability::mode_at(p, v_ref, 0.0, ModeSelect::Shimmy)?.freq_hz;
+    let mut c = mr_equivalent_viscous(&sp, current_a, freq, amp);
+    for _ in 0..1 {
+        freq = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy)?.freq_hz;
+        c = mr_equivalent_viscous(&sp, current_a, freq, amp);
+    }
+    Ok(DamperEquivalent {
+        current_a,
+        freq_hz: freq,
+        stroke_amp_m: amp,
+        c_eq_nspm: c,
+    })
 }
 
 #[cfg(test)]

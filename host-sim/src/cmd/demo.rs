@@ -2,16 +2,14 @@
 //! through the Hopf window with road noise, wheel imbalance and a pothole, the data-driven mode
 //! meter running in the loop, and a self-contained Markdown report with plots and metrics.
 
-use crate::closed_loop::{self, Arm, LoopConfig, LoopResult, RunMetrics};
-use crate::compare::{fastest_growth_speed, pothole, road, POTHOLE_NM};
-use crate::disturbance::{Scenario, SpeedProfile};
-use crate::plot_util;
-use crate::report::{self, Report, ReportRun, Section};
+use crate::out::plot_util;
+use crate::out::report::{self, Report, ReportRun, Section};
+use crate::sim::closed_loop::{LoopResult, RunMetrics};
+use crate::sim::demo_case::{demo_case, run_arm, ARMS};
+use crate::sim::standard::POTHOLE_NM;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
-use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
+use shimmy_core::params::mps_to_kmh;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -20,7 +18,7 @@ use std::path::{Path, PathBuf};
 pub struct DemoOptions {
     /// Output directory.
     pub out: PathBuf,
-    /// Ramp duration [s] (20 -> 120 km/h).
+    /// Ramp duration, s (20 -> 120 km/h).
     pub ramp_s: f64,
 }
 
@@ -96,83 +94,8 @@ fn plot_meter(
     Ok(())
 }
 
-/// The demo's case: the nominal plant, the ramp scenario and the facts the report states.
-#[derive(Clone, Debug)]
-pub struct DemoCase {
-    /// The true (and nominal) plant.
-    pub plant: PlantParams,
-    /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
-    pub scenario: Scenario,
-    /// Hopf crossings of the plant without damper (1-50 m/s).
-    pub crossings: Vec<HopfCrossing>,
-    /// The no-damper Hopf window [km/h], when there is one.
-    pub window_kmh: Option<(f64, f64)>,
-    /// Speed of fastest shimmy growth [m/s] (where the pothole hits).
-    pub v_fastest_mps: f64,
-    /// Time of the pothole [s].
-    pub t_pothole_s: f64,
-}
-
-/// The demo's two arms with their report labels: damper off (0 A) and ASMC.
-pub const ARMS: [(&str, Arm); 2] = [
-    ("damper off (0 A)", Arm::Mr(ControllerKind::PassiveOff)),
-    ("ASMC", Arm::Mr(ControllerKind::Asmc)),
-];
-
-/// Builds the demo's case for a ramp of `ramp_s` seconds (all numbers computed).
-pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
-    let p = ParamSet::Nominal.params();
-    let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
-        .map_err(|e| anyhow::anyhow!("hopf_crossings: {e:?}"))?
-        .iter()
-        .copied()
-        .collect();
-    let onset = crossings.iter().find(|c| c.kind == CrossingKind::Onset);
-    let offset = crossings.iter().find(|c| c.kind != CrossingKind::Onset);
-    let window_kmh = match (onset, offset) {
-        (Some(a), Some(b)) => Some((mps_to_kmh(a.speed_mps), mps_to_kmh(b.speed_mps))),
-        _ => None,
-    };
-    let v_fg = fastest_growth_speed(&p);
-    let (v0, v1) = (kmh_to_mps(20.0), kmh_to_mps(120.0));
-    let mut sc = Scenario::new(SpeedProfile::Ramp {
-        v0_mps: v0,
-        v1_mps: v1,
-        t0_s: 0.0,
-        t1_s: ramp_s,
-    });
-    let (n, im) = road(7, &p);
-    sc.noise = Some(n);
-    sc.imbalance = Some(im);
-    let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
-    sc.impulses.push(pothole(t_hit, POTHOLE_NM));
-    Ok(DemoCase {
-        plant: p,
-        scenario: sc,
-        crossings,
-        window_kmh,
-        v_fastest_mps: v_fg,
-        t_pothole_s: t_hit,
-    })
-}
-
-/// Runs one arm of the demo (the golden regression trace and the benchmark use the ASMC arm).
-pub fn run_arm(
-    case: &DemoCase,
-    arm: Arm,
-    ramp_s: f64,
-    record_every: usize,
-) -> Result<(LoopConfig, LoopResult)> {
-    let mut cfg = LoopConfig::new(case.plant, arm, ramp_s);
-    cfg.record_every = record_every;
-    let mut s = case.scenario.clone();
-    let r = closed_loop::run(&cfg, &mut s, None)
-        .map_err(|e| anyhow::anyhow!("{}: integration failed: {e:?}", arm.name()))?;
-    Ok((cfg, r))
-}
-
 /// Runs the demo and writes `report.md` with its plots into `o.out` (through
-/// [`crate::report::write`], the same writer as `shimmy-sim report`).
+/// [`report::write`], the same writer as `shimmy-sim report`).
 pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let case = demo_case(o.ramp_s)?;

@@ -7,7 +7,7 @@
 //! first-order low-pass, reproducible with `rand_chacha`), and wheel imbalance (once per wheel
 //! revolution, f_w = V / (2 pi R), with amplitude and phase per wheel).
 
-use crate::plant::{idx, Inputs, State, N_STATE};
+use crate::model::plant::{idx, Inputs, State, N_STATE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -16,17 +16,17 @@ use std::f64::consts::PI;
 /// Forward speed as a function of time.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SpeedProfile {
-    /// Constant speed [m/s].
+    /// Constant speed, m/s.
     Constant(f64),
     /// Linear ramp from `v0_mps` at `t0_s` to `v1_mps` at `t1_s`, constant outside.
     Ramp {
-        /// Start speed [m/s].
+        /// Start speed, m/s.
         v0_mps: f64,
-        /// End speed [m/s].
+        /// End speed, m/s.
         v1_mps: f64,
-        /// Ramp start [s].
+        /// Ramp start, s.
         t0_s: f64,
-        /// Ramp end [s].
+        /// Ramp end, s.
         t1_s: f64,
     },
     /// Piecewise linear through `(t_s, v_mps)` points (sorted by time), constant outside.
@@ -34,7 +34,7 @@ pub enum SpeedProfile {
 }
 
 impl SpeedProfile {
-    /// Speed [m/s] at `t_s`.
+    /// Speed (m/s) at `t_s`.
     pub fn at(&self, t_s: f64) -> f64 {
         match self {
             SpeedProfile::Constant(v) => *v,
@@ -76,26 +76,26 @@ pub enum DriverTorque {
     /// Single lane change: one full sine period of `amplitude_nm` and length `period_s`
     /// starting at `t0_s` (steer one way, then back), zero elsewhere.
     LaneChange {
-        /// Peak torque [N m].
+        /// Peak torque, N m.
         amplitude_nm: f64,
-        /// Length of the manoeuvre [s].
+        /// Length of the manoeuvre, s.
         period_s: f64,
-        /// Start [s].
+        /// Start, s.
         t0_s: f64,
     },
     /// Slalom: continuous sine from `t0_s`.
     Slalom {
-        /// Peak torque [N m].
+        /// Peak torque, N m.
         amplitude_nm: f64,
-        /// Frequency [Hz].
+        /// Frequency, Hz.
         freq_hz: f64,
-        /// Start [s].
+        /// Start, s.
         t0_s: f64,
     },
 }
 
 impl DriverTorque {
-    /// Torque [N m] at `t_s`.
+    /// Torque (N m) at `t_s`.
     pub fn at(&self, t_s: f64) -> f64 {
         match *self {
             DriverTorque::None => 0.0,
@@ -129,16 +129,16 @@ impl DriverTorque {
 /// A short yaw-torque pulse on the wheels (pothole, road joint): a half sine.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Impulse {
-    /// Start [s].
+    /// Start, s.
     pub t0_s: f64,
-    /// Duration [s].
+    /// Duration, s.
     pub duration_s: f64,
-    /// Peak yaw torque on `[left, right]` [N m].
+    /// Peak yaw torque on `[left, right]`, N m.
     pub peak_nm: [f64; 2],
 }
 
 impl Impulse {
-    /// Torques [N m] at `t_s`.
+    /// Torques (N m) at `t_s`.
     pub fn at(&self, t_s: f64) -> [f64; 2] {
         let tau = t_s - self.t0_s;
         if tau >= 0.0 && tau <= self.duration_s && self.duration_s > 0.0 {
@@ -155,9 +155,9 @@ impl Impulse {
 /// torque has standard deviation `std_nm` (for a corner well below the sample rate).
 #[derive(Clone, Debug)]
 pub struct RoadNoise {
-    /// Standard deviation of the filtered torque [N m].
+    /// Standard deviation of the filtered torque, N m.
     pub std_nm: f64,
-    /// Low-pass corner [Hz].
+    /// Low-pass corner, Hz.
     pub corner_hz: f64,
     /// Fraction of the torque common to both wheels (0 = independent, 1 = identical).
     pub common: f64,
@@ -177,7 +177,7 @@ impl RoadNoise {
         }
     }
 
-    /// Draws the torques [N m] for the next period of length `dt_s`.
+    /// Draws the torques, N m for the next period of length `dt_s`.
     pub fn next(&mut self, dt_s: f64) -> [f64; 2] {
         // Exact discretisation of x' = -w x + w sqrt(2/w) s w_noise so that var(x) = s^2:
         // x_{k+1} = a x_k + s sqrt(1 - a^2) n_k, a = exp(-w dt).
@@ -197,11 +197,11 @@ impl RoadNoise {
 /// rotation angle theta_w = integral of V / R dt (once per revolution: f_w = V / (2 pi R)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Imbalance {
-    /// Torque amplitude per wheel [N m].
+    /// Torque amplitude per wheel, N m.
     pub amplitude_nm: [f64; 2],
-    /// Phase per wheel [rad].
+    /// Phase per wheel, rad.
     pub phase_rad: [f64; 2],
-    /// Rolling radius R [m].
+    /// Rolling radius R, m.
     pub radius_m: f64,
 }
 
@@ -210,7 +210,7 @@ pub struct Imbalance {
 pub struct Scenario {
     /// Forward speed.
     pub speed: SpeedProfile,
-    /// Constant coil current command [A] (open loop).
+    /// Constant coil current command, A (open loop).
     pub current_a: f64,
     /// Driver torque.
     pub driver: DriverTorque,

@@ -1,5 +1,5 @@
 //! `shimmy-sim reference-bench`: the simulator next to an independent NumPy/SciPy implementation
-//! of the same plant (`host-sim/reference/plant_scipy.py`, written from reference-plant.md), run
+//! of the same plant (`host-sim/reference/plant_scipy.py`, written from `docs/plant-model.md`), run
 //! in one command: speed ratios for the time-domain run and the eigenvalue sweep, and agreement
 //! of the two implementations' trajectories and eigenvalues.
 //!
@@ -16,7 +16,7 @@
 //! cannot step over it). So the Rust side does strictly more work per
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
-use crate::plant::{idx, Inputs, Plant, Simulator, N_STATE};
+use crate::model::plant::{idx, Inputs, Plant, Simulator, N_STATE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -32,16 +32,17 @@ pub struct ReferenceBenchArgs {
     /// Parameter set (name or TOML file).
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Simulated time of the time-domain run [s].
+    /// Simulated time of the time-domain run, s.
     #[arg(long, default_value_t = 10.0)]
     pub duration_s: f64,
-    /// Forward speed [km/h] (inside the Hopf window by default).
+    /// Forward speed, km/h (inside the Hopf window by default).
     #[arg(long, default_value_t = 60.0)]
     pub speed_kmh: f64,
-    /// Constant coil current [A].
-    #[arg(long, default_value_t = 0.5)]
+    /// Constant coil current, in A (`--damper-current-a` as in `stability` and `bifurcation`;
+    /// the field keeps its name for callers that build the arguments).
+    #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5)]
     pub current_a: f64,
-    /// Initial in-phase wheel yaw [deg] (large enough for the damper to slide).
+    /// Initial in-phase wheel yaw, deg (large enough for the damper to slide).
     #[arg(long, default_value_t = 3.0)]
     pub initial_yaw_deg: f64,
     /// Points of the eigenvalue sweep (1-150 km/h).
@@ -53,10 +54,10 @@ pub struct ReferenceBenchArgs {
     /// Python interpreter with numpy and scipy.
     #[arg(long, default_value = "python3")]
     pub python: String,
-    /// Ramp length of the closed-loop row [s] (the demo's is 30 s).
+    /// Ramp length of the closed-loop row, s (the demo's is 30 s).
     #[arg(long, default_value_t = 30.0)]
     pub cl_ramp_s: f64,
-    /// Gain of the Python side's current law in the closed-loop row [A per rad/s].
+    /// Gain of the Python side's current law in the closed-loop row, A per rad/s.
     #[arg(long, default_value_t = 4.0)]
     pub cl_gain_a_per_radps: f64,
     /// Output folder (case file, SciPy result, summary).
@@ -75,25 +76,25 @@ pub struct ReferenceResult {
     pub rust_sweep_rate: f64,
     /// Eigen-sweep points per wall second, NumPy.
     pub numpy_sweep_rate: f64,
-    /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times [rad].
+    /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times, rad.
     pub max_traj_diff_rad: f64,
-    /// Largest |psi_L| of the run [rad] (scale of the difference).
+    /// Largest |psi_L| of the run, rad (scale of the difference).
     pub max_psi_rad: f64,
-    /// Largest |max Re lambda (Rust) - max Re lambda (NumPy)| over the sweep [1/s].
+    /// Largest |max Re lambda (Rust) - max Re lambda (NumPy)| over the sweep, 1/s.
     pub max_eig_diff: f64,
     /// Closed loop (the demo's ASMC run): simulated seconds per wall second, Rust.
     pub rust_cl_rate: f64,
     /// The same drive in SciPy with a simple current law: simulated seconds per wall second.
     pub scipy_cl_rate: f64,
-    /// Simulated time of the closed-loop row [s].
+    /// Simulated time of the closed-loop row, s.
     pub cl_duration_s: f64,
-    /// Peak |psi_L| of the closed-loop runs [rad]: (Rust with ASMC, SciPy with the simple law).
+    /// Peak |psi_L| of the closed-loop runs in rad: (Rust with ASMC, SciPy with the simple law).
     pub cl_peak_psi_rad: (f64, f64),
 }
 
 /// Runs both implementations and compares them.
 pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
-    let params = crate::paramfile::load(&a.params)?;
+    let params = crate::sim::paramfile::load(&a.params)?;
     let damper = SpencerParams::steering();
     let v_mps = kmh_to_mps(a.speed_kmh);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -122,8 +123,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let mut psi_rust = vec![sim.state()[idx::PSI_L]];
     let start = Instant::now();
     for k in 1..=n_periods {
-        sim.advance(1e-3, &inputs)
-            .map_err(|e| anyhow::anyhow!("simulator: {e:?}"))?;
+        sim.advance(1e-3, &inputs).context("simulator")?;
         if k % sample_every == 0 {
             psi_rust.push(sim.state()[idx::PSI_L]);
         }
@@ -134,8 +134,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let mut max_re_rust = Vec::with_capacity(sweep.len());
     for &v in &sweep {
         let m = shimmy_core::plant::linearise(&params, v, 0.0);
-        let ev =
-            shimmy_core::eigen::eigenvalues(&m).map_err(|e| anyhow::anyhow!("eigen: {e:?}"))?;
+        let ev = shimmy_core::eigen::eigenvalues(&m).context("eigen")?;
         max_re_rust.push(ev.iter().map(|l| l.re).fold(f64::NEG_INFINITY, f64::max));
     }
     let rust_sweep_wall = start.elapsed().as_secs_f64();
@@ -145,8 +144,9 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     if !(ramp_s.is_finite() && ramp_s >= 1.0) {
         bail!("--cl-ramp-s {ramp_s}: at least 1 s");
     }
-    let demo_case = crate::demo::demo_case(ramp_s)?;
-    let (_, cl) = crate::demo::run_arm(&demo_case, crate::demo::ARMS[1].1, ramp_s, 5)?;
+    let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
+    let (_, cl) =
+        crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
     let cl_peak = cl
         .series
         .psi_l_rad
@@ -215,8 +215,8 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
 
 /// The `[ramp]` section: the demo's drive (nominal plant parameters are the `[plant]` section
 /// only when `--params nominal`; the demo always uses nominal, so its plant is written here).
-fn ramp_toml(case: &crate::demo::DemoCase, ramp_s: f64, gain: f64) -> Result<String> {
-    use crate::disturbance::SpeedProfile;
+fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> Result<String> {
+    use crate::model::disturbance::SpeedProfile;
     let SpeedProfile::Ramp {
         v0_mps,
         v1_mps,

@@ -1,13 +1,14 @@
 //! `shimmy-sim run SCENARIO.toml`: one closed-loop run from a scenario file (see
-//! [`crate::scenario_file`]): metrics table, trace CSV with units, a time plot (wheel yaw, coil
+//! [`scenario_file`]): metrics table, trace CSV with units, a time plot (wheel yaw, coil
 //! current, adaptive gain) and a margin plot (the mode meter's damping estimate over time next to
 //! the true eigenvalue of the plant's shimmy mode at the same speed).
 
-use crate::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::compare::plot_runs;
-use crate::disturbance::initial_yaw;
-use crate::scenario_file::{self, ScenarioSpec};
-use anyhow::{anyhow, Context, Result};
+use crate::out::file_name::sanitize;
+use crate::out::plots::{plot_margin, plot_runs};
+use crate::sim::closed_loop::LoopResult;
+use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::scenario_file;
+use anyhow::{Context, Result};
 use clap::Args;
 use std::f64::consts::PI;
 use std::path::PathBuf;
@@ -23,75 +24,44 @@ pub struct RunArgs {
     /// Controller (overrides the file's `controller.kind`; passive-on needs `--on-current-a`).
     #[arg(long)]
     pub controller: Option<String>,
-    /// Fixed current for `--controller passive-on` [A].
-    #[arg(long, default_value_t = 1.0)]
+    /// Fixed current for `--controller passive-on`, in A.
+    #[arg(long, default_value_t = 1.0, alias = "on-current")]
     pub on_current_a: f64,
 }
 
-/// Builds the closed-loop configuration of a validated scenario.
-pub fn loop_config(spec: &ScenarioSpec) -> Result<LoopConfig> {
-    let arm = Arm::from_name(&spec.controller, spec.on_current_a as f32).ok_or_else(|| {
-        anyhow!(
-            "controller `{}` is not known to the closed loop",
-            spec.controller
-        )
-    })?;
-    let mut cfg = LoopConfig::new(spec.params, arm, spec.duration_s);
-    cfg.sensors.encoder_bits = spec.encoder_bits;
-    cfg.sensors.encoder_noise_rad =
-        spec.encoder_noise_lsb * 2.0 * PI / f64::from(1u32 << spec.encoder_bits.min(31));
-    cfg.sensors.seed = spec.seed;
-    cfg.record_every = spec.trace_every;
-    cfg.x0 = initial_yaw(spec.initial_yaw_rad);
-    cfg.faults = spec.faults.clone();
-    Ok(cfg)
-}
-
-/// Runs a scenario.
-pub fn run(spec: &ScenarioSpec) -> Result<(LoopConfig, LoopResult)> {
-    let cfg = loop_config(spec)?;
-    let mut scenario = spec.scenario.clone();
-    let result = closed_loop::run(&cfg, &mut scenario, None)
-        .map_err(|e| anyhow!("integration failed: {e:?}"))?;
-    Ok((cfg, result))
-}
-
-/// When settling is measured from: the initial perturbation (t = 0), else the first impulse.
-pub fn disturbance_time(spec: &ScenarioSpec) -> Option<f64> {
-    if spec.initial_yaw_rad != 0.0 {
-        Some(0.0)
-    } else {
-        spec.scenario.impulses.first().map(|i| i.t0_s)
-    }
+/// The output folder of a run: `--out`, else the file's `output.dir`, else `out/<name>` with
+/// the name sanitised.
+pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
+    a.out
+        .clone()
+        .or_else(|| spec.out_dir.clone())
+        .unwrap_or_else(|| PathBuf::from("out").join(sanitize(&spec.name)))
 }
 
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
     if let Some(c) = &a.controller {
-        if !scenario_file::CONTROLLERS.contains(&c.as_str()) {
-            anyhow::bail!(
-                "--controller {c}: allowed: {}",
-                scenario_file::CONTROLLERS.join(", ")
-            );
-        }
-        spec.controller = c.clone();
+        let Some(c) = controller_name(c) else {
+            anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", "));
+        };
+        spec.controller = c.to_string();
         spec.on_current_a = a.on_current_a;
     }
-    let out = a.out.clone().unwrap_or_else(|| spec.out_dir.clone());
+    let out = out_dir(a, &spec);
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let (cfg, r) = run(&spec)?;
-    let m = r.metrics(&cfg, disturbance_time(&spec));
+    let (cfg, r) = scenario::run(&spec)?;
+    let m = r.metrics(&cfg, spec.t_dist_s);
 
     let trace = out.join("trace.csv");
     r.write_trace_csv(&trace)?;
     let time_png = out.join("time.png");
     plot_runs(&time_png, &spec.name, &[(spec.controller.as_str(), &r)])?;
     let margin_png = out.join("margin.png");
-    crate::report::plot_margin(
+    plot_margin(
         &margin_png,
         &spec.name,
-        &spec.params,
+        &spec.plant,
         &[(spec.controller.as_str(), &r)],
     )?;
 
@@ -178,7 +148,7 @@ mod tests {
             "t",
         )
         .unwrap();
-        let (cfg, r) = run(&spec).unwrap();
+        let (cfg, r) = scenario::run(&spec).unwrap();
         assert!((r.sim_s - 2.0).abs() < 1e-9);
         // The initial perturbation reached the plant: the first recorded yaw is the file's.
         let m = r.metrics(&cfg, None);

@@ -87,9 +87,9 @@ pub const COLORS: [RGBColor; 6] = [
 /// Facts about a written PNG, to check that a plot holds a picture.
 #[derive(Clone, Copy, Debug)]
 pub struct PngCheck {
-    /// File size [bytes].
+    /// File size, bytes.
     pub bytes: u64,
-    /// Width x height [px].
+    /// Width x height, px.
     pub size_px: (u32, u32),
     /// Number of distinct colours (counted up to 4096).
     pub colors: usize,

@@ -46,7 +46,7 @@
 //! dir = "out/ramp"
 //! trace_every = 5                 # record every n-th 1 ms period
 //!
-//! [[fault]]                       # any number; see `crate::faults` for what each does
+//! [[fault]]                       # any number; see `crate::model::faults` for what each does
 //! kind = "stuck"                  # stuck | noise | dropout | spike | nan | parity | error-flag |
 //!                                 # speed-lost | speed-implausible | frame-loss | coil-open | coil-short
 //! sensor = "left"                 # encoder faults only: left | right | both (default left)
@@ -61,55 +61,19 @@
 //! # ratio = 5.0                   coil-short: measured / commanded current (1 ..= 100)
 //! ```
 
-use crate::disturbance::{DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile};
-use crate::faults::{FaultMode, FaultSpec, Side, KINDS};
-use crate::paramfile;
+use crate::model::disturbance::{
+    DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
+};
+use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
+use crate::model::sensors::SensorConfig;
+use crate::sim::paramfile;
+use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
-use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
+use shimmy_core::params::{kmh_to_mps, Param};
 use std::collections::BTreeMap;
+use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-
-/// Controller names a scenario may use (`no-damper` = no damper force at all).
-pub const CONTROLLERS: [&str; 6] = [
-    "no-damper",
-    "passive-off",
-    "passive-on",
-    "smc",
-    "asmc",
-    "skyhook",
-];
-
-/// A validated scenario, ready to run.
-#[derive(Clone, Debug)]
-pub struct ScenarioSpec {
-    /// Display name.
-    pub name: String,
-    /// Simulated time [s].
-    pub duration_s: f64,
-    /// Seed of road and sensor noise.
-    pub seed: u64,
-    /// The true plant.
-    pub params: PlantParams,
-    /// Controller name, one of [`CONTROLLERS`].
-    pub controller: String,
-    /// Fixed current of `passive-on` [A].
-    pub on_current_a: f64,
-    /// Initial in-phase wheel yaw [rad].
-    pub initial_yaw_rad: f64,
-    /// Speed, driver and road inputs.
-    pub scenario: Scenario,
-    /// Encoder resolution [bits].
-    pub encoder_bits: u32,
-    /// Encoder noise [LSB rms].
-    pub encoder_noise_lsb: f64,
-    /// Output folder.
-    pub out_dir: PathBuf,
-    /// Trace decimation (every n-th period).
-    pub trace_every: usize,
-    /// Injected faults (`[[fault]]`).
-    pub faults: Vec<FaultSpec>,
-}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -302,14 +266,14 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
 
     let (controller, on_current_a) = match &f.controller {
         Some(c) => {
-            if !CONTROLLERS.contains(&c.kind.as_str()) {
+            let Some(kind) = controller_name(&c.kind) else {
                 bail!(
                     "field `controller.kind` = {:?}: allowed: {}",
                     c.kind,
                     CONTROLLERS.join(", ")
                 );
-            }
-            let on = match (c.kind.as_str(), c.on_current_a) {
+            };
+            let on = match (kind, c.on_current_a) {
                 ("passive-on", Some(i)) => in_range("controller.on_current_a", i, 0.0, 2.0, "A")?,
                 ("passive-on", None) => {
                     bail!("field `controller.on_current_a` is required for passive-on")
@@ -317,7 +281,7 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
                 (_, Some(_)) => bail!("field `controller.on_current_a` only applies to passive-on"),
                 (_, None) => 0.0,
             };
-            (c.kind.clone(), on)
+            (kind.to_string(), on)
         }
         None => ("asmc".to_string(), 0.0),
     };
@@ -443,28 +407,39 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         ),
         None => (None, 5),
     };
-    let out_dir = out_dir.unwrap_or_else(|| PathBuf::from("out").join(sanitize(&name)));
     let faults = f
         .fault
         .iter()
         .enumerate()
         .map(|(i, fs)| parse_fault(i, fs, duration_s))
         .collect::<Result<Vec<_>>>()?;
+    let sensors = SensorConfig {
+        encoder_bits,
+        encoder_noise_rad: encoder_noise_lsb * 2.0 * PI / f64::from(1u32 << encoder_bits.min(31)),
+        seed: f.seed,
+        ..SensorConfig::default()
+    };
+    // Settling is measured from the initial perturbation (t = 0), else from the first impulse.
+    let t_dist_s = if initial_yaw_rad != 0.0 {
+        Some(0.0)
+    } else {
+        scenario.impulses.first().map(|i| i.t0_s)
+    };
 
     Ok(ScenarioSpec {
         name,
-        duration_s,
-        seed: f.seed,
-        params,
+        description: String::new(),
+        plant: params,
         controller,
         on_current_a,
         initial_yaw_rad,
         scenario,
-        encoder_bits,
-        encoder_noise_lsb,
-        out_dir,
+        duration_s,
+        t_dist_s,
+        sensors,
         trace_every,
         faults,
+        out_dir,
     })
 }
 
@@ -652,18 +627,6 @@ fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
     }
 }
 
-fn sanitize(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -701,15 +664,16 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
     fn a_complete_file_parses_into_the_run() {
         let s = parse(GOOD, "x").unwrap();
         assert_eq!(s.name, "ramp");
-        assert_eq!(s.params.c_a, 72000.0);
-        assert_eq!(s.params.k_d, 5000.0, "hard set");
+        assert_eq!(s.plant.c_a, 72000.0);
+        assert_eq!(s.plant.k_d, 5000.0, "hard set");
         assert_eq!(s.controller, "passive-on");
         assert!((s.scenario.speed.at(15.0) - kmh_to_mps(70.0)).abs() < 1e-12);
         assert_eq!(s.scenario.impulses.len(), 1);
         assert!(s.scenario.noise.is_some() && s.scenario.imbalance.is_some());
         assert!(matches!(s.scenario.driver, DriverTorque::Slalom { .. }));
         assert!((s.initial_yaw_rad - 0.5f64.to_radians()).abs() < 1e-15);
-        assert_eq!(s.out_dir, PathBuf::from("out/ramp"));
+        assert_eq!(s.out_dir, None, "no `[output]`: the command decides");
+        assert_eq!(s.t_dist_s, Some(0.0), "from the initial yaw");
     }
 
     fn err(text: &str) -> String {

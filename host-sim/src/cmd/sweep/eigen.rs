@@ -4,131 +4,26 @@
 //! it, and CSV. Rows run in parallel (rayon) with a progress bar; the result does not depend on
 //! the number of threads (each grid point is computed independently, rows are written in order).
 
-use crate::plot_util;
-use crate::stability_cmd::damper_equivalent;
-use anyhow::{anyhow, bail, Context, Result};
-use clap::Args;
+use super::args::{axes, SweepArgs};
+use crate::model::damper_equiv::damper_equivalent;
+use crate::out::plot_util;
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{self, CrossingKind};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-
-/// Options of `shimmy-sim sweep`.
-#[derive(Args, Debug, Clone)]
-pub struct SweepArgs {
-    /// Base parameter set (name or TOML file).
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
-    /// Parameter varied on the vertical axis (field name, see `shimmy-sim params`).
-    #[arg(long, default_value = "k_d")]
-    pub param: String,
-    /// Smallest factor on the parameter's base value.
-    #[arg(long, default_value_t = 0.5)]
-    pub factor_min: f64,
-    /// Largest factor on the parameter's base value.
-    #[arg(long, default_value_t = 1.5)]
-    pub factor_max: f64,
-    /// Number of parameter values [default: 41; 9 with --controllers].
-    #[arg(long)]
-    pub factor_steps: Option<usize>,
-    /// Lowest speed [km/h].
-    #[arg(long, default_value_t = 2.0)]
-    pub v_min_kmh: f64,
-    /// Highest speed [km/h].
-    #[arg(long, default_value_t = 150.0)]
-    pub v_max_kmh: f64,
-    /// Number of speeds [default: 149; 25 with --controllers].
-    #[arg(long)]
-    pub v_steps: Option<usize>,
-    /// MR damper currents [A] (one map each, as an equivalent viscous damper); none = no damper.
-    #[arg(long, value_delimiter = ',')]
-    pub damper_currents: Vec<f64>,
-    /// Wheel-yaw amplitude of the damper's describing function [deg].
-    #[arg(long, default_value_t = 0.5)]
-    pub ref_amplitude_deg: f64,
-    /// Output folder.
-    #[arg(long, default_value = "out/sweep")]
-    pub out: PathBuf,
-    /// No progress bar (for scripts and tests).
-    #[arg(long)]
-    pub quiet: bool,
-    /// Time-domain sweep over this controller axis instead of the eigenvalue map (comma
-    /// separated: no-damper, off, on, smc, asmc, skyhook): one closed-loop run per grid point
-    /// and controller, map of the final wheel-yaw amplitude with the linear Hopf boundary.
-    #[arg(long, value_delimiter = ',')]
-    pub controllers: Vec<String>,
-    /// Time-domain sweep: fixed current of `on` (passive-on) [A].
-    #[arg(long, default_value_t = 1.0)]
-    pub on_current_a: f64,
-    /// Time-domain sweep: simulated time per run [s].
-    #[arg(long, default_value_t = 6.0)]
-    pub duration_s: f64,
-    /// Time-domain sweep: initial in-phase wheel-yaw kick [deg] (3 deg breaks through the
-    /// damper's friction at 0 A).
-    #[arg(long, default_value_t = 3.0)]
-    pub kick_deg: f64,
-    /// Time-domain sweep: seed of the sensor noise (same seed, same numbers).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-}
-
-/// The grid axes: speeds [km/h], parameter values and the parameter, validated
-/// (`default_steps` = (speeds, values) when not given).
-pub fn axes(
-    a: &SweepArgs,
-    base: &PlantParams,
-    default_steps: (usize, usize),
-) -> Result<(Vec<f64>, Vec<f64>, Param)> {
-    let Some(param) = Param::from_name(&a.param) else {
-        let names: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
-        bail!(
-            "--param {}: no such parameter, allowed: {}",
-            a.param,
-            names.join(", ")
-        );
-    };
-    let v_steps = a.v_steps.unwrap_or(default_steps.0);
-    let factor_steps = a.factor_steps.unwrap_or(default_steps.1);
-    let ok = a.factor_min.is_finite()
-        && a.factor_max.is_finite()
-        && a.factor_min > 0.0
-        && a.factor_max >= a.factor_min
-        && factor_steps >= 1
-        && a.v_min_kmh > 0.0
-        && a.v_max_kmh > a.v_min_kmh
-        && v_steps >= 2;
-    if !ok {
-        bail!(
-            "need 0 < factor-min <= factor-max, factor-steps >= 1, 0 < v-min < v-max, v-steps >= 2"
-        );
-    }
-    let speeds_kmh: Vec<f64> = (0..v_steps)
-        .map(|i| a.v_min_kmh + (a.v_max_kmh - a.v_min_kmh) * i as f64 / (v_steps - 1) as f64)
-        .collect();
-    let values: Vec<f64> = (0..factor_steps)
-        .map(|j| {
-            let f = if factor_steps == 1 {
-                a.factor_min
-            } else {
-                a.factor_min + (a.factor_max - a.factor_min) * j as f64 / (factor_steps - 1) as f64
-            };
-            base.get(param) * f
-        })
-        .collect();
-    Ok((speeds_kmh, values, param))
-}
+use std::path::Path;
 
 /// One parameter row of a map.
 #[derive(Debug, Clone)]
 pub struct SweepRow {
     /// Parameter value.
     pub value: f64,
-    /// Largest real part of the oscillatory eigenvalues at each speed [1/s].
+    /// Largest real part of the oscillatory eigenvalues at each speed, 1/s.
     pub max_re: Vec<f64>,
-    /// Hopf crossings in the speed range: (speed [km/h], onset?).
+    /// Hopf crossings in the speed range: (speed in km/h, onset?).
     pub crossings: Vec<(f64, bool)>,
 }
 
@@ -137,9 +32,9 @@ pub struct SweepRow {
 pub struct SweepMap {
     /// Label of the damper setting.
     pub damper: String,
-    /// Equivalent viscous damper coefficient [N s/m].
+    /// Equivalent viscous damper coefficient, N s/m.
     pub c_nspm: f64,
-    /// Speeds [km/h].
+    /// Speeds, km/h.
     pub speeds_kmh: Vec<f64>,
     /// Rows, by increasing parameter value.
     pub rows: Vec<SweepRow>,
@@ -147,13 +42,13 @@ pub struct SweepMap {
 
 /// Computes the maps.
 pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
-    let base = crate::paramfile::load(&a.params)?;
+    let base = crate::sim::paramfile::load(&a.params)?;
     let (speeds_kmh, values, param) = axes(a, &base, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
-    if a.damper_currents.is_empty() {
+    if a.damper_current_a.is_empty() {
         dampers.push(("no damper".into(), 0.0));
     }
-    for &i in &a.damper_currents {
+    for &i in &a.damper_current_a {
         let d = damper_equivalent(
             &base,
             i,
@@ -200,7 +95,7 @@ fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -
         .map(|&v| {
             stability::critical_mode_at(p, kmh_to_mps(v), c)
                 .map(|m| m.re)
-                .map_err(|e| anyhow!("eigenvalues at {v} km/h, {} = {value}: {e:?}", a.param))
+                .with_context(|| format!("eigenvalues at {v} km/h, {} = {value}", a.param))
         })
         .collect::<Result<Vec<f64>>>()?;
     let step = kmh_to_mps(speeds_kmh[1] - speeds_kmh[0]);
@@ -212,7 +107,7 @@ fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -
         step,
         1e-4,
     )
-    .map_err(|e| anyhow!("Hopf crossings, {} = {value}: {e:?}", a.param))?
+    .with_context(|| format!("Hopf crossings, {} = {value}", a.param))?
     .iter()
     .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
     .collect();
@@ -225,9 +120,6 @@ fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -
 
 /// The command: compute, write CSV + PNG per map, print the boundary table.
 pub fn command(a: &SweepArgs) -> Result<()> {
-    if !a.controllers.is_empty() {
-        return crate::sweep_td::command(a).map(|_| ());
-    }
     let (param, maps) = compute(a)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for (k, map) in maps.iter().enumerate() {
@@ -394,7 +286,7 @@ mod tests {
             v_min_kmh: 5.0,
             v_max_kmh: 120.0,
             v_steps: Some(47),
-            damper_currents: vec![],
+            damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
             out: out.to_path_buf(),
             quiet: true,

@@ -1,5 +1,5 @@
-//! `shimmy-sim stability` and `shimmy-sim sensitivity`: eigenvalue analysis of the linearised
-//! plant over speed, Hopf crossings, CSV and PNG reports, and a parameter sensitivity table.
+//! `shimmy-sim stability`: eigenvalue analysis of the linearised plant over speed (optionally
+//! with the MR damper as its equivalent viscous damper), Hopf crossings, CSV and PNG.
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -7,12 +7,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 use shimmy_core::eigen::ModeShape;
-use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_TOL_MPS};
 
-use crate::damper_equiv;
-use crate::paramfile;
+use crate::model::damper_equiv::damper_equivalent;
+use crate::sim::paramfile;
 
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
@@ -20,20 +19,20 @@ pub struct StabilityArgs {
     /// Named set (nominal, gentle, hard) or TOML parameter file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Constant MR-damper coil current [A]; the damper enters as its energy-equivalent viscous
+    /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
     /// coefficient (describing function). Without it there is no damper force.
-    #[arg(long)]
-    pub damper_current: Option<f64>,
-    /// Reference wheel-yaw amplitude for the describing function [deg].
+    #[arg(long, alias = "damper-current")]
+    pub damper_current_a: Option<f64>,
+    /// Reference wheel-yaw amplitude for the describing function, deg.
     #[arg(long, default_value_t = 0.5)]
     pub ref_amplitude_deg: f64,
-    /// Lowest speed [km/h].
+    /// Lowest speed, km/h.
     #[arg(long, default_value_t = 5.0)]
     pub v_min_kmh: f64,
-    /// Highest speed [km/h].
+    /// Highest speed, km/h.
     #[arg(long, default_value_t = 150.0)]
     pub v_max_kmh: f64,
-    /// Grid step for the sweep and for bracketing crossings [km/h].
+    /// Grid step for the sweep and for bracketing crossings, km/h.
     #[arg(long, default_value_t = 1.0)]
     pub step_kmh: f64,
     /// Output directory (CSV, PNG).
@@ -41,95 +40,25 @@ pub struct StabilityArgs {
     pub out: PathBuf,
 }
 
-/// Options of `shimmy-sim sensitivity`.
-#[derive(clap::Args, Debug, Clone)]
-pub struct SensitivityArgs {
-    /// Named set (nominal, gentle, hard) or TOML parameter file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
-    /// Relative change applied down and up [%].
-    #[arg(long, default_value_t = 20.0)]
-    pub percent: f64,
-    /// Output directory (CSV).
-    #[arg(long, default_value = "out/sensitivity")]
-    pub out: PathBuf,
-}
-
-/// The equivalent viscous damper coefficient for a coil current, with the frequency it was
-/// evaluated at.
-#[derive(Clone, Copy, Debug)]
-pub struct DamperEquivalent {
-    /// Coil current [A].
-    pub current_a: f64,
-    /// Mode frequency the describing function was evaluated at [Hz].
-    pub freq_hz: f64,
-    /// Stroke amplitude [m].
-    pub stroke_amp_m: f64,
-    /// Equivalent viscous coefficient [N s/m].
-    pub c_eq_nspm: f64,
-}
-
-/// Energy-equivalent viscous coefficient of the MR damper at `current_a`, evaluated at the
-/// frequency of the shimmy (in-phase wheel-yaw) mode at the speed where the damper-free growth
-/// rate of the critical mode is largest in [v_min, v_max]; the frequency is updated once with
-/// the damper in place (a two-pass fixed point: the mode frequency moves little with c).
-pub fn damper_equivalent(
-    p: &PlantParams,
-    current_a: f64,
-    ref_amp_deg: f64,
-    v_min_mps: f64,
-    v_max_mps: f64,
-) -> Result<DamperEquivalent> {
-    let sp = SpencerParams::steering();
-    let amp = damper_equiv::stroke_amplitude_m(p.l_t, ref_amp_deg.to_radians());
-    let n = 100;
-    let mut v_ref = v_min_mps;
-    let mut g_best = f64::NEG_INFINITY;
-    for i in 0..=n {
-        let v = v_min_mps + (v_max_mps - v_min_mps) * i as f64 / n as f64;
-        let m = stability::critical_mode_at(p, v, 0.0).map_err(|e| anyhow::anyhow!("{e:?}"))?;
-        if m.re > g_best {
-            g_best = m.re;
-            v_ref = v;
-        }
-    }
-    let mut freq = stability::mode_at(p, v_ref, 0.0, ModeSelect::Shimmy)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?
-        .freq_hz;
-    let mut c = damper_equiv::mr_equivalent_viscous(&sp, current_a, freq, amp);
-    for _ in 0..1 {
-        freq = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy)
-            .map_err(|e| anyhow::anyhow!("{e:?}"))?
-            .freq_hz;
-        c = damper_equiv::mr_equivalent_viscous(&sp, current_a, freq, amp);
-    }
-    Ok(DamperEquivalent {
-        current_a,
-        freq_hz: freq,
-        stroke_amp_m: amp,
-        c_eq_nspm: c,
-    })
-}
-
 fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<Vec<ModeSummary>> {
     let n = ((v_max - v_min) / step).round() as usize;
     (0..=n)
         .map(|i| {
             let v = kmh_to_mps(v_min + i as f64 * step);
-            stability::mode_summary(p, v, c).map_err(|e| anyhow::anyhow!("eigen at {v} m/s: {e:?}"))
+            stability::mode_summary(p, v, c).with_context(|| format!("eigen at {v} m/s"))
         })
         .collect()
 }
 
 /// Runs `shimmy-sim stability`.
-pub fn run_stability(args: &StabilityArgs) -> Result<()> {
+pub fn command(args: &StabilityArgs) -> Result<()> {
     anyhow::ensure!(
         args.v_min_kmh > 0.0 && args.v_max_kmh > args.v_min_kmh && args.step_kmh > 0.0,
         "need 0 < v-min < v-max and step > 0"
     );
     let p = paramfile::load(&args.params)?;
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
-    let (c, damper) = match args.damper_current {
+    let (c, damper) = match args.damper_current_a {
         None => (0.0, None),
         Some(i) => {
             let d = damper_equivalent(&p, i, args.ref_amplitude_deg, v_min, v_max)?;
@@ -161,7 +90,7 @@ pub fn run_stability(args: &StabilityArgs) -> Result<()> {
         kmh_to_mps(args.step_kmh),
         DEFAULT_TOL_MPS,
     )
-    .map_err(|e| anyhow::anyhow!("Hopf search: {e:?}"))?;
+    .context("Hopf search")?;
 
     println!();
     println!(
@@ -403,121 +332,5 @@ fn panel(
             ("sans-serif", 14),
         )))?;
     }
-    Ok(())
-}
-
-/// Parameters varied by the sensitivity study (those the linear model depends on; F_z, mu, C_s
-/// only shape the nonlinear tyre and l_t only the damper lever, so they have no effect without
-/// a damper).
-pub const SENSITIVITY_PARAMS: [Param; 15] = [
-    Param::CA,
-    Param::Sigma,
-    Param::E,
-    Param::TP,
-    Param::KD,
-    Param::CSw,
-    Param::CK,
-    Param::IP,
-    Param::IK,
-    Param::KTr,
-    Param::JSw,
-    Param::IS,
-    Param::HR,
-    Param::KPhi,
-    Param::IPhi,
-];
-
-/// Onset/offset speeds [km/h] and onset frequency [Hz] of a parameter set (None where absent),
-/// searching 1..250 km/h.
-pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f64>)> {
-    let xs = stability::hopf_crossings(
-        p,
-        0.0,
-        kmh_to_mps(1.0),
-        kmh_to_mps(250.0),
-        kmh_to_mps(1.0),
-        DEFAULT_TOL_MPS,
-    )
-    .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let on = xs.iter().find(|x| x.kind == stability::CrossingKind::Onset);
-    let off = xs
-        .iter()
-        .find(|x| x.kind == stability::CrossingKind::Offset);
-    Ok((
-        on.map(|x| mps_to_kmh(x.speed_mps)),
-        off.map(|x| mps_to_kmh(x.speed_mps)),
-        on.map(|x| x.freq_hz),
-    ))
-}
-
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map_or("-".to_string(), |x| format!("{x:.2}"))
-}
-
-/// Runs `shimmy-sim sensitivity`.
-pub fn run_sensitivity(args: &SensitivityArgs) -> Result<()> {
-    let p = paramfile::load(&args.params)?;
-    let (on0, off0, f0) = window_of(&p)?;
-    println!(
-        "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
-        args.params, args.percent
-    );
-    println!(
-        "base: onset {} km/h, offset {} km/h, onset frequency {} Hz",
-        fmt_opt(on0),
-        fmt_opt(off0),
-        fmt_opt(f0)
-    );
-    println!(
-        "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
-        "param", "on -", "off -", "f -", "on +", "off +", "f +", "d on/d%", "d off/d%"
-    );
-    fs::create_dir_all(&args.out)?;
-    let path = args.out.join("sensitivity.csv");
-    let mut f = fs::File::create(&path)?;
-    writeln!(
-        f,
-        "param,unit,base_value,factor,onset_kmh,offset_kmh,onset_freq_hz,base_onset_kmh,base_offset_kmh,base_onset_freq_hz"
-    )?;
-    let k = args.percent / 100.0;
-    for q in SENSITIVITY_PARAMS {
-        let mut res = Vec::new();
-        for factor in [1.0 - k, 1.0 + k] {
-            let w = window_of(&p.scaled(q, factor))?;
-            writeln!(
-                f,
-                "{},{},{},{},{},{},{},{},{},{}",
-                q.name(),
-                q.unit(),
-                p.get(q),
-                factor,
-                w.0.map_or(String::new(), |x| format!("{x:.6}")),
-                w.1.map_or(String::new(), |x| format!("{x:.6}")),
-                w.2.map_or(String::new(), |x| format!("{x:.6}")),
-                on0.map_or(String::new(), |x| format!("{x:.6}")),
-                off0.map_or(String::new(), |x| format!("{x:.6}")),
-                f0.map_or(String::new(), |x| format!("{x:.6}")),
-            )?;
-            res.push(w);
-        }
-        // Central-difference slope in km/h per % change.
-        let slope = |a: Option<f64>, b: Option<f64>| match (a, b) {
-            (Some(a), Some(b)) => format!("{:.3}", (b - a) / (2.0 * args.percent)),
-            _ => "-".into(),
-        };
-        println!(
-            "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
-            q.name(),
-            fmt_opt(res[0].0),
-            fmt_opt(res[0].1),
-            fmt_opt(res[0].2),
-            fmt_opt(res[1].0),
-            fmt_opt(res[1].1),
-            fmt_opt(res[1].2),
-            slope(res[0].0, res[1].0),
-            slope(res[0].1, res[1].1)
-        );
-    }
-    println!("wrote {}", path.display());
     Ok(())
 }

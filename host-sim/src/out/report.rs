@@ -2,19 +2,18 @@
 //! in one place for the no-argument demo and for `shimmy-sim report SCENARIO.toml...`.
 //!
 //! A [`Report`] is a title, an introduction and [`Section`]s (one scenario each) holding the
-//! closed-loop runs of one or more controllers. [`write`] produces in the output folder:
+//! closed-loop runs of one or more controllers. [`write()`] produces in the output folder:
 //! `report.md`, `metrics.csv` (every run, units in the header), per section `<name>-time.png`
 //! (wheel yaw, coil current, gain vs time), `<name>-margin.png` (the mode meter's damping
 //! estimate next to the true eigenvalue of the plant's shimmy mode at the same speed, when the
 //! meter ran) and one trace CSV per run.
 
-use crate::closed_loop::{LoopConfig, LoopResult, RunMetrics};
-use crate::compare::{plot_runs, sanitize};
-use crate::plot_util::{self, COLORS};
+use crate::out::file_name::sanitize;
+use crate::out::plots::{plot_margin, plot_runs};
+use crate::out::table::opt;
+use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use anyhow::{Context, Result};
-use plotters::prelude::*;
 use shimmy_core::params::PlantParams;
-use shimmy_core::stability::{self, ModeSelect};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -70,7 +69,7 @@ pub struct Report {
     pub sections: Vec<Section>,
 }
 
-/// What [`write`] produced.
+/// What [`write()`] produced.
 #[derive(Clone, Debug)]
 pub struct Written {
     /// `report.md`.
@@ -100,7 +99,7 @@ fn metric_cells(m: &RunMetrics) -> [String; 11] {
     [
         format!("{:.3}", m.peak_yaw_rad.to_degrees()),
         format!("{:.3}", m.rms_yaw_rad.to_degrees()),
-        m.settle_s.map_or("-".into(), |s| format!("{s:.2}")),
+        opt(m.settle_s, 2),
         format!("{:.2}", m.peak_sw_rad.to_degrees()),
         format!("{:.3}", m.rms_current_a),
         format!("{:.3}", m.peak_current_a),
@@ -151,76 +150,6 @@ fn write_metrics_csv(path: &Path, report: &Report) -> Result<()> {
         }
     }
     std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to the
-/// damping ratio of the plant's shimmy mode from A(V) at the true speed without damper (the
-/// margin the plant has on its own; the measured closed-loop damping lies above it when the
-/// damper works).
-pub fn plot_margin(
-    path: &Path,
-    title: &str,
-    plant: &PlantParams,
-    runs: &[(&str, &LoopResult)],
-) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let t_end = runs
-        .iter()
-        .filter_map(|(_, r)| r.meter.last().map(|m| m.t_s))
-        .fold(0.1f64, f64::max);
-    let (lo, hi) = (-0.15, 0.3);
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("{title}: damping ratio of the shimmy mode (meter: dots +- sigma; A(V) without damper: line)"),
-            ("sans-serif", 16),
-        )
-        .margin(8)
-        .x_label_area_size(35)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..t_end, lo..hi)?;
-    plot_util::mesh(&mut chart, "time [s]", "zeta [-]")?;
-    chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
-    if let Some((_, r)) = runs.first() {
-        let model: Vec<(f64, f64)> = r
-            .meter
-            .iter()
-            .step_by(10)
-            .filter_map(|row| {
-                stability::mode_at(plant, row.speed_mps.max(0.1), 0.0, ModeSelect::Shimmy)
-                    .ok()
-                    .map(|m| (row.t_s, m.zeta.clamp(lo, hi)))
-            })
-            .collect();
-        chart
-            .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))?
-            .label("A(V), no damper")
-            .legend(plot_util::line_marker(BLUE, 2));
-    }
-    for (i, (name, r)) in runs.iter().enumerate() {
-        let c = COLORS[(i + 1) % COLORS.len()];
-        let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
-        chart.draw_series(valid.iter().map(|m| {
-            PathElement::new(
-                [
-                    (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi)),
-                    (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)),
-                ],
-                c.mix(0.25),
-            )
-        }))?;
-        chart
-            .draw_series(
-                valid
-                    .iter()
-                    .map(|m| Circle::new((m.t_s, m.zeta_slow.clamp(lo, hi)), 1, c.filled())),
-            )?
-            .label(format!("mode meter (slow), {name}"))
-            .legend(plot_util::dot_marker(c));
-    }
-    plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-    root.present()?;
-    Ok(())
 }
 
 /// Writes the report into `out` (created if missing).

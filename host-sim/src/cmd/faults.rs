@@ -1,4 +1,4 @@
-//! `shimmy-sim faults`: the fault campaign. Every sensor/actuator fault of [`crate::faults`]
+//! `shimmy-sim faults`: the fault campaign. Every sensor/actuator fault of [`crate::model::faults`]
 //! (and a few combinations) is injected into the closed loop (nominal plant, ASMC under the
 //! core's `SafeController`) at speeds inside the nominal Hopf window (29.35-84.15 km/h) and
 //! outside it, with road noise and a yaw kick shortly after the fault that starts shimmy
@@ -8,10 +8,11 @@
 //! Runs are independent and go in parallel (rayon). Output: a table on stdout, `faults.csv` and
 //! `faults.md` under `--out` (default `out/faults/`).
 
-use crate::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
-use crate::faults::{FaultMode, FaultSpec, Side};
-use anyhow::{anyhow, Context, Result};
+use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
+use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::out::table::opt;
+use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
+use anyhow::{Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
@@ -23,7 +24,7 @@ use std::path::PathBuf;
 /// Peak wheel yaw after the fault below which shimmy counts as suppressed: 0.5 deg.
 pub const SUPPRESSED_BELOW_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
-/// Nominal Hopf window without damper [km/h] (`shimmy-sim stability`).
+/// Nominal Hopf window without damper, km/h (`shimmy-sim stability`).
 pub const WINDOW_KMH: (f64, f64) = (29.35, 84.15);
 
 /// One campaign case: a name and its faults (empty: the healthy reference).
@@ -167,17 +168,17 @@ pub fn standard_cases() -> Vec<Case> {
 pub struct Setup {
     /// The true plant.
     pub plant: PlantParams,
-    /// Fault injection time [s].
+    /// Fault injection time, s.
     pub fault_s: f64,
-    /// Yaw kick (half-sine torque on both wheels) time [s].
+    /// Yaw kick (half-sine torque on both wheels) time, s.
     pub kick_s: f64,
-    /// Kick peak torque [N m].
+    /// Kick peak torque, N m.
     pub kick_nm: f64,
-    /// Kick duration [s].
+    /// Kick duration, s.
     pub kick_duration_s: f64,
-    /// Road noise standard deviation [N m].
+    /// Road noise standard deviation, N m.
     pub noise_nm: f64,
-    /// Run length [s].
+    /// Run length, s.
     pub duration_s: f64,
     /// Seed (road and sensor noise).
     pub seed: u64,
@@ -207,13 +208,13 @@ pub struct CaseResult {
     pub case: String,
     /// Arm (controller) name.
     pub arm: String,
-    /// Speed [km/h].
+    /// Speed, km/h.
     pub speed_kmh: f64,
     /// Inside the no-damper Hopf window.
     pub in_window: bool,
     /// Faults injected.
     pub injected: bool,
-    /// Detection time after the injection [ms] (first detected fault or missed sample).
+    /// Detection time after the injection, ms (first detected fault or missed sample).
     pub detect_ms: Option<f64>,
     /// The detected fault kinds (names, `+`-joined).
     pub detected: String,
@@ -221,13 +222,13 @@ pub struct CaseResult {
     pub worst_mode: Mode,
     /// Mode at the end of the run.
     pub final_mode: Mode,
-    /// Coil command at the end [A].
+    /// Coil command at the end, A.
     pub final_cmd_a: f64,
-    /// Mean true coil current over the last 0.5 s [A].
+    /// Mean true coil current over the last 0.5 s, A.
     pub final_coil_a: f64,
-    /// Peak |wheel yaw| after the fault [rad].
+    /// Peak |wheel yaw| after the fault, rad.
     pub peak_after_rad: f64,
-    /// Shimmy-band amplitude over the last 0.5 s [rad].
+    /// Shimmy-band amplitude over the last 0.5 s, rad.
     pub amp_end_rad: f64,
     /// Commands that broke the output contract (NaN or outside [0, i_max]).
     pub invalid_commands: u64,
@@ -286,7 +287,7 @@ pub fn run_case(
     let (mut cfg, mut sc) = build(setup, arm, &c.faults, speed_kmh);
     cfg.supervised = supervised;
     let r = closed_loop::run(&cfg, &mut sc, None)
-        .map_err(|e| anyhow!("{} at {speed_kmh} km/h: integration failed: {e:?}", c.name))?;
+        .with_context(|| format!("{} at {speed_kmh} km/h: integration failed", c.name))?;
     let k_f = ((setup.fault_s / cfg.dt_s).round() as usize).min(r.series.psi_l_rad.len());
     let peak_after_rad = r.series.psi_l_rad[k_f..]
         .iter()
@@ -355,19 +356,20 @@ pub struct FaultsArgs {
     /// Output directory (faults.csv, faults.md).
     #[arg(long, default_value = "out/faults")]
     pub out: PathBuf,
-    /// Speeds [km/h] (comma separated): two inside the 29.35-84.15 km/h window, two outside.
-    #[arg(long, value_delimiter = ',', default_value = "20,45,70,100")]
-    pub speeds: Vec<f64>,
+    /// Speeds, km/h (comma separated): two inside the 29.35-84.15 km/h window, two outside.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "20,45,70,100",
+        alias = "speeds"
+    )]
+    pub speeds_kmh: Vec<f64>,
     /// Only cases whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Run length [s] (fault at 1.0 s, kick at 1.1 s).
-    #[arg(long, default_value_t = 5.0)]
-    pub duration: f64,
-}
-
-fn fmt_opt(x: Option<f64>) -> String {
-    x.map_or("-".into(), |v| format!("{v:.0}"))
+    /// Run length, s (fault at 1.0 s, kick at 1.1 s).
+    #[arg(long, default_value_t = 5.0, alias = "duration")]
+    pub duration_s: f64,
 }
 
 fn suppressed_cell(r: &CaseResult) -> &'static str {
@@ -398,7 +400,7 @@ pub fn markdown(rows: &[CaseResult]) -> String {
             r.arm,
             r.speed_kmh,
             if r.in_window { "in" } else { "out" },
-            fmt_opt(r.detect_ms),
+            opt(r.detect_ms, 0),
             if r.detected.is_empty() { "-" } else { &r.detected },
             r.worst_mode.name(),
             r.final_mode.name(),
@@ -482,7 +484,7 @@ pub fn check(rows: &[CaseResult]) -> Vec<String> {
 /// The command.
 pub fn command(a: &FaultsArgs) -> Result<()> {
     let setup = Setup {
-        duration_s: a.duration,
+        duration_s: a.duration_s,
         ..Setup::default()
     };
     let cases: Vec<Case> = standard_cases()
@@ -490,7 +492,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
         .filter(|c| a.only.as_deref().is_none_or(|o| c.name.contains(o)))
         .collect();
     let wall = std::time::Instant::now();
-    let rows = campaign(&setup, &cases, &a.speeds)?;
+    let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
     println!(
         "fault campaign: ASMC under SafeController, nominal plant, fault at {} s, kick {} N m x {} ms at {} s, road noise {} N m; {} runs in {:.1} s wall",

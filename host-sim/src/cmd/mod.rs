@@ -1,0 +1,17 @@
+//! The command layer: one module per `shimmy-sim` subcommand (its clap arguments, its own
+//! tables and its `command` entry point).
+//!
+//! Rule: a command uses `out`, `sim` and `model`, never another command.
+
+pub mod bifurcation;
+pub mod compare;
+pub mod demo;
+pub mod faults;
+pub mod margin;
+pub mod params;
+pub mod reference_bench;
+pub mod report;
+pub mod run;
+pub mod sensitivity;
+pub mod stability;
+pub mod sweep;

@@ -1,0 +1,12 @@
+//! The model layer: the simulated physical system and its sensors -- the nonlinear plant and
+//! its integrators, the road/driver disturbances, the sensor models, injected faults and the MR
+//! damper's equivalent viscous coefficient.
+//!
+//! Rule: uses only `shimmy-core` and external crates, never `sim`, `out` or `cmd`.
+
+pub mod damper_equiv;
+pub mod disturbance;
+pub mod faults;
+pub mod integrator;
+pub mod plant;
+pub mod sensors;

@@ -1,0 +1,143 @@
+//! The run plots several commands share: time histories of closed-loop runs ([`plot_runs`]) and
+//! the mode meter's damping estimate against the plant's eigenvalue ([`plot_margin`]).
+
+use crate::out::plot_util::{self, COLORS};
+use crate::sim::closed_loop::{LoopResult, TraceRow};
+use anyhow::Result;
+use plotters::prelude::*;
+use shimmy_core::params::PlantParams;
+use shimmy_core::stability::{self, ModeSelect};
+use std::path::Path;
+
+/// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
+pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
+    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (top, rest) = root.split_vertically(40);
+    top.draw(&Text::new(
+        title.to_string(),
+        (15, 10),
+        ("sans-serif", 20).into_font(),
+    ))?;
+    let panels = rest.split_evenly((3, 1));
+    let t_max = runs
+        .iter()
+        .filter_map(|(_, r)| r.trace.last().map(|x| x.t_s))
+        .fold(0.1f64, f64::max);
+    type Get = fn(&TraceRow) -> f64;
+    let specs: [(&str, Get); 3] = [
+        ("psi_L [deg]", |r| r.psi_l_rad.to_degrees()),
+        ("coil current [A]", |r| r.coil_a),
+        ("adaptive / switching gain [rad/s^2]", |r| r.gain_radps2),
+    ];
+    for (pi, (area, (label, get))) in panels.iter().zip(specs).enumerate() {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (_, r) in runs {
+            for row in &r.trace {
+                let y = get(row);
+                if y.is_finite() {
+                    lo = lo.min(y);
+                    hi = hi.max(y);
+                }
+            }
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            (lo, hi) = (0.0, 1.0);
+        } else if hi - lo < 1e-9 {
+            (lo, hi) = (lo - 0.5, lo + 0.5);
+        }
+        let pad = 0.05 * (hi - lo);
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .x_label_area_size(35)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
+        plot_util::mesh(&mut chart, "t [s]", label)?;
+        for (i, (name, r)) in runs.iter().enumerate() {
+            let c = plot_util::COLORS[i % plot_util::COLORS.len()];
+            let s = chart.draw_series(LineSeries::new(
+                r.trace.iter().map(|row| (row.t_s, get(row))),
+                c.stroke_width(1),
+            ))?;
+            if pi == 0 {
+                s.label(name.to_string())
+                    .legend(plot_util::line_marker(c, 2));
+            }
+        }
+        if pi == 0 {
+            plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        }
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to the
+/// damping ratio of the plant's shimmy mode from A(V) at the true speed without damper (the
+/// margin the plant has on its own; the measured closed-loop damping lies above it when the
+/// damper works).
+pub fn plot_margin(
+    path: &Path,
+    title: &str,
+    plant: &PlantParams,
+    runs: &[(&str, &LoopResult)],
+) -> Result<()> {
+    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let t_end = runs
+        .iter()
+        .filter_map(|(_, r)| r.meter.last().map(|m| m.t_s))
+        .fold(0.1f64, f64::max);
+    let (lo, hi) = (-0.15, 0.3);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("{title}: damping ratio of the shimmy mode (meter: dots +- sigma; A(V) without damper: line)"),
+            ("sans-serif", 16),
+        )
+        .margin(8)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..t_end, lo..hi)?;
+    plot_util::mesh(&mut chart, "time [s]", "zeta [-]")?;
+    chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
+    if let Some((_, r)) = runs.first() {
+        let model: Vec<(f64, f64)> = r
+            .meter
+            .iter()
+            .step_by(10)
+            .filter_map(|row| {
+                stability::mode_at(plant, row.speed_mps.max(0.1), 0.0, ModeSelect::Shimmy)
+                    .ok()
+                    .map(|m| (row.t_s, m.zeta.clamp(lo, hi)))
+            })
+            .collect();
+        chart
+            .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))?
+            .label("A(V), no damper")
+            .legend(plot_util::line_marker(BLUE, 2));
+    }
+    for (i, (name, r)) in runs.iter().enumerate() {
+        let c = COLORS[(i + 1) % COLORS.len()];
+        let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
+        chart.draw_series(valid.iter().map(|m| {
+            PathElement::new(
+                [
+                    (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi)),
+                    (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)),
+                ],
+                c.mix(0.25),
+            )
+        }))?;
+        chart
+            .draw_series(
+                valid
+                    .iter()
+                    .map(|m| Circle::new((m.t_s, m.zeta_slow.clamp(lo, hi)), 1, c.filled())),
+            )?
+            .label(format!("mode meter (slow), {name}"))
+            .legend(plot_util::dot_marker(c));
+    }
+    plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+    root.present()?;
+    Ok(())
+}

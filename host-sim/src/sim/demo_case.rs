@@ -1,0 +1,86 @@
+//! The demo's case (`shimmy-sim` with no arguments): the nominal plant on a speed ramp 20 -> 120
+//! km/h through the Hopf window with road noise, wheel imbalance and a pothole, and its two arms
+//! (damper off, ASMC). Shared by the demo command, the reference benchmark and the golden test.
+
+use crate::model::disturbance::{Scenario, SpeedProfile};
+use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
+use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
+use anyhow::{Context, Result};
+use shimmy_core::control::ControllerKind;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
+use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
+
+/// The demo's case: the nominal plant, the ramp scenario and the facts the report states.
+#[derive(Clone, Debug)]
+pub struct DemoCase {
+    /// The true (and nominal) plant.
+    pub plant: PlantParams,
+    /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
+    pub scenario: Scenario,
+    /// Hopf crossings of the plant without damper (1-50 m/s).
+    pub crossings: Vec<HopfCrossing>,
+    /// The no-damper Hopf window in km/h, when there is one.
+    pub window_kmh: Option<(f64, f64)>,
+    /// Speed of fastest shimmy growth, m/s (where the pothole hits).
+    pub v_fastest_mps: f64,
+    /// Time of the pothole, s.
+    pub t_pothole_s: f64,
+}
+
+/// The demo's two arms with their report labels: damper off (0 A) and ASMC.
+pub const ARMS: [(&str, Arm); 2] = [
+    ("damper off (0 A)", Arm::Mr(ControllerKind::PassiveOff)),
+    ("ASMC", Arm::Mr(ControllerKind::Asmc)),
+];
+
+/// Builds the demo's case for a ramp of `ramp_s` seconds (all numbers computed).
+pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
+    let p = ParamSet::Nominal.params();
+    let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
+        .context("hopf_crossings")?
+        .iter()
+        .copied()
+        .collect();
+    let onset = crossings.iter().find(|c| c.kind == CrossingKind::Onset);
+    let offset = crossings.iter().find(|c| c.kind != CrossingKind::Onset);
+    let window_kmh = match (onset, offset) {
+        (Some(a), Some(b)) => Some((mps_to_kmh(a.speed_mps), mps_to_kmh(b.speed_mps))),
+        _ => None,
+    };
+    let v_fg = fastest_growth_speed(&p);
+    let (v0, v1) = (kmh_to_mps(20.0), kmh_to_mps(120.0));
+    let mut sc = Scenario::new(SpeedProfile::Ramp {
+        v0_mps: v0,
+        v1_mps: v1,
+        t0_s: 0.0,
+        t1_s: ramp_s,
+    });
+    let (n, im) = road(7, &p);
+    sc.noise = Some(n);
+    sc.imbalance = Some(im);
+    let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
+    sc.impulses.push(pothole(t_hit, POTHOLE_NM));
+    Ok(DemoCase {
+        plant: p,
+        scenario: sc,
+        crossings,
+        window_kmh,
+        v_fastest_mps: v_fg,
+        t_pothole_s: t_hit,
+    })
+}
+
+/// Runs one arm of the demo (the golden regression trace and the benchmark use the ASMC arm).
+pub fn run_arm(
+    case: &DemoCase,
+    arm: Arm,
+    ramp_s: f64,
+    record_every: usize,
+) -> Result<(LoopConfig, LoopResult)> {
+    let mut cfg = LoopConfig::new(case.plant, arm, ramp_s);
+    cfg.record_every = record_every;
+    let mut s = case.scenario.clone();
+    let r = closed_loop::run(&cfg, &mut s, None)
+        .with_context(|| format!("{}: integration failed", arm.name()))?;
+    Ok((cfg, r))
+}

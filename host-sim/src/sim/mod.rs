@@ -1,0 +1,13 @@
+//! The simulation layer: runs the model -- the closed loop with the core's controller, open-loop
+//! plant runs, parameter and scenario files (the one [`scenario::ScenarioSpec`], turned into a
+//! loop configuration and run), the standard scenario set and the demo case.
+//!
+//! Rule: uses only `model` (and `shimmy-core`), never `out` or `cmd`.
+
+pub mod closed_loop;
+pub mod demo_case;
+pub mod open_loop;
+pub mod paramfile;
+pub mod scenario;
+pub mod scenario_file;
+pub mod standard;
