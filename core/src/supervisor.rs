@@ -76,19 +76,8 @@
 //! Time is an input: a free-running microsecond counter (`t_us`, wrapping u32; differences are
 //! taken with wrapping arithmetic, so the 71.6 min wrap is harmless).
 
-use crate::control::actuator::CurrentLimiter;
+use crate::control::actuator::{CurrentLimiter, FAILSAFE_CURRENT_A};
 use crate::control::{ControlInput, ControlOutput, ControlParams, Controller, ControllerKind};
-
-/// Fail-safe coil current [A] = the coil rating. Computed by `tests/tests/failsafe_current.rs`
-/// (describing function of the Spencer damper + `hopf_crossings` over 0.1 m/s-150 km/h):
-/// the nominal family (nominal, +-20 % C_a/sigma/e) needs c_eq >= 1.2 x 1367 N s/m, i.e.
-/// I_min = 1.13 A at the 0.5 deg reference amplitude (asserted: constant >= 1.25 I_min) and
-/// 1.73 A at 1 deg; at 2-3 deg and for the hard family (c_eq >= 1.2 x 3506 N s/m) no current
-/// within the rating meets the requirement, so the constant is the rating (c_eq grows with the
-/// current at every amplitude; asserted). Time domain (nonlinear simulator, 5-130 km/h): the
-/// nominal set recovers from 3 deg and the hard set from 0.5 deg at this current, with 0 A both
-/// show shimmy. Known limit: the hard set from 3 deg at 20 km/h grows to ~12 deg even at 2 A.
-pub const FAILSAFE_CURRENT_A: f32 = 2.0;
 
 /// Below this (trusted) speed 0 A is safe: 80 % of the lowest Hopf onset of every analysed
 /// variant without damper (checked by `tests/tests/failsafe_current.rs`) [m/s].

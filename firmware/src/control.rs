@@ -194,7 +194,8 @@ mod tests {
     use super::*;
     use crate::drivers::wheel_speed::SpeedReading;
     use crate::monitoring::safe_controller;
-    use shimmy_core::supervisor::{FaultKind, FAILSAFE_CURRENT_A};
+    use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
+    use shimmy_core::supervisor::FaultKind;
 
     fn good(k: u32) -> SampleSet {
         let y = 0.01 * libm::sinf(k as f32 * 0.05);

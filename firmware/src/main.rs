@@ -20,7 +20,8 @@ mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use shimmy_core::estimator::ModelMargin;
     use shimmy_core::params::PlantParams;
-    use shimmy_core::supervisor::{MarginStatus, SafeController, FAILSAFE_CURRENT_A};
+    use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
+    use shimmy_core::supervisor::{MarginStatus, SafeController};
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{supervised_step, Health};
     use shimmy_firmware::monitoring::{

@@ -50,7 +50,7 @@ pub const MODEL_REFRESH_S: f32 = 0.1;
 
 /// The core's supervised controller as the firmware runs it: the adaptive sliding-mode
 /// controller with the default (nominal-plant) parameters, the default supervisor thresholds
-/// (fail-safe current `shimmy_core::supervisor::FAILSAFE_CURRENT_A`).
+/// (fail-safe current `shimmy_core::control::actuator::FAILSAFE_CURRENT_A`).
 pub fn safe_controller() -> SafeController {
     SafeController::new(
         ControllerKind::Asmc,

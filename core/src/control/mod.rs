@@ -131,8 +131,8 @@ impl ControlParams {
 
 impl Default for ControlParams {
     /// Defaults for the reference plant's nominal parameter set and the fitted damper.
-    /// fallback 1 A: the passive-on current that keeps the nominal plant stable (to be confirmed
-    /// by the simulator's comparison); min speed 2 m/s; psi limit 0.8 rad (beyond full lock).
+    /// fallback: the fail-safe current [`actuator::FAILSAFE_CURRENT_A`] (a passive-on current
+    /// that keeps the analysed plants stable); min speed 2 m/s; psi limit 0.8 rad (beyond full lock).
     fn default() -> Self {
         ControlParams {
             conditioning: ConditioningParams::default(),
@@ -142,8 +142,8 @@ impl Default for ControlParams {
             asmc: AsmcParams::default(),
             skyhook_ns_per_m: 1000.0,
             limits: CurrentLimits::default(),
-            // the supervisor's fail-safe current (one place: chosen from the stability analysis)
-            fallback_current_a: crate::supervisor::FAILSAFE_CURRENT_A,
+            // the fail-safe current (one place, with the coil limits: chosen from the stability analysis)
+            fallback_current_a: actuator::FAILSAFE_CURRENT_A,
             min_speed_mps: 2.0,
             psi_limit_rad: 0.8,
         }

@@ -2,6 +2,7 @@
 //! counterpart raises nothing), hysteresis, latches, and property tests over arbitrary input.
 
 use super::*;
+use crate::control::actuator::FAILSAFE_CURRENT_A;
 use crate::control::{ControlParams, ControllerKind};
 use proptest::prelude::*;
 
