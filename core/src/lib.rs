@@ -28,7 +28,6 @@ pub mod eigen;
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 pub mod estimator;
-pub mod monitor;
 pub mod mr_damper;
 pub mod params;
 pub mod plant;

@@ -485,7 +485,7 @@ pub const EVENT_CAPACITY: usize = 32;
 pub enum MarginStatus {
     /// No margin estimator in this build / not checked.
     NotUsed,
-    /// The latest [`crate::estimator::MarginReport`] is valid.
+    /// The latest [`crate::estimator::fusion::MarginReport`] is valid.
     Valid,
     /// The latest report is invalid (frozen, warming up, no mode in band).
     Invalid,
@@ -1055,11 +1055,11 @@ impl SafeController {
     /// The validated sample to feed the margin estimator, if the wheel yaw is trusted.
     pub fn estimator_sample(
         out: &SafeOutput,
-        wheel: crate::estimator::WheelOrder,
-    ) -> Option<crate::estimator::Sample> {
+        wheel: crate::estimator::meter::mode_meter::WheelOrder,
+    ) -> Option<crate::estimator::meter::mode_meter::Sample> {
         out.validated
             .angles_rad
-            .map(|(l, r)| crate::estimator::Sample {
+            .map(|(l, r)| crate::estimator::meter::mode_meter::Sample {
                 psi_l_rad: l,
                 psi_r_rad: r,
                 wheel,

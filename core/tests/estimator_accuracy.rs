@@ -15,7 +15,7 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::EstimatorConfig;
+use shimmy_core::estimator::meter::mode_meter::EstimatorConfig;
 
 struct Case {
     modes: Vec<ModeSpec>,
@@ -225,7 +225,7 @@ fn two_mode_equal_participation_is_a_known_limitation() {
 /// discretised system at 100 Hz (Yule-Walker), independent of the RLS: returns the damping of
 /// the pole closest in frequency to `f_target` in the band.
 fn yule_walker_zeta(modes: &[ModeSpec], ord: usize, f_target: f64) -> f64 {
-    use shimmy_core::estimator::roots::{aberth, mode_of_root, C64};
+    use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
     let tr = Truth::new(modes, 0.01);
     let qd = tr.l * tr.l.transpose();
     // stationary covariance by doubling: S = sum_k Ad^k Qd Ad'^k

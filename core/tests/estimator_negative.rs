@@ -2,8 +2,9 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::roots::{aberth, mode_of_root, C64};
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, Real, WheelOrder};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
+use shimmy_core::estimator::meter::real::Real;
+use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
 
 /// Slow-instance estimates (every 10 s after 30 s) over `runs` runs; the wheel reference is
 /// replaced by the speed + radius form when `speed_radius` is given.

@@ -24,8 +24,9 @@ use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::eigen::Precision;
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
-use shimmy_core::estimator::{ConfigError, PipelineParams, Sample, WheelOrder};
-use shimmy_core::monitor::Level;
+use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
+use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::estimator::monitor::Level;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::{MarginStatus, SafeController, SafeOutput, SupervisorParams};
 
@@ -142,7 +143,7 @@ impl DataMargin {
     pub fn push(
         &mut self,
         s: &MeterSample,
-        model: Option<&shimmy_core::estimator::ModelMargin>,
+        model: Option<&shimmy_core::estimator::model_margin::ModelMargin>,
     ) -> Option<(MarginUpdate, bool)> {
         let speed_ok = s.speed_mps.is_finite();
         if speed_ok {

@@ -8,7 +8,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, WheelOrder};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
 use shimmy_core::supervisor::{
     EncoderReading, MarginStatus, RawFrame, SafeController, SupervisorParams,
 };

@@ -509,7 +509,7 @@ proptest! {
     fn rls_covariance_stays_finite_and_symmetric(
         samples in proptest::collection::vec((any_f32(), any_f32(), any_f32(), any_f32()), 1..2000),
     ) {
-        use crate::estimator::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
+        use crate::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
         let cfg = EstimatorConfig::default();
         let mut est = MarginEstimator::<f32>::new(cfg).expect("default config");
         for (i, (l, r, v, c)) in samples.into_iter().enumerate() {

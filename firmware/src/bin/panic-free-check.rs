@@ -17,9 +17,8 @@ mod check {
     use cortex_m_rt::entry;
     // The device crate supplies the interrupt vector table the runtime's linker script expects.
     use shimmy_core::control::{ControlParams, ControllerKind};
-    use shimmy_core::estimator::{
-        EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, WheelOrder,
-    };
+    use shimmy_core::estimator::fusion::{Fusion, FusionInput, FusionParams};
+    use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
     use shimmy_core::supervisor::{
         EncoderReading, MarginStatus, RawFrame, SafeController, SupervisorParams,
     };
