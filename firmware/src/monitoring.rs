@@ -22,13 +22,15 @@
 
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::eigen::Precision;
-use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
-use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
-use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::params::PlantParams;
-use shimmy_core::supervisor::{MarginStatus, SafeController, SafeOutput, SupervisorParams};
+use shimmy_core::supervisor::frame::MarginStatus;
+use shimmy_core::supervisor::params::SupervisorParams;
+use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
 /// Control period [s].
 pub const DT_S: f32 = 1e-3;

@@ -25,11 +25,11 @@
 //! The zero-current speed `ZERO_CURRENT_SAFE_BELOW_MPS` is checked the same way: below it every
 //! variant is stable with no damper at all.
 
+use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{critical_mode_at, hopf_crossings, V_SEARCH_MIN_MPS};
-use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
-use shimmy_core::supervisor::ZERO_CURRENT_SAFE_BELOW_MPS;
+use shimmy_core::supervisor::params::ZERO_CURRENT_SAFE_BELOW_MPS;
 use shimmy_sim::bifurcation::{run_speed, DamperSetting};
 use shimmy_sim::damper_equiv::mr_equivalent_viscous;
 

@@ -10,8 +10,8 @@
 //! pipeline. The 10-minute drives take ~5-10 s each in the debug profile (the same runs are
 //! available as `shimmy-sim margin --constant-kmh 15 --duration-s 600`).
 use shimmy_core::estimator::fusion::DataMarginUse;
-use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::params::ParamSet;
 use shimmy_sim::margin_cmd::{run, MarginScenario};
 

@@ -1,9 +1,14 @@
 //! Supervisor and SafeController tests: one scenario per check (each also shows the healthy
 //! counterpart raises nothing), hysteresis, latches, and property tests over arbitrary input.
 
-use super::*;
+use super::checks::*;
+use super::faults::*;
+use super::frame::*;
+use super::params::*;
+use super::policy::*;
+use super::safe_controller::*;
 use crate::control::actuator::FAILSAFE_CURRENT_A;
-use crate::control::{ControlParams, ControllerKind};
+use crate::control::{ControlInput, ControlParams, Controller, ControllerKind};
 use proptest::prelude::*;
 
 const I_MAX: f32 = 2.0;
