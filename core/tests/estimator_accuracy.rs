@@ -1,7 +1,7 @@
 //! Monte Carlo accuracy of the mode meter on synthetic ambient data from EXACTLY discretised
 //! continuous 1- and 2-mode systems (Van Loan / matrix exponential), measured with white noise
 //! at 10-40 dB SNR, against the accuracy bound sigma_b = sqrt(zeta / (w_n T_eff)),
-//! T_eff = 2 / ((1 - lambda) f_s) (see /work/shared/margin-estimation.md).
+//! T_eff = 2 / ((1 - lambda) f_s) (see `docs/margin-estimator.md`).
 //!
 //! Reading of the requirement: |bias| <= 0.25 sigma_b and sample standard deviation
 //! <= 1.5 sigma_b, for the margin (slow, lambda_slow = 0.998, T_eff = 10 s) instance of the f32

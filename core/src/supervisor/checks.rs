@@ -51,21 +51,21 @@ use super::policy::{decide, Mode, SupervisorVerdict};
 pub enum SupervisorEvent {
     /// A fault became active.
     Raised {
-        /// Time stamp [us].
+        /// Time stamp, us.
         t_us: u32,
         /// Which.
         kind: FaultKind,
     },
     /// A fault left the active set (after the recovery time).
     Cleared {
-        /// Time stamp [us].
+        /// Time stamp, us.
         t_us: u32,
         /// Which.
         kind: FaultKind,
     },
     /// The mode changed.
     ModeChange {
-        /// Time stamp [us].
+        /// Time stamp, us.
         t_us: u32,
         /// Previous mode.
         from: Mode,
@@ -485,15 +485,15 @@ impl Supervisor {
 /// Inputs after validation.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Validated {
-    /// Time [s] (wraps with the us counter; for logs).
+    /// Time, s (wraps with the us counter; for logs).
     pub t_s: f32,
-    /// Time since the previous frame [s] (the nominal period after a timing fault).
+    /// Time since the previous frame, s (the nominal period after a timing fault).
     pub dt_s: f32,
-    /// Wheel yaw (left, right) [rad] to control on: both encoders, or the healthy one twice;
+    /// Wheel yaw (left, right) in rad to control on: both encoders, or the healthy one twice;
     /// `None` in FailSafe.
     pub angles_rad: Option<(f32, f32)>,
-    /// Trusted speed [m/s].
+    /// Trusted speed, m/s.
     pub speed_mps: Option<f32>,
-    /// Trusted coil current [A].
+    /// Trusted coil current, A.
     pub coil_current_a: Option<f32>,
 }

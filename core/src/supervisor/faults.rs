@@ -109,7 +109,7 @@ impl FaultKind {
         1 << (self as u8)
     }
 
-    /// Latched until [`Supervisor::clear_latched`].
+    /// Latched until [`Supervisor::clear_latched`](super::checks::Supervisor::clear_latched).
     pub const fn latched(self) -> bool {
         matches!(self, FaultKind::CoilOpen | FaultKind::CoilShort)
     }
@@ -176,9 +176,9 @@ pub struct FaultRecord {
     pub frames: u32,
     /// Times the fault became active.
     pub activations: u32,
-    /// Time stamp of the first detection [us].
+    /// Time stamp of the first detection, us.
     pub first_t_us: Option<u32>,
-    /// Time stamp of the last detection [us].
+    /// Time stamp of the last detection, us.
     pub last_t_us: Option<u32>,
     /// Currently active.
     pub active: bool,

@@ -4,13 +4,13 @@
 //! Time is an input: a free-running microsecond counter (`t_us`, wrapping u32; differences are
 //! taken with wrapping arithmetic, so the 71.6 min wrap is harmless).
 
-/// Nominal sample period [us].
+/// Nominal sample period, us.
 pub const NOMINAL_PERIOD_US: u32 = 1000;
 
 /// One wheel-yaw encoder reading.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EncoderReading {
-    /// Wheel yaw about the kingpin [rad] (already converted from counts).
+    /// Wheel yaw about the kingpin, rad (already converted from counts).
     pub angle_rad: f32,
     /// The bus transaction completed (SPI/SSI frame received).
     pub read_ok: bool,
@@ -35,17 +35,17 @@ impl EncoderReading {
 /// One raw sensor frame, as delivered every 1 ms.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RawFrame {
-    /// Free-running time stamp [us] (wraps).
+    /// Free-running time stamp, us (wraps).
     pub t_us: u32,
     /// Left wheel-yaw encoder.
     pub left: EncoderReading,
     /// Right wheel-yaw encoder.
     pub right: EncoderReading,
-    /// Vehicle speed [m/s].
+    /// Vehicle speed, m/s.
     pub speed_mps: f32,
     /// The speed source marks its value valid (e.g. CAN signal qualifier).
     pub speed_valid: bool,
-    /// Measured coil current [A], if the board measures it.
+    /// Measured coil current in A, if the board measures it.
     pub coil_current_a: Option<f32>,
 }
 

@@ -22,6 +22,10 @@
 //!   for `recovery_s`. Coil open/short are latched until [`Supervisor::clear_latched`] (a burnt
 //!   coil does not heal; retrying into a short is harmful). After FailSafe the controller is
 //!   reset (its filters restart from the next sample).
+//!
+//! [`FAILSAFE_CURRENT_A`]: crate::control::actuator::FAILSAFE_CURRENT_A
+//! [`ZERO_CURRENT_SAFE_BELOW_MPS`]: super::params::ZERO_CURRENT_SAFE_BELOW_MPS
+//! [`Supervisor::clear_latched`]: super::checks::Supervisor::clear_latched
 
 use super::faults::{FaultKind, FaultSet};
 use super::params::SupervisorParams;
@@ -54,7 +58,7 @@ impl Mode {
 pub struct SupervisorVerdict {
     /// Mode.
     pub mode: Mode,
-    /// FailSafe: the current to command [A]; Degraded: a floor under the controller's command
+    /// FailSafe: the current to command, A; Degraded: a floor under the controller's command
     /// (if any); Normal: `None`.
     pub safe_current_a: Option<f32>,
     /// Active faults (detected now or not yet recovered).

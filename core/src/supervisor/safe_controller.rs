@@ -12,7 +12,7 @@ use crate::estimator::meter::mode_meter::{Sample, WheelOrder};
 /// Output of one [`SafeController::step`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SafeOutput {
-    /// Coil-current command [A]: finite, in [i_min, i_max] of the controller's limits.
+    /// Coil-current command, A: finite, in [i_min, i_max] of the controller's limits.
     pub current_cmd_a: f32,
     /// The supervisor's verdict.
     pub verdict: SupervisorVerdict,
@@ -63,7 +63,7 @@ impl SafeController {
         &mut self.ctl
     }
 
-    /// The last coil command [A].
+    /// The last coil command, A.
     pub fn last_command_a(&self) -> f32 {
         self.out.last()
     }
