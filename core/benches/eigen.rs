@@ -1,7 +1,7 @@
 //! Cost of the model-based margin path: `linearise` + bounded eigen-solve, the least-damped
 //! summary, dzeta/dV, and one warm-started `critical_speed_near` update.
 use criterion::{criterion_group, criterion_main, Criterion};
-use shimmy_core::estimator::{ModelMarginConfig, ModelMarginTracker};
+use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker};
 use shimmy_core::params::ParamSet;
 use shimmy_core::stability::{self, ModeSelect};
 use shimmy_core::{eigen, plant};

@@ -3,9 +3,11 @@
 //! `cargo bench -p shimmy-core --bench estimator`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use shimmy_core::estimator::rls::{Rls, N_MAX};
-use shimmy_core::estimator::roots::{aberth, C64, MAX_ORDER};
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
+use shimmy_core::estimator::meter::mode_meter::{
+    EstimatorConfig, MarginEstimator, Sample, WheelOrder,
+};
+use shimmy_core::estimator::meter::rls::{Rls, N_MAX};
+use shimmy_core::estimator::meter::roots::{aberth, C64, MAX_ORDER};
 use std::hint::black_box;
 
 fn signal(k: usize) -> f32 {

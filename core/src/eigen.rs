@@ -107,8 +107,8 @@ pub enum Precision {
     F64,
     /// A is formed in f64, rounded to f32, balanced (exact power-of-two scaling) and solved in
     /// f32 on the FPU: ~20x fewer instructions on the M4. Balancing is what makes this
-    /// accurate enough (margin-estimation.md: unscaled f32 loses ~0.04 in zeta); the tracker's
-    /// critical speeds still meet 0.05 km/h (tests/tests/margin_model.rs).
+    /// accurate enough (`docs/margin-estimator.md`: unscaled f32 loses ~0.04 in zeta); the
+    /// tracker's critical speeds still meet 0.05 km/h (tests/tests/margin_model.rs).
     F32,
 }
 
@@ -137,15 +137,15 @@ fn eigenvalues_f32(a: &StateMatrix) -> Result<Eigenvalues, EigenError> {
 /// Continuous-time mode of one eigenvalue s = re + j im.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Mode {
-    /// Real part [1/s] (positive = growing).
+    /// Real part, 1/s (positive = growing).
     pub re: f64,
-    /// Imaginary part [rad/s] (>= 0 for the representative of a pair).
+    /// Imaginary part, rad/s (>= 0 for the representative of a pair).
     pub im: f64,
-    /// Damping ratio zeta = -re / |s| [-].
+    /// Damping ratio zeta = -re / |s|.
     pub zeta: f64,
-    /// Damped frequency |im| / (2 pi) [Hz].
+    /// Damped frequency |im| / (2 pi), Hz.
     pub freq_hz: f64,
-    /// Natural frequency |s| [rad/s].
+    /// Natural frequency |s|, rad/s.
     pub omega_n: f64,
 }
 
@@ -178,7 +178,7 @@ pub fn is_oscillatory(s: Complex<f64>) -> bool {
     libm::fabs(s.im) > OSCILLATORY_REL_IM * libm::hypot(s.re, s.im) + 1e-12
 }
 
-/// Largest real part over all eigenvalues [1/s].
+/// Largest real part over all eigenvalues, 1/s.
 pub fn max_real_part(vals: &Eigenvalues) -> f64 {
     vals.iter()
         .fold(f64::NEG_INFINITY, |m, v| if v.re > m { v.re } else { m })
@@ -361,18 +361,18 @@ impl ModeShape {
 pub struct ModeShapeInfo {
     /// Dominant motion.
     pub shape: ModeShape,
-    /// Share of the modal kinetic energy in wheel yaw (both wheels) [-].
+    /// Share of the modal kinetic energy in wheel yaw (both wheels).
     pub wheel_energy_frac: f64,
-    /// Share of the modal kinetic energy in axle roll [-].
+    /// Share of the modal kinetic energy in axle roll.
     pub tramp_energy_frac: f64,
-    /// Share of the modal kinetic energy in the steering wheel [-].
+    /// Share of the modal kinetic energy in the steering wheel.
     pub steering_wheel_energy_frac: f64,
     /// |theta_sw| / (i_s max(|psi_L|, |psi_R|)): steering-wheel swing relative to the
-    /// kinematic (rigid-link) value [-].
+    /// kinematic (rigid-link) value.
     pub steering_wheel_ratio: f64,
-    /// Phase of psi_R relative to psi_L [rad] (0 = in phase, +-pi = anti-phase).
+    /// Phase of psi_R relative to psi_L, rad (0 = in phase, +-pi = anti-phase).
     pub wheel_phase_rad: f64,
-    /// max(|a_L|, |a_R|) / max(|psi_L|, |psi_R|, |phi|, |theta_sw|/i_s) [-].
+    /// max(|a_L|, |a_R|) / max(|psi_L|, |psi_R|, |phi|, |theta_sw|/i_s).
     pub tyre_ratio: f64,
 }
 

@@ -1,6 +1,17 @@
-//! shimmy-core: the `no_std`, heap-free code shared by the firmware and the host simulator:
-//! plant linearisation and stability analysis, signal conditioning, the MR-damper controllers,
-//! the eigenvalue-margin estimators, the shimmy monitor and the supervisor.
+//! shimmy-core: the `no_std`, heap-free code shared by the firmware and the host simulator
+//! (`docs/architecture.md`). The modules, lowest layer first (each uses only those above it):
+//!
+//! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
+//! - [`plant`]: the plant linearised at a forward speed (state matrix A(V), dA/dV);
+//! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
+//! - [`stability`]: stability over speed: Hopf crossings and critical speeds;
+//! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
+//! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
+//!   controllers (`docs/control-and-supervisor.md`);
+//! - [`estimator`]: the margin path: mode meter, model margin, fusion, monitor, pipeline
+//!   (`docs/margin-estimator.md`);
+//! - [`supervisor`]: sensor-frame checks, faults, mode policy, and the supervised controller
+//!   the firmware and the simulator call every 1 ms.
 //!
 //! Rules for everything in here: no heap, no panics on the control path, time is an input,
 //! units are in the names.
@@ -28,7 +39,6 @@ pub mod eigen;
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 pub mod estimator;
-pub mod monitor;
 pub mod mr_damper;
 pub mod params;
 pub mod plant;

@@ -1,5 +1,5 @@
 //! The MR steering damper as the simulator models it: Spencer et al. (1997) modified Bouc-Wen
-//! model with a first-order coil lag (`shared/reference-plant.md`).
+//! model with a first-order coil lag (`docs/plant-model.md`).
 //!
 //! This is the *plant's* damper: the simulator integrates it and the firmware's simple invertible
 //! model is fitted to it. The firmware never calls it (so it is not linked there). It lives in
@@ -10,40 +10,40 @@
 /// Parameters of the modified Bouc-Wen model. Units: N, m, s, V (1 V per A of coil current).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpencerParams {
-    /// Viscous coefficient c0 = c0a + c0b u: c0a [N s/m].
+    /// Viscous coefficient c0 = c0a + c0b u: c0a, N s/m.
     pub c0a: f64,
     /// c0b [N s/(m V)].
     pub c0b: f64,
-    /// Internal stiffness k0 [N/m].
+    /// Internal stiffness k0, N/m.
     pub k0: f64,
-    /// Viscous coefficient c1 = c1a + c1b u: c1a [N s/m].
+    /// Viscous coefficient c1 = c1a + c1b u: c1a, N s/m.
     pub c1a: f64,
     /// c1b [N s/(m V)].
     pub c1b: f64,
-    /// Accumulator stiffness k1 [N/m].
+    /// Accumulator stiffness k1, N/m.
     pub k1: f64,
-    /// Accumulator initial displacement x0 [m].
+    /// Accumulator initial displacement x0, m.
     pub x0: f64,
-    /// Evolutionary coefficient alpha = alpha_a + alpha_b u: alpha_a [N/m].
+    /// Evolutionary coefficient alpha = alpha_a + alpha_b u: alpha_a, N/m.
     pub alpha_a: f64,
     /// alpha_b [N/(m V)].
     pub alpha_b: f64,
-    /// Hysteresis shape gamma [m^-2].
+    /// Hysteresis shape gamma, m^-2.
     pub gamma: f64,
-    /// Hysteresis shape beta [m^-2].
+    /// Hysteresis shape beta, m^-2.
     pub beta: f64,
-    /// Hysteresis scale A [-].
+    /// Hysteresis scale A.
     pub a_bw: f64,
-    /// Hysteresis exponent n [-].
+    /// Hysteresis exponent n.
     pub n: f64,
-    /// Coil + driver bandwidth eta [1/s].
+    /// Coil + driver bandwidth eta, 1/s.
     pub eta: f64,
-    /// Largest coil input u [V] (= A).
+    /// Largest coil input u, V (= A).
     pub u_max: f64,
 }
 
 /// Force coefficients of the automotive-size calibration are scaled by this factor to make a
-/// steering-damper-sized device (reference-plant.md).
+/// steering-damper-sized device (`docs/plant-model.md`).
 pub const STEERING_DAMPER_FORCE_SCALE: f64 = 0.25;
 
 impl SpencerParams {
@@ -86,7 +86,7 @@ impl SpencerParams {
         }
     }
 
-    /// (alpha(u), c0(u), c1(u)) at coil input `u` [V].
+    /// (alpha(u), c0(u), c1(u)) at coil input `u`, V.
     pub fn coefficients(&self, u: f64) -> (f64, f64, f64) {
         (
             self.alpha_a + self.alpha_b * u,
@@ -99,29 +99,29 @@ impl SpencerParams {
 /// Internal states of the damper model.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SpencerState {
-    /// Filtered coil input u [V].
+    /// Filtered coil input u, V.
     pub u: f64,
-    /// Internal displacement y [m].
+    /// Internal displacement y, m.
     pub y: f64,
-    /// Evolutionary (hysteretic) variable z [m].
+    /// Evolutionary (hysteretic) variable z, m.
     pub z: f64,
 }
 
 /// Time derivatives of [`SpencerState`] and the damper force at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpencerRates {
-    /// du/dt [V/s].
+    /// du/dt, V/s.
     pub du: f64,
-    /// dy/dt [m/s].
+    /// dy/dt, m/s.
     pub dy: f64,
-    /// dz/dt [m/s].
+    /// dz/dt, m/s.
     pub dz: f64,
-    /// Damper force F [N], positive when resisting a positive stroke rate.
+    /// Damper force F in N, positive when resisting a positive stroke rate.
     pub force_n: f64,
 }
 
 /// Evaluates the model: state derivatives and force for stroke `x_m`, stroke rate `v_mps` and
-/// commanded coil input `u_cmd` [V] (clamped to [0, u_max]).
+/// commanded coil input `u_cmd`, V (clamped to [0, u_max]).
 pub fn rates(
     p: &SpencerParams,
     s: &SpencerState,

@@ -1,4 +1,4 @@
-//! Parameters of the 4-DOF solid-axle steering plant (`shared/reference-plant.md`), in one place.
+//! Parameters of the 4-DOF solid-axle steering plant (`docs/plant-model.md`), in one place.
 //!
 //! SI units throughout (rad, m, s, N, N m). Named sets are built by functions here and nowhere
 //! else; studies derive variants with [`PlantParams::with`] / [`PlantParams::scaled`].
@@ -7,47 +7,47 @@
 /// document; the unit of each field is in its doc comment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlantParams {
-    /// Wheel-assembly yaw inertia about the kingpin I_k [kg m^2].
+    /// Wheel-assembly yaw inertia about the kingpin I_k, kg m^2.
     pub i_k: f64,
-    /// Wheel spin inertia I_p [kg m^2] (gyroscopic coupling).
+    /// Wheel spin inertia I_p, kg m^2 (gyroscopic coupling).
     pub i_p: f64,
-    /// Rolling radius R [m].
+    /// Rolling radius R, m.
     pub r: f64,
-    /// Roll-centre height h_r [m].
+    /// Roll-centre height h_r, m.
     pub h_r: f64,
-    /// Axle roll inertia I_phi [kg m^2].
+    /// Axle roll inertia I_phi, kg m^2.
     pub i_phi: f64,
-    /// Tramp (roll) stiffness K_phi [N m/rad].
+    /// Tramp (roll) stiffness K_phi, N m/rad.
     pub k_phi: f64,
-    /// Tramp damping c_phi [N m s/rad].
+    /// Tramp damping c_phi, N m s/rad.
     pub c_phi: f64,
-    /// Cornering stiffness per tyre C_a [N/rad].
+    /// Cornering stiffness per tyre C_a, N/rad.
     pub c_a: f64,
-    /// Tyre relaxation length sigma [m].
+    /// Tyre relaxation length sigma, m.
     pub sigma: f64,
-    /// Caster (mechanical) trail e [m].
+    /// Caster (mechanical) trail e, m.
     pub e: f64,
-    /// Pneumatic trail t_p [m].
+    /// Pneumatic trail t_p, m.
     pub t_p: f64,
-    /// Steering-arm length l_t [m].
+    /// Steering-arm length l_t, m.
     pub l_t: f64,
-    /// Track-rod stiffness referred to the kingpin K_tr [N m/rad].
+    /// Track-rod stiffness referred to the kingpin K_tr, N m/rad.
     pub k_tr: f64,
-    /// Drag link + gear stiffness at the kingpin K_d [N m/rad].
+    /// Drag link + gear stiffness at the kingpin K_d, N m/rad.
     pub k_d: f64,
-    /// Overall steering ratio i_s [-].
+    /// Overall steering ratio i_s.
     pub i_s: f64,
-    /// Steering-wheel inertia J_sw [kg m^2].
+    /// Steering-wheel inertia J_sw, kg m^2.
     pub j_sw: f64,
-    /// Steering-wheel damping c_sw [N m s/rad].
+    /// Steering-wheel damping c_sw, N m s/rad.
     pub c_sw: f64,
-    /// Kingpin damping c_k [N m s/rad].
+    /// Kingpin damping c_k, N m s/rad.
     pub c_k: f64,
-    /// Static load per front wheel F_z [N].
+    /// Static load per front wheel F_z, N.
     pub f_z: f64,
-    /// Tyre-road friction coefficient mu [-] (Magic Formula peak D = mu F_z).
+    /// Tyre-road friction coefficient mu (Magic Formula peak D = mu F_z).
     pub mu: f64,
-    /// Magic-Formula shape factor C_s [-].
+    /// Magic-Formula shape factor C_s.
     pub c_s: f64,
 }
 
@@ -276,17 +276,17 @@ impl PlantParams {
         Ok(())
     }
 
-    /// Magic-Formula peak lateral force D = mu F_z [N].
+    /// Magic-Formula peak lateral force D = mu F_z, N.
     pub fn tyre_peak_force(&self) -> f64 {
         self.mu * self.f_z
     }
 
-    /// Magic-Formula stiffness factor B = C_a / (C_s D) [1/rad], so that the initial slope is C_a.
+    /// Magic-Formula stiffness factor B = C_a / (C_s D) in 1/rad, so that the initial slope is C_a.
     pub fn tyre_stiffness_factor(&self) -> f64 {
         self.c_a / (self.c_s * self.tyre_peak_force())
     }
 
-    /// Spin angular momentum of one wheel H = I_p V / R [N m s] at forward speed `v_mps`.
+    /// Spin angular momentum of one wheel H = I_p V / R in N m s at forward speed `v_mps`.
     pub fn spin_momentum(&self, v_mps: f64) -> f64 {
         self.i_p * v_mps / self.r
     }

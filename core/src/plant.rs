@@ -1,17 +1,17 @@
-//! Linearised 4-DOF solid-axle steering plant with tyre lag (`shared/reference-plant.md`).
+//! Linearised 4-DOF solid-axle steering plant with tyre lag (`docs/plant-model.md`).
 //!
 //! State vector (10), indices are the named constants below:
 //! `x = [psi_L, psi_R, phi, theta_sw, dpsi_L, dpsi_R, dphi, dtheta_sw, a_L, a_R]`.
 //!
 //! Sign conventions (as in the reference document):
-//! - `psi_L`, `psi_R`: wheel yaw about the kingpins, positive = steer left [rad];
-//! - `phi`: axle roll (tramp), positive = left wheel up [rad];
-//! - `theta_sw`: steering-wheel angle, positive turns the wheels left through `i_s` [rad];
-//! - `a_L`, `a_R`: lagged slip angles [rad]; tyre force `F_i = C_a a_i` [N];
-//! - `F_d`: damper force along the track rod [N], positive when it resists a positive stroke rate
+//! - `psi_L`, `psi_R`: wheel yaw about the kingpins, positive = steer left, rad;
+//! - `phi`: axle roll (tramp), positive = left wheel up, rad;
+//! - `theta_sw`: steering-wheel angle, positive turns the wheels left through `i_s`, rad;
+//! - `a_L`, `a_R`: lagged slip angles, rad; tyre force `F_i = C_a a_i`, N;
+//! - `F_d`: damper force along the track rod in N, positive when it resists a positive stroke rate
 //!   `v_d = (l_t/2)(dpsi_L + dpsi_R)`; it enters both wheel equations as `-(l_t/2) F_d`;
-//! - `T_driver`: driver torque at the steering wheel [N m], positive in the `theta_sw` sense;
-//! - gyroscopic coupling `H = I_p V / R` [N m s]: `-H dphi` in both wheel equations and
+//! - `T_driver`: driver torque at the steering wheel in N m, positive in the `theta_sw` sense;
+//! - gyroscopic coupling `H = I_p V / R`, N m s: `-H dphi` in both wheel equations and
 //!   `+H (dpsi_L + dpsi_R)` in the roll equation (a skew-symmetric pair: no net power).
 //!
 //! The linearisation is exact for the linear-tyre model about straight running; a viscous damper
@@ -28,25 +28,25 @@ pub const N_STATES: usize = 10;
 /// Number of mechanical degrees of freedom.
 pub const N_DOF: usize = 4;
 
-/// Left wheel yaw angle psi_L [rad].
+/// Left wheel yaw angle psi_L, rad.
 pub const PSI_L: usize = 0;
-/// Right wheel yaw angle psi_R [rad].
+/// Right wheel yaw angle psi_R, rad.
 pub const PSI_R: usize = 1;
-/// Axle roll (tramp) angle phi [rad].
+/// Axle roll (tramp) angle phi, rad.
 pub const PHI: usize = 2;
-/// Steering-wheel angle theta_sw [rad].
+/// Steering-wheel angle theta_sw, rad.
 pub const THETA_SW: usize = 3;
-/// Left wheel yaw rate dpsi_L [rad/s].
+/// Left wheel yaw rate dpsi_L, rad/s.
 pub const DPSI_L: usize = 4;
-/// Right wheel yaw rate dpsi_R [rad/s].
+/// Right wheel yaw rate dpsi_R, rad/s.
 pub const DPSI_R: usize = 5;
-/// Axle roll rate dphi [rad/s].
+/// Axle roll rate dphi, rad/s.
 pub const DPHI: usize = 6;
-/// Steering-wheel rate dtheta_sw [rad/s].
+/// Steering-wheel rate dtheta_sw, rad/s.
 pub const DTHETA_SW: usize = 7;
-/// Left lagged slip angle a_L [rad].
+/// Left lagged slip angle a_L, rad.
 pub const A_L: usize = 8;
-/// Right lagged slip angle a_R [rad].
+/// Right lagged slip angle a_R, rad.
 pub const A_R: usize = 9;
 
 /// Short names of the states, for tables and CSV headers.
@@ -68,18 +68,18 @@ pub const STATE_NAMES: [&str; N_STATES] = [
 /// and the tyre-lag equations `sigma a' = V (S q - a) + E q' ` written out in [`linearise`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SecondOrder {
-    /// Mass matrix M = diag(I_k, I_k, I_phi, J_sw) [kg m^2].
+    /// Mass matrix M = diag(I_k, I_k, I_phi, J_sw), kg m^2.
     pub m: SMatrix<f64, N_DOF, N_DOF>,
-    /// Damping matrix C incl. the gyroscopic (skew) part and the viscous damper [N m s/rad].
+    /// Damping matrix C incl. the gyroscopic (skew) part and the viscous damper, N m s/rad.
     pub c: SMatrix<f64, N_DOF, N_DOF>,
-    /// Stiffness matrix K (symmetric) [N m/rad].
+    /// Stiffness matrix K (symmetric), N m/rad.
     pub k: SMatrix<f64, N_DOF, N_DOF>,
-    /// Generalised tyre forces per unit lagged slip angle, columns (a_L, a_R) [N m/rad].
+    /// Generalised tyre forces per unit lagged slip angle, columns (a_L, a_R), N m/rad.
     pub g: SMatrix<f64, N_DOF, 2>,
 }
 
 /// Mass, damping (with gyroscopic coupling at speed `v_mps` and a viscous track-rod damper
-/// `c_damper_nspm` [N s/m]) and stiffness matrices of the mechanical subsystem.
+/// `c_damper_nspm` in N s/m) and stiffness matrices of the mechanical subsystem.
 pub fn second_order(p: &PlantParams, v_mps: f64, c_damper_nspm: f64) -> SecondOrder {
     let h = p.spin_momentum(v_mps);
     let cd = c_damper_nspm * p.l_t * p.l_t / 4.0;
@@ -124,8 +124,8 @@ pub fn second_order(p: &PlantParams, v_mps: f64, c_damper_nspm: f64) -> SecondOr
     SecondOrder { m, c, k, g }
 }
 
-/// State matrix A(V) of the linear model at forward speed `v_mps` [m/s] with a viscous
-/// track-rod damper of coefficient `c_damper_nspm` [N s/m] (0 = no damper force).
+/// State matrix A(V) of the linear model at forward speed `v_mps` in m/s with a viscous
+/// track-rod damper of coefficient `c_damper_nspm`, N s/m (0 = no damper force).
 ///
 /// Rows 0..4 are the kinematic identities `q' = dq`; rows 4..8 are `M^-1 (-K q - C dq + G a)`;
 /// rows 8..10 are the tyre lag `sigma a_i' = V (psi_i - a_i) + e dpsi_i - h_r dphi`.
@@ -176,7 +176,7 @@ pub fn dlinearise_dv(p: &PlantParams) -> SMatrix<f64, N_STATES, N_STATES> {
     d
 }
 
-/// Column of dx/dt per unit damper force F_d [N] (positive resisting a positive stroke rate).
+/// Column of dx/dt per unit damper force F_d, N (positive resisting a positive stroke rate).
 pub fn damper_force_input(p: &PlantParams) -> SVector<f64, N_STATES> {
     let mut b = SVector::<f64, N_STATES>::zeros();
     b[DPSI_L] = -(p.l_t / 2.0) / p.i_k;
@@ -184,19 +184,19 @@ pub fn damper_force_input(p: &PlantParams) -> SVector<f64, N_STATES> {
     b
 }
 
-/// Column of dx/dt per unit driver torque T_driver [N m] at the steering wheel.
+/// Column of dx/dt per unit driver torque T_driver in N m at the steering wheel.
 pub fn driver_torque_input(p: &PlantParams) -> SVector<f64, N_STATES> {
     let mut b = SVector::<f64, N_STATES>::zeros();
     b[DTHETA_SW] = 1.0 / p.j_sw;
     b
 }
 
-/// Damper stroke x_d = (l_t/2)(psi_L + psi_R) [m] of a state.
+/// Damper stroke x_d = (l_t/2)(psi_L + psi_R) in m of a state.
 pub fn damper_stroke_m(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
     (p.l_t / 2.0) * (x[PSI_L] + x[PSI_R])
 }
 
-/// Damper stroke rate v_d = (l_t/2)(dpsi_L + dpsi_R) [m/s] of a state.
+/// Damper stroke rate v_d = (l_t/2)(dpsi_L + dpsi_R) in m/s of a state.
 pub fn damper_stroke_rate_mps(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
     (p.l_t / 2.0) * (x[DPSI_L] + x[DPSI_R])
 }

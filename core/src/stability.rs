@@ -19,12 +19,12 @@ use crate::plant::{dlinearise_dv, linearise};
 /// Capacity of a crossing list.
 pub const MAX_CROSSINGS: usize = 8;
 
-/// Default speed tolerance of the root refinement [m/s].
+/// Default speed tolerance of the root refinement, m/s.
 pub const DEFAULT_TOL_MPS: f64 = 1e-5;
 
-/// Lowest speed the searches look at [m/s] (at V = 0 the tyre states are pure integrators).
+/// Lowest speed the searches look at, m/s (at V = 0 the tyre states are pure integrators).
 pub const V_SEARCH_MIN_MPS: f64 = 0.1;
-/// Highest speed the searches look at [m/s] (252 km/h).
+/// Highest speed the searches look at, m/s (252 km/h).
 pub const V_SEARCH_MAX_MPS: f64 = 70.0;
 
 /// Errors of the stability analysis.
@@ -76,15 +76,15 @@ impl CrossingKind {
 /// One Hopf crossing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HopfCrossing {
-    /// Critical speed [m/s].
+    /// Critical speed, m/s.
     pub speed_mps: f64,
     /// Onset or offset.
     pub kind: CrossingKind,
-    /// Frequency of the crossing mode [Hz].
+    /// Frequency of the crossing mode, Hz.
     pub freq_hz: f64,
     /// Shape of the crossing mode.
     pub shape: ModeShape,
-    /// Width of the final bracket [m/s] (<= the tolerance when converged).
+    /// Width of the final bracket, m/s (<= the tolerance when converged).
     pub bracket_mps: f64,
     /// Whether Brent met the tolerance within its iteration bound.
     pub converged: bool,
@@ -102,7 +102,7 @@ pub fn eigenvalues_at(
     eigen::eigenvalues(&linearise(p, v_mps, c_damper_nspm))
 }
 
-/// Growth rate g(V) = max Re lambda over the oscillatory eigenvalues [1/s], and that mode.
+/// Growth rate g(V) = max Re lambda over the oscillatory eigenvalues in 1/s, and that mode.
 pub fn critical_mode_at(
     p: &PlantParams,
     v_mps: f64,
@@ -179,9 +179,9 @@ pub fn mode_at(
 /// Summary of the modes at one speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ModeSummary {
-    /// Speed [m/s].
+    /// Speed, m/s.
     pub v_mps: f64,
-    /// Largest real part over all eigenvalues [1/s].
+    /// Largest real part over all eigenvalues, 1/s.
     pub max_re: f64,
     /// Oscillatory mode with the largest real part.
     pub critical: Mode,
@@ -211,8 +211,8 @@ pub fn mode_summary(
 
 /// The selected mode and its sensitivities d(lambda)/dV and d(zeta)/dV at `v_mps`, from the
 /// first-order eigenvalue perturbation dlambda = w^H (dA/dV) v / (w^H v) with the right and left
-/// eigenvectors v, w (A is affine in V, so dA/dV is exact). Returns (mode, dzeta/dV [s/m],
-/// dlambda/dV [1/m]).
+/// eigenvectors v, w (A is affine in V, so dA/dV is exact). Returns (mode, dzeta/dV in s/m,
+/// dlambda/dV in 1/m).
 pub fn dzeta_dv(
     p: &PlantParams,
     v_mps: f64,
@@ -437,13 +437,13 @@ pub fn hopf_crossings(
 /// Answer of [`critical_speed_near`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CriticalSpeed {
-    /// Critical (Hopf) speed [m/s]: the best estimate, inside the final bracket.
+    /// Critical (Hopf) speed, m/s: the best estimate, inside the final bracket.
     pub speed_mps: f64,
     /// Onset or offset (direction of the sign change with increasing speed).
     pub kind: CrossingKind,
-    /// Frequency of the critical mode at `speed_mps` [Hz] (from the last evaluation).
+    /// Frequency of the critical mode at `speed_mps`, Hz (from the last evaluation).
     pub freq_hz: f64,
-    /// Final bracket width [m/s].
+    /// Final bracket width, m/s.
     pub bracket_mps: f64,
     /// Eigen-solves used.
     pub evals: usize,

@@ -1,7 +1,7 @@
 //! Monte Carlo accuracy of the mode meter on synthetic ambient data from EXACTLY discretised
 //! continuous 1- and 2-mode systems (Van Loan / matrix exponential), measured with white noise
 //! at 10-40 dB SNR, against the accuracy bound sigma_b = sqrt(zeta / (w_n T_eff)),
-//! T_eff = 2 / ((1 - lambda) f_s) (see /work/shared/margin-estimation.md).
+//! T_eff = 2 / ((1 - lambda) f_s) (see `docs/margin-estimator.md`).
 //!
 //! Reading of the requirement: |bias| <= 0.25 sigma_b and sample standard deviation
 //! <= 1.5 sigma_b, for the margin (slow, lambda_slow = 0.998, T_eff = 10 s) instance of the f32
@@ -15,7 +15,7 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::EstimatorConfig;
+use shimmy_core::estimator::meter::mode_meter::EstimatorConfig;
 
 struct Case {
     modes: Vec<ModeSpec>,
@@ -225,7 +225,7 @@ fn two_mode_equal_participation_is_a_known_limitation() {
 /// discretised system at 100 Hz (Yule-Walker), independent of the RLS: returns the damping of
 /// the pole closest in frequency to `f_target` in the band.
 fn yule_walker_zeta(modes: &[ModeSpec], ord: usize, f_target: f64) -> f64 {
-    use shimmy_core::estimator::roots::{aberth, mode_of_root, C64};
+    use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
     let tr = Truth::new(modes, 0.01);
     let qd = tr.l * tr.l.transpose();
     // stationary covariance by doubling: S = sum_k Ad^k Qd Ad'^k

@@ -2,8 +2,9 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::roots::{aberth, mode_of_root, C64};
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, Real, WheelOrder};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
+use shimmy_core::estimator::meter::real::Real;
+use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
 
 /// Slow-instance estimates (every 10 s after 30 s) over `runs` runs; the wheel reference is
 /// replaced by the speed + radius form when `speed_radius` is given.
@@ -87,7 +88,7 @@ fn wheel_order_regressors_are_needed_for_a_forced_line() {
 /// Coefficient rounding alone: AR(4) polynomials of an exactly discretised (zeta, f) mode plus a
 /// well-damped pair, rounded to f32, rooted in f64. At 1 kHz the poles crowd around z = 1 and
 /// the damping error is more than 1000x what it is at 100 Hz, where it is negligible
-/// (margin-estimation.md: ~1e-5). The full-estimator test below shows the consequence.
+/// (`docs/margin-estimator.md`: ~1e-5). The full-estimator test below shows the consequence.
 #[test]
 fn f32_coefficient_rounding_ruins_ar4_at_1khz_but_not_at_100hz() {
     let mut err = [Vec::new(), Vec::new()];

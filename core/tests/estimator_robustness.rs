@@ -3,9 +3,10 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::{
-    EstimatorConfig, MarginEstimator, MeterOutput, ModeEstimate, Real, Sample, WheelOrder,
+use shimmy_core::estimator::meter::mode_meter::{
+    EstimatorConfig, MarginEstimator, MeterOutput, ModeEstimate, Sample, WheelOrder,
 };
+use shimmy_core::estimator::meter::real::Real;
 
 fn finite_est(e: &ModeEstimate) -> bool {
     e.zeta.is_finite() && e.sigma_zeta.is_finite() && e.freq_hz.is_finite() && e.wn_hz.is_finite()

@@ -7,7 +7,7 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator};
 
 #[test]
 fn damping_step_detected_within_1_5_s_median_with_at_most_1_percent_false_time() {

@@ -5,10 +5,10 @@
 
 mod common;
 use common::*;
-use shimmy_core::estimator::{
-    EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, ModelMargin,
-};
-use shimmy_core::monitor::{Level, Monitor, MonitorInput, MonitorParams};
+use shimmy_core::estimator::fusion::{Fusion, FusionInput, FusionParams};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator};
+use shimmy_core::estimator::model_margin::ModelMargin;
+use shimmy_core::estimator::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 
 #[test]
 fn subcritical_burst_raises_shimmy_present_and_is_logged() {

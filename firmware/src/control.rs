@@ -3,17 +3,17 @@
 //!
 //! Per control step (1 kHz): [`crate::sensors::Sensors::sample`] -> [`raw_frame`] (what only the
 //! firmware knows: SPI errors, AS5047P parity / error flag, the tone-wheel decoding, ADC
-//! errors; each counted) -> `shimmy_core::supervisor::SafeController::step` (the one
-//! validation policy: range, rate, stuck, left/right agreement, speed plausibility, coil
+//! errors; each counted) -> `shimmy_core::supervisor::safe_controller::SafeController::step`
+//! (the one validation policy: range, rate, stuck, left/right agreement, speed plausibility, coil
 //! checks, timing; fault records, Normal / Degraded / FailSafe with recovery hysteresis; the
 //! core controller; the final clamp and slew limit) -> coil current command ->
 //! [`crate::drivers::coil_pwm::CoilDriver::set_current_a`]. [`supervised_step`] is that chain.
 
 use crate::drivers::wheel_speed::SpeedStatus;
 use crate::sensors::{SampleSet, SensorFault};
-use shimmy_core::supervisor::{
-    EncoderReading, MarginStatus, Mode, RawFrame, SafeController, SafeOutput,
-};
+use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
+use shimmy_core::supervisor::policy::Mode;
+use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
 /// Control period, us (the supervisor's time stamps advance by this per step).
 pub const PERIOD_US: u32 = 1000;
@@ -194,7 +194,8 @@ mod tests {
     use super::*;
     use crate::drivers::wheel_speed::SpeedReading;
     use crate::monitoring::safe_controller;
-    use shimmy_core::supervisor::{FaultKind, FAILSAFE_CURRENT_A};
+    use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
+    use shimmy_core::supervisor::faults::FaultKind;
 
     fn good(k: u32) -> SampleSet {
         let y = 0.01 * libm::sinf(k as f32 * 0.05);

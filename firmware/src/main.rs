@@ -18,9 +18,11 @@
 #[rtic::app(device = shimmy_firmware::hal::pac, dispatchers = [EXTI0, EXTI1])]
 mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
-    use shimmy_core::estimator::ModelMargin;
+    use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
+    use shimmy_core::estimator::model_margin::ModelMargin;
     use shimmy_core::params::PlantParams;
-    use shimmy_core::supervisor::{MarginStatus, SafeController, FAILSAFE_CURRENT_A};
+    use shimmy_core::supervisor::frame::MarginStatus;
+    use shimmy_core::supervisor::safe_controller::SafeController;
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{supervised_step, Health};
     use shimmy_firmware::monitoring::{
@@ -246,8 +248,8 @@ mod app {
         defmt::warn!("reset cause: {=str}", cause);
     }
 
-    fn level_name(l: shimmy_core::monitor::Level) -> &'static str {
-        use shimmy_core::monitor::Level;
+    fn level_name(l: shimmy_core::estimator::monitor::Level) -> &'static str {
+        use shimmy_core::estimator::monitor::Level;
         match l {
             Level::Normal => "normal",
             Level::MarginLow => "margin-low",

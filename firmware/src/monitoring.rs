@@ -22,12 +22,15 @@
 
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::eigen::Precision;
+use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
-use shimmy_core::estimator::{ConfigError, PipelineParams, Sample, WheelOrder};
-use shimmy_core::monitor::Level;
 use shimmy_core::params::PlantParams;
-use shimmy_core::supervisor::{MarginStatus, SafeController, SafeOutput, SupervisorParams};
+use shimmy_core::supervisor::frame::MarginStatus;
+use shimmy_core::supervisor::params::SupervisorParams;
+use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
 /// Control period, s.
 pub const DT_S: f32 = 1e-3;
@@ -50,7 +53,7 @@ pub const MODEL_REFRESH_S: f32 = 0.1;
 
 /// The core's supervised controller as the firmware runs it: the adaptive sliding-mode
 /// controller with the default (nominal-plant) parameters, the default supervisor thresholds
-/// (fail-safe current `shimmy_core::supervisor::FAILSAFE_CURRENT_A`).
+/// (fail-safe current `shimmy_core::control::actuator::FAILSAFE_CURRENT_A`).
 pub fn safe_controller() -> SafeController {
     SafeController::new(
         ControllerKind::Asmc,
@@ -142,7 +145,7 @@ impl DataMargin {
     pub fn push(
         &mut self,
         s: &MeterSample,
-        model: Option<&shimmy_core::estimator::ModelMargin>,
+        model: Option<&shimmy_core::estimator::model_margin::ModelMargin>,
     ) -> Option<(MarginUpdate, bool)> {
         let speed_ok = s.speed_mps.is_finite();
         if speed_ok {

@@ -15,9 +15,10 @@
 
 use crate::drivers::as5047p::AngleTracker;
 use crate::monitoring::{safe_controller, DataMargin, MeterSample, ModelTask, DT_S};
-use shimmy_core::estimator::ModelMargin;
-use shimmy_core::monitor::Level;
-use shimmy_core::supervisor::{EncoderReading, Mode, RawFrame};
+use shimmy_core::estimator::model_margin::ModelMargin;
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
+use shimmy_core::supervisor::policy::Mode;
 
 /// Bytes per sample in a trace.
 pub const SAMPLE_BYTES: usize = 8;

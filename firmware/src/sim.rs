@@ -49,8 +49,8 @@ pub const STUCK_END_STEP: u32 = 2750;
 pub const SCENARIO_STEPS: u32 = 4000;
 /// The supervisor's mode sequence over [`SCENARIO_STEPS`] (see the module table); `cargo xtask
 /// qemu` checks the application's decoded log against it.
-pub const EXPECTED_MODES: [shimmy_core::supervisor::Mode; 9] = {
-    use shimmy_core::supervisor::Mode::{Degraded as D, FailSafe as F, Normal as N};
+pub const EXPECTED_MODES: [shimmy_core::supervisor::policy::Mode; 9] = {
+    use shimmy_core::supervisor::policy::Mode::{Degraded as D, FailSafe as F, Normal as N};
     [N, D, N, D, F, D, N, D, N]
 };
 /// Steps in FailSafe over [`SCENARIO_STEPS`]: from the right error flag until the left
@@ -349,12 +349,13 @@ pub fn sensors(world: &'static SimWorld) -> SimSensors {
 /// simulated truth and returns the health counters. Panics (test failure) on a wrong angle.
 pub fn run_closed_loop(
     world: &'static SimWorld,
-    ctrl: &mut shimmy_core::supervisor::SafeController,
+    ctrl: &mut shimmy_core::supervisor::safe_controller::SafeController,
     steps: u32,
 ) -> crate::control::Health {
     use crate::control::{supervised_step, Health};
     use crate::drivers::coil_pwm::CoilDriver;
-    use shimmy_core::supervisor::{MarginStatus, Mode};
+    use shimmy_core::supervisor::frame::MarginStatus;
+    use shimmy_core::supervisor::policy::Mode;
     let mut s = sensors(world);
     let mut coil = match CoilDriver::new(SimPwm::new(world), COIL) {
         Ok(c) => c,
@@ -405,7 +406,8 @@ mod tests {
         assert_eq!((h.enc_bus, h.current_faults), (0, 0));
         assert_eq!(h.steps, SCENARIO_STEPS);
         // The mode sequence, from the supervisor's event log.
-        use shimmy_core::supervisor::{Mode, SupervisorEvent};
+        use shimmy_core::supervisor::checks::SupervisorEvent;
+        use shimmy_core::supervisor::policy::Mode;
         let mut modes = vec![Mode::Normal];
         for e in c.supervisor().events() {
             if let SupervisorEvent::ModeChange { to, .. } = e {
@@ -422,7 +424,7 @@ mod tests {
         let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
         let mut c = crate::monitoring::safe_controller();
         let h = run_closed_loop(world, &mut c, STUCK_START_STEP);
-        let stuck = shimmy_core::supervisor::FaultKind::RightStuck;
+        let stuck = shimmy_core::supervisor::faults::FaultKind::RightStuck;
         assert_eq!(c.supervisor().record(stuck).activations, 0);
         assert_eq!(h.faults_raised, EXPECTED_FAULTS_RAISED - 1);
     }

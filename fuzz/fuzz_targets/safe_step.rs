@@ -8,10 +8,10 @@
 
 use libfuzzer_sys::fuzz_target;
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, WheelOrder};
-use shimmy_core::supervisor::{
-    EncoderReading, MarginStatus, RawFrame, SafeController, SupervisorParams,
-};
+use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
+use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
+use shimmy_core::supervisor::params::SupervisorParams;
+use shimmy_core::supervisor::safe_controller::SafeController;
 
 /// Bytes per frame: dt (2), left angle (4), right angle (4), speed (4), coil (4), flags (2).
 const FRAME_BYTES: usize = 20;

@@ -5,8 +5,10 @@
 //! 0.1 s after the fault) at 45 km/h, inside the no-damper Hopf window (29.35-84.15 km/h), where
 //! the same disturbance grows into a ~7 deg limit cycle without a damper.
 
+use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
 use shimmy_core::control::ControllerKind;
-use shimmy_core::supervisor::{FaultKind, Mode, FAILSAFE_CURRENT_A};
+use shimmy_core::supervisor::faults::FaultKind;
+use shimmy_core::supervisor::policy::Mode;
 use shimmy_sim::cmd::faults::{self as fault_campaign, standard_cases, Case, Setup};
 use shimmy_sim::model::faults::{FaultMode, Side};
 use shimmy_sim::sim::closed_loop::{Arm, SHIMMY_AMP_RAD};

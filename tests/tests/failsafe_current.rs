@@ -1,5 +1,6 @@
-//! The supervisor's fail-safe coil current (`shimmy_core::supervisor::FAILSAFE_CURRENT_A`) is
-//! derived here from the stability analysis, not guessed:
+//! The supervisor's fail-safe coil current
+//! (`shimmy_core::control::actuator::FAILSAFE_CURRENT_A`) is derived here from the stability
+//! analysis, not guessed:
 //!
 //! 1. Plant variants: the `nominal` and `hard` sets, each as is and with the tyre data
 //!    C_a, sigma, e scaled by 0.8 and 1.2 one at a time (14 plants).
@@ -24,10 +25,11 @@
 //! The zero-current speed `ZERO_CURRENT_SAFE_BELOW_MPS` is checked the same way: below it every
 //! variant is stable with no damper at all.
 
+use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{critical_mode_at, hopf_crossings, V_SEARCH_MIN_MPS};
-use shimmy_core::supervisor::{FAILSAFE_CURRENT_A, ZERO_CURRENT_SAFE_BELOW_MPS};
+use shimmy_core::supervisor::params::ZERO_CURRENT_SAFE_BELOW_MPS;
 use shimmy_sim::model::damper_equiv::mr_equivalent_viscous;
 use shimmy_sim::sim::open_loop::{run_speed, DamperSetting};
 

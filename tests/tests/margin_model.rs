@@ -5,7 +5,7 @@
 use faer::Mat;
 use nalgebra::Complex;
 use shimmy_core::eigen::Precision;
-use shimmy_core::estimator::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
+use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
 use shimmy_core::plant::{linearise, N_STATES};
 use shimmy_core::stability::CrossingKind;

@@ -9,8 +9,9 @@
 //! The onset speed comes from an independent scan (`stability::hopf_crossings`), not from the
 //! pipeline. The 10-minute drives take ~5-10 s each in the debug profile (the same runs are
 //! available as `shimmy-sim margin --constant-kmh 15 --duration-s 600`).
-use shimmy_core::estimator::{DataMarginUse, PipelineParams};
-use shimmy_core::monitor::Level;
+use shimmy_core::estimator::fusion::DataMarginUse;
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::params::ParamSet;
 use shimmy_sim::cmd::margin::{run, MarginScenario};
 

@@ -1,5 +1,5 @@
 //! The plant against a second, independent implementation: NumPy/SciPy code written from
-//! reference-plant.md (`host-sim/reference/plant_scipy.py`). Trajectories of the nonlinear plant
+//! `docs/plant-model.md` (`host-sim/reference/plant_scipy.py`). Trajectories of the nonlinear plant
 //! with the MR damper sliding and the eigenvalues of the linearisation must agree.
 //! Needs python3 with numpy and scipy (`cargo xtask test` installs them).
 use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};

@@ -1,6 +1,6 @@
 //! Signal conditioning for the damper controllers (1 kHz, f32).
 //!
-//! Inputs: the two kingpin encoder angles psi_L, psi_R [rad]. Outputs ([`Conditioned`]):
+//! Inputs: the two kingpin encoder angles psi_L, psi_R, rad. Outputs ([`Conditioned`]):
 //!
 //! * the in-phase wheel yaw psi = (psi_L + psi_R)/2 (the damper stroke is x_d = l_t psi) and its
 //!   rate from a discrete **alpha-beta tracking observer** ([`RateObserver`]). Its estimation
@@ -34,13 +34,13 @@ use core::f64::consts::PI;
 /// Parameters of the conditioning chain.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConditioningParams {
-    /// Sample rate the filters are designed for [Hz].
+    /// Sample rate the filters are designed for, Hz.
     pub sample_rate_hz: f32,
-    /// Corner of the high-pass (shimmy path) and low-pass (slow path) [Hz].
+    /// Corner of the high-pass (shimmy path) and low-pass (slow path), Hz.
     pub split_hz: f32,
-    /// Natural frequency of the rate observer's error dynamics [Hz].
+    /// Natural frequency of the rate observer's error dynamics, Hz.
     pub observer_bandwidth_hz: f32,
-    /// Damping ratio of the rate observer's error dynamics [-].
+    /// Damping ratio of the rate observer's error dynamics.
     pub observer_damping: f32,
 }
 
@@ -236,16 +236,16 @@ impl RateObserver {
 /// Outputs of the conditioning chain for one sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Conditioned {
-    /// In-phase wheel yaw (psi_L + psi_R)/2 [rad], unfiltered.
+    /// In-phase wheel yaw (psi_L + psi_R)/2 in rad, unfiltered.
     pub psi_rad: f32,
-    /// Rate of the in-phase yaw from the observer [rad/s] (full band: the damper's stroke rate is
+    /// Rate of the in-phase yaw from the observer, rad/s (full band: the damper's stroke rate is
     /// l_t times this).
     pub rate_radps: f32,
-    /// Shimmy-band (high-passed) in-phase yaw [rad].
+    /// Shimmy-band (high-passed) in-phase yaw, rad.
     pub psi_hp_rad: f32,
-    /// Shimmy-band in-phase yaw rate [rad/s].
+    /// Shimmy-band in-phase yaw rate, rad/s.
     pub rate_hp_radps: f32,
-    /// Slow (driver steering) in-phase yaw [rad].
+    /// Slow (driver steering) in-phase yaw, rad.
     pub psi_slow_rad: f32,
 }
 

@@ -51,9 +51,9 @@ use smc::{AdaptiveGain, AsmcParams, NominalPlant, SmcParams};
 pub enum ControllerKind {
     /// Coil off (0 A, or the limiter's minimum current).
     PassiveOff,
-    /// Constant coil current [A].
+    /// Constant coil current, A.
     PassiveOn {
-        /// The current [A] (clamped to the limits).
+        /// The current, A (clamped to the limits).
         current_a: f32,
     },
     /// Sliding-mode control with a boundary layer and fixed gain.
@@ -104,16 +104,16 @@ pub struct ControlParams {
     pub smc: SmcParams,
     /// Adaptation law.
     pub asmc: AsmcParams,
-    /// Skyhook coefficient on the shimmy-band stroke rate [N s/m].
+    /// Skyhook coefficient on the shimmy-band stroke rate, N s/m.
     pub skyhook_ns_per_m: f32,
     /// Coil-current limits and slew rate.
     pub limits: CurrentLimits,
-    /// Current commanded while inputs are invalid [A].
+    /// Current commanded while inputs are invalid, A.
     pub fallback_current_a: f32,
     /// Below this speed the damper is left at the minimum current (no shimmy at walking pace,
-    /// and parking is not made heavier) [m/s]. A non-finite speed does not gate.
+    /// and parking is not made heavier), m/s. A non-finite speed does not gate.
     pub min_speed_mps: f32,
-    /// Encoder angles beyond +-this are invalid [rad].
+    /// Encoder angles beyond +-this are invalid, rad.
     pub psi_limit_rad: f32,
 }
 
@@ -131,8 +131,9 @@ impl ControlParams {
 
 impl Default for ControlParams {
     /// Defaults for the reference plant's nominal parameter set and the fitted damper.
-    /// fallback 1 A: the passive-on current that keeps the nominal plant stable (to be confirmed
-    /// by the simulator's comparison); min speed 2 m/s; psi limit 0.8 rad (beyond full lock).
+    /// fallback: the fail-safe current [`actuator::FAILSAFE_CURRENT_A`] (a passive-on current
+    /// that keeps the analysed plants stable); min speed 2 m/s; psi limit 0.8 rad (beyond full
+    /// lock).
     fn default() -> Self {
         ControlParams {
             conditioning: ConditioningParams::default(),
@@ -142,8 +143,9 @@ impl Default for ControlParams {
             asmc: AsmcParams::default(),
             skyhook_ns_per_m: 1000.0,
             limits: CurrentLimits::default(),
-            // the supervisor's fail-safe current (one place: chosen from the stability analysis)
-            fallback_current_a: crate::supervisor::FAILSAFE_CURRENT_A,
+            // the fail-safe current (one place, next to the coil limits; chosen from the stability
+            // analysis)
+            fallback_current_a: actuator::FAILSAFE_CURRENT_A,
             min_speed_mps: 2.0,
             psi_limit_rad: 0.8,
         }
@@ -153,17 +155,17 @@ impl Default for ControlParams {
 /// Inputs of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ControlInput {
-    /// Time of the sample [s] (logged; the laws use `dt_s`).
+    /// Time of the sample, s (logged; the laws use `dt_s`).
     pub t_s: f32,
-    /// Time since the previous step [s] (nominally 1e-3).
+    /// Time since the previous step, s (nominally 1e-3).
     pub dt_s: f32,
-    /// Left wheel yaw [rad].
+    /// Left wheel yaw, rad.
     pub psi_l_rad: f32,
-    /// Right wheel yaw [rad].
+    /// Right wheel yaw, rad.
     pub psi_r_rad: f32,
-    /// Vehicle speed [m/s].
+    /// Vehicle speed, m/s.
     pub speed_mps: f32,
-    /// Measured coil current [A], if available (passed through to the actuator path).
+    /// Measured coil current in A, if available (passed through to the actuator path).
     pub coil_current_a: Option<f32>,
 }
 
@@ -187,16 +189,16 @@ pub struct ControlFlags {
 /// Outputs of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ControlOutput {
-    /// Coil-current command [A], always in [i_min, i_max] and finite.
+    /// Coil-current command in A, always in [i_min, i_max] and finite.
     pub current_cmd_a: f32,
-    /// Desired damper force of the law [N] (before the semi-active clip; for passive modes the
+    /// Desired damper force of the law, N (before the semi-active clip; for passive modes the
     /// model force at the commanded current).
     pub desired_force_n: f32,
-    /// Sliding variable s [rad/s].
+    /// Sliding variable s, rad/s.
     pub s_radps: f32,
-    /// Switching gain in use (adaptive for ASMC, fixed for SMC, 0 otherwise) [rad/s^2].
+    /// Switching gain in use (adaptive for ASMC, fixed for SMC, 0 otherwise), rad/s^2.
     pub gain_radps2: f32,
-    /// Stroke rate estimate v_d = l_t psi' [m/s].
+    /// Stroke rate estimate v_d = l_t psi', m/s.
     pub stroke_rate_mps: f32,
     /// Conditioned signals.
     pub conditioned: Conditioned,
@@ -242,7 +244,7 @@ impl Controller {
         self.kind = kind;
     }
 
-    /// Current adaptive gain [rad/s^2].
+    /// Current adaptive gain, rad/s^2.
     pub fn adaptive_gain(&self) -> f32 {
         self.gain.get()
     }

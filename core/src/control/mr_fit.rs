@@ -24,11 +24,11 @@ use core::f64::consts::PI;
 /// The excitation grid of a fit.
 #[derive(Clone, Copy, Debug)]
 pub struct FitGrid<'a> {
-    /// Constant coil currents [A].
+    /// Constant coil currents, A.
     pub currents_a: &'a [f64],
-    /// Stroke amplitudes [m].
+    /// Stroke amplitudes, m.
     pub amplitudes_m: &'a [f64],
-    /// Stroke frequencies [Hz].
+    /// Stroke frequencies, Hz.
     pub freqs_hz: &'a [f64],
     /// Cycles run before sampling starts.
     pub settle_cycles: usize,
@@ -66,11 +66,11 @@ impl FitGrid<'_> {
 /// One force sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FitSample {
-    /// Coil current [A].
+    /// Coil current, A.
     pub current_a: f64,
-    /// Stroke rate [m/s].
+    /// Stroke rate, m/s.
     pub v_mps: f64,
-    /// Spencer-model force [N].
+    /// Spencer-model force, N.
     pub force_n: f64,
 }
 
@@ -166,21 +166,21 @@ impl Smoothing {
 /// A fitted Bingham model and its error.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BinghamFit {
-    /// Yield force at 0 A [N].
+    /// Yield force at 0 A, N.
     pub f_ca_n: f64,
-    /// Yield force per ampere [N/A].
+    /// Yield force per ampere, N/A.
     pub f_cb_n_per_a: f64,
-    /// Viscous coefficient at 0 A [N s/m].
+    /// Viscous coefficient at 0 A, N s/m.
     pub c_a_ns_per_m: f64,
     /// Viscous coefficient per ampere [N s/(m A)].
     pub c_b_ns_per_m_a: f64,
-    /// Smoothing velocity [m/s].
+    /// Smoothing velocity, m/s.
     pub v0_mps: f64,
     /// The smoothing function used.
     pub smoothing: Smoothing,
-    /// RMS force error [N].
+    /// RMS force error, N.
     pub rms_error_n: f64,
-    /// RMS of the fitted forces [N].
+    /// RMS of the fitted forces, N.
     pub rms_force_n: f64,
 }
 

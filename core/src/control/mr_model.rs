@@ -26,24 +26,24 @@
 /// Parameters of the invertible model. Units in the names.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MrModel {
-    /// Yield force at 0 A [N].
+    /// Yield force at 0 A, N.
     pub f_ca_n: f32,
-    /// Yield force per ampere [N/A].
+    /// Yield force per ampere, N/A.
     pub f_cb_n_per_a: f32,
-    /// Viscous coefficient at 0 A [N s/m].
+    /// Viscous coefficient at 0 A, N s/m.
     pub c_a_ns_per_m: f32,
     /// Viscous coefficient per ampere [N s/(m A)].
     pub c_b_ns_per_m_a: f32,
-    /// Smoothing velocity [m/s].
+    /// Smoothing velocity, m/s.
     pub v0_mps: f32,
-    /// Largest coil current [A].
+    /// Largest coil current, A.
     pub i_max_a: f32,
 }
 
 /// Result of the inverse model.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct InverseResult {
-    /// Coil current [A], in [0, I_max].
+    /// Coil current in A, within [0, I_max].
     pub current_a: f32,
     /// The semi-active constraint removed the request (F_des v <= 0 or invalid input).
     pub clipped: bool,
@@ -53,7 +53,7 @@ pub struct InverseResult {
     pub at_minimum: bool,
 }
 
-/// Stroke rates beyond this are treated as this (keeps the arithmetic finite) [m/s].
+/// Stroke rates beyond this are treated as this (keeps the arithmetic finite), m/s.
 pub const V_LIMIT_MPS: f32 = 10.0;
 
 /// Clamp that maps NaN to `lo`.
@@ -90,7 +90,7 @@ impl MrModel {
         x / libm::sqrtf(1.0 + x * x)
     }
 
-    /// Model force [N] at coil current `current_a` and stroke rate `v_mps`.
+    /// Model force in N at coil current `current_a` and stroke rate `v_mps`.
     #[inline]
     pub fn force_n(&self, current_a: f32, v_mps: f32) -> f32 {
         let v = clamp_nan_lo(v_mps, -V_LIMIT_MPS, V_LIMIT_MPS);

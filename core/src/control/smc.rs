@@ -99,11 +99,11 @@
 /// Nominal plant data the controllers use (f32 copies of the nominal parameter set).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NominalPlant {
-    /// Wheel-assembly yaw inertia about the kingpin I_k [kg m^2].
+    /// Wheel-assembly yaw inertia about the kingpin I_k, kg m^2.
     pub i_k_kgm2: f32,
-    /// Kingpin damping c_k [N m s/rad].
+    /// Kingpin damping c_k, N m s/rad.
     pub c_k_nms_per_rad: f32,
-    /// Steering-arm length l_t [m].
+    /// Steering-arm length l_t, m.
     pub l_t_m: f32,
 }
 
@@ -133,11 +133,11 @@ impl Default for NominalPlant {
 /// Gains of the sliding surface and the fixed-gain SMC.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SmcParams {
-    /// Sliding-surface slope lambda [1/s].
+    /// Sliding-surface slope lambda, 1/s.
     pub lambda_per_s: f32,
-    /// Boundary-layer half width phi [rad/s].
+    /// Boundary-layer half width phi, rad/s.
     pub phi_radps: f32,
-    /// Fixed switching gain K of the ordinary SMC [rad/s^2].
+    /// Fixed switching gain K of the ordinary SMC, rad/s^2.
     pub k_radps2: f32,
 }
 
@@ -160,15 +160,15 @@ impl Default for SmcParams {
 pub struct AsmcParams {
     /// Adaptation rate gamma [rad/s^2 per (rad/s) per s].
     pub gamma: f32,
-    /// Leakage sigma [1/s].
+    /// Leakage sigma, 1/s.
     pub sigma_per_s: f32,
-    /// Dead zone on |s| [rad/s] (above the noise floor of s).
+    /// Dead zone on |s|, rad/s (above the noise floor of s).
     pub dead_zone_radps: f32,
-    /// Lower bound (and leakage target) of K [rad/s^2].
+    /// Lower bound (and leakage target) of K, rad/s^2.
     pub k_min_radps2: f32,
-    /// Upper bound of K [rad/s^2].
+    /// Upper bound of K, rad/s^2.
     pub k_max_radps2: f32,
-    /// K at start-up and after reset [rad/s^2].
+    /// K at start-up and after reset, rad/s^2.
     pub k_init_radps2: f32,
     /// Freeze the growth term while the actuator is saturated or clipped (anti-windup). Off
     /// only to show that it is needed.
@@ -212,13 +212,13 @@ pub fn sat(x: f32) -> f32 {
     }
 }
 
-/// Sliding variable s = rate + lambda psi [rad/s].
+/// Sliding variable s = rate + lambda psi, rad/s.
 #[inline]
 pub fn sliding_surface(psi_hp_rad: f32, rate_hp_radps: f32, lambda_per_s: f32) -> f32 {
     rate_hp_radps + lambda_per_s * psi_hp_rad
 }
 
-/// Desired damper force of the SMC law [N] (positive resists a positive stroke rate).
+/// Desired damper force of the SMC law, N (positive resists a positive stroke rate).
 #[inline]
 pub fn smc_force_n(
     nom: &NominalPlant,
@@ -266,7 +266,7 @@ impl AdaptiveGain {
         }
     }
 
-    /// Current gain [rad/s^2].
+    /// Current gain, rad/s^2.
     #[inline]
     pub fn get(&self) -> f32 {
         self.k

@@ -8,25 +8,11 @@
 //! - model consistency: |zeta_hat - zeta_model| > k sigma_zeta (k = 3) held for
 //!   `mismatch_hold_s` sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
 //!
-//! The model-based quantities are plain inputs ([`ModelMargin`]) computed by the plant/eigen
-//! code elsewhere.
+//! The model-based quantities are plain inputs ([`ModelMargin`]), computed from the plant model
+//! by [`super::model_margin`].
 
-use super::ModeEstimate;
-
-/// Model-based quantities at the current operating point (f64: the model path).
-#[derive(Clone, Copy, Debug, PartialEq, Default)]
-pub struct ModelMargin {
-    /// Damping ratio of the model's least-damped shimmy mode.
-    pub zeta: f64,
-    /// Its damped frequency, Hz.
-    pub freq_hz: f64,
-    /// Slope d zeta / dV at the current speed, 1/(m/s).
-    pub dzeta_dv_per_mps: f64,
-    /// Onset (Hopf) speed of the linear model above the current speed, if any, m/s.
-    pub v_crit_onset_mps: Option<f64>,
-    /// The model computation succeeded and is current.
-    pub valid: bool,
-}
+use super::meter::mode_meter::ModeEstimate;
+use super::model_margin::ModelMargin;
 
 /// Fusion parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -263,7 +249,7 @@ impl Fusion {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimator::EstimateStatus;
+    use crate::estimator::meter::mode_meter::EstimateStatus;
 
     fn est(zeta: f32, sigma: f32) -> ModeEstimate {
         ModeEstimate {

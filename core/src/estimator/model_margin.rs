@@ -29,7 +29,6 @@
 
 use nalgebra::Complex;
 
-use super::fusion::ModelMargin;
 use crate::eigen::{self, Mode};
 use crate::params::PlantParams;
 use crate::plant::{dlinearise_dv, linearise};
@@ -147,6 +146,22 @@ impl ModelPoint {
                 && self.dzeta_dv_per_mps.is_finite(),
         }
     }
+}
+
+/// Model-based quantities at the current operating point (f64: the model path): the fusion's
+/// model input, from [`ModelPoint::margin`].
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct ModelMargin {
+    /// Damping ratio of the model's least-damped shimmy mode.
+    pub zeta: f64,
+    /// Its damped frequency, Hz.
+    pub freq_hz: f64,
+    /// Slope d zeta / dV at the current speed, 1/(m/s).
+    pub dzeta_dv_per_mps: f64,
+    /// Onset (Hopf) speed of the linear model above the current speed, if any, m/s.
+    pub v_crit_onset_mps: Option<f64>,
+    /// The model computation succeeded and is current.
+    pub valid: bool,
 }
 
 /// Brent's method split into propose / tell steps (same iteration as

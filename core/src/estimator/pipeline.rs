@@ -11,10 +11,12 @@
 //! All thresholds live in [`PipelineParams`]; `PipelineParams::default()` is the tuned design
 //! point (see [`PipelineParams::tuned_monitor`] for how each threshold was chosen).
 
-use super::fusion::{DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport, ModelMargin};
-use super::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
-use super::{ConfigError, EstimatorConfig, MarginEstimator, MeterOutput, Sample};
-use crate::monitor::{Level, Monitor, MonitorInput, MonitorParams};
+use super::fusion::{DataMarginUse, Fusion, FusionInput, FusionParams, MarginReport};
+use super::meter::mode_meter::{
+    ConfigError, EstimatorConfig, MarginEstimator, MeterOutput, Sample,
+};
+use super::model_margin::{ModelMargin, ModelMarginConfig, ModelMarginTracker, ModelPoint};
+use super::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 use crate::params::PlantParams;
 
 /// Every tunable of the pipeline in one place.
@@ -282,7 +284,7 @@ impl<const N: usize> ShimmyPipeline<N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimator::WheelOrder;
+    use crate::estimator::meter::mode_meter::WheelOrder;
 
     /// `ShimmyPipeline` is exactly a `DataPipeline` fed by a tracker stepped each tick: the
     /// composition by hand gives bit-identical outputs (so the firmware, which composes them

@@ -1,8 +1,14 @@
 //! Supervisor and SafeController tests: one scenario per check (each also shows the healthy
 //! counterpart raises nothing), hysteresis, latches, and property tests over arbitrary input.
 
-use super::*;
-use crate::control::{ControlParams, ControllerKind};
+use super::checks::*;
+use super::faults::*;
+use super::frame::*;
+use super::params::*;
+use super::policy::*;
+use super::safe_controller::*;
+use crate::control::actuator::FAILSAFE_CURRENT_A;
+use crate::control::{ControlInput, ControlParams, Controller, ControllerKind};
 use proptest::prelude::*;
 
 const I_MAX: f32 = 2.0;
@@ -508,7 +514,7 @@ proptest! {
     fn rls_covariance_stays_finite_and_symmetric(
         samples in proptest::collection::vec((any_f32(), any_f32(), any_f32(), any_f32()), 1..2000),
     ) {
-        use crate::estimator::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
+        use crate::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, Sample, WheelOrder};
         let cfg = EstimatorConfig::default();
         let mut est = MarginEstimator::<f32>::new(cfg).expect("default config");
         for (i, (l, r, v, c)) in samples.into_iter().enumerate() {

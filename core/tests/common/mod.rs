@@ -8,9 +8,10 @@ use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use shimmy_core::estimator::{
-    EstimatorConfig, MarginEstimator, MeterOutput, Real, Sample, WheelOrder,
+use shimmy_core::estimator::meter::mode_meter::{
+    EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
+use shimmy_core::estimator::meter::real::Real;
 
 pub const FS: f64 = 1000.0;
 pub const PI2: f64 = 2.0 * std::f64::consts::PI;

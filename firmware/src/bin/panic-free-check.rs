@@ -17,12 +17,11 @@ mod check {
     use cortex_m_rt::entry;
     // The device crate supplies the interrupt vector table the runtime's linker script expects.
     use shimmy_core::control::{ControlParams, ControllerKind};
-    use shimmy_core::estimator::{
-        EstimatorConfig, Fusion, FusionInput, FusionParams, MarginEstimator, WheelOrder,
-    };
-    use shimmy_core::supervisor::{
-        EncoderReading, MarginStatus, RawFrame, SafeController, SupervisorParams,
-    };
+    use shimmy_core::estimator::fusion::{Fusion, FusionInput, FusionParams};
+    use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
+    use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
+    use shimmy_core::supervisor::params::SupervisorParams;
+    use shimmy_core::supervisor::safe_controller::SafeController;
     use stm32f4xx_hal as _;
 
     /// Raw input words, written by "hardware" (opaque to the optimiser).

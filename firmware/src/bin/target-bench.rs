@@ -235,7 +235,7 @@ mod bench {
     static METER_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
 
     fn control_step() -> u32 {
-        use shimmy_core::supervisor::MarginStatus;
+        use shimmy_core::supervisor::frame::MarginStatus;
         use shimmy_firmware::control::{supervised_step, Health};
         use shimmy_firmware::drivers::coil_pwm::CoilDriver;
         use shimmy_firmware::monitoring::safe_controller;
@@ -263,7 +263,7 @@ mod bench {
                 worst = worst.max(measure_once(one));
             }
         }
-        if ctrl.supervisor().mode() != shimmy_core::supervisor::Mode::Normal {
+        if ctrl.supervisor().mode() != shimmy_core::supervisor::policy::Mode::Normal {
             return u32::MAX; // not the path we meant to measure
         }
         CONTROL_MAX.store(worst, Ordering::Relaxed);
@@ -271,7 +271,7 @@ mod bench {
     }
 
     fn safe_step() -> u32 {
-        use shimmy_core::supervisor::{MarginStatus, RawFrame};
+        use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
         let mut c = shimmy_firmware::monitoring::safe_controller();
         let mut seed = 1;
         let mut worst = 0;

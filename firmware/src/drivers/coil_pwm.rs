@@ -8,14 +8,14 @@
 //! - As soon as the driver is constructed, and whenever the control loop has no valid command
 //!   (invalid sensors, a NaN from the controller, the supervisor's fault state), it drives
 //!   [`FAILSAFE_CURRENT_A`]: the supervisor's fail-safe current, chosen from the stability
-//!   analysis (`shimmy_core::supervisor::FAILSAFE_CURRENT_A`, checked by
+//!   analysis (`shimmy_core::control::actuator::FAILSAFE_CURRENT_A`, checked by
 //!   `tests/tests/failsafe_current.rs`).
 
 use embedded_hal::pwm::SetDutyCycle;
 
 /// Coil current commanded while the loop has no valid command, A: the supervisor's fail-safe
 /// current (one definition, in core).
-pub const FAILSAFE_CURRENT_A: f32 = shimmy_core::supervisor::FAILSAFE_CURRENT_A;
+pub const FAILSAFE_CURRENT_A: f32 = shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
 
 /// Electrical data of the coil drive.
 #[derive(Clone, Copy, Debug, PartialEq)]

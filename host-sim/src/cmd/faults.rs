@@ -17,7 +17,7 @@ use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::params::{kmh_to_mps, ParamSet, PlantParams};
-use shimmy_core::supervisor::Mode;
+use shimmy_core::supervisor::policy::Mode;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 

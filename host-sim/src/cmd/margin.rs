@@ -14,8 +14,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 use plotters::prelude::*;
-use shimmy_core::estimator::{PipelineParams, Sample, ShimmyPipeline, WheelOrder};
-use shimmy_core::monitor::Level;
+use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind, ModeSelect};
 

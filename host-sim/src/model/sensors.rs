@@ -158,8 +158,8 @@ impl Default for Measurement {
 
 impl Measurement {
     /// The core's raw frame of this measurement at time stamp `t_us`.
-    pub fn raw_frame(&self, t_us: u32) -> shimmy_core::supervisor::RawFrame {
-        use shimmy_core::supervisor::{EncoderReading, RawFrame};
+    pub fn raw_frame(&self, t_us: u32) -> shimmy_core::supervisor::frame::RawFrame {
+        use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
         let enc = |a: f32, s: EncoderStatus| EncoderReading {
             angle_rad: a,
             read_ok: s.read_ok,

@@ -1,8 +1,9 @@
 //! The closed loop in lockstep at the control rate (1 kHz): the nonlinear plant (with the MR
-//! damper and its coil lag) -> [`sensors`](crate::model::sensors) (+ optional [`faults`](crate::model::faults))
-//! -> `shimmy_core::supervisor::SafeController` (supervisor + `Controller` + final limiter, the
-//! firmware's 1 kHz call) -> coil-current command -> plant; the data-driven mode meter
-//! (`shimmy_core::estimator::MarginEstimator`) runs on the validated encoder angles.
+//! damper and its coil lag) -> [`sensors`](crate::model::sensors) (+ optional
+//! [`faults`](crate::model::faults)) -> `shimmy_core::supervisor::safe_controller::SafeController`
+//! (supervisor + `Controller` + final limiter, the firmware's 1 kHz call) -> coil-current command
+//! -> plant; the data-driven mode meter (`shimmy_core::estimator::meter::mode_meter::MarginEstimator`)
+//! runs on the validated encoder angles.
 //!
 //! Per control period `k` (t = k dt):
 //! 1. the sensors read the true state at t (encoder angles with status bits, speed with its
@@ -25,12 +26,16 @@ use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
-use shimmy_core::estimator::{EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder};
-use shimmy_core::params::PlantParams;
-use shimmy_core::supervisor::{
-    FaultKind, FaultRecord, FaultSet, MarginStatus, Mode, SafeController, SafeOutput,
-    SupervisorEvent, SupervisorParams,
+use shimmy_core::estimator::meter::mode_meter::{
+    EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
+use shimmy_core::params::PlantParams;
+use shimmy_core::supervisor::checks::SupervisorEvent;
+use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
+use shimmy_core::supervisor::frame::MarginStatus;
+use shimmy_core::supervisor::params::SupervisorParams;
+use shimmy_core::supervisor::policy::Mode;
+use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
 /// What sits on the track rod and drives it.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -16,7 +16,7 @@
 //! Every episode above `Normal` becomes an [`Event`] (start time, speed, frequency, peak amplitude,
 //! worst level, duration) in a ring buffer of `N` entries (oldest dropped, drop count kept).
 
-use crate::estimator::MarginReport;
+use super::fusion::MarginReport;
 
 /// Warning level.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Default)]

@@ -5,7 +5,7 @@
 //! float type: f32 on the target, f64 in the reference twin. It is warm-started from the
 //! previous roots, so while tracking it usually converges in 2-4 sweeps. Rooting in f32 is safe
 //! here because the polynomial is identified at the decimated rate (~100 Hz), where rounding the
-//! coefficients to f32 moves zeta by ~1e-5 (margin-estimation.md); the f32 iteration adds
+//! coefficients to f32 moves zeta by ~1e-5 (`docs/margin-estimator.md`); the f32 iteration adds
 //! rounding of the same order (tested against the f64 twin). An independent solver (nalgebra's
 //! Schur decomposition of the companion matrix) checks it in the tests.
 
@@ -82,7 +82,7 @@ pub enum RootError {
     NoConvergence,
 }
 
-/// Roots of the monic polynomial z^p + c[0] z^(p-1) + ... + c[p-1], in the float type of the
+/// Roots of the monic polynomial `z^p + c[0] z^(p-1) + ... + c[p-1]`, in the float type of the
 /// coefficients: f32 in the target's estimator (hardware FPU; f64 is software on the M4 and
 /// made this step ~1.2 M instructions), f64 in the reference twin.
 ///

@@ -1,0 +1,499 @@
+//! The [`Supervisor`]: per-frame checks, fault hysteresis and latches, fault records and the
+//! event log; each frame ends with the verdict of [`super::policy`].
+//!
+//! # Checks (each frame)
+//!
+//!
+//! | fault | rule |
+//! |---|---|
+//! | `*Read` | the encoder transaction failed (`read_ok == false`) |
+//! | `*Flag` | parity error or the sensor's own error flag (magnet field, CORDIC overflow) |
+//! | `*NonFinite` | NaN or Inf angle |
+//! | `*Range` | \|psi\| > `psi_limit_rad` (beyond full lock) |
+//! | `*Rate` | \|psi - psi_last_good\| > `max_rate_radps` x (time since the last good sample) |
+//! | `*Stuck` | bit-identical for `stuck_samples` while the *other* encoder moved > `stuck_motion_rad` |
+//! | `EncoderDisagree` | both valid but \|psi_L - psi_R\| > `max_disagree_rad` |
+//! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed (advisory) |
+//! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
+//! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
+//! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
+//! | `CoilOpen` | command > `coil_min_cmd_a` and measured < `coil_open_ratio` x command for `coil_fault_s` |
+//! | `CoilShort` | measured > command + `coil_over_a` (or at the ADC full scale when that is above it) for `coil_fault_s` |
+//! | `CoilSensor` | measured coil current NaN/Inf |
+//! | `MarginUnavailable` | the margin estimate is invalid for `margin_invalid_s` (advisory) |
+//!
+//! Rate bound: the no-damper shimmy limit cycle of the reference plant peaks at ~7 deg at
+//! ~7 Hz, i.e. ~5.4 rad/s; the default 25 rad/s also passes 0.2 rad at the 20 Hz edge of the
+//! shimmy band (the 47 Hz anti-phase mode is milli-radian). A flipped high bit of a 14-bit
+//! encoder (> 0.38 rad in one 1 ms sample, i.e. > 380 rad/s) is caught by a factor of 15.
+//!
+//! # Why the stuck check compares with the other encoder
+//!
+//! On a perfectly straight, smooth road a healthy wheel-yaw signal can be constant for seconds
+//! (the encoder quantum, 0.38 mrad for 14 bits, is larger than the yaw motion), so "no change for
+//! N samples" alone would raise false faults exactly when everything is fine. The two wheels are
+//! joined by the track rod: in-phase yaw moves both encoders 1:1 and the anti-phase (track-rod
+//! compliance) motion is tiny. So an encoder is declared stuck only if it stays bit-identical
+//! while the *other* encoder moves by more than `stuck_motion_rad` (default 5 mrad, 13 quanta:
+//! no rigid-linkage motion can show that on one wheel and nothing on the other). Both encoders
+//! stuck at once cannot be told from a smooth road by comparison; a bit-identical pair for
+//! `both_stuck_samples` (2 s) above `zero_current_below_mps` is therefore only *suspected*
+//! (`BothStuckSuspect`): the mode goes to Degraded with the fail-safe current as a floor, which
+//! is safe and costs only a stiffer damper on a mirror-smooth road.
+
+use super::faults::{FaultKind, FaultRecord, FaultSet, N_FAULTS};
+use super::frame::{EncoderReading, MarginStatus, RawFrame, NOMINAL_PERIOD_US};
+use super::params::SupervisorParams;
+use super::policy::{decide, Mode, SupervisorVerdict};
+
+/// A mode change or fault (de)activation, for the log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SupervisorEvent {
+    /// A fault became active.
+    Raised {
+        /// Time stamp, us.
+        t_us: u32,
+        /// Which.
+        kind: FaultKind,
+    },
+    /// A fault left the active set (after the recovery time).
+    Cleared {
+        /// Time stamp, us.
+        t_us: u32,
+        /// Which.
+        kind: FaultKind,
+    },
+    /// The mode changed.
+    ModeChange {
+        /// Time stamp, us.
+        t_us: u32,
+        /// Previous mode.
+        from: Mode,
+        /// New mode.
+        to: Mode,
+    },
+}
+
+/// Capacity of the event log.
+pub const EVENT_CAPACITY: usize = 32;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct EncoderTrack {
+    last_good_rad: Option<f32>,
+    last_good_t_us: u32,
+    last_raw_bits: Option<u32>,
+    unchanged: u16,
+    other_lo_rad: f32,
+    other_hi_rad: f32,
+}
+
+/// Frame validation, fault records and the mode policy.
+#[derive(Clone, Debug)]
+pub struct Supervisor {
+    p: SupervisorParams,
+    last_t_us: Option<u32>,
+    enc: [EncoderTrack; 2],
+    both_unchanged: u16,
+    speed_last_good: Option<(f32, u32)>,
+    coil_mismatch_s: [f32; 2],
+    margin_invalid_s: f32,
+    absent_s: [f32; N_FAULTS],
+    records: [FaultRecord; N_FAULTS],
+    active: FaultSet,
+    mode: Mode,
+    events: heapless::Deque<SupervisorEvent, EVENT_CAPACITY>,
+    dropped_events: u32,
+    missed_samples: u32,
+    frames: u32,
+}
+
+/// `x <= bound`, false for NaN (a NaN difference fails the check).
+#[inline]
+fn within(x: f32, bound: f32) -> bool {
+    x <= bound
+}
+
+/// |x| for the checks (NaN stays NaN and fails every `<=`).
+#[inline]
+fn abs(x: f32) -> f32 {
+    libm::fabsf(x)
+}
+
+impl Supervisor {
+    /// A supervisor with `p`.
+    pub fn new(p: SupervisorParams) -> Self {
+        Supervisor {
+            p,
+            last_t_us: None,
+            enc: [EncoderTrack::default(); 2],
+            both_unchanged: 0,
+            speed_last_good: None,
+            coil_mismatch_s: [0.0; 2],
+            margin_invalid_s: 0.0,
+            absent_s: [0.0; N_FAULTS],
+            records: [FaultRecord::default(); N_FAULTS],
+            active: FaultSet::EMPTY,
+            mode: Mode::Normal,
+            events: heapless::Deque::new(),
+            dropped_events: 0,
+            missed_samples: 0,
+            frames: 0,
+        }
+    }
+
+    /// The thresholds.
+    pub fn params(&self) -> &SupervisorParams {
+        &self.p
+    }
+
+    /// The mode of the last frame.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Active faults.
+    pub fn faults(&self) -> FaultSet {
+        self.active
+    }
+
+    /// Counters of fault `k`.
+    pub fn record(&self, k: FaultKind) -> FaultRecord {
+        self.records.get(k as usize).copied().unwrap_or_default()
+    }
+
+    /// Frames checked.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Samples missing according to the time stamps (gaps of more than 1.5 periods).
+    pub fn missed_samples(&self) -> u32 {
+        self.missed_samples
+    }
+
+    /// The event log, oldest first (drops the oldest when full).
+    pub fn events(&self) -> impl Iterator<Item = &SupervisorEvent> {
+        self.events.iter()
+    }
+
+    /// Events lost to the log's capacity.
+    pub fn dropped_events(&self) -> u32 {
+        self.dropped_events
+    }
+
+    /// Takes the events out of the log.
+    pub fn drain_events(&mut self) -> impl Iterator<Item = SupervisorEvent> + '_ {
+        core::iter::from_fn(move || self.events.pop_front())
+    }
+
+    /// Clears latched faults (coil open/short): call on an ignition cycle or after service.
+    pub fn clear_latched(&mut self) {
+        for k in FaultKind::ALL {
+            if k.latched() {
+                self.active.0 &= !k.bit();
+                if let Some(r) = self.records.get_mut(k as usize) {
+                    r.active = false;
+                }
+            }
+        }
+        self.coil_mismatch_s = [0.0; 2];
+    }
+
+    fn log(&mut self, e: SupervisorEvent) {
+        if self.events.is_full() {
+            let _ = self.events.pop_front();
+            self.dropped_events = self.dropped_events.saturating_add(1);
+        }
+        let _ = self.events.push_back(e);
+    }
+
+    /// Checks one encoder; `other` is the other encoder's raw value (for the stuck check).
+    fn check_encoder(
+        &mut self,
+        side: usize,
+        r: &EncoderReading,
+        other: &EncoderReading,
+        t_us: u32,
+        det: &mut FaultSet,
+    ) {
+        let base = if side == 0 { 0u8 } else { 6u8 };
+        let kind = |off: u8| FaultKind::ALL.get((base + off) as usize).copied();
+        let p = self.p;
+        let Some(tr) = self.enc.get_mut(side) else {
+            return;
+        };
+        let mut bad = FaultSet::EMPTY;
+        if !r.read_ok {
+            bad.0 |= 1 << base;
+        }
+        if !r.parity_ok || r.error_flag {
+            bad.0 |= 1 << (base + 1);
+        }
+        let x = r.angle_rad;
+        if !x.is_finite() {
+            bad.0 |= 1 << (base + 2);
+        } else if abs(x) > p.psi_limit_rad {
+            bad.0 |= 1 << (base + 3);
+        }
+        // Rate: against the last good sample, over the time since it (grows across gaps).
+        if bad.is_empty() {
+            if let Some(last) = tr.last_good_rad {
+                let dt_s = t_us.wrapping_sub(tr.last_good_t_us) as f32 * 1e-6;
+                if !within(abs(x - last), p.max_rate_radps * dt_s) {
+                    bad.0 |= 1 << (base + 4);
+                }
+            }
+        }
+        // Stuck: bit-identical raw value while the other encoder moves (only transactions that
+        // completed count; a failed read is its own fault).
+        let other_x = other.angle_rad;
+        if r.read_ok && x.is_finite() {
+            let bits = x.to_bits();
+            if tr.last_raw_bits == Some(bits) {
+                tr.unchanged = tr.unchanged.saturating_add(1);
+            } else {
+                tr.unchanged = 0;
+                tr.other_lo_rad = f32::INFINITY;
+                tr.other_hi_rad = f32::NEG_INFINITY;
+            }
+            tr.last_raw_bits = Some(bits);
+            if other.read_ok && other_x.is_finite() && abs(other_x) <= p.psi_limit_rad {
+                tr.other_lo_rad = tr.other_lo_rad.min(other_x);
+                tr.other_hi_rad = tr.other_hi_rad.max(other_x);
+            }
+            if tr.unchanged >= p.stuck_samples
+                && tr.other_hi_rad - tr.other_lo_rad > p.stuck_motion_rad
+            {
+                bad.0 |= 1 << (base + 5);
+            }
+        } else {
+            tr.last_raw_bits = None;
+            tr.unchanged = 0;
+        }
+        // Only rate/stuck-free, valid samples become the rate reference.
+        if bad.is_empty() {
+            tr.last_good_rad = Some(x);
+            tr.last_good_t_us = t_us;
+        }
+        for off in 0..6u8 {
+            if bad.0 & (1 << (base + off)) != 0 {
+                if let Some(k) = kind(off) {
+                    det.insert(k);
+                }
+            }
+        }
+    }
+
+    fn check_speed(&mut self, f: &RawFrame, det: &mut FaultSet) -> Option<f32> {
+        let v = f.speed_mps;
+        let p = self.p;
+        if !f.speed_valid || !v.is_finite() || v < -p.speed_neg_tol_mps || v > p.max_speed_mps {
+            det.insert(FaultKind::SpeedInvalid);
+            return None;
+        }
+        if let Some((last, t_last)) = self.speed_last_good {
+            let dt_s = f.t_us.wrapping_sub(t_last) as f32 * 1e-6;
+            // One extra sample period of slack: speed signals are often held between updates.
+            let bound = p.max_accel_mps2 * (dt_s + 1e-3) + p.speed_noise_tol_mps;
+            if !within(abs(v - last), bound) {
+                det.insert(FaultKind::SpeedJump);
+                return None;
+            }
+        }
+        self.speed_last_good = Some((v, f.t_us));
+        Some(v)
+    }
+
+    /// Coil check against the command of the previous step `last_cmd_a`.
+    fn check_coil(&mut self, f: &RawFrame, last_cmd_a: f32, dt_s: f32, det: &mut FaultSet) {
+        let Some(i_meas) = f.coil_current_a else {
+            self.coil_mismatch_s = [0.0; 2];
+            return;
+        };
+        if !i_meas.is_finite() {
+            det.insert(FaultKind::CoilSensor);
+            return;
+        }
+        let p = self.p;
+        let open = last_cmd_a > p.coil_min_cmd_a && i_meas < p.coil_open_ratio * last_cmd_a;
+        let over_a = last_cmd_a + p.coil_over_a;
+        let short =
+            i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
+        for (acc, cond) in self.coil_mismatch_s.iter_mut().zip([open, short]) {
+            *acc = if cond { (*acc + dt_s).min(1e3) } else { 0.0 };
+        }
+        if self.coil_mismatch_s[0] >= p.coil_fault_s {
+            det.insert(FaultKind::CoilOpen);
+        }
+        if self.coil_mismatch_s[1] >= p.coil_fault_s {
+            det.insert(FaultKind::CoilShort);
+        }
+    }
+
+    /// Validates one frame. `last_cmd_a` is the coil command applied since the previous frame
+    /// (for the coil checks); `margin` the latest margin validity. Returns the verdict and the
+    /// validated inputs.
+    pub fn check(
+        &mut self,
+        f: &RawFrame,
+        last_cmd_a: f32,
+        margin: MarginStatus,
+    ) -> (SupervisorVerdict, Validated) {
+        let p = self.p;
+        self.frames = self.frames.saturating_add(1);
+        let mut det = FaultSet::EMPTY;
+        // Timing.
+        let period_s = NOMINAL_PERIOD_US as f32 * 1e-6;
+        let dt_s = match self.last_t_us {
+            None => period_s,
+            Some(last) => {
+                let gap = f.t_us.wrapping_sub(last);
+                if gap == 0 || gap > p.max_gap_us {
+                    det.insert(FaultKind::Timing);
+                }
+                if gap > NOMINAL_PERIOD_US + NOMINAL_PERIOD_US / 2 {
+                    let missed = gap.saturating_add(NOMINAL_PERIOD_US / 2) / NOMINAL_PERIOD_US;
+                    self.missed_samples =
+                        self.missed_samples.saturating_add(missed.saturating_sub(1));
+                }
+                if gap == 0 || gap > p.max_gap_us {
+                    period_s
+                } else {
+                    gap as f32 * 1e-6
+                }
+            }
+        };
+        self.last_t_us = Some(f.t_us);
+        // Encoders.
+        self.check_encoder(0, &f.left, &f.right, f.t_us, &mut det);
+        self.check_encoder(1, &f.right, &f.left, f.t_us, &mut det);
+        let l_ok = !det.left();
+        let r_ok = !det.right();
+        if l_ok
+            && r_ok
+            && !within(
+                abs(f.left.angle_rad - f.right.angle_rad),
+                p.max_disagree_rad,
+            )
+        {
+            det.insert(FaultKind::EncoderDisagree);
+        }
+        // Speed.
+        let speed = self.check_speed(f, &mut det);
+        // Both encoders frozen at speed (advisory).
+        let both_frozen = self.enc.iter().all(|e| e.unchanged > 0);
+        let at_speed = speed.is_none_or(|v| v >= p.zero_current_below_mps);
+        self.both_unchanged = if both_frozen && at_speed {
+            self.both_unchanged.saturating_add(1)
+        } else {
+            0
+        };
+        if self.both_unchanged >= p.both_stuck_samples {
+            det.insert(FaultKind::BothStuckSuspect);
+        }
+        // Coil.
+        self.check_coil(f, last_cmd_a, dt_s, &mut det);
+        // Margin estimate.
+        match margin {
+            MarginStatus::Invalid if p.margin_invalid_s > 0.0 => {
+                self.margin_invalid_s = (self.margin_invalid_s + dt_s).min(1e6);
+                if self.margin_invalid_s >= p.margin_invalid_s {
+                    det.insert(FaultKind::MarginUnavailable);
+                }
+            }
+            _ => self.margin_invalid_s = 0.0,
+        }
+        self.update_active(det, f.t_us, dt_s);
+        let verdict = decide(self.active, det, speed, &self.p);
+        if verdict.mode != self.mode {
+            log_warn!(
+                "supervisor: mode {} -> {}",
+                self.mode.name(),
+                verdict.mode.name()
+            );
+            self.log(SupervisorEvent::ModeChange {
+                t_us: f.t_us,
+                from: self.mode,
+                to: verdict.mode,
+            });
+            self.mode = verdict.mode;
+        }
+        let a = self.active;
+        let left = (!a.left()).then_some(f.left.angle_rad);
+        let right = (!a.right()).then_some(f.right.angle_rad);
+        let (psi_l, psi_r) = match (left, right) {
+            (Some(l), Some(r)) if !a.contains(FaultKind::EncoderDisagree) => (Some(l), Some(r)),
+            (Some(l), None) => (Some(l), Some(l)),
+            (None, Some(r)) => (Some(r), Some(r)),
+            _ => (None, None),
+        };
+        let angles = match (psi_l, psi_r) {
+            (Some(l), Some(r)) if verdict.mode != Mode::FailSafe => Some((l, r)),
+            _ => None,
+        };
+        let validated = Validated {
+            t_s: f.t_us as f32 * 1e-6,
+            dt_s,
+            angles_rad: angles,
+            speed_mps: if a.contains(FaultKind::SpeedInvalid) || a.contains(FaultKind::SpeedJump) {
+                None
+            } else {
+                speed
+            },
+            coil_current_a: if a.contains(FaultKind::CoilSensor) {
+                None
+            } else {
+                f.coil_current_a.filter(|i| i.is_finite())
+            },
+        };
+        (verdict, validated)
+    }
+
+    fn update_active(&mut self, det: FaultSet, t_us: u32, dt_s: f32) {
+        let recovery = self.p.recovery_s;
+        for (i, k) in FaultKind::ALL.into_iter().enumerate() {
+            let (Some(rec), Some(absent)) = (self.records.get_mut(i), self.absent_s.get_mut(i))
+            else {
+                continue;
+            };
+            let was = self.active.contains(k);
+            if det.contains(k) {
+                rec.frames = rec.frames.saturating_add(1);
+                rec.first_t_us.get_or_insert(t_us);
+                rec.last_t_us = Some(t_us);
+                *absent = 0.0;
+                if !was {
+                    rec.activations = rec.activations.saturating_add(1);
+                    rec.active = true;
+                    self.active.insert(k);
+                    log_warn!("supervisor: fault {} raised", k.name());
+                    self.log(SupervisorEvent::Raised { t_us, kind: k });
+                }
+            } else if was && !k.latched() {
+                *absent = (*absent + dt_s).min(1e6);
+                if *absent >= recovery {
+                    rec.active = false;
+                    self.active.0 &= !k.bit();
+                    log_info!("supervisor: fault {} cleared", k.name());
+                    self.log(SupervisorEvent::Cleared { t_us, kind: k });
+                }
+            }
+        }
+    }
+}
+
+/// Inputs after validation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Validated {
+    /// Time, s (wraps with the us counter; for logs).
+    pub t_s: f32,
+    /// Time since the previous frame, s (the nominal period after a timing fault).
+    pub dt_s: f32,
+    /// Wheel yaw (left, right) in rad to control on: both encoders, or the healthy one twice;
+    /// `None` in FailSafe.
+    pub angles_rad: Option<(f32, f32)>,
+    /// Trusted speed, m/s.
+    pub speed_mps: Option<f32>,
+    /// Trusted coil current, A.
+    pub coil_current_a: Option<f32>,
+}

@@ -1,0 +1,92 @@
+//! The supervisor's thresholds ([`SupervisorParams`]) and the two currents its policy uses.
+
+use crate::control::actuator::FAILSAFE_CURRENT_A;
+
+/// Below this (trusted) speed 0 A is safe: 80 % of the lowest Hopf onset of every analysed
+/// variant without damper (checked by `tests/tests/failsafe_current.rs`), m/s.
+pub const ZERO_CURRENT_SAFE_BELOW_MPS: f32 = 1.0;
+
+/// Supervisor thresholds. `Default` is the documented design point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SupervisorParams {
+    /// Encoder angles beyond +-this are invalid, rad.
+    pub psi_limit_rad: f32,
+    /// Largest plausible wheel-yaw rate, rad/s.
+    pub max_rate_radps: f32,
+    /// Largest plausible |psi_L - psi_R|, rad (steering-geometry Ackermann difference at
+    /// full lock plus compliance).
+    pub max_disagree_rad: f32,
+    /// Samples of bit-identical value for the single-encoder stuck check.
+    pub stuck_samples: u16,
+    /// Peak-to-peak motion of the other encoder that must show on a healthy one, rad.
+    pub stuck_motion_rad: f32,
+    /// Samples of a bit-identical pair (at speed) for `BothStuckSuspect`.
+    pub both_stuck_samples: u16,
+    /// Largest plausible speed, m/s.
+    pub max_speed_mps: f32,
+    /// Negative speed tolerated as sensor noise at standstill, m/s.
+    pub speed_neg_tol_mps: f32,
+    /// Largest plausible |dV/dt|, m/s^2.
+    pub max_accel_mps2: f32,
+    /// Sample-to-sample speed noise tolerated on top of the acceleration bound, m/s (a
+    /// wheel-speed signal read every 1 ms carries noise much larger than 1.5 g x 1 ms).
+    pub speed_noise_tol_mps: f32,
+    /// Largest time-stamp gap before `Timing`, us.
+    pub max_gap_us: u32,
+    /// Coil checks only run above this command, A.
+    pub coil_min_cmd_a: f32,
+    /// Open coil: measured below this fraction of the command.
+    pub coil_open_ratio: f32,
+    /// Short: measured above command + this, A.
+    pub coil_over_a: f32,
+    /// Coil mismatch must last this long, s (>> the coil's L/R = 5 ms).
+    pub coil_fault_s: f32,
+    /// Full scale of the coil-current measurement, A: a reading at or above it means "at least
+    /// this much" (ADC saturated), so it counts as over-current whenever full scale is at least
+    /// command plus `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A =
+    /// the ADC's 2.5 A) could never be seen.
+    pub coil_full_scale_a: f32,
+    /// Margin invalid for this long raises `MarginUnavailable`, s (0 disables).
+    pub margin_invalid_s: f32,
+    /// A fault must be absent this long before it leaves the active set, s.
+    pub recovery_s: f32,
+    /// Fail-safe current, A.
+    pub failsafe_current_a: f32,
+    /// Below this trusted speed the safe current is 0 A, m/s.
+    pub zero_current_below_mps: f32,
+}
+
+impl Default for SupervisorParams {
+    /// psi limit 0.8 rad (as the controller); 25 rad/s (module docs); disagreement 0.25 rad
+    /// (the Ackermann difference of a road vehicle at full lock is ~0.1-0.2 rad); stuck after
+    /// 100 ms with 5 mrad motion on the other side; both-stuck after 2 s; 70 m/s max (the
+    /// analysed range); 0.5 m/s negative tolerance; 15 m/s^2 (1.5 g) plus 0.5 m/s
+    /// sample-to-sample noise (10 sigma of the simulator's 0.05 m/s wheel-speed noise; the
+    /// board's tone-wheel `jump_margin_mps` is 0.5 m/s too); gap 5 ms (4 missed samples); coil
+    /// checks above 0.2 A, open < 25 %, short > +0.5 A or a saturated 2.5 A reading, for 50 ms
+    /// (10 L/R); margin 10 s; recovery 1 s.
+    fn default() -> Self {
+        SupervisorParams {
+            psi_limit_rad: 0.8,
+            max_rate_radps: 25.0,
+            max_disagree_rad: 0.25,
+            stuck_samples: 100,
+            stuck_motion_rad: 5e-3,
+            both_stuck_samples: 2000,
+            max_speed_mps: 70.0,
+            speed_neg_tol_mps: 0.5,
+            max_accel_mps2: 15.0,
+            speed_noise_tol_mps: 0.5,
+            max_gap_us: 5000,
+            coil_min_cmd_a: 0.2,
+            coil_open_ratio: 0.25,
+            coil_over_a: 0.5,
+            coil_fault_s: 0.05,
+            coil_full_scale_a: 2.5,
+            margin_invalid_s: 10.0,
+            recovery_s: 1.0,
+            failsafe_current_a: FAILSAFE_CURRENT_A,
+            zero_current_below_mps: ZERO_CURRENT_SAFE_BELOW_MPS,
+        }
+    }
+}

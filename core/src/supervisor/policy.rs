@@ -1,0 +1,115 @@
+//! The mode policy: from the active faults to the operating [`Mode`] and the safe current.
+//!
+//! * **FailSafe** (controller output ignored, fixed current): no trustworthy wheel yaw (both
+//!   encoders faulted, or they disagree), timing fault, coil fault. The current is
+//!   [`FAILSAFE_CURRENT_A`] (stabilises every analysed plant variant at every speed, see
+//!   `tests/tests/failsafe_current.rs`), or 0 A when the speed is trusted and below
+//!   [`ZERO_CURRENT_SAFE_BELOW_MPS`] (below the lowest Hopf onset: no shimmy possible, parking
+//!   stays light). A coil fault commands 0 A (driving current into a short only heats it; an
+//!   open coil cannot be driven): the damper is then passive-off, and the verdict says so with
+//!   `damper_available == false`.
+//! * **Degraded** (controller runs, possibly with a current floor):
+//!   - one encoder lost: the healthy one stands in for both. The controller acts on the
+//!     in-phase yaw (psi_L + psi_R)/2, which the track rod makes equal to either wheel's yaw up
+//!     to the tiny anti-phase part, so control quality is kept; but the cross-check is gone, so
+//!     the command is floored at [`FAILSAFE_CURRENT_A`] (the controller can only add damping);
+//!   - speed unknown: the speed gate is disabled and the floor applied (the safe current does not
+//!     depend on speed);
+//!   - `BothStuckSuspect`: floor;
+//!   - coil-current sensor lost or margin estimate unavailable: advisory, no floor (the coil is
+//!     then driven open loop; the controller does not use the margin).
+//! * **Recovery with hysteresis**: a fault leaves the active set only after it has been absent
+//!   for `recovery_s`. Coil open/short are latched until [`Supervisor::clear_latched`] (a burnt
+//!   coil does not heal; retrying into a short is harmful). After FailSafe the controller is
+//!   reset (its filters restart from the next sample).
+//!
+//! [`FAILSAFE_CURRENT_A`]: crate::control::actuator::FAILSAFE_CURRENT_A
+//! [`ZERO_CURRENT_SAFE_BELOW_MPS`]: super::params::ZERO_CURRENT_SAFE_BELOW_MPS
+//! [`Supervisor::clear_latched`]: super::checks::Supervisor::clear_latched
+
+use super::faults::{FaultKind, FaultSet};
+use super::params::SupervisorParams;
+
+/// Operating mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mode {
+    /// All inputs trusted: the controller's command is used.
+    #[default]
+    Normal,
+    /// Reduced information: the controller runs, possibly with a current floor.
+    Degraded,
+    /// Inputs not trusted: fixed safe current, controller output ignored.
+    FailSafe,
+}
+
+impl Mode {
+    /// Short name.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Mode::Normal => "normal",
+            Mode::Degraded => "degraded",
+            Mode::FailSafe => "fail-safe",
+        }
+    }
+}
+
+/// The supervisor's decision for one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SupervisorVerdict {
+    /// Mode.
+    pub mode: Mode,
+    /// FailSafe: the current to command, A; Degraded: a floor under the controller's command
+    /// (if any); Normal: `None`.
+    pub safe_current_a: Option<f32>,
+    /// Active faults (detected now or not yet recovered).
+    pub faults: FaultSet,
+    /// Faults detected in this frame.
+    pub detected: FaultSet,
+    /// False when the coil cannot be driven (open/short): the damper is passive-off.
+    pub damper_available: bool,
+}
+
+/// The verdict for one frame from the active faults `active`, the faults detected in this frame
+/// `det`, and the validated speed `speed`.
+pub(super) fn decide(
+    active: FaultSet,
+    det: FaultSet,
+    speed: Option<f32>,
+    p: &SupervisorParams,
+) -> SupervisorVerdict {
+    let a = active;
+    let coil_dead = a.contains(FaultKind::CoilOpen) || a.contains(FaultKind::CoilShort);
+    let speed_trusted = speed.is_some()
+        && !a.contains(FaultKind::SpeedInvalid)
+        && !a.contains(FaultKind::SpeedJump);
+    let fixed = match speed {
+        Some(v) if speed_trusted && v < p.zero_current_below_mps => 0.0,
+        _ => p.failsafe_current_a,
+    };
+    let no_yaw = (a.left() && a.right()) || a.contains(FaultKind::EncoderDisagree);
+    let fail = no_yaw || a.contains(FaultKind::Timing) || coil_dead;
+    let (mode, safe) = if coil_dead {
+        (Mode::FailSafe, Some(0.0))
+    } else if fail {
+        (Mode::FailSafe, Some(fixed))
+    } else {
+        let floor =
+            a.left() || a.right() || !speed_trusted || a.contains(FaultKind::BothStuckSuspect);
+        let advisory =
+            a.contains(FaultKind::CoilSensor) || a.contains(FaultKind::MarginUnavailable);
+        if floor {
+            (Mode::Degraded, Some(fixed))
+        } else if advisory {
+            (Mode::Degraded, None)
+        } else {
+            (Mode::Normal, None)
+        }
+    };
+    SupervisorVerdict {
+        mode,
+        safe_current_a: safe,
+        faults: a,
+        detected: det,
+        damper_available: !coil_dead,
+    }
+}
