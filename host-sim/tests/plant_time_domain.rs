@@ -1,4 +1,4 @@
-//! Time-domain checks of the nonlinear plant (host-sim/src/plant.rs): integration accuracy,
+//! Time-domain checks of the nonlinear plant (host-sim/src/model/plant.rs): integration accuracy,
 //! energy at standstill, agreement with the FD-Jacobian eigenvalues at small amplitude, limit
 //! cycles inside the Hopf window, suppression by the MR damper, and the Hopf window itself.
 //!
