@@ -262,6 +262,18 @@ mod tests {
         }
     }
 
+    /// One update at a constant 20 m/s with `e` as both data estimates.
+    fn steady_at_20_mps(f: &mut Fusion, e: &ModeEstimate, t: f32, m: &ModelMargin) -> MarginReport {
+        f.update(&FusionInput {
+            t_s: t,
+            speed_mps: 20.0,
+            accel_mps2: 0.0,
+            fast: e,
+            slow: e,
+            model: Some(m),
+        })
+    }
+
     #[test]
     fn margin_is_min_of_data_and_model() {
         let mut f = Fusion::new(FusionParams::default());
@@ -317,16 +329,7 @@ mod tests {
         let bad = est(0.02, 0.01); // 6 sigma off
         let good = est(0.075, 0.01);
         let mut t = 0.0f32;
-        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
-            f.update(&FusionInput {
-                t_s: t,
-                speed_mps: 20.0,
-                accel_mps2: 0.0,
-                fast: e,
-                slow: e,
-                model: Some(&m),
-            })
-        };
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| steady_at_20_mps(f, e, t, &m);
         // a 2 s excursion does not trip the 3 s hold
         while t < 2.0 {
             assert!(step(&mut f, &bad, t).model_consistent);
@@ -367,16 +370,7 @@ mod tests {
             valid: true,
         };
         let agree = est(0.01, 0.01);
-        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| {
-            f.update(&FusionInput {
-                t_s: t,
-                speed_mps: 20.0,
-                accel_mps2: 0.0,
-                fast: e,
-                slow: e,
-                model: Some(&m),
-            })
-        };
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| steady_at_20_mps(f, e, t, &m);
         let r = step(&mut f, &agree, 0.0);
         assert_eq!(r.margin_source, MarginSource::Model);
         assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
