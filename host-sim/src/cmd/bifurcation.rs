@@ -3,6 +3,7 @@
 //! measure the settled oscillation amplitude (peak |psi_L| over the last window) and whether it
 //! still grows or decays; table, CSV and PNG.
 
+use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -278,35 +279,46 @@ fn plot(path: &Path, rows: &[BifurcationRow], o: &BifurcationOptions, damper: &s
     Ok(())
 }
 
+/// Speed step: 0.1 to 100 km/h.
+pub const STEP_KMH: Range = Range::closed(0.1, 100.0, "km/h");
+/// Initial wheel yaw: above 0, at most 20 deg.
+pub const START_DEG: Range = Range::above(0.0, 20.0, "deg");
+/// Run length: above 0, at most 600 s.
+pub const DURATION_S: Range = Range::above(0.0, 600.0, "s");
+/// End window: above 0, at most 300 s.
+pub const WINDOW_S: Range = Range::above(0.0, 300.0, "s");
+
 /// Command-line arguments of `shimmy-sim bifurcation`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BifurcationArgs {
     /// Named parameter set or TOML file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Fit the MR damper and hold this coil current in A; without it there is no damper (F_d = 0).
-    #[arg(long, alias = "damper-current")]
+    /// Fit the MR damper and hold this coil current in A (0 to 2 A, the coil rating); without it
+    /// there is no damper (F_d = 0).
+    #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Option<f64>,
-    /// Lowest speed, km/h.
-    #[arg(long, default_value_t = 5.0)]
+    /// Lowest speed, km/h: 1 to 250, at most `--v-max-kmh`.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_min_kmh: f64,
-    /// Highest speed, km/h.
-    #[arg(long, default_value_t = 130.0)]
+    /// Highest speed, km/h: 1 to 250.
+    #[arg(long, default_value_t = 130.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_max_kmh: f64,
-    /// Speed step, km/h.
-    #[arg(long, default_value_t = 2.5)]
+    /// Speed step, km/h: 0.1 to 100.
+    #[arg(long, default_value_t = 2.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(STEP_KMH))]
     pub step_kmh: f64,
-    /// Small initial in-phase wheel yaw, deg.
-    #[arg(long, default_value_t = 0.05)]
+    /// Small initial in-phase wheel yaw, deg: above 0, at most 20.
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = arg_range::f64_in(START_DEG))]
     pub small_deg: f64,
-    /// Large initial in-phase wheel yaw, deg.
-    #[arg(long, default_value_t = 3.0)]
+    /// Large initial in-phase wheel yaw, deg: above 0, at most 20.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(START_DEG))]
     pub large_deg: f64,
-    /// Length of each run, s.
-    #[arg(long, default_value_t = 40.0)]
+    /// Length of each run, s: above 0, at most 600, at least twice `--window-s`.
+    #[arg(long, default_value_t = 40.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
-    /// Amplitude window at the end of each run, s (the trend compares it with the one before).
-    #[arg(long, default_value_t = 3.0)]
+    /// Amplitude window at the end of each run, s (the trend compares it with the one before):
+    /// above 0, at most 300.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(WINDOW_S))]
     pub window_s: f64,
     /// Output directory.
     #[arg(long, default_value = "out/bifurcation")]
@@ -315,18 +327,32 @@ pub struct BifurcationArgs {
 
 /// Entry point of `shimmy-sim bifurcation`.
 pub fn command(a: &BifurcationArgs) -> Result<()> {
-    let params = crate::sim::paramfile::load(&a.params)?;
+    arg_range::SPEED_KMH.check("--v-min-kmh", a.v_min_kmh)?;
+    arg_range::SPEED_KMH.check("--v-max-kmh", a.v_max_kmh)?;
+    STEP_KMH.check("--step-kmh", a.step_kmh)?;
+    START_DEG.check("--small-deg", a.small_deg)?;
+    START_DEG.check("--large-deg", a.large_deg)?;
+    DURATION_S.check("--duration-s", a.duration_s)?;
+    WINDOW_S.check("--window-s", a.window_s)?;
     anyhow::ensure!(
-        a.duration_s >= 2.0 * a.window_s && a.window_s > 0.0,
-        "--duration-s must be at least twice --window-s"
+        a.v_min_kmh <= a.v_max_kmh,
+        "--v-min-kmh {} must not exceed --v-max-kmh {}",
+        a.v_min_kmh,
+        a.v_max_kmh
+    );
+    anyhow::ensure!(
+        a.duration_s >= 2.0 * a.window_s,
+        "--duration-s {} must be at least twice --window-s {}",
+        a.duration_s,
+        a.window_s
     );
     let damper = match a.damper_current_a {
         None => DamperSetting::Off,
         Some(i) => {
-            anyhow::ensure!(i.is_finite() && i >= 0.0, "--damper-current must be >= 0 A");
-            DamperSetting::Current(i)
+            DamperSetting::Current(arg_range::coil_current().check("--damper-current-a", i)?)
         }
     };
+    let params = crate::sim::paramfile::load(&a.params)?;
     run(&BifurcationOptions {
         params,
         params_name: a.params.clone(),

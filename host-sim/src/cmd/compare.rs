@@ -5,6 +5,7 @@ use crate::model::sensors::SensorConfig;
 use crate::out::file_name::sanitize;
 use crate::out::plots::plot_runs;
 use crate::out::table::opt;
+use crate::sim::arg_range::{f32_in, Range};
 use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
 use crate::sim::scenario::{self, ScenarioSpec};
 use crate::sim::standard::standard_scenarios;
@@ -28,8 +29,8 @@ pub struct CompareArgs {
     )]
     pub controllers: Vec<String>,
     /// Current of `passive-on` in A; default: the least constant current (bisection to 0.02 A)
-    /// with which no scenario of the set shimmies.
-    #[arg(long, alias = "on-current")]
+    /// with which no scenario of the set shimmies. 0 to 2 A (the coil rating).
+    #[arg(long, alias = "on-current", allow_negative_numbers = true, value_parser = f32_in(crate::sim::arg_range::coil_current()))]
     pub on_current_a: Option<f32>,
     /// Short runs (a few seconds each).
     #[arg(long)]
@@ -37,26 +38,26 @@ pub struct CompareArgs {
     /// Only scenarios whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Override the ASMC dead zone, rad/s (gain studies).
-    #[arg(long)]
+    /// Override the ASMC dead zone, rad/s (gain studies): 0 to 10.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 10.0, "rad/s")))]
     pub dead_zone: Option<f32>,
-    /// Override the ASMC adaptation rate gamma.
-    #[arg(long)]
+    /// Override the ASMC adaptation rate gamma: 0 to 100000.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 1e5, "")))]
     pub gamma: Option<f32>,
-    /// Override the ASMC leakage sigma, 1/s.
-    #[arg(long)]
+    /// Override the ASMC leakage sigma, 1/s: 0 to 1000.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 1e3, "1/s")))]
     pub leak: Option<f32>,
-    /// Override the sliding-surface slope lambda, 1/s.
-    #[arg(long)]
+    /// Override the sliding-surface slope lambda, 1/s: 0 to 1000.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 1e3, "1/s")))]
     pub lambda: Option<f32>,
-    /// Override the boundary layer phi, rad/s.
-    #[arg(long)]
+    /// Override the boundary layer phi, rad/s: above 0 (it divides), at most 100.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::above(0.0, 100.0, "rad/s")))]
     pub phi: Option<f32>,
-    /// Override the fixed SMC gain K, rad/s^2.
-    #[arg(long)]
+    /// Override the fixed SMC gain K, rad/s^2: 0 to 100000.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 1e5, "rad/s^2")))]
     pub smc_k: Option<f32>,
-    /// Override the ASMC K_min (= K_init), rad/s^2.
-    #[arg(long)]
+    /// Override the ASMC K_min (= K_init), rad/s^2: 0 to 100000.
+    #[arg(long, allow_negative_numbers = true, value_parser = f32_in(Range::closed(0.0, 1e5, "rad/s^2")))]
     pub k_min: Option<f32>,
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
     #[arg(long)]

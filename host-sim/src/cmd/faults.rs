@@ -11,8 +11,9 @@
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::out::table::opt;
+use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
@@ -350,6 +351,12 @@ pub fn campaign(setup: &Setup, cases: &[Case], speeds_kmh: &[f64]) -> Result<Vec
     Ok(out)
 }
 
+/// Run length of a campaign run: 1 to 600 s.
+pub const DURATION_S: Range = Range::closed(1.0, 600.0, "s");
+
+/// Most speeds in one campaign.
+pub const MAX_SPEEDS: usize = 32;
+
 /// Command-line arguments of `shimmy-sim faults`.
 #[derive(Args, Clone, Debug)]
 pub struct FaultsArgs {
@@ -357,19 +364,48 @@ pub struct FaultsArgs {
     #[arg(long, default_value = "out/faults")]
     pub out: PathBuf,
     /// Speeds, km/h (comma separated): two inside the 29.35-84.15 km/h window, two outside.
+    /// Each 1 to 250 km/h, at most 32 speeds.
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "20,45,70,100",
-        alias = "speeds"
+        alias = "speeds",
+        allow_negative_numbers = true, value_parser = arg_range::speed_kmh()
     )]
     pub speeds_kmh: Vec<f64>,
-    /// Only cases whose name contains this.
+    /// Only cases whose name contains this (an error if none does).
     #[arg(long)]
     pub only: Option<String>,
-    /// Run length, s (fault at 1.0 s, kick at 1.1 s).
-    #[arg(long, default_value_t = 5.0, alias = "duration")]
+    /// Run length, s (fault at 1.0 s, kick at 1.1 s): 1 to 600 s. At 1 s the run ends at the
+    /// fault, so no injected fault can be detected and those checks fail.
+    #[arg(long, default_value_t = 5.0, alias = "duration", allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
+}
+
+impl FaultsArgs {
+    /// The cases `--only` selects; an error naming the existing cases when none matches.
+    /// Also checks what clap cannot (the number of speeds).
+    pub fn cases(&self) -> Result<Vec<Case>> {
+        arg_range::ensure_count("--speeds-kmh", self.speeds_kmh.len(), MAX_SPEEDS)?;
+        for &v in &self.speeds_kmh {
+            arg_range::SPEED_KMH.check("--speeds-kmh", v)?;
+        }
+        DURATION_S.check("--duration-s", self.duration_s)?;
+        let all = standard_cases();
+        let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
+        let cases: Vec<Case> = all
+            .into_iter()
+            .filter(|c| self.only.as_deref().is_none_or(|o| c.name.contains(o)))
+            .collect();
+        if cases.is_empty() {
+            bail!(
+                "--only {:?}: no case name contains it; cases: {}",
+                self.only.as_deref().unwrap_or(""),
+                names.join(", ")
+            );
+        }
+        Ok(cases)
+    }
 }
 
 fn suppressed_cell(r: &CaseResult) -> &'static str {
@@ -481,16 +517,27 @@ pub fn check(rows: &[CaseResult]) -> Vec<String> {
     bad
 }
 
-/// The command.
+/// The campaign's verdict from [`check`]'s failing lines: `Ok` when there are none, else an
+/// error naming every failed check (the command's exit status is non-zero).
+pub fn verdict(bad: &[String]) -> Result<()> {
+    if bad.is_empty() {
+        return Ok(());
+    }
+    bail!(
+        "{} fault-campaign check(s) failed:\n  {}",
+        bad.len(),
+        bad.join("\n  ")
+    )
+}
+
+/// The command. Every option is checked before anything runs; the table and files are
+/// written either way, then the command fails if any check failed.
 pub fn command(a: &FaultsArgs) -> Result<()> {
+    let cases = a.cases()?;
     let setup = Setup {
         duration_s: a.duration_s,
         ..Setup::default()
     };
-    let cases: Vec<Case> = standard_cases()
-        .into_iter()
-        .filter(|c| a.only.as_deref().is_none_or(|o| c.name.contains(o)))
-        .collect();
     let wall = std::time::Instant::now();
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
@@ -518,5 +565,5 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
         }
     }
     println!("wrote {}", a.out.display());
-    Ok(())
+    verdict(&bad)
 }

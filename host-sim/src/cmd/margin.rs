@@ -22,10 +22,20 @@ use shimmy_core::stability::{self, CrossingKind, ModeSelect};
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::sim::arg_range::{self, Range};
 use crate::sim::paramfile;
 
 /// Control period, s.
 pub const DT_S: f64 = 1e-3;
+
+/// Ramp rate: 0.01 to 50 km/h per s.
+pub const RATE_KMH_PER_S: Range = Range::closed(0.01, 50.0, "km/h/s");
+/// Lead-in before the ramp: 0 to 600 s.
+pub const SETTLE_S: Range = Range::closed(0.0, 600.0, "s");
+/// Road-noise and imbalance torques: 0 to 200 N m.
+pub const TORQUE_NM: Range = Range::closed(0.0, 200.0, "N m");
+/// Simulated time of one run (constant drive, or settle plus ramp): above 0, at most 3600 s.
+pub const DURATION_S: Range = Range::above(0.0, 3600.0, "s");
 
 /// Arguments of `shimmy-sim margin`.
 #[derive(Args, Debug, Clone)]
@@ -33,32 +43,33 @@ pub struct MarginArgs {
     /// Parameter set name or TOML file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Ramp start speed, km/h.
-    #[arg(long, default_value_t = 15.0)]
+    /// Ramp start speed, km/h: 1 to 250.
+    #[arg(long, default_value_t = 15.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub ramp_from_kmh: f64,
-    /// Ramp end speed, km/h.
-    #[arg(long, default_value_t = 40.0)]
+    /// Ramp end speed, km/h: 1 to 250.
+    #[arg(long, default_value_t = 40.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub ramp_to_kmh: f64,
-    /// Ramp rate, km/h per s.
-    #[arg(long, default_value_t = 1.0)]
+    /// Ramp rate, km/h per s: 0.01 to 50 (settle plus ramp at most 3600 s).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(RATE_KMH_PER_S))]
     pub rate_kmh_per_s: f64,
-    /// Constant-speed lead-in before the ramp (estimator warm-up), s.
-    #[arg(long, default_value_t = 30.0)]
+    /// Constant-speed lead-in before the ramp (estimator warm-up), s: 0 to 600.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(SETTLE_S))]
     pub settle_s: f64,
-    /// Road-noise yaw torque standard deviation per wheel, N m.
-    #[arg(long, default_value_t = 5.0)]
+    /// Road-noise yaw torque standard deviation per wheel, N m: 0 to 200.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(TORQUE_NM))]
     pub noise_nm: f64,
-    /// Wheel imbalance yaw torque amplitude per wheel, N m.
-    #[arg(long, default_value_t = 2.0)]
+    /// Wheel imbalance yaw torque amplitude per wheel, N m: 0 to 200.
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(TORQUE_NM))]
     pub imbalance_nm: f64,
     /// Random seed of the road noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Instead of the ramp: a constant-speed drive at this speed (km/h) for `--duration-s`.
-    #[arg(long)]
+    /// Instead of the ramp: a constant-speed drive at this speed (km/h, 1 to 250) for
+    /// `--duration-s`.
+    #[arg(long, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub constant_kmh: Option<f64>,
-    /// Duration of the constant-speed drive, s.
-    #[arg(long, default_value_t = 600.0)]
+    /// Duration of the constant-speed drive, s: above 0, at most 3600.
+    #[arg(long, default_value_t = 600.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
     /// Output directory.
     #[arg(long, default_value = "out/margin")]
@@ -447,8 +458,31 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
     Ok(())
 }
 
+/// The options' ranges again (for arguments built in code) and the simulated time: the
+/// constant drive's `--duration-s`, or `--settle-s` plus the ramp, above 0 and at most 3600 s.
+pub fn check(a: &MarginArgs) -> Result<()> {
+    arg_range::SPEED_KMH.check("--ramp-from-kmh", a.ramp_from_kmh)?;
+    arg_range::SPEED_KMH.check("--ramp-to-kmh", a.ramp_to_kmh)?;
+    RATE_KMH_PER_S.check("--rate-kmh-per-s", a.rate_kmh_per_s)?;
+    SETTLE_S.check("--settle-s", a.settle_s)?;
+    TORQUE_NM.check("--noise-nm", a.noise_nm)?;
+    TORQUE_NM.check("--imbalance-nm", a.imbalance_nm)?;
+    DURATION_S.check("--duration-s", a.duration_s)?;
+    if let Some(v) = a.constant_kmh {
+        arg_range::SPEED_KMH.check("--constant-kmh", v)?;
+    } else {
+        let t = a.settle_s + (a.ramp_to_kmh - a.ramp_from_kmh).abs() / a.rate_kmh_per_s;
+        DURATION_S.check(
+            "--settle-s + |--ramp-to-kmh - --ramp-from-kmh| / --rate-kmh-per-s",
+            t,
+        )?;
+    }
+    Ok(())
+}
+
 /// `shimmy-sim margin`.
 pub fn command(a: &MarginArgs) -> Result<()> {
+    check(a)?;
     let p = paramfile::load(&a.params)?;
     let mut sc = match a.constant_kmh {
         Some(v) => MarginScenario::constant(p, v, a.duration_s),

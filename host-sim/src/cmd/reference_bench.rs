@@ -17,6 +17,7 @@
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
 use crate::model::plant::{idx, Inputs, Plant, Simulator, N_STATE};
+use crate::sim::arg_range::{self, Range};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -26,27 +27,36 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
+/// Time-domain run: above 0, at most 600 s.
+pub const DURATION_S: Range = Range::above(0.0, 600.0, "s");
+/// Initial wheel yaw: -20 to 20 deg.
+pub const YAW_DEG: Range = Range::closed(-20.0, 20.0, "deg");
+/// Closed-loop ramp: 1 to 600 s.
+pub const CL_RAMP_S: Range = Range::closed(1.0, 600.0, "s");
+/// Python current-law gain: 0 to 1000 A per rad/s.
+pub const CL_GAIN: Range = Range::closed(0.0, 1000.0, "A/(rad/s)");
+
 /// Options of `shimmy-sim reference-bench`.
 #[derive(Args, Debug)]
 pub struct ReferenceBenchArgs {
     /// Parameter set (name or TOML file).
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Simulated time of the time-domain run, s.
-    #[arg(long, default_value_t = 10.0)]
+    /// Simulated time of the time-domain run, s: above 0, at most 600.
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
-    /// Forward speed, km/h (inside the Hopf window by default).
-    #[arg(long, default_value_t = 60.0)]
+    /// Forward speed, km/h (inside the Hopf window by default): 1 to 250.
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub speed_kmh: f64,
     /// Constant coil current, in A (`--damper-current-a` as in `stability` and `bifurcation`;
-    /// the field keeps its name for callers that build the arguments).
-    #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5)]
+    /// the field keeps its name for callers that build the arguments): 0 to 2 A (the coil rating).
+    #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub current_a: f64,
-    /// Initial in-phase wheel yaw, deg (large enough for the damper to slide).
-    #[arg(long, default_value_t = 3.0)]
+    /// Initial in-phase wheel yaw, deg (large enough for the damper to slide): -20 to 20.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(YAW_DEG))]
     pub initial_yaw_deg: f64,
-    /// Points of the eigenvalue sweep (1-150 km/h).
-    #[arg(long, default_value_t = 2000)]
+    /// Points of the eigenvalue sweep (1-150 km/h): 2 to 100000.
+    #[arg(long, default_value_t = 2000, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=100_000))]
     pub sweep_points: usize,
     /// SciPy integrator (`LSODA`, `Radau`, `BDF`, `RK45`).
     #[arg(long, default_value = "LSODA")]
@@ -54,11 +64,11 @@ pub struct ReferenceBenchArgs {
     /// Python interpreter with numpy and scipy.
     #[arg(long, default_value = "python3")]
     pub python: String,
-    /// Ramp length of the closed-loop row, s (the demo's is 30 s).
-    #[arg(long, default_value_t = 30.0)]
+    /// Ramp length of the closed-loop row, s (the demo's is 30 s): 1 to 600.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(CL_RAMP_S))]
     pub cl_ramp_s: f64,
-    /// Gain of the Python side's current law in the closed-loop row, A per rad/s.
-    #[arg(long, default_value_t = 4.0)]
+    /// Gain of the Python side's current law in the closed-loop row, A per rad/s: 0 to 1000.
+    #[arg(long, default_value_t = 4.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(CL_GAIN))]
     pub cl_gain_a_per_radps: f64,
     /// Output folder (case file, SciPy result, summary).
     #[arg(long, default_value = "out/reference-bench")]
@@ -94,6 +104,15 @@ pub struct ReferenceResult {
 
 /// Runs both implementations and compares them.
 pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
+    DURATION_S.check("--duration-s", a.duration_s)?;
+    arg_range::SPEED_KMH.check("--speed-kmh", a.speed_kmh)?;
+    arg_range::coil_current().check("--damper-current-a", a.current_a)?;
+    YAW_DEG.check("--initial-yaw-deg", a.initial_yaw_deg)?;
+    CL_RAMP_S.check("--cl-ramp-s", a.cl_ramp_s)?;
+    CL_GAIN.check("--cl-gain-a-per-radps", a.cl_gain_a_per_radps)?;
+    if !(2..=100_000).contains(&a.sweep_points) {
+        bail!("--sweep-points {}: allowed 2 to 100000", a.sweep_points);
+    }
     let params = crate::sim::paramfile::load(&a.params)?;
     let damper = SpencerParams::steering();
     let v_mps = kmh_to_mps(a.speed_kmh);
@@ -141,9 +160,6 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
 
     // Closed loop: the demo's ASMC run (nominal plant, as the demo).
     let ramp_s = a.cl_ramp_s;
-    if !(ramp_s.is_finite() && ramp_s >= 1.0) {
-        bail!("--cl-ramp-s {ramp_s}: at least 1 s");
-    }
     let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
     let (_, cl) =
         crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;

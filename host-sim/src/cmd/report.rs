@@ -22,8 +22,9 @@ pub struct ReportArgs {
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Fixed current of `passive-on` when given in `--controllers`, in A.
-    #[arg(long, default_value_t = 1.0, alias = "on-current")]
+    /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to 2 A (the coil
+    /// rating).
+    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
 }
 

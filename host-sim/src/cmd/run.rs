@@ -24,8 +24,8 @@ pub struct RunArgs {
     /// Controller (overrides the file's `controller.kind`; passive-on needs `--on-current-a`).
     #[arg(long)]
     pub controller: Option<String>,
-    /// Fixed current for `--controller passive-on`, in A.
-    #[arg(long, default_value_t = 1.0, alias = "on-current")]
+    /// Fixed current for `--controller passive-on`, in A: 0 to 2 A (the coil rating).
+    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
 }
 

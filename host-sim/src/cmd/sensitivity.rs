@@ -18,13 +18,17 @@ pub struct SensitivityArgs {
     /// Named set (nominal, gentle, hard) or TOML parameter file.
     #[arg(long, default_value = "nominal")]
     pub params: String,
-    /// Relative change applied down and up in %.
-    #[arg(long, default_value_t = 20.0)]
+    /// Relative change applied down and up in %: above 0, at most 90.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::arg_range::f64_in(PERCENT))]
     pub percent: f64,
     /// Output directory (CSV).
     #[arg(long, default_value = "out/sensitivity")]
     pub out: PathBuf,
 }
+
+/// The relative change: above 0, at most 90 % (at 100 % a parameter would vanish).
+pub const PERCENT: crate::sim::arg_range::Range =
+    crate::sim::arg_range::Range::above(0.0, 90.0, "%");
 
 /// Parameters varied by the sensitivity study (those the linear model depends on; F_z, mu, C_s
 /// only shape the nonlinear tyre and l_t only the damper lever, so they have no effect without
@@ -72,6 +76,7 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
 
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
+    PERCENT.check("--percent", args.percent)?;
     let p = paramfile::load(&args.params)?;
     let (on0, off0, f0) = window_of(&p)?;
     println!(

@@ -11,6 +11,7 @@ use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_TOL_MPS};
 
 use crate::model::damper_equiv::damper_equivalent;
+use crate::sim::arg_range::{self, Range};
 use crate::sim::paramfile;
 
 /// Options of `shimmy-sim stability`.
@@ -20,25 +21,32 @@ pub struct StabilityArgs {
     #[arg(long, default_value = "nominal")]
     pub params: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
-    /// coefficient (describing function). Without it there is no damper force.
-    #[arg(long, alias = "damper-current")]
+    /// coefficient (describing function). Without it there is no damper force. 0 to 2 A (the
+    /// coil rating).
+    #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Option<f64>,
-    /// Reference wheel-yaw amplitude for the describing function, deg.
-    #[arg(long, default_value_t = 0.5)]
+    /// Reference wheel-yaw amplitude for the describing function, deg: above 0, at most 20.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(REF_AMPLITUDE_DEG))]
     pub ref_amplitude_deg: f64,
-    /// Lowest speed, km/h.
-    #[arg(long, default_value_t = 5.0)]
+    /// Lowest speed, km/h: 1 to 250, below `--v-max-kmh`.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_min_kmh: f64,
-    /// Highest speed, km/h.
-    #[arg(long, default_value_t = 150.0)]
+    /// Highest speed, km/h: 1 to 250.
+    #[arg(long, default_value_t = 150.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_max_kmh: f64,
-    /// Grid step for the sweep and for bracketing crossings, km/h.
-    #[arg(long, default_value_t = 1.0)]
+    /// Grid step for the sweep and for bracketing crossings, km/h: 0.01 to 50.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(STEP_KMH))]
     pub step_kmh: f64,
     /// Output directory (CSV, PNG).
     #[arg(long, default_value = "out/stability")]
     pub out: PathBuf,
 }
+
+/// Describing-function reference amplitude: above 0, at most 20 deg.
+pub const REF_AMPLITUDE_DEG: Range = Range::above(0.0, 20.0, "deg");
+
+/// Speed grid step: 0.01 to 50 km/h.
+pub const STEP_KMH: Range = Range::closed(0.01, 50.0, "km/h");
 
 fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<Vec<ModeSummary>> {
     let n = ((v_max - v_min) / step).round() as usize;
@@ -52,9 +60,18 @@ fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<V
 
 /// Runs `shimmy-sim stability`.
 pub fn command(args: &StabilityArgs) -> Result<()> {
+    arg_range::SPEED_KMH.check("--v-min-kmh", args.v_min_kmh)?;
+    arg_range::SPEED_KMH.check("--v-max-kmh", args.v_max_kmh)?;
+    STEP_KMH.check("--step-kmh", args.step_kmh)?;
+    REF_AMPLITUDE_DEG.check("--ref-amplitude-deg", args.ref_amplitude_deg)?;
+    if let Some(i) = args.damper_current_a {
+        arg_range::coil_current().check("--damper-current-a", i)?;
+    }
     anyhow::ensure!(
-        args.v_min_kmh > 0.0 && args.v_max_kmh > args.v_min_kmh && args.step_kmh > 0.0,
-        "need 0 < v-min < v-max and step > 0"
+        args.v_max_kmh > args.v_min_kmh,
+        "--v-min-kmh {} must be below --v-max-kmh {}",
+        args.v_min_kmh,
+        args.v_max_kmh
     );
     let p = paramfile::load(&args.params)?;
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));

@@ -1,9 +1,11 @@
 //! The simulation layer: runs the model -- the closed loop with the core's controller, open-loop
 //! plant runs, parameter and scenario files (the one [`scenario::ScenarioSpec`], turned into a
-//! loop configuration and run), the standard scenario set and the demo case.
+//! loop configuration and run), the standard scenario set, the demo case and the allowed ranges
+//! of the commands' numeric options.
 //!
 //! Rule: uses only `model` (and `shimmy-core`), never `out` or `cmd`.
 
+pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
 pub mod open_loop;

@@ -1,6 +1,7 @@
 //! The arguments and grid axes shared by both sweep variants (the eigenvalue map and the
 //! time-domain map), so that neither has to import the other.
 
+use crate::sim::arg_range::{self, Range};
 use anyhow::{bail, Result};
 use clap::Args;
 use shimmy_core::params::{Param, PlantParams};
@@ -15,29 +16,31 @@ pub struct SweepArgs {
     /// Parameter varied on the vertical axis (field name, see `shimmy-sim params`).
     #[arg(long, default_value = "k_d")]
     pub param: String,
-    /// Smallest factor on the parameter's base value.
-    #[arg(long, default_value_t = 0.5)]
+    /// Smallest factor on the parameter's base value: above 0, at most 10.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(FACTOR))]
     pub factor_min: f64,
-    /// Largest factor on the parameter's base value.
-    #[arg(long, default_value_t = 1.5)]
+    /// Largest factor on the parameter's base value: above 0, at most 10, at least
+    /// `--factor-min`.
+    #[arg(long, default_value_t = 1.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(FACTOR))]
     pub factor_max: f64,
-    /// Number of parameter values [default: 41; 9 with --controllers].
-    #[arg(long)]
+    /// Number of parameter values [default: 41; 9 with --controllers]: 1 to 401.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=401))]
     pub factor_steps: Option<usize>,
-    /// Lowest speed, km/h.
-    #[arg(long, default_value_t = 2.0)]
+    /// Lowest speed, km/h: 1 to 250, below `--v-max-kmh`.
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_min_kmh: f64,
-    /// Highest speed, km/h.
-    #[arg(long, default_value_t = 150.0)]
+    /// Highest speed, km/h: 1 to 250.
+    #[arg(long, default_value_t = 150.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub v_max_kmh: f64,
-    /// Number of speeds [default: 149; 25 with --controllers].
-    #[arg(long)]
+    /// Number of speeds [default: 149; 25 with --controllers]: 2 to 1001.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=1001))]
     pub v_steps: Option<usize>,
     /// MR damper currents, A (one map each, as an equivalent viscous damper); none = no damper.
-    #[arg(long, value_delimiter = ',', alias = "damper-currents")]
+    /// Each 0 to 2 A (the coil rating), at most 16.
+    #[arg(long, value_delimiter = ',', alias = "damper-currents", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Vec<f64>,
-    /// Wheel-yaw amplitude of the damper's describing function, deg.
-    #[arg(long, default_value_t = 0.5)]
+    /// Wheel-yaw amplitude of the damper's describing function, deg: above 0, at most 20.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(REF_AMPLITUDE_DEG))]
     pub ref_amplitude_deg: f64,
     /// Output folder.
     #[arg(long, default_value = "out/sweep")]
@@ -51,20 +54,33 @@ pub struct SweepArgs {
     /// and controller, map of the final wheel-yaw amplitude with the linear Hopf boundary.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Time-domain sweep: fixed current of `passive-on`, in A.
-    #[arg(long, default_value_t = 1.0, alias = "on-current")]
+    /// Time-domain sweep: fixed current of `passive-on`, in A: 0 to 2 A (the coil rating).
+    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub on_current_a: f64,
-    /// Time-domain sweep: simulated time per run, s.
-    #[arg(long, default_value_t = 6.0)]
+    /// Time-domain sweep: simulated time per run, s: 1 to 600.
+    #[arg(long, default_value_t = 6.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
     /// Time-domain sweep: initial in-phase wheel-yaw kick, deg (3 deg breaks through the
-    /// damper's friction at 0 A).
-    #[arg(long, default_value_t = 3.0)]
+    /// damper's friction at 0 A): -20 to 20 deg.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(KICK_DEG))]
     pub kick_deg: f64,
     /// Time-domain sweep: seed of the sensor noise (same seed, same numbers).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
+
+/// Factor on the parameter's base value: above 0, at most 10.
+pub const FACTOR: Range = Range::above(0.0, 10.0, "");
+/// Describing-function reference amplitude: above 0, at most 20 deg.
+pub const REF_AMPLITUDE_DEG: Range = Range::above(0.0, 20.0, "deg");
+/// Time-domain run length: 1 to 600 s.
+pub const DURATION_S: Range = Range::closed(1.0, 600.0, "s");
+/// Time-domain kick: -20 to 20 deg.
+pub const KICK_DEG: Range = Range::closed(-20.0, 20.0, "deg");
+/// Most damper currents (maps) in one eigenvalue sweep.
+pub const MAX_CURRENTS: usize = 16;
+/// Most closed-loop runs (speeds x values x controllers) in one time-domain sweep.
+pub const MAX_RUNS: usize = 20_000;
 
 /// The grid axes: speeds in km/h, parameter values and the parameter, validated
 /// (`default_steps` = (speeds, values) when not given).
@@ -83,18 +99,9 @@ pub fn axes(
     };
     let v_steps = a.v_steps.unwrap_or(default_steps.0);
     let factor_steps = a.factor_steps.unwrap_or(default_steps.1);
-    let ok = a.factor_min.is_finite()
-        && a.factor_max.is_finite()
-        && a.factor_min > 0.0
-        && a.factor_max >= a.factor_min
-        && factor_steps >= 1
-        && a.v_min_kmh > 0.0
-        && a.v_max_kmh > a.v_min_kmh
-        && v_steps >= 2;
-    if !ok {
-        bail!(
-            "need 0 < factor-min <= factor-max, factor-steps >= 1, 0 < v-min < v-max, v-steps >= 2"
-        );
+    check(a)?;
+    if !(1..=401).contains(&factor_steps) || !(2..=1001).contains(&v_steps) {
+        bail!("--factor-steps {factor_steps}, --v-steps {v_steps}: allowed 1 to 401 and 2 to 1001");
     }
     let speeds_kmh: Vec<f64> = (0..v_steps)
         .map(|i| a.v_min_kmh + (a.v_max_kmh - a.v_min_kmh) * i as f64 / (v_steps - 1) as f64)
@@ -110,4 +117,42 @@ pub fn axes(
         })
         .collect();
     Ok((speeds_kmh, values, param))
+}
+
+/// The single-option ranges again (for arguments built in code rather than parsed) and the
+/// checks that involve several options: `--factor-min <= --factor-max`, `--v-min-kmh <
+/// --v-max-kmh`, at most [`MAX_CURRENTS`] currents and [`MAX_RUNS`] time-domain runs.
+pub fn check(a: &SweepArgs) -> Result<()> {
+    FACTOR.check("--factor-min", a.factor_min)?;
+    FACTOR.check("--factor-max", a.factor_max)?;
+    arg_range::SPEED_KMH.check("--v-min-kmh", a.v_min_kmh)?;
+    arg_range::SPEED_KMH.check("--v-max-kmh", a.v_max_kmh)?;
+    REF_AMPLITUDE_DEG.check("--ref-amplitude-deg", a.ref_amplitude_deg)?;
+    arg_range::coil_current().check("--on-current-a", a.on_current_a)?;
+    DURATION_S.check("--duration-s", a.duration_s)?;
+    KICK_DEG.check("--kick-deg", a.kick_deg)?;
+    for &i in &a.damper_current_a {
+        arg_range::coil_current().check("--damper-current-a", i)?;
+    }
+    if a.damper_current_a.len() > MAX_CURRENTS {
+        bail!(
+            "--damper-current-a: {} values; allowed: at most {MAX_CURRENTS}",
+            a.damper_current_a.len()
+        );
+    }
+    if a.factor_max < a.factor_min {
+        bail!(
+            "--factor-min {} must not exceed --factor-max {}",
+            a.factor_min,
+            a.factor_max
+        );
+    }
+    if a.v_max_kmh <= a.v_min_kmh {
+        bail!(
+            "--v-min-kmh {} must be below --v-max-kmh {}",
+            a.v_min_kmh,
+            a.v_max_kmh
+        );
+    }
+    Ok(())
 }

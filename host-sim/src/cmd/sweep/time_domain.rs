@@ -10,7 +10,7 @@
 //! computed in parallel (rayon) and collected in grid order, so the CSV does not depend on the
 //! number of threads.
 
-use super::args::{axes, SweepArgs};
+use super::args::{axes, SweepArgs, MAX_RUNS};
 use crate::model::disturbance::{initial_yaw, Scenario};
 use crate::out::plot_util;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
@@ -82,12 +82,6 @@ pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
 fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
     let base = crate::sim::paramfile::load(&a.params)?;
     let (speeds_kmh, values, param) = axes(a, &base, DEFAULT_STEPS)?;
-    if !(a.duration_s.is_finite() && a.duration_s >= 1.0 && a.duration_s <= 600.0) {
-        bail!("--duration-s {}: allowed 1 to 600 s", a.duration_s);
-    }
-    if !(a.kick_deg.is_finite() && a.kick_deg.abs() <= 20.0) {
-        bail!("--kick-deg {}: allowed -20 to 20 deg", a.kick_deg);
-    }
     let step = kmh_to_mps((a.v_max_kmh - a.v_min_kmh) / (speeds_kmh.len() - 1) as f64 / 4.0);
     let hopf = values
         .iter()
@@ -156,6 +150,13 @@ fn point(
 /// Computes every controller's map (all points in parallel, collected in grid order).
 pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
     let arms = arms(a)?;
+    super::args::check(a)?;
+    let runs = a.v_steps.unwrap_or(DEFAULT_STEPS.0)
+        * a.factor_steps.unwrap_or(DEFAULT_STEPS.1)
+        * arms.len();
+    if runs > MAX_RUNS {
+        bail!("--v-steps x --factor-steps x --controllers: {runs} closed-loop runs; allowed: at most {MAX_RUNS}");
+    }
     let (base, g) = grid(a)?;
     let (nv, np) = (g.speeds_kmh.len(), g.values.len());
     let jobs: Vec<(usize, usize, usize)> = (0..arms.len())

@@ -1,0 +1,299 @@
+//! The command line's contract, on the built binary: a bad numeric option is rejected before
+//! any work starts (non-zero exit, a message naming the option and its allowed range, nothing
+//! written), and `faults` exits non-zero when `--only` matches no case or a campaign check
+//! fails. Every run here is either rejected at once or a one-case, one-speed campaign, so the
+//! file takes well under a second.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// A fresh, empty working directory under the system's temp folder.
+fn temp_dir() -> PathBuf {
+    static N: AtomicUsize = AtomicUsize::new(0);
+    let d = std::env::temp_dir().join(format!(
+        "shimmy-cli-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// Runs `shimmy-sim args` with `dir` as the working directory.
+fn run_in(dir: &PathBuf, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
+        .args(args)
+        .current_dir(dir)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("run shimmy-sim")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `args` fails, its message contains every one of `expect`, and nothing was written.
+fn rejected(args: &[&str], expect: &[&str]) {
+    let dir = temp_dir();
+    let o = run_in(&dir, args);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{args:?} exited 0; stderr: {err}");
+    for e in expect {
+        assert!(err.contains(e), "{args:?}: `{e}` not in the message: {err}");
+    }
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .expect("read temp dir")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    assert!(left.is_empty(), "{args:?} wrote {left:?} before failing");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn faults_rejects_bad_numbers_before_running() {
+    let dur = "1 <= value <= 600 s";
+    let speed = "1 <= value <= 250 km/h";
+    rejected(
+        &["faults", "--duration-s", "0"],
+        &["--duration-s", "'0'", dur],
+    );
+    rejected(
+        &["faults", "--duration-s", "1e9"],
+        &["--duration-s", "'1e9'", dur],
+    );
+    rejected(&["faults", "--duration-s", "NaN"], &["--duration-s", dur]);
+    rejected(
+        &["faults", "--duration-s", "-5"],
+        &["--duration-s", "'-5'", dur],
+    );
+    rejected(
+        &["faults", "--speeds-kmh", "45,1e9"],
+        &["--speeds-kmh", "'1e9'", speed],
+    );
+    rejected(&["faults", "--speeds-kmh", "0"], &["--speeds-kmh", speed]);
+    rejected(&["faults", "--speeds-kmh", "inf"], &["--speeds-kmh", speed]);
+    let many = vec!["45"; 33].join(",");
+    rejected(
+        &["faults", "--speeds-kmh", &many],
+        &["--speeds-kmh", "33", "1 to 32"],
+    );
+}
+
+#[test]
+fn faults_only_without_a_match_fails_and_lists_the_cases() {
+    rejected(
+        &["faults", "--only", "nonexistent", "--speeds-kmh", "45"],
+        &["--only", "nonexistent", "healthy", "nan-left"],
+    );
+}
+
+/// A failing check, provoked legitimately: `--duration-s 1` ends every run at the fault time
+/// (1.0 s), so the injected NaN can never be detected and the campaign's "every injected fault
+/// detected" check fails. The table and files are still written (the results are kept); the
+/// exit status and the message report the failed checks.
+#[test]
+fn faults_exits_non_zero_when_a_check_fails() {
+    let dir = temp_dir();
+    let o = run_in(
+        &dir,
+        &[
+            "faults",
+            "--only",
+            "nan-left",
+            "--speeds-kmh",
+            "45",
+            "--duration-s",
+            "1",
+        ],
+    );
+    let err = stderr(&o);
+    assert!(!o.status.success(), "exited 0; stderr: {err}");
+    assert!(err.contains("check(s) failed"), "{err}");
+    assert!(err.contains("nan-left at 45 km/h: not detected"), "{err}");
+    assert!(dir.join("out/faults/faults.csv").is_file(), "results kept");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The mapping from check results to the exit status, independent of the campaign.
+#[test]
+fn verdict_fails_exactly_when_a_check_failed() {
+    use shimmy_sim::cmd::faults::verdict;
+    assert!(verdict(&[]).is_ok());
+    let e = verdict(&[
+        "a at 45 km/h: not detected".into(),
+        "b: 3 invalid commands".into(),
+    ])
+    .expect_err("two failed checks");
+    let msg = e.to_string();
+    assert!(msg.contains("2 fault-campaign check(s) failed"), "{msg}");
+    assert!(msg.contains("a at 45 km/h: not detected") && msg.contains("b: 3 invalid"));
+}
+
+#[test]
+fn faults_tiny_valid_run_exits_zero() {
+    let dir = temp_dir();
+    let o = run_in(
+        &dir,
+        &[
+            "faults",
+            "--only",
+            "healthy",
+            "--speeds-kmh",
+            "45",
+            "--duration-s",
+            "1",
+        ],
+    );
+    assert!(o.status.success(), "stderr: {}", stderr(&o));
+    assert!(dir.join("out/faults/faults.csv").is_file());
+    assert!(dir.join("out/faults/faults.md").is_file());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn other_commands_reject_bad_numbers_before_running() {
+    let amps = "0 <= value <= 2 A";
+    let speed = "1 <= value <= 250 km/h";
+    let cases: &[(&[&str], &[&str])] = &[
+        (
+            &["stability", "--damper-current-a", "-1"],
+            &["--damper-current-a", "'-1'", amps],
+        ),
+        (
+            &["stability", "--step-kmh", "0"],
+            &["--step-kmh", "0.01 <= value <= 50 km/h"],
+        ),
+        (
+            &["stability", "--v-max-kmh", "1e9"],
+            &["--v-max-kmh", speed],
+        ),
+        (
+            &["stability", "--ref-amplitude-deg", "0"],
+            &["--ref-amplitude-deg", "0 < value <= 20 deg"],
+        ),
+        (
+            &["stability", "--v-min-kmh", "50", "--v-max-kmh", "10"],
+            &["--v-min-kmh 50", "--v-max-kmh 10"],
+        ),
+        (
+            &["sensitivity", "--percent", "-20"],
+            &["--percent", "0 < value <= 90 %"],
+        ),
+        (
+            &["bifurcation", "--damper-current-a", "NaN"],
+            &["--damper-current-a", amps],
+        ),
+        (
+            &["bifurcation", "--step-kmh", "0"],
+            &["--step-kmh", "0.1 <= value <= 100 km/h"],
+        ),
+        (
+            &["bifurcation", "--duration-s", "1e9"],
+            &["--duration-s", "0 < value <= 600 s"],
+        ),
+        (
+            &["bifurcation", "--duration-s", "4"],
+            &["--duration-s 4", "--window-s 3"],
+        ),
+        (&["sweep", "--v-steps", "0"], &["--v-steps", "2..=1001"]),
+        (
+            &["sweep", "--factor-steps", "1000000"],
+            &["--factor-steps", "1..=401"],
+        ),
+        (
+            &["sweep", "--factor-min", "-1"],
+            &["--factor-min", "0 < value <= 10"],
+        ),
+        (
+            &["sweep", "--damper-current-a", "0.5,3"],
+            &["--damper-current-a", "'3'", amps],
+        ),
+        (&["sweep", "--on-current-a", "9"], &["--on-current-a", amps]),
+        (
+            &["sweep", "--kick-deg", "90"],
+            &["--kick-deg", "-20 <= value <= 20 deg"],
+        ),
+        (
+            &[
+                "sweep",
+                "--controllers",
+                "asmc",
+                "--v-steps",
+                "1001",
+                "--factor-steps",
+                "401",
+            ],
+            &["closed-loop runs", "at most 20000"],
+        ),
+        (
+            &["compare", "--on-current-a", "-0.1"],
+            &["--on-current-a", amps],
+        ),
+        (
+            &["compare", "--phi", "0"],
+            &["--phi", "0 < value <= 100 rad/s"],
+        ),
+        (
+            &["compare", "--gamma", "NaN"],
+            &["--gamma", "0 <= value <= 100000"],
+        ),
+        (
+            &["run", "x.toml", "--on-current-a", "5"],
+            &["--on-current-a", amps],
+        ),
+        (
+            &["report", "--on-current-a", "inf"],
+            &["--on-current-a", amps],
+        ),
+        (
+            &["margin", "--rate-kmh-per-s", "0"],
+            &["--rate-kmh-per-s", "0.01 <= value <= 50 km/h/s"],
+        ),
+        (
+            &["margin", "--constant-kmh", "1e9"],
+            &["--constant-kmh", speed],
+        ),
+        (
+            &["margin", "--noise-nm", "-1"],
+            &["--noise-nm", "0 <= value <= 200 N m"],
+        ),
+        (
+            &["margin", "--duration-s", "0"],
+            &["--duration-s", "0 < value <= 3600 s"],
+        ),
+        (
+            &[
+                "margin",
+                "--settle-s",
+                "600",
+                "--ramp-to-kmh",
+                "250",
+                "--rate-kmh-per-s",
+                "0.01",
+            ],
+            &["--settle-s", "0 < value <= 3600 s"],
+        ),
+        (
+            &["reference-bench", "--damper-current-a", "-1"],
+            &["--damper-current-a", amps],
+        ),
+        (
+            &["reference-bench", "--sweep-points", "0"],
+            &["--sweep-points", "2..=100000"],
+        ),
+        (
+            &["reference-bench", "--speed-kmh", "1e9"],
+            &["--speed-kmh", speed],
+        ),
+        (
+            &["reference-bench", "--cl-ramp-s", "0"],
+            &["--cl-ramp-s", "1 <= value <= 600 s"],
+        ),
+    ];
+    for (args, expect) in cases {
+        rejected(args, expect);
+    }
+}
