@@ -16,7 +16,7 @@
 //! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
-//! | `SpeedLowImplausible` | V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`; then held while V < `speed_low_mps` |
+//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`; then held while V < `speed_low_mps` |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
 //! | `CoilOpen` | command > `coil_min_cmd_a` and measured < `coil_open_ratio` x command for `coil_fault_s` |
 //! | `CoilShort` | measured > command + `coil_over_a` (or at the ADC full scale when that is above it) for `coil_fault_s` |
@@ -299,10 +299,10 @@ impl Supervisor {
         } else {
             // Low-speed plausibility: the lowest speed the vehicle can have now is the
             // deceleration envelope of the trusted speeds (`max_accel_mps2` from each). A reading
-            // below it came faster than braking allows (lost pulse train, frozen value); once
-            // seen, a reading below `speed_low_mps` stays suspect (time alone does not make it
-            // plausible) until the reading is back above `speed_low_mps`.
-            if v < self.speed_floor_at(f.t_us) - p.speed_noise_tol_mps {
+            // below the controller's gate and below the envelope came faster than braking allows
+            // (lost pulse train, frozen value); once seen, it stays suspect (time alone does not
+            // make it plausible) until the reading is back at or above `speed_low_mps`.
+            if v < p.speed_low_mps && v < self.speed_floor_at(f.t_us) - p.speed_noise_tol_mps {
                 self.speed_suspect = true;
             } else if v >= p.speed_low_mps {
                 self.speed_suspect = false;
