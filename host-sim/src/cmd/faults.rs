@@ -107,7 +107,7 @@ pub fn standard_cases() -> Vec<Case> {
         case(
             "speed-lost",
             vec![F::SpeedLost],
-            "qualifier invalid: speed gate off, 2 A floor",
+            "qualifier invalid: last trusted speed held 1 s, then speed gate off, 2 A floor",
         ),
         case(
             "speed-pulses-lost",
