@@ -207,3 +207,136 @@ fn the_sensor_faults_scenario_detects_each_fault() {
     assert_eq!(log.invalid_commands, 0);
     assert_eq!(r.series.cmd_a.last().copied(), Some(0.0));
 }
+
+/// The speed-fault runs: the kick comes 3 s after the fault, once the old supervisor had
+/// accepted the low reading (its `SpeedJump` healed after ~0.8 s plus the 1 s recovery).
+fn late_kick() -> Setup {
+    Setup {
+        kick_s: 4.0,
+        duration_s: 7.0,
+        ..Setup::default()
+    }
+}
+
+/// The wheel-speed signal is lost (the tone wheel's pulse train stops; the decoder falls to a
+/// "valid" 0 m/s standstill), or it freezes at a plausible low 6 km/h, while the vehicle drives
+/// at 45 or 60 km/h inside the Hopf window, and a yaw kick follows. A low speed reached faster
+/// than braking allows is not trusted: `speed-low-implausible` is raised, the last trusted speed
+/// is held (the controller keeps acting), then the 2 A floor; the wheel stays below 0.5 deg.
+/// (Before this check the supervisor accepted the low reading after ~2 s, the controller gated
+/// itself off below 2 m/s in Normal mode and the kick grew into shimmy.)
+#[test]
+fn a_lost_or_frozen_speed_does_not_switch_the_damper_off() {
+    let s = late_kick();
+    let arm = Arm::Mr(ControllerKind::Asmc);
+    let cases = [
+        ("speed-pulses-lost", vec![FaultMode::SpeedPulsesLost], 45.0),
+        ("speed-pulses-lost", vec![FaultMode::SpeedPulsesLost], 60.0),
+        (
+            "speed-frozen 6kmh",
+            vec![FaultMode::SpeedImplausible(6.0 / 3.6)],
+            45.0,
+        ),
+    ];
+    let mut bad = Vec::new();
+    for (name, faults, v_kmh) in cases {
+        let c = Case {
+            name: name.into(),
+            faults,
+            note: "",
+            handleable: true,
+        };
+        let (r, _) = fault_campaign::run_case(&s, arm, &c, v_kmh, true).unwrap();
+        println!(
+            "{name} at {v_kmh} km/h: peak {:.3} deg after the fault, end amplitude {:.3} deg, {} -> {}, final {:.2} A, detected {}",
+            r.peak_after_rad.to_degrees(),
+            r.amp_end_rad.to_degrees(),
+            r.worst_mode.name(),
+            r.final_mode.name(),
+            r.final_cmd_a,
+            r.detected
+        );
+        if !r.detected.contains("speed-low-implausible") {
+            bad.push(format!("{name} at {v_kmh}: not detected ({})", r.detected));
+        }
+        if !r.suppressed() {
+            bad.push(format!(
+                "{name} at {v_kmh}: peak {:.3} deg",
+                r.peak_after_rad.to_degrees()
+            ));
+        }
+        if r.final_mode != Mode::Degraded || r.final_cmd_a != f64::from(FAILSAFE_CURRENT_A) {
+            bad.push(format!(
+                "{name} at {v_kmh}: ends {} at {} A",
+                r.final_mode.name(),
+                r.final_cmd_a
+            ));
+        }
+    }
+    assert!(bad.is_empty(), "{bad:#?}");
+}
+
+/// Lost speed (decoder standstill) and both encoders failed: FailSafe, and the safe current is
+/// the 2 A fail-safe current, not the 0 A that only a trusted low speed allows.
+#[test]
+fn lost_speed_with_both_encoders_failed_holds_the_failsafe_current() {
+    let c = Case {
+        name: "error-flag-both+speed-pulses-lost".into(),
+        faults: vec![FaultMode::ErrorFlag(Side::Both), FaultMode::SpeedPulsesLost],
+        note: "",
+        handleable: true,
+    };
+    let arm = Arm::Mr(ControllerKind::Asmc);
+    for v_kmh in [45.0, 60.0] {
+        let (r, _) = fault_campaign::run_case(&late_kick(), arm, &c, v_kmh, true).unwrap();
+        println!(
+            "at {v_kmh} km/h: peak {:.3} deg, {}, final {:.2} A, detected {}",
+            r.peak_after_rad.to_degrees(),
+            r.final_mode.name(),
+            r.final_cmd_a,
+            r.detected
+        );
+        assert_eq!(r.final_mode, Mode::FailSafe);
+        assert_eq!(r.final_cmd_a, f64::from(FAILSAFE_CURRENT_A), "{v_kmh} km/h");
+        assert!(r.suppressed(), "{v_kmh} km/h");
+    }
+}
+
+/// The other way round: a genuine braking from 45 km/h to standstill at 0.8 g (inside the
+/// deceleration bound), with healthy sensors, is accepted as standstill without any fault; the
+/// damper then goes to 0 A (speed gate).
+#[test]
+fn a_genuine_braking_to_standstill_raises_no_fault() {
+    use shimmy_sim::model::disturbance::SpeedProfile;
+    use shimmy_sim::sim::closed_loop;
+    let s = Setup {
+        duration_s: 4.0,
+        ..setup()
+    };
+    let c = Case {
+        name: "braking".into(),
+        faults: vec![],
+        note: "",
+        handleable: true,
+    };
+    let v0 = V_KMH / 3.6;
+    let (cfg, mut sc) = fault_campaign::build(&s, Arm::Mr(ControllerKind::Asmc), &c.faults, V_KMH);
+    let t_stop = 1.2 + v0 / (0.8 * 9.81);
+    sc.speed = SpeedProfile::Ramp {
+        v0_mps: v0,
+        v1_mps: 0.0,
+        t0_s: 1.2,
+        t1_s: t_stop,
+    };
+    let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
+    let log = &r.faults;
+    println!(
+        "braking to standstill: detected {:?}, final {} at {:?} A",
+        log.detected,
+        log.final_mode.name(),
+        r.series.cmd_a.last()
+    );
+    assert!(log.detected.is_empty(), "{:?}", log.records);
+    assert_eq!(log.worst_mode, Mode::Normal);
+    assert_eq!(r.series.cmd_a.last().copied(), Some(0.0));
+}

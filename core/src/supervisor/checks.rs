@@ -16,6 +16,7 @@
 //! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
+//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`; then held while V < `speed_low_mps` |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
 //! | `CoilOpen` | command > `coil_min_cmd_a` and measured < `coil_open_ratio` x command for `coil_fault_s` |
 //! | `CoilShort` | measured > command + `coil_over_a` (or at the ADC full scale when that is above it) for `coil_fault_s` |
@@ -44,7 +45,7 @@
 use super::faults::{FaultKind, FaultRecord, FaultSet, N_FAULTS};
 use super::frame::{EncoderReading, MarginStatus, RawFrame, NOMINAL_PERIOD_US};
 use super::params::SupervisorParams;
-use super::policy::{decide, Mode, SupervisorVerdict};
+use super::policy::{decide, Mode, SpeedUse, SupervisorVerdict};
 
 /// A mode change or fault (de)activation, for the log.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,6 +96,9 @@ pub struct Supervisor {
     enc: [EncoderTrack; 2],
     both_unchanged: u16,
     speed_last_good: Option<(f32, u32)>,
+    speed_floor: (f32, u32),
+    speed_suspect: bool,
+    speed_trusted: Option<(f32, u32)>,
     coil_mismatch_s: [f32; 2],
     margin_invalid_s: f32,
     absent_s: [f32; N_FAULTS],
@@ -128,6 +132,9 @@ impl Supervisor {
             enc: [EncoderTrack::default(); 2],
             both_unchanged: 0,
             speed_last_good: None,
+            speed_floor: (0.0, 0),
+            speed_suspect: false,
+            speed_trusted: None,
             coil_mismatch_s: [0.0; 2],
             margin_invalid_s: 0.0,
             absent_s: [0.0; N_FAULTS],
@@ -289,19 +296,59 @@ impl Supervisor {
         let p = self.p;
         if !f.speed_valid || !v.is_finite() || v < -p.speed_neg_tol_mps || v > p.max_speed_mps {
             det.insert(FaultKind::SpeedInvalid);
-            return None;
-        }
-        if let Some((last, t_last)) = self.speed_last_good {
-            let dt_s = f.t_us.wrapping_sub(t_last) as f32 * 1e-6;
-            // One extra sample period of slack: speed signals are often held between updates.
-            let bound = p.max_accel_mps2 * (dt_s + 1e-3) + p.speed_noise_tol_mps;
-            if !within(abs(v - last), bound) {
-                det.insert(FaultKind::SpeedJump);
-                return None;
+        } else {
+            // Low-speed plausibility: the lowest speed the vehicle can have now is the
+            // deceleration envelope of the trusted speeds (`max_accel_mps2` from each). A reading
+            // below the controller's gate and below the envelope came faster than braking allows
+            // (lost pulse train, frozen value); once seen, it stays suspect (time alone does not
+            // make it plausible) until the reading is back at or above `speed_low_mps`.
+            if v < p.speed_low_mps && v < self.speed_floor_at(f.t_us) - p.speed_noise_tol_mps {
+                self.speed_suspect = true;
+            } else if v >= p.speed_low_mps {
+                self.speed_suspect = false;
+            }
+            if self.speed_suspect {
+                det.insert(FaultKind::SpeedLowImplausible);
+            }
+            if let Some((last, t_last)) = self.speed_last_good {
+                let dt_s = f.t_us.wrapping_sub(t_last) as f32 * 1e-6;
+                // One extra sample period of slack: speed signals are often held between updates.
+                let bound = p.max_accel_mps2 * (dt_s + 1e-3) + p.speed_noise_tol_mps;
+                if !within(abs(v - last), bound) {
+                    det.insert(FaultKind::SpeedJump);
+                }
+            }
+            if !det.contains(FaultKind::SpeedJump) {
+                self.speed_last_good = Some((v, f.t_us));
             }
         }
-        self.speed_last_good = Some((v, f.t_us));
+        if det.speed() {
+            return None;
+        }
+        if v >= self.speed_floor_at(f.t_us) {
+            self.speed_floor = (v, f.t_us);
+        }
+        self.speed_trusted = Some((v, f.t_us));
         Some(v)
+    }
+
+    /// The deceleration envelope of the trusted speeds at `t_us`, m/s (>= 0).
+    fn speed_floor_at(&mut self, t_us: u32) -> f32 {
+        let (v0, t0) = self.speed_floor;
+        let floor = v0 - self.p.max_accel_mps2 * (t_us.wrapping_sub(t0) as f32 * 1e-6);
+        if floor > 0.0 {
+            floor
+        } else {
+            // Reached zero: restart from here (keeps the time difference far from the wrap).
+            self.speed_floor = (0.0, t_us);
+            0.0
+        }
+    }
+
+    /// The speed to use while the speed is untrusted: the last trusted one, for `speed_hold_s`.
+    fn held_speed(&self, t_us: u32) -> Option<f32> {
+        let (v, t) = self.speed_trusted?;
+        within(t_us.wrapping_sub(t) as f32 * 1e-6, self.p.speed_hold_s).then_some(v)
     }
 
     /// Coil check against the command of the previous step `last_cmd_a`.
@@ -404,7 +451,13 @@ impl Supervisor {
             _ => self.margin_invalid_s = 0.0,
         }
         self.update_active(det, f.t_us, dt_s);
-        let verdict = decide(self.active, det, speed, &self.p);
+        let speed_use = match speed {
+            Some(v) if !self.active.speed() => SpeedUse::Trusted(v),
+            _ => self
+                .held_speed(f.t_us)
+                .map_or(SpeedUse::Unknown, SpeedUse::Held),
+        };
+        let verdict = decide(self.active, det, speed_use, &self.p);
         if verdict.mode != self.mode {
             log_warn!(
                 "supervisor: mode {} -> {}",
@@ -435,10 +488,9 @@ impl Supervisor {
             t_s: f.t_us as f32 * 1e-6,
             dt_s,
             angles_rad: angles,
-            speed_mps: if a.contains(FaultKind::SpeedInvalid) || a.contains(FaultKind::SpeedJump) {
-                None
-            } else {
-                speed
+            speed_mps: match speed_use {
+                SpeedUse::Trusted(v) | SpeedUse::Held(v) => Some(v),
+                SpeedUse::Unknown => None,
             },
             coil_current_a: if a.contains(FaultKind::CoilSensor) {
                 None
@@ -492,7 +544,8 @@ pub struct Validated {
     /// Wheel yaw (left, right) in rad to control on: both encoders, or the healthy one twice;
     /// `None` in FailSafe.
     pub angles_rad: Option<(f32, f32)>,
-    /// Trusted speed, m/s.
+    /// Speed to control on, m/s: the trusted reading; while the speed is untrusted, the last
+    /// trusted reading for `speed_hold_s`; then `None` (unknown).
     pub speed_mps: Option<f32>,
     /// Trusted coil current, A.
     pub coil_current_a: Option<f32>,

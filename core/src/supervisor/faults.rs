@@ -2,7 +2,7 @@
 //! [`super::checks`]; what a set of active faults means for the damper: [`super::policy`].
 
 /// Number of fault kinds.
-pub const N_FAULTS: usize = 21;
+pub const N_FAULTS: usize = 22;
 
 /// What went wrong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,6 +50,10 @@ pub enum FaultKind {
     CoilSensor,
     /// Margin estimate unavailable for long (advisory).
     MarginUnavailable,
+    /// Speed: a low reading (standstill or below the controller's speed gate) reached faster
+    /// than a vehicle can brake: the signal is lost (tone-wheel timeout) or frozen. Stays until
+    /// the reading is back above the gate.
+    SpeedLowImplausible,
 }
 
 impl FaultKind {
@@ -76,6 +80,7 @@ impl FaultKind {
         FaultKind::CoilShort,
         FaultKind::CoilSensor,
         FaultKind::MarginUnavailable,
+        FaultKind::SpeedLowImplausible,
     ];
 
     /// Short name for logs and tables.
@@ -102,6 +107,7 @@ impl FaultKind {
             FaultKind::CoilShort => "coil-short",
             FaultKind::CoilSensor => "coil-sensor",
             FaultKind::MarginUnavailable => "margin-unavailable",
+            FaultKind::SpeedLowImplausible => "speed-low-implausible",
         }
     }
 
@@ -159,6 +165,16 @@ impl FaultSet {
     /// Any right-encoder fault.
     pub const fn right(self) -> bool {
         self.0 & RIGHT_MASK != 0
+    }
+
+    /// Any speed fault (`SpeedInvalid`, `SpeedJump`, `SpeedLowImplausible`): the speed reading
+    /// is not trusted.
+    pub const fn speed(self) -> bool {
+        self.0
+            & (FaultKind::SpeedInvalid.bit()
+                | FaultKind::SpeedJump.bit()
+                | FaultKind::SpeedLowImplausible.bit())
+            != 0
     }
 
     /// The kinds in the set.

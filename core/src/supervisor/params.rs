@@ -31,6 +31,14 @@ pub struct SupervisorParams {
     /// Sample-to-sample speed noise tolerated on top of the acceleration bound, m/s (a
     /// wheel-speed signal read every 1 ms carries noise much larger than 1.5 g x 1 ms).
     pub speed_noise_tol_mps: f32,
+    /// A speed reading below this must have been reached plausibly (deceleration bound from the
+    /// trusted speeds) to be trusted, m/s: the controller's speed gate
+    /// (`ControlParams::min_speed_mps`), below which the damper switches itself off.
+    pub speed_low_mps: f32,
+    /// After the speed becomes untrusted, the last trusted speed is held for this long (the
+    /// controller keeps running on it, no current floor), then the speed counts as unknown
+    /// (speed gate off, fail-safe current as a floor), s.
+    pub speed_hold_s: f32,
     /// Largest time-stamp gap before `Timing`, us.
     pub max_gap_us: u32,
     /// Coil checks only run above this command, A.
@@ -62,7 +70,8 @@ impl Default for SupervisorParams {
     /// 100 ms with 5 mrad motion on the other side; both-stuck after 2 s; 70 m/s max (the
     /// analysed range); 0.5 m/s negative tolerance; 15 m/s^2 (1.5 g) plus 0.5 m/s
     /// sample-to-sample noise (10 sigma of the simulator's 0.05 m/s wheel-speed noise; the
-    /// board's tone-wheel `jump_margin_mps` is 0.5 m/s too); gap 5 ms (4 missed samples); coil
+    /// board's tone-wheel `jump_margin_mps` is 0.5 m/s too); low-speed plausibility below the
+    /// controller's 2 m/s gate, the last trusted speed held for 1 s; gap 5 ms (4 missed samples); coil
     /// checks above 0.2 A, open < 25 %, short > +0.5 A or a saturated 2.5 A reading, for 50 ms
     /// (10 L/R); margin 10 s; recovery 1 s.
     fn default() -> Self {
@@ -77,6 +86,8 @@ impl Default for SupervisorParams {
             speed_neg_tol_mps: 0.5,
             max_accel_mps2: 15.0,
             speed_noise_tol_mps: 0.5,
+            speed_low_mps: 2.0,
+            speed_hold_s: 1.0,
             max_gap_us: 5000,
             coil_min_cmd_a: 0.2,
             coil_open_ratio: 0.25,

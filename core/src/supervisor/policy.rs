@@ -3,7 +3,8 @@
 //! * **FailSafe** (controller output ignored, fixed current): no trustworthy wheel yaw (both
 //!   encoders faulted, or they disagree), timing fault, coil fault. The current is
 //!   [`FAILSAFE_CURRENT_A`] (stabilises every analysed plant variant at every speed, see
-//!   `tests/tests/failsafe_current.rs`), or 0 A when the speed is trusted and below
+//!   `tests/tests/failsafe_current.rs`), or 0 A when the speed is trusted (no speed fault
+//!   active, so not a held or implausibly low reading) and below
 //!   [`ZERO_CURRENT_SAFE_BELOW_MPS`] (below the lowest Hopf onset: no shimmy possible, parking
 //!   stays light). A coil fault commands 0 A (driving current into a short only heats it; an
 //!   open coil cannot be driven): the damper is then passive-off, and the verdict says so with
@@ -13,7 +14,9 @@
 //!     in-phase yaw (psi_L + psi_R)/2, which the track rod makes equal to either wheel's yaw up
 //!     to the tiny anti-phase part, so control quality is kept; but the cross-check is gone, so
 //!     the command is floored at [`FAILSAFE_CURRENT_A`] (the controller can only add damping);
-//!   - speed unknown: the speed gate is disabled and the floor applied (the safe current does not
+//!   - speed untrusted (`SpeedInvalid`, `SpeedJump`, `SpeedLowImplausible`): the last trusted
+//!     speed is held for `speed_hold_s` (controller runs on it, no floor); after that the speed
+//!     is unknown: the speed gate is disabled and the floor applied (the safe current does not
 //!     depend on speed);
 //!   - `BothStuckSuspect`: floor;
 //!   - coil-current sensor lost or margin estimate unavailable: advisory, no floor (the coil is
@@ -69,21 +72,30 @@ pub struct SupervisorVerdict {
     pub damper_available: bool,
 }
 
+/// The speed the policy may use for one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum SpeedUse {
+    /// No speed fault active: the reading, m/s.
+    Trusted(f32),
+    /// A speed fault is active: the last trusted reading, within `speed_hold_s`, m/s.
+    Held(f32),
+    /// No trusted speed (none yet, or held for longer than `speed_hold_s`).
+    Unknown,
+}
+
 /// The verdict for one frame from the active faults `active`, the faults detected in this frame
-/// `det`, and the validated speed `speed`.
+/// `det`, and the speed the policy may use, `speed`.
 pub(super) fn decide(
     active: FaultSet,
     det: FaultSet,
-    speed: Option<f32>,
+    speed: SpeedUse,
     p: &SupervisorParams,
 ) -> SupervisorVerdict {
     let a = active;
     let coil_dead = a.contains(FaultKind::CoilOpen) || a.contains(FaultKind::CoilShort);
-    let speed_trusted = speed.is_some()
-        && !a.contains(FaultKind::SpeedInvalid)
-        && !a.contains(FaultKind::SpeedJump);
+    // 0 A only for a trusted low speed: a held or unknown speed never lowers the safe current.
     let fixed = match speed {
-        Some(v) if speed_trusted && v < p.zero_current_below_mps => 0.0,
+        SpeedUse::Trusted(v) if v < p.zero_current_below_mps => 0.0,
         _ => p.failsafe_current_a,
     };
     let no_yaw = (a.left() && a.right()) || a.contains(FaultKind::EncoderDisagree);
@@ -93,10 +105,13 @@ pub(super) fn decide(
     } else if fail {
         (Mode::FailSafe, Some(fixed))
     } else {
-        let floor =
-            a.left() || a.right() || !speed_trusted || a.contains(FaultKind::BothStuckSuspect);
-        let advisory =
-            a.contains(FaultKind::CoilSensor) || a.contains(FaultKind::MarginUnavailable);
+        let floor = a.left()
+            || a.right()
+            || speed == SpeedUse::Unknown
+            || a.contains(FaultKind::BothStuckSuspect);
+        let advisory = a.speed()
+            || a.contains(FaultKind::CoilSensor)
+            || a.contains(FaultKind::MarginUnavailable);
         if floor {
             (Mode::Degraded, Some(fixed))
         } else if advisory {

@@ -3,7 +3,9 @@
 //! The board layer reports, once per control step, the newest complete pulse period (if a new
 //! edge arrived) and how long ago the last edge was, both in timer ticks ([`PulseSample`]).
 //! [`WheelSpeed`] turns that into m/s with the pulses per revolution and the rolling radius:
-//! - no edge for longer than the timeout: standstill, 0 m/s;
+//! - no edge for longer than the timeout: standstill, 0 m/s (only a candidate: a stop and a
+//!   lost pulse train look the same here; the core's supervisor trusts it only if it was reached
+//!   within its deceleration bound, `speed-low-implausible`);
 //! - between edges the speed can only be as high as one pulse distance over the time since the
 //!   last edge, so a decelerating wheel is followed without waiting for the next edge;
 //! - a new period whose speed differs from the last accepted one by more than the plausible

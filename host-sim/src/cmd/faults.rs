@@ -108,7 +108,17 @@ pub fn standard_cases() -> Vec<Case> {
         case(
             "speed-lost",
             vec![F::SpeedLost],
-            "qualifier invalid: speed gate off, 2 A floor",
+            "qualifier invalid: last trusted speed held 1 s, then speed gate off, 2 A floor",
+        ),
+        case(
+            "speed-pulses-lost",
+            vec![F::SpeedPulsesLost],
+            "tone-wheel pulses stop: the decoder decays to 0 m/s (standstill after 0.5 s) faster than braking allows; last trusted speed held 1 s, then 2 A floor",
+        ),
+        case(
+            "speed-frozen 6kmh",
+            vec![F::SpeedImplausible(kmh_to_mps(6.0))],
+            "frozen at a plausible low value below the 2 m/s gate: reached faster than braking allows; held speed, then 2 A floor",
         ),
         case(
             "speed-implausible 300kmh",
@@ -155,6 +165,11 @@ pub fn standard_cases() -> Vec<Case> {
             "error-flag-both",
             vec![F::ErrorFlag(Side::Both)],
             "common cause (supply/bus): fail-safe 2 A",
+        ),
+        case(
+            "error-flag-both+speed-pulses-lost",
+            vec![F::ErrorFlag(Side::Both), F::SpeedPulsesLost],
+            "no yaw and the speed reads standstill: fail-safe at 2 A (0 A only for a trusted low speed)",
         ),
         case(
             "noise-left+speed-lost",

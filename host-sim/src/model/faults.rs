@@ -17,7 +17,8 @@
 //! | `parity` | parity bit wrong | `*Flag` |
 //! | `error-flag` | the sensor's error flag set | `*Flag` |
 //! | `speed-lost` | speed 0 with the validity qualifier false | `SpeedInvalid` |
-//! | `speed-implausible` | speed replaced by `speed_kmh` (validity true) | `SpeedInvalid` (> 252 km/h or < 0) / `SpeedJump` |
+//! | `speed-pulses-lost` | the tone-wheel pulse train stops; the decoder's reading (qualifier valid): its value at the start, bounded by one pulse distance over the time since the last edge, then 0 m/s (standstill) after its timeout | `SpeedJump` + `SpeedLowImplausible` (faster than braking; held while below the 2 m/s gate) |
+//! | `speed-implausible` | speed replaced by `speed_kmh` (validity true): also a speed frozen at a plausible value | `SpeedInvalid` (> 252 km/h or < 0) / `SpeedJump`; `SpeedLowImplausible` when below the 2 m/s gate |
 //! | `frame-loss` | `length_samples` of every `period_samples` whole frames lost (command held) | missed-sample counter; `Timing` for gaps > 5 ms |
 //! | `coil-open` | coil carries no current (damper passive-off), shunt reads ~0 | `CoilOpen` (latched) |
 //! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x command | `CoilShort` (latched) |
@@ -99,7 +100,12 @@ pub enum FaultMode {
     ErrorFlag(Side),
     /// Speed signal lost: value 0, qualifier invalid.
     SpeedLost,
-    /// Speed replaced by an implausible value, m/s (qualifier valid).
+    /// The tone wheel's pulse train stops (sensor or wire lost): the firmware decoder's reading,
+    /// qualifier valid, min(value at the start, [`PULSE_DISTANCE_M`] / time since the last edge)
+    /// and 0 m/s (standstill) after [`PULSE_TIMEOUT_S`].
+    SpeedPulsesLost,
+    /// Speed replaced by an implausible value, m/s (qualifier valid); a plausible value frozen
+    /// while the vehicle drives on is the same fault.
     SpeedImplausible(f64),
     /// `length` whole frames lost out of every `period`.
     FrameLoss {
@@ -114,8 +120,15 @@ pub enum FaultMode {
     CoilShort(f64),
 }
 
+/// Distance between two tone-wheel pulses of the board's decoder (48 teeth, 0.35 m rolling
+/// radius: `firmware::calibration::WHEEL_SPEED`), m.
+pub const PULSE_DISTANCE_M: f64 = 2.0 * std::f64::consts::PI * 0.35 / 48.0;
+
+/// The board decoder's no-edge timeout after which it reports standstill, s.
+pub const PULSE_TIMEOUT_S: f64 = 0.5;
+
 /// Fault kinds as named in scenario files.
-pub const KINDS: [&str; 12] = [
+pub const KINDS: [&str; 13] = [
     "stuck",
     "noise",
     "dropout",
@@ -124,6 +137,7 @@ pub const KINDS: [&str; 12] = [
     "parity",
     "error-flag",
     "speed-lost",
+    "speed-pulses-lost",
     "speed-implausible",
     "frame-loss",
     "coil-open",
@@ -142,6 +156,7 @@ impl FaultMode {
             FaultMode::Parity(_) => "parity",
             FaultMode::ErrorFlag(_) => "error-flag",
             FaultMode::SpeedLost => "speed-lost",
+            FaultMode::SpeedPulsesLost => "speed-pulses-lost",
             FaultMode::SpeedImplausible(_) => "speed-implausible",
             FaultMode::FrameLoss { .. } => "frame-loss",
             FaultMode::CoilOpen => "coil-open",
@@ -299,6 +314,17 @@ impl FaultInjector for FaultPlan {
                     m.speed_mps = 0.0;
                     m.speed_valid = false;
                 }
+                FaultMode::SpeedPulsesLost => {
+                    let v0 = *self.frozen[i][0].get_or_insert(m.speed_mps);
+                    // The last edge came at the start; `n + 1` sample periods since.
+                    let since_s = (n + 1) as f64 * 1e-3;
+                    m.speed_mps = if since_s > PULSE_TIMEOUT_S {
+                        0.0
+                    } else {
+                        v0.min((PULSE_DISTANCE_M / since_s) as f32)
+                    };
+                    m.speed_valid = true;
+                }
                 FaultMode::SpeedImplausible(v) => m.speed_mps = v as f32,
                 FaultMode::FrameLoss { period, length }
                     if n % u64::from(period.max(1)) < u64::from(length) =>
@@ -368,6 +394,7 @@ mod tests {
                 amplitude_rad: 0.3,
             },
             FaultMode::SpeedLost,
+            FaultMode::SpeedPulsesLost,
             FaultMode::SpeedImplausible(100.0),
             FaultMode::FrameLoss {
                 period: 3,
@@ -417,6 +444,13 @@ mod tests {
                         assert!((d - want).abs() < 1e-6, "{k}: {d}");
                     }
                     FaultMode::SpeedLost => assert!(!m.speed_valid && m.speed_mps == 0.0),
+                    FaultMode::SpeedPulsesLost => {
+                        // 20 m/s at the start; one pulse (45.8 mm) over (n + 1) ms is less
+                        // from the 3rd sample on.
+                        let bound = (PULSE_DISTANCE_M / ((n + 1) as f64 * 1e-3)) as f32;
+                        assert_eq!(m.speed_mps, bound.min(20.0), "{k}");
+                        assert!(m.speed_valid);
+                    }
                     FaultMode::SpeedImplausible(_) => assert_eq!(m.speed_mps, 100.0),
                     FaultMode::FrameLoss { .. } => assert_eq!(m.lost, n % 3 == 0),
                     _ => unreachable!(),

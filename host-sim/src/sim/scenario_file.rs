@@ -48,7 +48,8 @@
 //!
 //! [[fault]]                       # any number; see `crate::model::faults` for what each does
 //! kind = "stuck"                  # stuck | noise | dropout | spike | nan | parity | error-flag |
-//!                                 # speed-lost | speed-implausible | frame-loss | coil-open | coil-short
+//!                                 # speed-lost | speed-pulses-lost | speed-implausible | frame-loss |
+//!                                 # coil-open | coil-short
 //! sensor = "left"                 # encoder faults only: left | right | both (default left)
 //! start_s = 5.0                   # active from (0 ..= duration_s)
 //! end_s = 8.0                     # optional, active until (start_s ..= duration_s)
@@ -560,6 +561,7 @@ fn parse_fault(i: usize, f: &FaultSection, duration_s: f64) -> Result<FaultSpec>
         "parity" => FaultMode::Parity(side),
         "error-flag" => FaultMode::ErrorFlag(side),
         "speed-lost" => FaultMode::SpeedLost,
+        "speed-pulses-lost" => FaultMode::SpeedPulsesLost,
         "speed-implausible" => FaultMode::SpeedImplausible(kmh_to_mps(speed_kmh)),
         "frame-loss" => FaultMode::FrameLoss { period, length },
         "coil-open" => FaultMode::CoilOpen,
