@@ -117,6 +117,12 @@ fn within(x: f32, bound: f32) -> bool {
     x <= bound
 }
 
+/// Seconds from time stamp `earlier_us` to `now_us` (wrapping: right across the u32 wrap).
+#[inline]
+fn seconds_since(now_us: u32, earlier_us: u32) -> f32 {
+    now_us.wrapping_sub(earlier_us) as f32 * 1e-6
+}
+
 /// |x| for the checks (NaN stays NaN and fails every `<=`).
 #[inline]
 fn abs(x: f32) -> f32 {
@@ -245,7 +251,7 @@ impl Supervisor {
         // Rate: against the last good sample, over the time since it (grows across gaps).
         if bad.is_empty() {
             if let Some(last) = tr.last_good_rad {
-                let dt_s = t_us.wrapping_sub(tr.last_good_t_us) as f32 * 1e-6;
+                let dt_s = seconds_since(t_us, tr.last_good_t_us);
                 if !within(abs(x - last), p.max_rate_radps * dt_s) {
                     bad.0 |= 1 << (base + 4);
                 }
@@ -311,7 +317,7 @@ impl Supervisor {
                 det.insert(FaultKind::SpeedLowImplausible);
             }
             if let Some((last, t_last)) = self.speed_last_good {
-                let dt_s = f.t_us.wrapping_sub(t_last) as f32 * 1e-6;
+                let dt_s = seconds_since(f.t_us, t_last);
                 // One extra sample period of slack: speed signals are often held between updates.
                 let bound = p.max_accel_mps2 * (dt_s + 1e-3) + p.speed_noise_tol_mps;
                 if !within(abs(v - last), bound) {
@@ -335,7 +341,7 @@ impl Supervisor {
     /// The deceleration envelope of the trusted speeds at `t_us`, m/s (>= 0).
     fn speed_floor_at(&mut self, t_us: u32) -> f32 {
         let (v0, t0) = self.speed_floor;
-        let floor = v0 - self.p.max_accel_mps2 * (t_us.wrapping_sub(t0) as f32 * 1e-6);
+        let floor = v0 - self.p.max_accel_mps2 * seconds_since(t_us, t0);
         if floor > 0.0 {
             floor
         } else {
@@ -348,7 +354,7 @@ impl Supervisor {
     /// The speed to use while the speed is untrusted: the last trusted one, for `speed_hold_s`.
     fn held_speed(&self, t_us: u32) -> Option<f32> {
         let (v, t) = self.speed_trusted?;
-        within(t_us.wrapping_sub(t) as f32 * 1e-6, self.p.speed_hold_s).then_some(v)
+        within(seconds_since(t_us, t), self.p.speed_hold_s).then_some(v)
     }
 
     /// Coil check against the command of the previous step `last_cmd_a`.
