@@ -67,6 +67,7 @@ use crate::model::disturbance::{
 };
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
+use crate::sim::arg_range::{self, Range};
 use crate::sim::paramfile;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
 use anyhow::{bail, Context, Result};
@@ -218,9 +219,10 @@ struct OutputSection {
     trace_every: Option<usize>,
 }
 
-/// Checks `lo <= value <= hi` (and finiteness), naming the field and the range on failure.
+/// Checks `lo <= value <= hi` (and finiteness, the command-line options' rule
+/// [`Range::contains`]), naming the field and the range on failure.
 fn in_range(field: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<f64> {
-    if value.is_finite() && (lo..=hi).contains(&value) {
+    if Range::closed(lo, hi, "").contains(value) {
         Ok(value)
     } else {
         bail!("field `{field}` = {value}: allowed range {lo} ..= {hi} {unit}")
@@ -275,7 +277,10 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
                 );
             };
             let on = match (kind, c.on_current_a) {
-                ("passive-on", Some(i)) => in_range("controller.on_current_a", i, 0.0, 2.0, "A")?,
+                ("passive-on", Some(i)) => {
+                    let rated = arg_range::coil_current();
+                    in_range("controller.on_current_a", i, rated.lo, rated.hi, "A")?
+                }
                 ("passive-on", None) => {
                     bail!("field `controller.on_current_a` is required for passive-on")
                 }
