@@ -33,7 +33,12 @@ fn root() -> PathBuf {
 /// Every module file reachable by the directory convention from `src/lib.rs` (binaries,
 /// `main.rs` and `bin/` are crate roots of their own and left out).
 fn load(name: &'static str, dir: &str) -> Crate {
-    let src = root().join(dir).join("src");
+    load_src(name, &root().join(dir).join("src"))
+}
+
+/// [`load`] for the source folder `src`.
+fn load_src(name: &'static str, src: &Path) -> Crate {
+    let src = src.to_path_buf();
     let mut files = BTreeMap::new();
     let mut stack = vec![src.clone()];
     while let Some(d) = stack.pop() {
@@ -282,39 +287,36 @@ fn no_file_imports_a_file_that_imports_it_back() {
     assert!(bad.is_empty(), "import cycles:\n{}", bad.join("\n"));
 }
 
+/// A scratch crate in a fresh temporary folder from (path under `src/`, text) pairs; the
+/// folder is returned for removal.
+fn scratch(tag: &str, sources: &[(&str, &str)]) -> (Crate, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("shimmy-arch-{tag}-{}", std::process::id()));
+    let src = dir.join("src");
+    for (path, text) in sources {
+        let f = src.join(path);
+        std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+        std::fs::write(f, text).unwrap();
+    }
+    (load_src("scratch", &src), dir)
+}
+
 /// The checker itself must see a cycle where there is one (else the test above proves
 /// nothing): two files of a scratch crate that name each other, one through `use`, one
 /// through a path in an expression; a third file importing its sibling only is no cycle.
 #[test]
 fn the_checker_finds_a_planted_cycle() {
-    let dir = std::env::temp_dir().join(format!("shimmy-arch-{}", std::process::id()));
-    let src = dir.join("src");
-    std::fs::create_dir_all(src.join("a")).unwrap();
-    std::fs::write(src.join("lib.rs"), "pub mod a;\npub mod c;\n").unwrap();
-    std::fs::write(
-        src.join("a/mod.rs"),
-        "pub mod b;\npub use b::B;\npub struct A;\n",
-    )
-    .unwrap();
-    std::fs::write(
-        src.join("a/b.rs"),
-        "/// [`crate::c`] in a doc is no import.\npub struct B;\npub fn f() -> usize { core::mem::size_of::<super::A>() }\n",
-    )
-    .unwrap();
-    std::fs::write(src.join("c.rs"), "use crate::a::b::B;\npub fn g(_: B) {}\n").unwrap();
-    let mut files = BTreeMap::new();
-    for (m, f) in [
-        (vec![], "lib.rs"),
-        (vec!["a"], "a/mod.rs"),
-        (vec!["a", "b"], "a/b.rs"),
-        (vec!["c"], "c.rs"),
-    ] {
-        files.insert(m.into_iter().map(String::from).collect(), src.join(f));
-    }
-    let scratch = Crate {
-        name: "scratch",
-        files,
-    };
+    let (scratch, dir) = scratch(
+        "cycle",
+        &[
+            ("lib.rs", "pub mod a;\npub mod c;\n"),
+            ("a/mod.rs", "pub mod b;\npub use b::B;\npub struct A;\n"),
+            (
+                "a/b.rs",
+                "/// [`crate::c`] in a doc is no import.\npub struct B;\npub fn f() -> usize { core::mem::size_of::<super::A>() }\n",
+            ),
+            ("c.rs", "use crate::a::b::B;\npub fn g(_: B) {}\n"),
+        ],
+    );
     let g = graph(&scratch);
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<ModPath>();
     assert_eq!(g[&s(&["c"])], BTreeSet::from([s(&["a", "b"])]));
@@ -332,17 +334,17 @@ fn the_checker_finds_a_planted_cycle() {
     assert!(found[0][0].ends_with("a/b.rs") && found[0][1].ends_with("a/mod.rs"));
 }
 
-#[test]
-fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
+/// host-sim's rule: a file uses only its own or lower layers (`model` < `sim` < `out` <
+/// `cmd`), no command uses another command, and only the crate root sits outside the layers.
+fn layer_violations(c: &Crate) -> Vec<String> {
     const LAYERS: [&str; 4] = ["model", "sim", "out", "cmd"];
-    let c = load("shimmy-sim", "host-sim");
     let layer = |m: &ModPath| m.first().and_then(|t| LAYERS.iter().position(|l| l == t));
     let mut bad = Vec::new();
-    for (m, deps) in graph(&c) {
+    for (m, deps) in graph(c) {
         let Some(lm) = layer(&m) else {
             // Only the crate root (the map) may sit outside the layers.
             if !m.is_empty() {
-                bad.push(format!("{} is in no layer", show(&c, &m)));
+                bad.push(format!("{} is in no layer", show(c, &m)));
             }
             continue;
         };
@@ -350,22 +352,57 @@ fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
             match layer(d) {
                 Some(ld) if ld > lm => bad.push(format!(
                     "{} ({}) uses the higher layer {} ({})",
-                    show(&c, &m),
+                    show(c, &m),
                     LAYERS[lm],
-                    show(&c, d),
+                    show(c, d),
                     LAYERS[ld]
                 )),
                 // Two different commands: cmd/<a>... and cmd/<b>...
                 Some(3) if lm == 3 && m.get(1) != d.get(1) && m.len() > 1 && d.len() > 1 => bad
                     .push(format!(
                         "command {} imports command {}",
-                        show(&c, &m),
-                        show(&c, d)
+                        show(c, &m),
+                        show(c, d)
                     )),
-                None => bad.push(format!("{} uses the crate root", show(&c, &m))),
+                None => bad.push(format!("{} uses the crate root", show(c, &m))),
                 _ => {}
             }
         }
     }
+    bad
+}
+
+#[test]
+fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
+    let bad = layer_violations(&load("shimmy-sim", "host-sim"));
     assert!(bad.is_empty(), "layer violations:\n{}", bad.join("\n"));
+}
+
+/// The layer check must see each kind of violation (else the test above proves nothing): a
+/// model file using a command, one command using another, a file outside the layers; a command
+/// using a model file and its own sibling file is fine.
+#[test]
+fn the_layer_check_finds_planted_violations() {
+    let (c, dir) = scratch(
+        "layers",
+        &[
+            ("lib.rs", "pub mod cmd;\npub mod model;\npub mod extra;\n"),
+            ("model/mod.rs", "pub mod plant;\n"),
+            ("model/plant.rs", "pub fn f() { crate::cmd::a::run(); }\n"),
+            ("cmd/mod.rs", "pub mod a;\npub mod b;\n"),
+            ("cmd/a/mod.rs", "pub mod args;\npub fn run() {}\n"),
+            (
+                "cmd/a/args.rs",
+                "pub fn g() { crate::model::plant::f(); }\n",
+            ),
+            ("cmd/b.rs", "pub fn h() { crate::cmd::a::args::g(); }\n"),
+            ("extra.rs", "pub fn e() {}\n"),
+        ],
+    );
+    let bad = layer_violations(&c);
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(bad.len(), 3, "{bad:#?}");
+    assert!(bad[0].contains("cmd/b.rs") && bad[0].contains("imports command"));
+    assert!(bad[1].contains("extra.rs is in no layer"));
+    assert!(bad[2].contains("model/plant.rs (model) uses the higher layer"));
 }
