@@ -131,7 +131,7 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
     let wall = t0.elapsed().as_secs_f64();
     let damper = match o.damper {
         DamperSetting::Off => "no damper".to_string(),
-        DamperSetting::Current(i) => format!("MR damper at {i} A"),
+        DamperSetting::Mr { current_a, .. } => format!("MR damper at {current_a} A"),
     };
     println!(
         "bifurcation: `{}`, {damper}; {} s runs, amplitude = peak |psi_L| over the last {} s",
@@ -291,9 +291,10 @@ pub const WINDOW_S: Range = Range::above(0.0, 300.0, "s");
 /// Command-line arguments of `shimmy-sim bifurcation`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BifurcationArgs {
-    /// Named parameter set or TOML file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Fit the MR damper and hold this coil current in A (0 to 2 A, the coil rating); without it
     /// there is no damper (F_d = 0).
     #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
@@ -346,16 +347,17 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.duration_s,
         a.window_s
     );
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
     let damper = match a.damper_current_a {
         None => DamperSetting::Off,
-        Some(i) => {
-            DamperSetting::Current(arg_range::coil_current().check("--damper-current-a", i)?)
-        }
+        Some(i) => DamperSetting::Mr {
+            damper: vehicle.damper.spencer,
+            current_a: arg_range::coil_current().check("--damper-current-a", i)?,
+        },
     };
-    let params = crate::sim::paramfile::load(&a.params)?;
     run(&BifurcationOptions {
-        params,
-        params_name: a.params.clone(),
+        params: vehicle.plant,
+        params_name: a.vehicle.clone(),
         damper,
         v_min_kmh: a.v_min_kmh,
         v_max_kmh: a.v_max_kmh,

@@ -1,0 +1,118 @@
+//! The reference line of a run: the eigenvalue of the plant *as it runs*, the truth the mode
+//! meter's estimate is plotted against.
+//!
+//! At each reference time the operating point is read off the run: the speed, the mean coil
+//! current and the in-phase wheel-yaw amplitude over one shimmy period around that time. The MR
+//! damper enters the linearisation as its energy-equivalent viscous coefficient c_eq at that
+//! current, amplitude and the mode's own frequency (describing function,
+//! [`crate::model::damper_equiv`]; a two-pass fixed point on the frequency). The damper at 0 A
+//! is not "no damper": its yield force and viscous part still dissipate energy, most of all at
+//! small amplitude. Only a run without damper (`Arm::NoDamper`) gets c = 0.
+//!
+//! The mode is the shimmy mode tracked by its shape (`ModeSelect::Shimmy`: the least-damped
+//! in-phase wheel-yaw mode), never simply the least-damped mode, which at some speeds is another
+//! mode (e.g. the anti-phase wheel-yaw mode near 47 Hz).
+
+use crate::model::damper_equiv::{mr_equivalent_viscous, stroke_amplitude_m};
+use crate::sim::closed_loop::{Arm, LoopConfig, LoopResult};
+use rayon::prelude::*;
+use shimmy_core::eigen::{EigenError, Mode};
+use shimmy_core::mr_damper::SpencerParams;
+use shimmy_core::params::PlantParams;
+use shimmy_core::stability::{mode_at, ModeSelect};
+
+/// What the reference line is, for legends and captions.
+pub const REFERENCE_LABEL: &str =
+    "shimmy mode of A(V) with the damper's c_eq at the run's current and amplitude";
+
+/// Amplitudes below this (rad, ~0.001 deg: a few encoder quanta of noise) are taken as this:
+/// the describing function of a friction damper diverges as the amplitude goes to 0.
+pub const MIN_AMPLITUDE_RAD: f64 = 2e-5;
+
+/// One point of the reference line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefPoint {
+    /// Time, s.
+    pub t_s: f64,
+    /// Speed, m/s.
+    pub speed_mps: f64,
+    /// Mean coil current over the window, A.
+    pub current_a: f64,
+    /// Peak in-phase wheel yaw over the window, rad.
+    pub amplitude_rad: f64,
+    /// Equivalent viscous coefficient of the damper, N s/m (0 without damper).
+    pub c_eq_nspm: f64,
+    /// The shimmy mode at this operating point.
+    pub mode: Mode,
+}
+
+/// The shimmy mode of `p` at `v_mps` with the damper `damper` (`None`: no damper) held at
+/// `current_a` and oscillating with in-phase wheel-yaw amplitude `amplitude_rad`; with its c_eq.
+pub fn shimmy_mode_with_damper(
+    p: &PlantParams,
+    damper: Option<&SpencerParams>,
+    v_mps: f64,
+    current_a: f64,
+    amplitude_rad: f64,
+) -> Result<(Mode, f64), EigenError> {
+    let m0 = mode_at(p, v_mps, 0.0, ModeSelect::Shimmy)?;
+    let Some(sp) = damper else {
+        return Ok((m0, 0.0));
+    };
+    let amp_m = stroke_amplitude_m(p.l_t, amplitude_rad.max(MIN_AMPLITUDE_RAD));
+    let mut c = mr_equivalent_viscous(sp, current_a, m0.freq_hz, amp_m);
+    let mut m = mode_at(p, v_mps, c, ModeSelect::Shimmy)?;
+    // The damper stiffens and damps the mode, which moves its frequency; one more pass at the
+    // new frequency (the frequency moves little with c).
+    c = mr_equivalent_viscous(sp, current_a, m.freq_hz, amp_m);
+    m = mode_at(p, v_mps, c, ModeSelect::Shimmy)?;
+    Ok((m, c))
+}
+
+/// The reference line of run `r` of `cfg`, one point every `every_s` seconds of its trace
+/// (computed in parallel). Points where no shimmy mode is found are left out.
+pub fn reference_line(cfg: &LoopConfig, r: &LoopResult, every_s: f64) -> Vec<RefPoint> {
+    let damper = match cfg.arm {
+        Arm::NoDamper => None,
+        Arm::Mr(_) => Some(cfg.damper),
+    };
+    let trace = &r.trace;
+    let (Some(first), Some(last)) = (trace.first(), trace.last()) else {
+        return Vec::new();
+    };
+    let n = ((last.t_s - first.t_s) / every_s).floor() as usize + 1;
+    (0..n)
+        .into_par_iter()
+        .filter_map(|k| {
+            let t = first.t_s + k as f64 * every_s;
+            let speed = trace
+                .iter()
+                .find(|row| row.t_s >= t)
+                .map_or(last.speed_mps, |row| row.speed_mps)
+                .max(0.1);
+            // One shimmy period around t (the undamped mode's period at this speed).
+            let period = mode_at(&cfg.plant, speed, 0.0, ModeSelect::Shimmy)
+                .map_or(0.2, |m| 1.0 / m.freq_hz.max(0.5));
+            let window = trace
+                .iter()
+                .filter(|row| (row.t_s - t).abs() <= 0.5 * period);
+            let (mut amp, mut sum_i, mut count) = (0.0f64, 0.0, 0usize);
+            for row in window {
+                amp = amp.max((0.5 * (row.psi_l_rad + row.psi_r_rad)).abs());
+                sum_i += row.coil_a;
+                count += 1;
+            }
+            let current = if count > 0 { sum_i / count as f64 } else { 0.0 };
+            let (mode, c) =
+                shimmy_mode_with_damper(&cfg.plant, damper.as_ref(), speed, current, amp).ok()?;
+            Some(RefPoint {
+                t_s: t,
+                speed_mps: speed,
+                current_a: current,
+                amplitude_rad: amp,
+                c_eq_nspm: c,
+                mode,
+            })
+        })
+        .collect()
+}
