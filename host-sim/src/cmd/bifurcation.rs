@@ -5,6 +5,7 @@
 
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
+use crate::sim::reference::shimmy_mode_with_damper;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -48,8 +49,9 @@ pub struct BifurcationRow {
     pub small: RunSummary,
     /// From the large start.
     pub large: RunSummary,
-    /// Real part (1/s) of the least-damped oscillatory eigenvalue of the FD Jacobian at this
-    /// speed (no damper, linear tyres): the linear prediction to compare with.
+    /// Real part (1/s) of the shimmy mode (tracked by its shape) of the plant as the small start
+    /// runs: A(V) with the damper's equivalent viscous coefficient at its current and the small
+    /// start's amplitude (c = 0 without damper): the linear prediction to compare with.
     pub eig_re_per_s: f64,
 }
 
@@ -111,8 +113,18 @@ pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRo
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let eig_re_per_s = crate::model::plant::least_damped_mode(&o.params, kmh_to_mps(v))
-                .map_or(f64::NAN, |e| e.0);
+            let (damper, current) = match &o.damper {
+                DamperSetting::Off => (None, 0.0),
+                DamperSetting::Mr { damper, current_a } => (Some(damper), *current_a),
+            };
+            let eig_re_per_s = shimmy_mode_with_damper(
+                &o.params,
+                damper,
+                kmh_to_mps(v),
+                current,
+                o.small_deg.to_radians(),
+            )
+            .map_or(f64::NAN, |(m, _)| m.re);
             Ok(BifurcationRow {
                 eig_re_per_s,
                 v_kmh: v,
@@ -157,7 +169,10 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
             r.eig_re_per_s
         );
     }
-    println!("amplitudes in deg; (*) least-damped eigenvalue of the FD Jacobian, no damper");
+    println!(
+        "amplitudes in deg; (*) shimmy mode of A(V) with the damper's c_eq at its current and \
+         the small start's amplitude (no damper: c = 0)"
+    );
     if let Some((lo, hi)) = window(&rows, |r| r.small.shimmies()) {
         println!("small disturbances end in shimmy from {lo} to {hi} km/h (grid points)");
     } else {
@@ -193,7 +208,7 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
     writeln!(
         w,
-        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_no_damper_per_s"
+        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_shimmy_per_s"
     )?;
     for r in rows {
         writeln!(

@@ -353,12 +353,12 @@ pub fn run_all(
 
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let vehicle = vehicle_file::load(&a.vehicle)?;
     let model = match &a.model_vehicle {
         Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
         None => vehicle,
     };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut specs = standard_scenarios(&vehicle, a.quick);
     for s in &mut specs {
         s.model_vehicle = Some(model);

@@ -205,6 +205,8 @@ mod tests {
             out: out.clone(),
             controllers: vec!["passive-off".into(), "asmc".into()],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         command(&a).unwrap();
         let md = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -249,6 +251,8 @@ mod tests {
             out: out.clone(),
             controllers: vec![],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         let e = format!("{:#}", command(&a).unwrap_err());
         assert!(e.contains("duration_s"), "{e}");
@@ -269,6 +273,8 @@ mod tests {
             out: tmp("std"),
             controllers: vec![],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         let plan = plan(&a).unwrap();
         assert!(plan.len() >= 7, "{} files", plan.len());

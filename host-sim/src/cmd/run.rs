@@ -168,6 +168,8 @@ mod tests {
             out: Some(out.clone()),
             controller: None,
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         // The command path itself (with a file on disk).
         let file = out.with_extension("toml");

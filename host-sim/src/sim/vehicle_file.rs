@@ -230,4 +230,29 @@ mod tests {
             assert!(t.contains(&format!("| `{}` |", f.name)), "{}", f.name);
         }
     }
+
+    /// docs/vehicle-file.md carries the generated table between its markers (re-bless with
+    /// `SHIMMY_BLESS=1 cargo test -p shimmy-sim --lib vehicle_file`).
+    #[test]
+    fn docs_vehicle_file_md_is_the_field_table() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/vehicle-file.md");
+        let doc = std::fs::read_to_string(&path).unwrap();
+        let (begin, end) = (DOC_BEGIN, DOC_END);
+        let i = doc.find(begin).expect("begin marker") + begin.len();
+        let j = doc.find(end).expect("end marker");
+        let want = field_table_markdown();
+        if std::env::var("SHIMMY_BLESS").is_ok_and(|v| v == "1") {
+            let new = format!("{}{want}\n{}", &doc[..i], &doc[j..]);
+            std::fs::write(&path, new).unwrap();
+            return;
+        }
+        assert_eq!(
+            doc[i..j].trim(),
+            want.trim(),
+            "docs/vehicle-file.md is out of date: SHIMMY_BLESS=1 cargo test -p shimmy-sim --lib vehicle_file"
+        );
+    }
+
+    const DOC_BEGIN: &str = "<!-- generated: shimmy_core::vehicle::FIELDS -->";
+    const DOC_END: &str = "<!-- end of generated table -->";
 }

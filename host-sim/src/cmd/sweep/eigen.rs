@@ -280,7 +280,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            params: "nominal".into(),
+            vehicle: "nominal".into(),
             param: "k_d".into(),
             factor_min: 0.8,
             factor_max: 1.0,

@@ -392,7 +392,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            params: "nominal".into(),
+            vehicle: "nominal".into(),
             param: "k_d".into(),
             factor_min: 1.0,
             factor_max: 1.0,
