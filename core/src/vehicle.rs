@@ -792,7 +792,7 @@ pub static FIELDS: &[Field] = &[
         "rad/s",
         0.0,
         10.0,
-        "ASMC dead zone on |s|",
+        "ASMC dead zone on the sliding variable s",
         |v| v.controller.asmc.dead_zone_radps
     ),
     field!(
