@@ -2,7 +2,7 @@
 //! meter's estimate is plotted against.
 //!
 //! At each reference time the operating point is read off the run: the speed, the mean coil
-//! current and the in-phase wheel-yaw amplitude over one shimmy period around that time. The MR
+//! current over one shimmy period and the in-phase wheel-yaw envelope at that time. The MR
 //! damper enters the linearisation as its energy-equivalent viscous coefficient c_eq at that
 //! current, amplitude and the mode's own frequency (describing function,
 //! [`crate::model::damper_equiv`]; a two-pass fixed point on the frequency). The damper at 0 A
@@ -14,7 +14,7 @@
 //! mode (e.g. the anti-phase wheel-yaw mode near 47 Hz).
 
 use crate::model::damper_equiv::{mr_equivalent_viscous, stroke_amplitude_m};
-use crate::sim::closed_loop::{Arm, LoopConfig, LoopResult};
+use crate::sim::closed_loop::{Arm, LoopConfig, LoopResult, TraceRow};
 use rayon::prelude::*;
 use shimmy_core::eigen::{EigenError, Mode};
 use shimmy_core::mr_damper::SpencerParams;
@@ -69,22 +69,63 @@ pub fn shimmy_mode_with_damper(
     Ok((m, c))
 }
 
+/// The in-phase wheel-yaw envelope of a trace: the peaks of |(psi_L + psi_R) / 2| (one per
+/// half cycle) as (time, amplitude), in time order.
+pub fn yaw_peaks(trace: &[TraceRow]) -> Vec<(f64, f64)> {
+    let y: Vec<f64> = trace
+        .iter()
+        .map(|r| (0.5 * (r.psi_l_rad + r.psi_r_rad)).abs())
+        .collect();
+    (1..y.len().saturating_sub(1))
+        .filter(|&k| y[k] >= y[k - 1] && y[k] > y[k + 1])
+        .map(|k| (trace[k].t_s, y[k]))
+        .collect()
+}
+
+/// The envelope at `t`: log-linear between the peaks around it (the first or last peak outside
+/// their span; 0 without peaks).
+fn envelope_at(peaks: &[(f64, f64)], t: f64) -> f64 {
+    let after = peaks.partition_point(|p| p.0 <= t);
+    match (
+        after.checked_sub(1).and_then(|i| peaks.get(i)),
+        peaks.get(after),
+    ) {
+        (Some(&(ta, a)), Some(&(tb, b))) if a > 0.0 && b > 0.0 => {
+            a * (b / a).powf((t - ta) / (tb - ta))
+        }
+        (Some(&(_, a)), _) => a,
+        (None, Some(&(_, b))) => b,
+        (None, None) => 0.0,
+    }
+}
+
 /// The reference line of run `r` of `cfg`, one point every `every_s` seconds of its trace
-/// (computed in parallel). Points where no shimmy mode is found are left out.
+/// ([`reference_at`] on that grid).
 pub fn reference_line(cfg: &LoopConfig, r: &LoopResult, every_s: f64) -> Vec<RefPoint> {
+    let (Some(first), Some(last)) = (r.trace.first(), r.trace.last()) else {
+        return Vec::new();
+    };
+    let n = ((last.t_s - first.t_s) / every_s).floor() as usize + 1;
+    let times: Vec<f64> = (0..n).map(|k| first.t_s + k as f64 * every_s).collect();
+    reference_at(cfg, r, &times)
+}
+
+/// The reference points of run `r` of `cfg` at `times` (computed in parallel): at each time the
+/// speed, the mean coil current over one shimmy period and the wheel-yaw envelope
+/// ([`yaw_peaks`], interpolated). Times where no shimmy mode is found are left out.
+pub fn reference_at(cfg: &LoopConfig, r: &LoopResult, times: &[f64]) -> Vec<RefPoint> {
     let damper = match cfg.arm {
         Arm::NoDamper => None,
         Arm::Mr(_) => Some(cfg.damper),
     };
     let trace = &r.trace;
-    let (Some(first), Some(last)) = (trace.first(), trace.last()) else {
+    let Some(last) = trace.last() else {
         return Vec::new();
     };
-    let n = ((last.t_s - first.t_s) / every_s).floor() as usize + 1;
-    (0..n)
-        .into_par_iter()
-        .filter_map(|k| {
-            let t = first.t_s + k as f64 * every_s;
+    let peaks = yaw_peaks(trace);
+    times
+        .par_iter()
+        .filter_map(|&t| {
             let speed = trace
                 .iter()
                 .find(|row| row.t_s >= t)
@@ -93,16 +134,12 @@ pub fn reference_line(cfg: &LoopConfig, r: &LoopResult, every_s: f64) -> Vec<Ref
             // One shimmy period around t (the undamped mode's period at this speed).
             let period = mode_at(&cfg.plant, speed, 0.0, ModeSelect::Shimmy)
                 .map_or(0.2, |m| 1.0 / m.freq_hz.max(0.5));
-            let window = trace
+            let (sum_i, count) = trace
                 .iter()
-                .filter(|row| (row.t_s - t).abs() <= 0.5 * period);
-            let (mut amp, mut sum_i, mut count) = (0.0f64, 0.0, 0usize);
-            for row in window {
-                amp = amp.max((0.5 * (row.psi_l_rad + row.psi_r_rad)).abs());
-                sum_i += row.coil_a;
-                count += 1;
-            }
+                .filter(|row| (row.t_s - t).abs() <= 0.5 * period)
+                .fold((0.0, 0usize), |(s, n), row| (s + row.coil_a, n + 1));
             let current = if count > 0 { sum_i / count as f64 } else { 0.0 };
+            let amp = envelope_at(&peaks, t);
             let (mode, c) =
                 shimmy_mode_with_damper(&cfg.plant, damper.as_ref(), speed, current, amp).ok()?;
             Some(RefPoint {
