@@ -427,7 +427,7 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
     }
     panel(
         &parts[0],
-        &format!("{title}: shimmy-mode damping (true A(V) at true speed, model, data)"),
+        &format!("{title}: shimmy-mode damping (true: shimmy mode by shape of the simulated plant's A(V), no damper fitted, at the true speed; model; data)"),
         t,
         (-0.05, 0.2),
         &[
