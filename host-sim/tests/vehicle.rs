@@ -351,3 +351,59 @@ fn a_field_in_the_vehicle_file_changes_every_commands_result() {
         &["o/metrics.csv"],
     );
 }
+
+/// A damper current above the vehicle's coil rating is rejected once the vehicle is known,
+/// before anything runs (the parse-time range is the reference coil's 2 A).
+#[test]
+fn a_current_above_the_vehicles_rating_is_rejected() {
+    let dir = temp_dir();
+    std::fs::write(dir.join("small.toml"), "[damper]\nrated_current_a = 1.0\n").unwrap();
+    for args in [
+        &[
+            "stability",
+            "--vehicle",
+            "small.toml",
+            "--damper-current-a",
+            "1.5",
+            "--out",
+            "o",
+        ][..],
+        &[
+            "bifurcation",
+            "--vehicle",
+            "small.toml",
+            "--damper-current-a",
+            "1.5",
+            "--out",
+            "o",
+        ],
+        &[
+            "sweep",
+            "--vehicle",
+            "small.toml",
+            "--damper-current-a",
+            "1.5",
+            "--out",
+            "o",
+        ],
+        &[
+            "compare",
+            "--vehicle",
+            "small.toml",
+            "--on-current-a",
+            "1.5",
+            "--out",
+            "o",
+        ],
+    ] {
+        let o = run_in(&dir, args);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            err.contains("1.5") && err.contains("0 <= value <= 1 A"),
+            "{args:?}: {err}"
+        );
+        assert!(!dir.join("o").exists(), "{args:?} wrote output");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

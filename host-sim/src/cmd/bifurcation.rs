@@ -367,7 +367,7 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         None => DamperSetting::Off,
         Some(i) => DamperSetting::Mr {
             damper: vehicle.damper.spencer,
-            current_a: arg_range::coil_current().check("--damper-current-a", i)?,
+            current_a: arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?,
         },
     };
     run(&BifurcationOptions {

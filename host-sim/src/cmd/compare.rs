@@ -358,6 +358,9 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
         None => vehicle,
     };
+    if let Some(i) = a.on_current_a {
+        crate::sim::arg_range::vehicle_current(&model).check("--on-current-a", f64::from(i))?;
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut specs = standard_scenarios(&vehicle, a.quick);
     for s in &mut specs {

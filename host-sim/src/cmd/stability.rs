@@ -76,6 +76,9 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     );
     let vehicle = vehicle_file::load(&args.vehicle)?;
     let p = vehicle.plant;
+    if let Some(i) = args.damper_current_a {
+        arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
+    }
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let (c, damper) = match args.damper_current_a {
         None => (0.0, None),

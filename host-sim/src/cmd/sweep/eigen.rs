@@ -50,6 +50,7 @@ pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
         dampers.push(("no damper".into(), 0.0));
     }
     for &i in &a.damper_current_a {
+        crate::sim::arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
         let d = damper_equivalent(
             &base,
             &vehicle.damper.spencer,
