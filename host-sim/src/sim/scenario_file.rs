@@ -843,6 +843,47 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
     }
 
     #[test]
+    fn plant_and_model_vehicles_resolve_relative_to_the_scenario_file() {
+        let dir = std::env::temp_dir().join(format!("shimmy-sc-vehicle-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("vehicles")).unwrap();
+        std::fs::write(dir.join("vehicles/truck.toml"), "[plant]\nf_z = 30000.0\n").unwrap();
+        let base = "duration_s = 1.0\n[speed]\nconstant_kmh = 50.0\n";
+        let s = parse_in(
+            &format!("{base}[plant]\nvehicle = \"vehicles/truck.toml\"\n[model]\nvehicle = \"nominal\"\noverrides = {{ c_a = 80000.0 }}\n"),
+            "x",
+            &dir,
+        )
+        .unwrap();
+        assert_eq!(s.plant.plant.f_z, 30000.0);
+        assert_eq!(s.model().plant.f_z, 6200.0);
+        assert_eq!(s.model().plant.c_a, 80000.0);
+        // Relative to the scenario's folder, not to the working directory.
+        let e = format!(
+            "{:#}",
+            parse(
+                &format!("{base}[plant]\nvehicle = \"vehicles/truck.toml\"\n"),
+                "x"
+            )
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("plant.vehicle") && e.contains("no such file"),
+            "{e}"
+        );
+        let e = format!(
+            "{:#}",
+            parse_in(
+                &format!("{base}[model]\noverrides = {{ mu = 1000.0 }}\n"),
+                "x",
+                &dir
+            )
+            .unwrap_err()
+        );
+        assert!(e.contains("model.overrides.mu") && e.contains("1.5"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
     fn every_shipped_scenario_is_valid() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios");
         let mut n = 0;
