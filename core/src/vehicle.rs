@@ -3,10 +3,11 @@
 //!
 //! A [`Vehicle`] holds the plant parameters, the MR damper (the simulator's Spencer model of it,
 //! the firmware's invertible model of it, the coil rating and resistance), the sensors'
-//! calibration, the controller's gains and the warning thresholds. The controller's and the
-//! estimator's models are derived from it ([`Vehicle::control_params`],
-//! [`Vehicle::pipeline_params`]), never from a hidden default; [`Vehicle::nominal`] reproduces
-//! today's defaults exactly (a test compares them field by field).
+//! calibration, the controller's gains and the warning thresholds. The controller's, the
+//! supervisor's and the estimator's parameters are derived from it
+//! ([`Vehicle::control_params`], [`Vehicle::supervisor_params`], [`Vehicle::pipeline_params`]),
+//! never from a hidden default; [`Vehicle::nominal`] reproduces today's defaults exactly (a
+//! test compares them).
 //!
 //! Every scalar is described once in [`FIELDS`]: section, name, unit, plausible range and a line
 //! of documentation. Setting a field by name ([`Vehicle::set`]) and validating a whole vehicle
@@ -23,6 +24,7 @@ use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
 use crate::mr_damper::SpencerParams;
 use crate::params::{Param, ParamSet, PlantParams};
+use crate::supervisor::params::SupervisorParams;
 
 /// The MR damper of the vehicle.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -165,6 +167,16 @@ impl Vehicle {
             fallback_current_a: rated,
             min_speed_mps: self.controller.min_speed_mps,
             psi_limit_rad: ControlParams::default().psi_limit_rad,
+        }
+    }
+
+    /// The supervisor's thresholds with this vehicle's coil: the fail-safe current is the coil
+    /// rating and a coil-current reading at the measurement's full scale counts as saturated.
+    pub fn supervisor_params(&self) -> SupervisorParams {
+        SupervisorParams {
+            failsafe_current_a: self.rated_current_a(),
+            coil_full_scale_a: self.sensors.current_full_scale_a,
+            ..SupervisorParams::default()
         }
     }
 
@@ -978,6 +990,7 @@ mod tests {
         let v = Vehicle::nominal();
         assert_eq!(v.control_params(), ControlParams::default());
         assert_eq!(v.pipeline_params(), PipelineParams::default());
+        assert_eq!(v.supervisor_params(), SupervisorParams::default());
         assert_eq!(v.damper.spencer, SpencerParams::steering());
         assert!(v.validate().is_ok());
         for set in ParamSet::ALL {
@@ -998,6 +1011,7 @@ mod tests {
             (c.mr.i_max_a, c.limits.i_max_a, c.fallback_current_a),
             (3.0, 3.0, 3.0)
         );
+        assert_eq!(v.supervisor_params().failsafe_current_a, 3.0);
         assert_eq!(v.damper.spencer.u_max, 3.0);
         assert!(v.validate().is_ok());
     }
