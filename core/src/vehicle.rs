@@ -20,6 +20,7 @@ use crate::control::conditioning::ConditioningParams;
 use crate::control::mr_model::MrModel;
 use crate::control::smc::{AsmcParams, NominalPlant, SmcParams};
 use crate::control::ControlParams;
+use crate::estimator::fusion::FusionParams;
 use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
 use crate::mr_damper::SpencerParams;
@@ -107,6 +108,8 @@ pub struct Vehicle {
     pub controller: ControllerGains,
     /// The warning thresholds of the margin monitor.
     pub thresholds: MonitorParams,
+    /// The fusion of data and model margins (its disagreement threshold is a vehicle field).
+    pub fusion: FusionParams,
 }
 
 impl Default for Vehicle {
@@ -138,6 +141,7 @@ impl Vehicle {
             sensors: SensorCalibration::default(),
             controller: ControllerGains::default(),
             thresholds: PipelineParams::tuned_monitor(),
+            fusion: PipelineParams::tuned_fusion(),
         }
     }
 
@@ -185,6 +189,7 @@ impl Vehicle {
     pub fn pipeline_params(&self) -> PipelineParams {
         PipelineParams {
             monitor: self.thresholds,
+            fusion: self.fusion,
             ..PipelineParams::default()
         }
     }
@@ -978,6 +983,16 @@ pub static FIELDS: &[Field] = &[
         60.0,
         "dwell before a level is released",
         |v| v.thresholds.release_s
+    ),
+    field!(
+        "thresholds",
+        "mismatch_sigmas",
+        "-",
+        1.0,
+        10.0,
+        "data and model disagree beyond this many reported sigmas (the data margin then \
+         replaces the model's)",
+        |v| v.fusion.mismatch_sigmas
     ),
 ];
 
