@@ -345,12 +345,16 @@ impl core::fmt::Display for VehicleError {
     }
 }
 
+impl core::error::Error for VehicleError {}
+
 /// Why [`Vehicle::set`] refused a value.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, thiserror::Error)]
 pub enum SetError {
     /// No field of that name in that section.
+    #[error("no such field")]
     UnknownField,
     /// The value fails the field's check.
+    #[error("{0}")]
     Invalid(VehicleError),
 }
 
