@@ -122,16 +122,18 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
             x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
-            supervisor: SupervisorParams::default(),
+            supervisor: vehicle.supervisor_params(),
             supervised: true,
         }
     }
 
-    /// The same loop with a controller that believes `model` (its plant and damper model, its
-    /// gains and limits); the simulated plant, damper and sensors stay.
+    /// The same loop with a firmware that believes `model` (the controller's plant and damper
+    /// model, gains and limits; the supervisor's fail-safe current and coil full scale); the
+    /// simulated plant, damper and sensors stay.
     #[must_use]
     pub fn with_model(mut self, model: &Vehicle) -> Self {
         self.control = model.control_params();
+        self.supervisor = model.supervisor_params();
         self
     }
 }
