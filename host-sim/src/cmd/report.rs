@@ -22,8 +22,8 @@ pub struct ReportArgs {
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to 2 A (the coil
-    /// rating).
+    /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to the coil rating
+    /// of the vehicle the firmware believes.
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle for every scenario (overrides each file's `[plant]`, sensors
@@ -85,6 +85,8 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
             let mut spec = scenario_file::load(&f)?;
             spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
             let specs = if controllers.is_empty() {
+                spec.check_on_current(scenario_file::ON_CURRENT_FIELD)
+                    .with_context(|| format!("in scenario file {}", f.display()))?;
                 vec![spec]
             } else {
                 controllers
@@ -93,9 +95,10 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
                         let mut s = spec.clone();
                         s.controller = c.to_string();
                         s.on_current_a = a.on_current_a;
-                        s
+                        s.check_on_current("--on-current-a")?;
+                        Ok(s)
                     })
-                    .collect()
+                    .collect::<Result<_>>()?
             };
             Ok((f, specs))
         })

@@ -7,6 +7,7 @@
 use crate::model::disturbance::{initial_yaw, Scenario};
 use crate::model::faults::FaultSpec;
 use crate::model::sensors::SensorConfig;
+use crate::sim::arg_range;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
@@ -114,6 +115,16 @@ impl ScenarioSpec {
     /// The vehicle the firmware believes.
     pub fn model(&self) -> &Vehicle {
         self.model_vehicle.as_ref().unwrap_or(&self.plant)
+    }
+
+    /// Checks the passive-on current (when that is the controller) against the coil rating of
+    /// the vehicle the firmware believes, whose controller limits the command to it; `source`
+    /// names where the current was given (an option or a scenario file's field).
+    pub fn check_on_current(&self, source: &str) -> Result<()> {
+        if self.controller == "passive-on" {
+            arg_range::check_current(source, self.on_current_a, self.model())?;
+        }
+        Ok(())
     }
 
     /// The scenario's own controller as a closed-loop arm.

@@ -72,7 +72,7 @@ use crate::model::disturbance::{
 };
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
-use crate::sim::arg_range::{self, Range};
+use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
 use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
@@ -303,12 +303,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
                 );
             };
             let on = match (kind, c.on_current_a) {
-                ("passive-on", Some(i)) => {
-                    // The firmware's limit: the coil rating of the vehicle it believes.
-                    let model = model_vehicle.as_ref().unwrap_or(&plant);
-                    let rated = arg_range::vehicle_current(model);
-                    in_range("controller.on_current_a", i, rated.lo, rated.hi, "A")?
-                }
+                ("passive-on", Some(i)) => i,
                 ("passive-on", None) => {
                     bail!("field `controller.on_current_a` is required for passive-on")
                 }
@@ -452,7 +447,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         scenario.impulses.first().map(|i| i.t0_s)
     };
 
-    Ok(ScenarioSpec {
+    let spec = ScenarioSpec {
         name,
         description: String::new(),
         plant,
@@ -467,8 +462,13 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         trace_every,
         faults,
         out_dir,
-    })
+    };
+    spec.check_on_current(ON_CURRENT_FIELD)?;
+    Ok(spec)
 }
+
+/// The scenario file's passive-on current, as error messages name it.
+pub const ON_CURRENT_FIELD: &str = "field `controller.on_current_a`";
 
 /// Validates one `[[fault]]` entry.
 fn parse_fault(i: usize, f: &FaultSection, duration_s: f64) -> Result<FaultSpec> {
