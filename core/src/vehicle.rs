@@ -174,12 +174,15 @@ impl Vehicle {
         }
     }
 
-    /// The supervisor's thresholds with this vehicle's coil: the fail-safe current is the coil
-    /// rating and a coil-current reading at the measurement's full scale counts as saturated.
+    /// The supervisor's thresholds with this vehicle's coil and speed gate: the fail-safe
+    /// current is the coil rating, a coil-current reading at the measurement's full scale
+    /// counts as saturated, and a low speed must have been reached plausibly below the
+    /// controller's speed gate (`controller.min_speed_mps`).
     pub fn supervisor_params(&self) -> SupervisorParams {
         SupervisorParams {
             failsafe_current_a: self.rated_current_a(),
             coil_full_scale_a: self.sensors.current_full_scale_a,
+            speed_low_mps: self.controller.min_speed_mps,
             ..SupervisorParams::default()
         }
     }
@@ -867,7 +870,7 @@ pub static FIELDS: &[Field] = &[
         "m/s",
         0.0,
         30.0,
-        "speed gate: minimum current below this speed",
+        "speed gate: minimum current below this speed (and the supervisor's low-speed plausibility limit)",
         |v| v.controller.min_speed_mps
     ),
     // Warning thresholds of the margin monitor.
@@ -1032,6 +1035,14 @@ mod tests {
         );
         assert_eq!(v.supervisor_params().failsafe_current_a, 3.0);
         assert_eq!(v.damper.spencer.u_max, 3.0);
+        // The supervisor's low-speed plausibility check sits at the controller's speed gate.
+        assert_eq!(
+            v.supervisor_params().speed_low_mps,
+            SupervisorParams::default().speed_low_mps
+        );
+        v.set("controller", "min_speed_mps", 5.0).unwrap();
+        assert_eq!(v.control_params().min_speed_mps, 5.0);
+        assert_eq!(v.supervisor_params().speed_low_mps, 5.0);
         assert!(v.validate().is_ok());
     }
 
