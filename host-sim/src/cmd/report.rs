@@ -82,24 +82,25 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     files
         .into_iter()
         .map(|f| {
-            let mut spec = scenario_file::load(&f)?;
-            spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
-            let specs = if controllers.is_empty() {
-                spec.check_on_current(scenario_file::ON_CURRENT_FIELD)
-                    .with_context(|| format!("in scenario file {}", f.display()))?;
-                vec![spec]
+            let spec = scenario_file::load(&f)?;
+            // One run per `--controllers` entry, else the file's own controller.
+            let runs: Vec<Option<(&str, f64)>> = if controllers.is_empty() {
+                vec![None]
             } else {
                 controllers
                     .iter()
-                    .map(|c| {
-                        let mut s = spec.clone();
-                        s.controller = c.to_string();
-                        s.on_current_a = a.on_current_a;
-                        s.check_on_current("--on-current-a")?;
-                        Ok(s)
-                    })
-                    .collect::<Result<_>>()?
+                    .map(|&c| Some((c, a.on_current_a)))
+                    .collect()
             };
+            let specs = runs
+                .into_iter()
+                .map(|controller| {
+                    let mut s = spec.clone();
+                    s.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+                        .with_context(|| format!("scenario file {}", f.display()))?;
+                    Ok(s)
+                })
+                .collect::<Result<Vec<_>>>()?;
             Ok((f, specs))
         })
         .collect()

@@ -49,18 +49,15 @@ pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
-    spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
-    let mut current_source = scenario_file::ON_CURRENT_FIELD;
-    if let Some(c) = &a.controller {
-        let Some(c) = controller_name(c) else {
-            anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", "));
-        };
-        spec.controller = c.to_string();
-        spec.on_current_a = a.on_current_a;
-        current_source = "--on-current-a";
-    }
-    spec.check_on_current(current_source)
-        .with_context(|| format!("in scenario file {}", a.scenario.display()))?;
+    let controller = match &a.controller {
+        Some(c) => match controller_name(c) {
+            Some(name) => Some((name, a.on_current_a)),
+            None => anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", ")),
+        },
+        None => None,
+    };
+    spec.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+        .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let out = out_dir(a, &spec);
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let (cfg, r) = scenario::run(&spec)?;
