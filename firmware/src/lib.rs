@@ -6,8 +6,10 @@
 #![cfg_attr(target_os = "none", no_std)]
 
 pub mod calibration;
+pub mod clock;
 pub mod control;
 pub mod drivers;
+pub mod fault_memory;
 pub mod monitoring;
 pub mod replay;
 pub mod sensors;
