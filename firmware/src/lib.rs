@@ -19,7 +19,7 @@ pub mod sim;
 pub mod board;
 #[cfg(target_os = "none")]
 pub mod periph;
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "panic-check")))]
 pub mod runtime;
 #[cfg(target_os = "none")]
 pub mod stack;

@@ -107,6 +107,10 @@ fn test() -> Result<(), String> {
             // Links only if no panic is reachable (firmware/src/bin/panic-free-check.rs).
             build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
         }),
+        ("panic-free firmware glue (link check)", || {
+            // The control task's glue around the core step (firmware/src/bin/panic-free-glue.rs).
+            build_firmware("panic-free-glue", &["panic-check"]).map(|_| "no reachable panic".into())
+        }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         (
             "host/target conformance (trace replay, bit-identical)",
