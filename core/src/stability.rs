@@ -131,16 +131,15 @@ pub fn select_mode(
     vals: &Eigenvalues,
     select: ModeSelect,
 ) -> Result<Mode, EigenError> {
-    select_mode_in(p, a, vals, select, eigen::Precision::F64)
+    select_mode_of::<f64>(p, a, vals, select)
 }
 
-/// [`select_mode`] with the mode-shape eigenvectors computed in the requested precision.
-pub fn select_mode_in(
+/// [`select_mode`] with the mode-shape eigenvectors computed in `T`.
+pub fn select_mode_of<T: eigen::SolveFloat>(
     p: &PlantParams,
     a: &crate::eigen::StateMatrix,
     vals: &Eigenvalues,
     select: ModeSelect,
-    precision: eigen::Precision,
 ) -> Result<Mode, EigenError> {
     match select {
         ModeSelect::LeastDamped => least_damped_mode(vals),
@@ -151,7 +150,7 @@ pub fn select_mode_in(
                 .iter()
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
             {
-                let shape = eigen::mode_shape_in(p, a, *l, precision)?;
+                let shape = eigen::mode_shape_of::<T>(p, a, *l)?;
                 if shape.shape == ModeShape::InPhaseWheelYaw {
                     let m = Mode::from_eigenvalue(*l);
                     if best.is_none_or(|b| m.zeta < b.zeta) {

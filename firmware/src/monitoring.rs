@@ -21,7 +21,6 @@
 //! `ShimmyPipeline`: one eigen-solve is ~3.8 M soft-float instructions on the M4.
 
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::eigen::Precision;
 use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::monitor::Level;
@@ -194,29 +193,32 @@ impl DataMargin {
 }
 
 /// The model-margin tracker's configuration in the firmware: the core's tuned one with the
-/// refresh period [`MODEL_REFRESH_S`] and the eigen-solves in f32 on the FPU (balanced; the
-/// critical speeds still meet 0.05 km/h, `tests/tests/margin_model.rs`; f64 is software
-/// floating point on the M4, ~20x the instructions).
+/// refresh period [`MODEL_REFRESH_S`].
 pub fn model_config() -> ModelMarginConfig {
     ModelMarginConfig {
         period_s: MODEL_REFRESH_S,
-        eigen_precision: Precision::F32,
         ..PipelineParams::default().model
     }
 }
+
+/// Float type of the tracker's eigen-solves and eigenvectors: f32 on the FPU (balanced; the
+/// critical speeds still meet 0.05 km/h, `tests/tests/margin_model.rs`). f64 is software
+/// floating point on the M4 (~20x the instructions); as a type parameter, only the f32 code is
+/// linked into the image.
+pub type ModelFloat = f32;
 
 /// The background model task: the core's incremental [`ModelMarginTracker`] on the linearised
 /// plant *without* the MR damper (c = 0: the conservative envelope, the damper only adds
 /// damping).
 pub struct ModelTask {
-    tracker: ModelMarginTracker,
+    tracker: ModelMarginTracker<ModelFloat>,
 }
 
 impl ModelTask {
     /// The tracker for `params` with [`model_config`].
     pub fn new(params: PlantParams) -> Self {
         ModelTask {
-            tracker: ModelMarginTracker::new(params, model_config()),
+            tracker: ModelMarginTracker::in_precision(params, model_config()),
         }
     }
 
@@ -227,7 +229,7 @@ impl ModelTask {
     }
 
     /// The tracker (counters, latest point).
-    pub fn tracker(&self) -> &ModelMarginTracker {
+    pub fn tracker(&self) -> &ModelMarginTracker<ModelFloat> {
         &self.tracker
     }
 }

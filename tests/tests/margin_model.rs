@@ -4,7 +4,7 @@
 //! update within 100 calls).
 use faer::Mat;
 use nalgebra::Complex;
-use shimmy_core::eigen::Precision;
+use shimmy_core::eigen::SolveFloat;
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
 use shimmy_core::plant::{linearise, N_STATES};
@@ -62,7 +62,12 @@ fn dense_crossings(p: &PlantParams, c: f64) -> Vec<(f64, CrossingKind)> {
 
 /// Runs the tracker at constant speed until a cycle completes; returns the point and the calls
 /// used, asserting <= 1 eigen-solve per call.
-fn cycle(t: &mut ModelMarginTracker, t0: f32, v_mps: f64, c: f64) -> (ModelPoint, usize) {
+fn cycle<T: SolveFloat>(
+    t: &mut ModelMarginTracker<T>,
+    t0: f32,
+    v_mps: f64,
+    c: f64,
+) -> (ModelPoint, usize) {
     for k in 0..1000usize {
         let before = t.total_eigen_solves();
         let r = t.step(t0 + k as f32 * 1e-3, v_mps as f32, c as f32);
@@ -81,7 +86,7 @@ fn modes_and_critical_speeds_agree_with_faer_and_a_dense_sweep() {
     // Tolerances: eigenvalues 1e-9 relative (both solvers backward stable, as in
     // eigen_vs_faer.rs); critical speeds 0.05 km/h (the requirement; the dense grid itself
     // locates the sign change to +-0.005 km/h and the tracker's Brent tolerance is 1e-4 m/s).
-    tracker_agrees_with_faer(ModelMarginConfig::default(), 1e-9);
+    tracker_agrees_with_faer::<f64>(1e-9);
 }
 
 #[test]
@@ -91,14 +96,11 @@ fn f32_eigen_solves_still_meet_the_critical_speed_requirement() {
     // the eigenvalue condition numbers (O(10-100) here), so 2e-5 relative to |lambda| (to the
     // mode's omega_n for the real part; measured worst 2.9e-6). The critical speeds must still
     // meet the 0.05 km/h requirement.
-    let cfg = ModelMarginConfig {
-        eigen_precision: Precision::F32,
-        ..ModelMarginConfig::default()
-    };
-    tracker_agrees_with_faer(cfg, 2e-5);
+    tracker_agrees_with_faer::<f32>(2e-5);
 }
 
-fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
+fn tracker_agrees_with_faer<T: SolveFloat>(eig_rel: f64) {
+    let cfg = ModelMarginConfig::default();
     let mut worst_kmh = 0.0f64;
     let mut worst_eig = 0.0f64;
     for (set, c) in [
@@ -111,7 +113,7 @@ fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
         let dense = dense_crossings(&p, c);
         assert!(!dense.is_empty(), "{}: no window", set.name());
         println!("{} c={c}: dense crossings {dense:?}", set.name());
-        let mut tr = ModelMarginTracker::new(p, cfg);
+        let mut tr = ModelMarginTracker::<T>::in_precision(p, cfg);
         let mut t0 = 0.0f32;
         for kmh in [5.0, 20.0, 45.0, 75.0, 100.0, 130.0] {
             let v = kmh_to_mps(kmh);
@@ -120,7 +122,12 @@ fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
                 let (pt, calls) = if warm {
                     cycle(&mut tr, t0, v, c)
                 } else {
-                    cycle(&mut ModelMarginTracker::new(p, cfg), 0.0, v, c)
+                    cycle(
+                        &mut ModelMarginTracker::<T>::in_precision(p, cfg),
+                        0.0,
+                        v,
+                        c,
+                    )
                 };
                 t0 += 1.0;
                 assert!(calls <= 100, "{} {kmh} km/h: {calls} calls", set.name());
@@ -172,8 +179,8 @@ fn tracker_agrees_with_faer(cfg: ModelMarginConfig, eig_rel: f64) {
         }
     }
     println!(
-        "{:?}: worst eigenvalue distance {worst_eig:.1e} x |lambda|, worst critical speed {worst_kmh:.4} km/h",
-        cfg.eigen_precision
+        "{}: worst eigenvalue distance {worst_eig:.1e} x |lambda|, worst critical speed {worst_kmh:.4} km/h",
+        T::NAME
     );
 }
 
@@ -182,21 +189,22 @@ fn slope_agrees_with_central_differences_of_faer_eigenvalues() {
     // dzeta/dV of the shimmy mode vs a central difference (h = 1e-3 m/s) of the damping of the
     // faer eigenvalue nearest to it: O(h^2) truncation ~1e-8, tolerance 1e-5 absolute, in both
     // precisions (f32: eigenvalue and eigenvectors from f32 solves, the firmware's setting).
-    for precision in [Precision::F64, Precision::F32] {
-        let cfg = ModelMarginConfig {
-            eigen_precision: precision,
-            ..ModelMarginConfig::default()
-        };
-        slope_agrees(cfg);
-    }
+    slope_agrees::<f64>();
+    slope_agrees::<f32>();
 }
 
-fn slope_agrees(cfg: ModelMarginConfig) {
+fn slope_agrees<T: SolveFloat>() {
+    let cfg = ModelMarginConfig::default();
     let p = ParamSet::Nominal.params();
     let mut worst = 0.0f64;
     for kmh in [10.0, 20.0, 28.0, 50.0] {
         let v = kmh_to_mps(kmh);
-        let (pt, _) = cycle(&mut ModelMarginTracker::new(p, cfg), 0.0, v, 0.0);
+        let (pt, _) = cycle(
+            &mut ModelMarginTracker::<T>::in_precision(p, cfg),
+            0.0,
+            v,
+            0.0,
+        );
         let l0 = pt.shimmy.eigenvalue();
         let zeta_near = |vv: f64| {
             let l = faer_eigs(&p, vv, 0.0)
@@ -223,8 +231,8 @@ fn slope_agrees(cfg: ModelMarginConfig) {
         }
     }
     println!(
-        "{:?}: worst |dzeta/dV - central difference| {worst:.1e} per m/s",
-        cfg.eigen_precision
+        "{}: worst |dzeta/dV - central difference| {worst:.1e} per m/s",
+        T::NAME
     );
 }
 

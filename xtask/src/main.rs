@@ -6,7 +6,9 @@
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
-//!                                against the budgets (flash <= 96 KiB, static RAM <= 24 KiB)
+//!                                against the budgets (flash <= 88 KiB, static RAM <= 24 KiB),
+//!                                flash by crate, largest symbols, and where the bytes go
+//!                                that no sized symbol covers
 //! cargo xtask conformance        replay the committed sensor trace on the host and under QEMU
 //!                                and require bit-identical controller/estimator outputs
 //! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
@@ -314,6 +316,7 @@ fn size() -> Result<(), String> {
     let report = elf::MemoryReport::read(&elf)?;
     println!("{report}");
     println!("{}", elf::top_symbols(&elf, 25)?);
+    println!("{}", elf::attribution(&elf, 12)?);
     report.check_fits()?;
     report.check_budget()
 }

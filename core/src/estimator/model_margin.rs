@@ -27,9 +27,11 @@
 //!
 //! No allocation, no panics; errors of a solve end that part of the cycle and are counted.
 
+use core::marker::PhantomData;
+
 use nalgebra::Complex;
 
-use crate::eigen::{self, Mode};
+use crate::eigen::{self, Mode, SolveFloat};
 use crate::params::PlantParams;
 use crate::plant::{dlinearise_dv, linearise};
 use crate::stability::{self, CrossingKind, ModeSelect, V_SEARCH_MAX_MPS, V_SEARCH_MIN_MPS};
@@ -51,8 +53,6 @@ pub struct ModelMarginConfig {
     pub max_evals_per_search: u16,
     /// Relative change of the damper coefficient that invalidates the warm-start hints.
     pub c_change_rel: f64,
-    /// Float type of the eigen-solves (the firmware uses `F32`: f64 is software on the M4).
-    pub eigen_precision: eigen::Precision,
 }
 
 impl Default for ModelMarginConfig {
@@ -65,7 +65,6 @@ impl Default for ModelMarginConfig {
             max_step_mps: 2.0,
             max_evals_per_search: 45,
             c_change_rel: 0.01,
-            eigen_precision: eigen::Precision::F64,
         }
     }
 }
@@ -315,9 +314,11 @@ enum Phase {
 }
 
 /// The incremental model-margin state machine. Call [`ModelMarginTracker::step`] every control
-/// tick; it returns `Some` when a cycle completes.
+/// tick; it returns `Some` when a cycle completes. `T` is the float type of the eigen-solves and
+/// eigenvectors (f64 by default; the firmware uses f32, f64 being software on the M4): a type
+/// parameter, so an image links only the precision it runs.
 #[derive(Clone, Debug)]
-pub struct ModelMarginTracker {
+pub struct ModelMarginTracker<T: SolveFloat = f64> {
     p: PlantParams,
     cfg: ModelMarginConfig,
     phase: Phase,
@@ -333,6 +334,7 @@ pub struct ModelMarginTracker {
     solves_last_call: u8,
     cycles: u32,
     overruns: u32,
+    precision: PhantomData<T>,
 }
 
 const EMPTY_MODE: Mode = Mode {
@@ -343,9 +345,16 @@ const EMPTY_MODE: Mode = Mode {
     omega_n: 0.0,
 };
 
-impl ModelMarginTracker {
-    /// A tracker for the plant `p`.
+impl ModelMarginTracker<f64> {
+    /// A tracker for the plant `p` solving in f64 (the host's reference precision).
     pub fn new(p: PlantParams, cfg: ModelMarginConfig) -> Self {
+        Self::in_precision(p, cfg)
+    }
+}
+
+impl<T: SolveFloat> ModelMarginTracker<T> {
+    /// A tracker for the plant `p` solving in `T`.
+    pub fn in_precision(p: PlantParams, cfg: ModelMarginConfig) -> Self {
         Self {
             p,
             cfg,
@@ -362,6 +371,7 @@ impl ModelMarginTracker {
             solves_last_call: 0,
             cycles: 0,
             overruns: 0,
+            precision: PhantomData,
         }
     }
 
@@ -433,7 +443,7 @@ impl ModelMarginTracker {
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
         self.evals_this_search = self.evals_this_search.saturating_add(1);
         let a = linearise(&self.p, v, self.work.c_damper_nspm);
-        match eigen::eigenvalues_in(&a, self.cfg.eigen_precision)
+        match eigen::eigenvalues_of::<T>(&a)
             .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
         {
             Ok(m) if m.re.is_finite() => Some(m.re),
@@ -527,18 +537,13 @@ impl ModelMarginTracker {
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
         let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
-        let ok = eigen::eigenvalues_in(&a, self.cfg.eigen_precision).and_then(|vals| {
+        let ok = eigen::eigenvalues_of::<T>(&a).and_then(|vals| {
             let crit = eigen::critical_oscillatory_mode(&vals)?;
-            let (shimmy, found) = match stability::select_mode_in(
-                &self.p,
-                &a,
-                &vals,
-                ModeSelect::Shimmy,
-                self.cfg.eigen_precision,
-            ) {
-                Ok(m) => (m, true),
-                Err(_) => (crit, false),
-            };
+            let (shimmy, found) =
+                match stability::select_mode_of::<T>(&self.p, &a, &vals, ModeSelect::Shimmy) {
+                    Ok(m) => (m, true),
+                    Err(_) => (crit, false),
+                };
             Ok((crit, shimmy, found, eigen::max_real_part(&vals)))
         });
         match ok {
@@ -560,8 +565,8 @@ impl ModelMarginTracker {
         let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
         let lambda = self.work.shimmy.eigenvalue();
         let r = (|| {
-            let v = eigen::eigenvector_in(&a, lambda, self.cfg.eigen_precision).ok()?;
-            let w = eigen::left_eigenvector_in(&a, lambda, self.cfg.eigen_precision).ok()?;
+            let v = eigen::eigenvector_of::<T>(&a, lambda).ok()?;
+            let w = eigen::left_eigenvector_of::<T>(&a, lambda).ok()?;
             let da = dlinearise_dv(&self.p).map(|x| Complex::new(x, 0.0));
             let num = (w.adjoint() * da * v)[(0, 0)];
             let den = (w.adjoint() * v)[(0, 0)];

@@ -78,11 +78,6 @@ mod bench {
             run: meter_run,
         },
         Entry {
-            name: "eigen update: linearise + eigenvalues (f64)",
-            budget: Budget::None,
-            run: eigen_update,
-        },
-        Entry {
             name: "eigen update: linearise + eigenvalues (f32, balanced)",
             budget: Budget::None,
             run: eigen_update_f32,
@@ -340,24 +335,13 @@ mod bench {
     }
 
     fn eigen_update_f32() -> u32 {
-        use shimmy_core::eigen::{eigenvalues_in, Precision};
+        use shimmy_core::eigen::eigenvalues_of;
         use shimmy_core::params::PlantParams;
         let p = PlantParams::nominal();
         let mut v = 12.0;
         measure(|| {
             let a = shimmy_core::plant::linearise(&p, black_box(v), 0.0);
-            let _ = black_box(eigenvalues_in(&a, Precision::F32));
-            v += 0.1;
-        })
-    }
-
-    fn eigen_update() -> u32 {
-        use shimmy_core::params::PlantParams;
-        let p = PlantParams::nominal();
-        let mut v = 12.0;
-        measure(|| {
-            let a = shimmy_core::plant::linearise(&p, black_box(v), 0.0);
-            let _ = black_box(shimmy_core::eigen::eigenvalues(&a));
+            let _ = black_box(eigenvalues_of::<f32>(&a));
             v += 0.1;
         })
     }
