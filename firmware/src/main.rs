@@ -67,6 +67,9 @@ mod app {
     #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         shimmy_firmware::stack::paint();
+        // An overflow into the statics faults instead (MemManage: coil off, reported, reset).
+        let mut core = cx.core;
+        shimmy_firmware::stack::guard(&mut core.MPU, &mut core.SCB);
         defmt::info!(
             "{=str} booted (core {=str}); fail-safe coil current {=f32} A",
             shimmy_firmware::BANNER,

@@ -114,6 +114,7 @@ fn test() -> Result<(), String> {
             build_firmware("panic-free-glue", &["panic-check"]).map(|_| "no reachable panic".into())
         }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
+        ("stack overflow caught by the guard (QEMU)", stack_guard),
         (
             "host/target conformance (trace replay, bit-identical)",
             conformance::step,
@@ -209,6 +210,20 @@ fn on_target_tests() -> Step {
         return Err(format!("unexpected summary: {summary}"));
     }
     Ok(summary.trim_start_matches("INFO ").to_string())
+}
+
+/// A stack overflow must end in the guard's fault handler (firmware/src/bin/stack-guard.rs):
+/// a clean exit and the handler's report, not a HardFault after corrupting the statics.
+fn stack_guard() -> Step {
+    let elf = build_firmware("stack-guard", &["qemu", "stack-guard-test"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    run.log
+        .iter()
+        .find(|l| l.contains("stack overflow: the stack guard caught it"))
+        .map(|_| "overflow ended in the guard's handler (coil off, reported)".to_string())
+        .ok_or_else(|| "the run ended without the guard's report".to_string())
 }
 
 /// The harness must turn a failing assertion into a failed run: build it with one test that
@@ -324,6 +339,9 @@ fn size() -> Result<(), String> {
 fn run_in_qemu(bin: &str) -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
+    if bin == "stack-guard" {
+        return stack_guard().map(|s| println!("xtask: {s}"));
+    }
     let elf = build_firmware(bin, &["qemu"])?;
     let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
     run.print();
