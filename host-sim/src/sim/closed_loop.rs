@@ -106,6 +106,17 @@ pub struct LoopConfig {
     pub coil_drive: CoilDrive,
 }
 
+/// The supervisor thresholds for `arm`: the defaults, except that the passive-off reference arm
+/// ("damper at 0 A", the baseline of the studies) gets no coil test pulse, which would put 0.4 A
+/// into it every ~1.1 s.
+fn reference_supervisor(arm: Arm) -> SupervisorParams {
+    let mut p = SupervisorParams::default();
+    if arm == Arm::Mr(ControllerKind::PassiveOff) {
+        p.coil_test_current_a = 0.0;
+    }
+    p
+}
+
 impl LoopConfig {
     /// The loop around `vehicle` (plant, damper, sensors and coil from it; the controller's
     /// model and gains from it too, see [`Self::with_model`] for a firmware that believes
@@ -125,7 +136,7 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
             x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
-            supervisor: SupervisorParams::default(),
+            supervisor: reference_supervisor(arm),
             supervised: true,
             coil_drive: CoilDrive::Ideal,
         }
