@@ -25,21 +25,21 @@ pub enum CoilDrive {
     OpenLoop,
 }
 
-/// The true coil and supply, as the fault plan sets them.
+/// The true coil and supply relative to the drive's nominal coil, as the fault plan sets them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveCondition {
     /// True coil resistance / nominal.
     pub r_factor: f64,
-    /// True supply voltage, V.
-    pub supply_v: f64,
+    /// True supply voltage, V (`None`: the nominal supply).
+    pub supply_v: Option<f64>,
 }
 
 impl Default for DriveCondition {
-    /// The nominal coil (`CoilParams::default()`) on its nominal supply.
+    /// The nominal coil on its nominal supply.
     fn default() -> Self {
         DriveCondition {
             r_factor: 1.0,
-            supply_v: f64::from(CoilParams::default().v_supply_v),
+            supply_v: None,
         }
     }
 }
@@ -76,14 +76,14 @@ pub struct BoardDrive {
 }
 
 impl BoardDrive {
-    /// The drive for `mode` (`None` for [`CoilDrive::Ideal`]).
-    pub fn new(mode: CoilDrive) -> Option<Self> {
+    /// The drive for `mode` (`None` for [`CoilDrive::Ideal`]) of the nominal coil `nominal` (the
+    /// vehicle's: feed-forward, loop gains, open-loop map).
+    pub fn new(mode: CoilDrive, nominal: CoilParams) -> Option<Self> {
         let closed_loop = match mode {
             CoilDrive::Ideal => return None,
             CoilDrive::ClosedLoop => true,
             CoilDrive::OpenLoop => false,
         };
-        let nominal = CoilParams::default();
         Some(BoardDrive {
             driver: CoilDriver::new(DutyOnly::default(), nominal),
             nominal,
@@ -104,7 +104,8 @@ impl BoardDrive {
         let fb = if self.closed_loop { measured_a } else { None };
         let Ok(r) = self.driver.drive(cmd_a, fb, dt_s);
         let duty = f64::from(r.duty_counts) / f64::from(PWM_COUNTS);
-        duty * cond.supply_v / (f64::from(self.nominal.r_coil_ohm) * cond.r_factor)
+        let supply_v = cond.supply_v.unwrap_or(f64::from(self.nominal.v_supply_v));
+        duty * supply_v / (f64::from(self.nominal.r_coil_ohm) * cond.r_factor)
     }
 
     /// Coil off (the supervisor found the coil open or shorted).
@@ -119,7 +120,7 @@ mod tests {
 
     /// Steady state over 0.3 s with the plant's lag as the measured current.
     fn settle(mode: CoilDrive, cond: DriveCondition) -> f64 {
-        let mut d = BoardDrive::new(mode).unwrap();
+        let mut d = BoardDrive::new(mode, CoilParams::default()).unwrap();
         let mut i = 0.0f64;
         let alpha = 1.0 - (-1e-3f64 * 190.0).exp();
         for _ in 0..300 {
@@ -138,6 +139,6 @@ mod tests {
         assert!((settle(CoilDrive::ClosedLoop, hot) - 2.0).abs() < 0.02);
         assert!((settle(CoilDrive::OpenLoop, hot) - 2.0 / 1.5).abs() < 1e-3);
         assert!((settle(CoilDrive::OpenLoop, DriveCondition::default()) - 2.0).abs() < 1e-3);
-        assert!(BoardDrive::new(CoilDrive::Ideal).is_none());
+        assert!(BoardDrive::new(CoilDrive::Ideal, CoilParams::default()).is_none());
     }
 }

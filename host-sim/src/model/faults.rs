@@ -385,7 +385,7 @@ impl FaultInjector for FaultPlan {
         for f in self.faults.iter().filter(|f| f.active(t_s)) {
             match f.mode {
                 FaultMode::CoilHot(ratio) => c.r_factor = ratio,
-                FaultMode::Supply(v) => c.supply_v = v,
+                FaultMode::Supply(v) => c.supply_v = Some(v),
                 _ => {}
             }
         }
@@ -542,6 +542,6 @@ mod tests {
         assert_eq!(p.drive_condition(1.5), DriveCondition::default());
         assert_eq!(p.drive_condition(2.5).r_factor, 1.5);
         let c = p.drive_condition(3.5);
-        assert_eq!((c.r_factor, c.supply_v), (1.5, 14.0));
+        assert_eq!((c.r_factor, c.supply_v), (1.5, Some(14.0)));
     }
 }

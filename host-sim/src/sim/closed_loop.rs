@@ -24,6 +24,7 @@ use crate::model::faults::{FaultPlan, FaultSpec};
 use crate::model::integrator::IntegrateError;
 use crate::model::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
 use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
+use shimmy_core::control::actuator::CoilParams;
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
@@ -104,6 +105,8 @@ pub struct LoopConfig {
     pub supervised: bool,
     /// How the command reaches the coil: ideal (default) or the board's drive.
     pub coil_drive: CoilDrive,
+    /// The nominal coil and driver the board's drive assumes (the vehicle's).
+    pub coil: CoilParams,
 }
 
 /// The supervisor thresholds for `arm`: the defaults, except that the passive-off reference arm
@@ -139,6 +142,7 @@ impl LoopConfig {
             supervisor: reference_supervisor(arm),
             supervised: true,
             coil_drive: CoilDrive::Ideal,
+            coil: vehicle.damper.coil,
         }
     }
 
@@ -516,7 +520,7 @@ pub fn run(
     let i_max = cfg.control.limits.i_max_a;
     // Command applied over the previous period (held across lost frames).
     let mut held = ControlOutput::default();
-    let mut drive = BoardDrive::new(cfg.coil_drive);
+    let mut drive = BoardDrive::new(cfg.coil_drive, cfg.coil);
     // The board drive's plant input of the previous period (held across lost frames).
     let mut driven_a = 0.0;
     let mut meter = if cfg.estimator {
