@@ -115,6 +115,7 @@ fn test() -> Result<(), String> {
         }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         ("stack overflow caught by the guard (QEMU)", stack_guard),
+        ("fault memory across resets (QEMU)", reset_memory),
         (
             "host/target conformance (trace replay, bit-identical)",
             conformance::step,
@@ -210,6 +211,20 @@ fn on_target_tests() -> Step {
         return Err(format!("unexpected summary: {summary}"));
     }
     Ok(summary.trim_start_matches("INFO ").to_string())
+}
+
+/// The reset record must survive three resets under QEMU, restore the latched coil short and
+/// hold the safe state at the third quick reset (firmware/src/bin/reset-memory.rs).
+fn reset_memory() -> Step {
+    let elf = build_firmware("reset-memory", &["qemu"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    run.log
+        .iter()
+        .find(|l| l.contains("reset memory ok"))
+        .map(|_| "record survived 3 resets, latch restored (0 A), reset loop held".to_string())
+        .ok_or_else(|| "the run ended without the final report".to_string())
 }
 
 /// A stack overflow must end in the guard's fault handler (firmware/src/bin/stack-guard.rs):
@@ -341,6 +356,9 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
     qemu::ensure_installed()?;
     if bin == "stack-guard" {
         return stack_guard().map(|s| println!("xtask: {s}"));
+    }
+    if bin == "reset-memory" {
+        return reset_memory().map(|s| println!("xtask: {s}"));
     }
     let elf = build_firmware(bin, &["qemu"])?;
     let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
