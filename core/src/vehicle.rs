@@ -3,10 +3,11 @@
 //!
 //! A [`Vehicle`] holds the plant parameters, the MR damper (the simulator's Spencer model of it,
 //! the firmware's invertible model of it, the coil rating and resistance), the sensors'
-//! calibration, the controller's gains and the warning thresholds. The controller's and the
-//! estimator's models are derived from it ([`Vehicle::control_params`],
-//! [`Vehicle::pipeline_params`]), never from a hidden default; [`Vehicle::nominal`] reproduces
-//! today's defaults exactly (a test compares them field by field).
+//! calibration, the controller's gains and the warning thresholds. The controller's, the
+//! supervisor's and the estimator's parameters are derived from it
+//! ([`Vehicle::control_params`], [`Vehicle::supervisor_params`], [`Vehicle::pipeline_params`]),
+//! never from a hidden default; [`Vehicle::nominal`] reproduces today's defaults exactly (a
+//! test compares them).
 //!
 //! Every scalar is described once in [`FIELDS`]: section, name, unit, plausible range and a line
 //! of documentation. Setting a field by name ([`Vehicle::set`]) and validating a whole vehicle
@@ -19,10 +20,12 @@ use crate::control::conditioning::ConditioningParams;
 use crate::control::mr_model::MrModel;
 use crate::control::smc::{AsmcParams, NominalPlant, SmcParams};
 use crate::control::ControlParams;
+use crate::estimator::fusion::FusionParams;
 use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
 use crate::mr_damper::SpencerParams;
 use crate::params::{Param, ParamSet, PlantParams};
+use crate::supervisor::params::SupervisorParams;
 
 /// The MR damper of the vehicle.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -105,6 +108,8 @@ pub struct Vehicle {
     pub controller: ControllerGains,
     /// The warning thresholds of the margin monitor.
     pub thresholds: MonitorParams,
+    /// The fusion of data and model margins (its disagreement threshold is a vehicle field).
+    pub fusion: FusionParams,
 }
 
 impl Default for Vehicle {
@@ -136,6 +141,7 @@ impl Vehicle {
             sensors: SensorCalibration::default(),
             controller: ControllerGains::default(),
             thresholds: PipelineParams::tuned_monitor(),
+            fusion: PipelineParams::tuned_fusion(),
         }
     }
 
@@ -168,11 +174,22 @@ impl Vehicle {
         }
     }
 
+    /// The supervisor's thresholds with this vehicle's coil: the fail-safe current is the coil
+    /// rating and a coil-current reading at the measurement's full scale counts as saturated.
+    pub fn supervisor_params(&self) -> SupervisorParams {
+        SupervisorParams {
+            failsafe_current_a: self.rated_current_a(),
+            coil_full_scale_a: self.sensors.current_full_scale_a,
+            ..SupervisorParams::default()
+        }
+    }
+
     /// The margin pipeline's parameters with this vehicle's warning thresholds (its model is
     /// [`Self::plant`], passed to the pipeline next to these).
     pub fn pipeline_params(&self) -> PipelineParams {
         PipelineParams {
             monitor: self.thresholds,
+            fusion: self.fusion,
             ..PipelineParams::default()
         }
     }
@@ -328,12 +345,16 @@ impl core::fmt::Display for VehicleError {
     }
 }
 
+impl core::error::Error for VehicleError {}
+
 /// Why [`Vehicle::set`] refused a value.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, thiserror::Error)]
 pub enum SetError {
     /// No field of that name in that section.
+    #[error("no such field")]
     UnknownField,
     /// The value fails the field's check.
+    #[error("{0}")]
     Invalid(VehicleError),
 }
 
@@ -967,6 +988,16 @@ pub static FIELDS: &[Field] = &[
         "dwell before a level is released",
         |v| v.thresholds.release_s
     ),
+    field!(
+        "thresholds",
+        "mismatch_sigmas",
+        "-",
+        1.0,
+        10.0,
+        "data and model disagree beyond this many reported sigmas (the data margin then \
+         replaces the model's)",
+        |v| v.fusion.mismatch_sigmas
+    ),
 ];
 
 #[cfg(test)]
@@ -978,6 +1009,7 @@ mod tests {
         let v = Vehicle::nominal();
         assert_eq!(v.control_params(), ControlParams::default());
         assert_eq!(v.pipeline_params(), PipelineParams::default());
+        assert_eq!(v.supervisor_params(), SupervisorParams::default());
         assert_eq!(v.damper.spencer, SpencerParams::steering());
         assert!(v.validate().is_ok());
         for set in ParamSet::ALL {
@@ -998,6 +1030,7 @@ mod tests {
             (c.mr.i_max_a, c.limits.i_max_a, c.fallback_current_a),
             (3.0, 3.0, 3.0)
         );
+        assert_eq!(v.supervisor_params().failsafe_current_a, 3.0);
         assert_eq!(v.damper.spencer.u_max, 3.0);
         assert!(v.validate().is_ok());
     }

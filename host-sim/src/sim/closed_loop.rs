@@ -109,11 +109,10 @@ pub struct LoopConfig {
     pub coil: CoilParams,
 }
 
-/// The supervisor thresholds for `arm`: the defaults, except that the passive-off reference arm
-/// ("damper at 0 A", the baseline of the studies) gets no coil test pulse, which would put 0.4 A
-/// into it every ~1.1 s.
-fn reference_supervisor(arm: Arm) -> SupervisorParams {
-    let mut p = SupervisorParams::default();
+/// The supervisor thresholds `p` for `arm`: unchanged, except that the passive-off reference
+/// arm ("damper at 0 A", the baseline of the studies) gets no coil test pulse, which would put
+/// 0.4 A into it every ~1.1 s.
+fn reference_supervisor(arm: Arm, mut p: SupervisorParams) -> SupervisorParams {
     if arm == Arm::Mr(ControllerKind::PassiveOff) {
         p.coil_test_current_a = 0.0;
     }
@@ -139,18 +138,20 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
             x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
-            supervisor: reference_supervisor(arm),
+            supervisor: reference_supervisor(arm, vehicle.supervisor_params()),
             supervised: true,
             coil_drive: CoilDrive::Ideal,
             coil: vehicle.damper.coil,
         }
     }
 
-    /// The same loop with a controller that believes `model` (its plant and damper model, its
-    /// gains and limits); the simulated plant, damper and sensors stay.
+    /// The same loop with a firmware that believes `model` (the controller's plant and damper
+    /// model, gains and limits; the supervisor's fail-safe current and coil full scale); the
+    /// simulated plant, damper and sensors stay.
     #[must_use]
     pub fn with_model(mut self, model: &Vehicle) -> Self {
         self.control = model.control_params();
+        self.supervisor = reference_supervisor(self.arm, model.supervisor_params());
         self
     }
 }

@@ -275,7 +275,7 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<Vehicle
         }
     }
     v.validate()
-        .map_err(|e| anyhow::anyhow!("field `{key}.overrides`: {e}"))?;
+        .with_context(|| format!("field `{key}.overrides`"))?;
     Ok(v)
 }
 
@@ -304,7 +304,9 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
             };
             let on = match (kind, c.on_current_a) {
                 ("passive-on", Some(i)) => {
-                    let rated = arg_range::coil_current();
+                    // The firmware's limit: the coil rating of the vehicle it believes.
+                    let model = model_vehicle.as_ref().unwrap_or(&plant);
+                    let rated = arg_range::vehicle_current(model);
                     in_range("controller.on_current_a", i, rated.lo, rated.hi, "A")?
                 }
                 ("passive-on", None) => {

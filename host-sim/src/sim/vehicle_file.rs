@@ -124,7 +124,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
             }
         }
     }
-    v.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    v.validate()?;
     Ok(v)
 }
 
