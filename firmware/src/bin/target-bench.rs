@@ -231,7 +231,7 @@ mod bench {
 
     fn control_step() -> u32 {
         use shimmy_core::supervisor::frame::MarginStatus;
-        use shimmy_firmware::control::{supervised_step, Health};
+        use shimmy_firmware::control::{drive_coil, supervised_step, Health};
         use shimmy_firmware::drivers::coil_pwm::CoilDriver;
         use shimmy_firmware::monitoring::safe_controller;
         use shimmy_firmware::sim::{self, SimPwm, SimWorld};
@@ -249,8 +249,8 @@ mod bench {
             WORLD.set_step(step);
             let mut one = || {
                 let s = sensors.sample(sim::TICKS_PER_STEP);
-                let o = supervised_step(&mut ctrl, &s, step, MarginStatus::Valid, &mut h);
-                let _ = coil.set_current_a(o.current_cmd_a);
+                let o = supervised_step(&mut ctrl, &s, MarginStatus::Valid, &mut h);
+                let _ = drive_coil(&mut coil, &o);
             };
             if step < 1100 {
                 one();
