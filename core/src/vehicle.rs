@@ -175,12 +175,14 @@ impl Vehicle {
     }
 
     /// The supervisor's thresholds with this vehicle's coil and speed gate: the fail-safe
-    /// current is the coil rating, a coil-current reading at the measurement's full scale
-    /// counts as saturated, and a low speed must have been reached plausibly below the
+    /// current is the coil rating, the expected coil current lags the command by the coil's
+    /// time constant 1/eta (`damper.eta`), a coil-current reading at the measurement's full
+    /// scale counts as saturated, and a low speed must have been reached plausibly below the
     /// controller's speed gate (`controller.min_speed_mps`).
     pub fn supervisor_params(&self) -> SupervisorParams {
         SupervisorParams {
             failsafe_current_a: self.rated_current_a(),
+            coil_tau_s: (1.0 / self.damper.spencer.eta) as f32,
             coil_full_scale_a: self.sensors.current_full_scale_a,
             speed_low_mps: self.controller.min_speed_mps,
             ..SupervisorParams::default()
@@ -685,7 +687,7 @@ pub static FIELDS: &[Field] = &[
         "1/s",
         1.0,
         1.0e4,
-        "coil + driver bandwidth eta",
+        "coil + driver bandwidth eta (1/eta: the supervisor's coil time constant)",
         |v| v.damper.spencer.eta
     ),
     // What the firmware believes about the damper (`control::mr_model`).
@@ -1043,6 +1045,13 @@ mod tests {
         v.set("controller", "min_speed_mps", 5.0).unwrap();
         assert_eq!(v.control_params().min_speed_mps, 5.0);
         assert_eq!(v.supervisor_params().speed_low_mps, 5.0);
+        // The coil checks' expected current lags by the vehicle's coil time constant.
+        assert_eq!(
+            Vehicle::nominal().supervisor_params().coil_tau_s,
+            SupervisorParams::default().coil_tau_s
+        );
+        v.set("damper", "eta", 50.0).unwrap();
+        assert_eq!(v.supervisor_params().coil_tau_s, 0.02);
         assert!(v.validate().is_ok());
     }
 
