@@ -174,12 +174,17 @@ impl Vehicle {
         }
     }
 
-    /// The supervisor's thresholds with this vehicle's coil: the fail-safe current is the coil
-    /// rating and a coil-current reading at the measurement's full scale counts as saturated.
+    /// The supervisor's thresholds with this vehicle's coil and speed gate: the fail-safe
+    /// current is the coil rating, the expected coil current lags the command by the coil's
+    /// time constant 1/eta (`damper.eta`), a coil-current reading at the measurement's full
+    /// scale counts as saturated, and a low speed must have been reached plausibly below the
+    /// controller's speed gate (`controller.min_speed_mps`).
     pub fn supervisor_params(&self) -> SupervisorParams {
         SupervisorParams {
             failsafe_current_a: self.rated_current_a(),
+            coil_tau_s: (1.0 / self.damper.spencer.eta) as f32,
             coil_full_scale_a: self.sensors.current_full_scale_a,
+            speed_low_mps: self.controller.min_speed_mps,
             ..SupervisorParams::default()
         }
     }
@@ -682,7 +687,7 @@ pub static FIELDS: &[Field] = &[
         "1/s",
         1.0,
         1.0e4,
-        "coil + driver bandwidth eta",
+        "coil + driver bandwidth eta (1/eta: the supervisor's coil time constant)",
         |v| v.damper.spencer.eta
     ),
     // What the firmware believes about the damper (`control::mr_model`).
@@ -867,7 +872,7 @@ pub static FIELDS: &[Field] = &[
         "m/s",
         0.0,
         30.0,
-        "speed gate: minimum current below this speed",
+        "speed gate: minimum current below this speed (and the supervisor's low-speed plausibility limit)",
         |v| v.controller.min_speed_mps
     ),
     // Warning thresholds of the margin monitor.
@@ -1032,6 +1037,21 @@ mod tests {
         );
         assert_eq!(v.supervisor_params().failsafe_current_a, 3.0);
         assert_eq!(v.damper.spencer.u_max, 3.0);
+        // The supervisor's low-speed plausibility check sits at the controller's speed gate.
+        assert_eq!(
+            v.supervisor_params().speed_low_mps,
+            SupervisorParams::default().speed_low_mps
+        );
+        v.set("controller", "min_speed_mps", 5.0).unwrap();
+        assert_eq!(v.control_params().min_speed_mps, 5.0);
+        assert_eq!(v.supervisor_params().speed_low_mps, 5.0);
+        // The coil checks' expected current lags by the vehicle's coil time constant.
+        assert_eq!(
+            Vehicle::nominal().supervisor_params().coil_tau_s,
+            SupervisorParams::default().coil_tau_s
+        );
+        v.set("damper", "eta", 50.0).unwrap();
+        assert_eq!(v.supervisor_params().coil_tau_s, 0.02);
         assert!(v.validate().is_ok());
     }
 

@@ -7,8 +7,12 @@ use shimmy_sim::cmd;
 /// Shimmy simulator: the 4-DOF solid-axle steering plant with an MR damper, in the loop with
 /// the firmware's own control and estimation code.
 #[derive(Parser)]
-#[command(version, about, long_about = None)]
+#[command(version, about, long_about = None, args_conflicts_with_subcommands = true)]
 struct Cli {
+    /// Without a command: the demo (damper off vs ASMC on a speed ramp through the Hopf
+    /// window, report in out/demo/), on these vehicles.
+    #[command(flatten, next_help_heading = "Demo options (without a command)")]
+    demo: cmd::demo::DemoArgs,
     #[command(subcommand)]
     command: Option<Command>,
 }
@@ -68,6 +72,6 @@ fn main() -> Result<()> {
         Some(Command::Margin(a)) => cmd::margin::command(&a),
         Some(Command::Faults(a)) => cmd::faults::command(&a),
         Some(Command::Report(a)) => cmd::report::command(&a),
-        None => cmd::demo::command(),
+        None => cmd::demo::command(&cli.demo),
     }
 }

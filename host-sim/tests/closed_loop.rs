@@ -112,6 +112,7 @@ fn demo_report_is_written() {
     let out = shimmy_sim::cmd::demo::run_demo(&shimmy_sim::cmd::demo::DemoOptions {
         out: dir.clone(),
         ramp_s: 6.0,
+        ..Default::default()
     })
     .unwrap();
     let md = std::fs::read_to_string(&out.report).unwrap();

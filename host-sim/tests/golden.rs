@@ -176,6 +176,7 @@ fn demo_plots_are_real_pictures() {
     let out = demo::run_demo(&DemoOptions {
         out: dir.clone(),
         ramp_s: 6.0,
+        ..Default::default()
     })
     .unwrap();
     assert!(out.plots.len() >= 3, "{:?}", out.plots);

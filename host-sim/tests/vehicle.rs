@@ -133,8 +133,30 @@ fn a_missing_file_says_no_such_file_before_anything_runs() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `csv` without its wall-clock columns (`wall_s`, `sim_per_wall`), which differ from run to run.
+fn without_timing(csv: &str) -> String {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    let keep: Vec<bool> = header
+        .iter()
+        .map(|h| *h != "wall_s" && *h != "sim_per_wall")
+        .collect();
+    std::iter::once(header.join(","))
+        .chain(lines.map(|l| {
+            l.split(',')
+                .zip(&keep)
+                .filter(|(_, &k)| k)
+                .map(|(x, _)| x)
+                .collect::<Vec<_>>()
+                .join(",")
+        }))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Runs `args` (plus `--vehicle`/`--model-vehicle` as `extra`) in a fresh folder and returns
-/// the concatenated text of the output files `files` (relative to the folder). `faults` exits
+/// the concatenated text of the output files `files` (relative to the folder; CSV files
+/// [`without_timing`]). `faults` exits
 /// non-zero when one of its campaign checks fails (a 2 s run is too short for some), but its
 /// files are written either way; every other command must succeed.
 fn output_of(setup: &dyn Fn(&Path), args: &[&str], extra: &[&str], files: &[&str]) -> String {
@@ -143,15 +165,20 @@ fn output_of(setup: &dyn Fn(&Path), args: &[&str], extra: &[&str], files: &[&str
     let all: Vec<&str> = args.iter().chain(extra).copied().collect();
     let o = run_in(&dir, &all);
     assert!(
-        o.status.success() || all[0] == "faults",
+        o.status.success() || all.first() == Some(&"faults"),
         "{all:?} failed: {}",
         text(&o.stderr)
     );
     let out = files
         .iter()
         .map(|f| {
-            std::fs::read_to_string(dir.join(f))
-                .unwrap_or_else(|e| panic!("{all:?}: reading {f}: {e}"))
+            let t = std::fs::read_to_string(dir.join(f))
+                .unwrap_or_else(|e| panic!("{all:?}: reading {f}: {e}"));
+            if f.ends_with(".csv") {
+                without_timing(&t)
+            } else {
+                t
+            }
         })
         .collect::<Vec<_>>()
         .join("\n");
@@ -185,9 +212,12 @@ fn files(dir: &Path) {
 }
 
 /// `args` with `--vehicle FILE` (or the given extra options) gives another result than with
-/// the reference vehicle.
+/// the reference vehicle. The reference is run twice and must be the same both times, so a
+/// difference is the vehicle's doing, not the clock's.
 fn changes(args: &[&str], extra: &[&str], out: &[&str]) {
     let reference = output_of(&files, args, &[], out);
+    let again = output_of(&files, args, &[], out);
+    assert!(reference == again, "{args:?}: not reproducible");
     let changed = output_of(&files, args, extra, out);
     assert!(reference != changed, "{args:?} {extra:?}: same result");
 }
@@ -350,60 +380,184 @@ fn a_field_in_the_vehicle_file_changes_every_commands_result() {
         &["--vehicle", "damper.toml"],
         &["o/metrics.csv"],
     );
+    // The demo (no command) on another plant, and with a firmware believing other gains.
+    let demo_trace = "out/demo/ramp_20-120_km_h_ASMC.csv";
+    changes(
+        &["--ramp-s", "3"],
+        &["--vehicle", "plant.toml"],
+        &[demo_trace],
+    );
+    changes(
+        &["--ramp-s", "3"],
+        &["--model-vehicle", "gains.toml"],
+        &[demo_trace],
+    );
 }
 
-/// A damper current above the vehicle's coil rating is rejected once the vehicle is known,
-/// before anything runs (the parse-time range is the reference coil's 2 A).
+/// Every coil current a command or a scenario file asks for is checked against the coil rating
+/// of the vehicle in question (`damper.rated_current_a`), not the reference coil's 2 A: with a
+/// 1.5 A coil, 1.8 A is rejected by each command before anything runs (nothing written); with
+/// a 3 A coil, 2.5 A is accepted and reaches the damper.
 #[test]
-fn a_current_above_the_vehicles_rating_is_rejected() {
+fn currents_are_checked_against_the_vehicles_own_coil_rating() {
+    let setup = |dir: &Path| {
+        std::fs::write(dir.join("small.toml"), "[damper]\nrated_current_a = 1.5\n").unwrap();
+        std::fs::write(dir.join("big.toml"), "[damper]\nrated_current_a = 3.0\n").unwrap();
+        for (name, vehicle, current) in [
+            ("small", "small.toml", 1.8),
+            ("big", "big.toml", 2.5),
+            ("nominal", "nominal", 1.8),
+        ] {
+            std::fs::write(
+                dir.join(format!("on-{name}.toml")),
+                format!(
+                    "duration_s = 1.0\n[plant]\nvehicle = \"{vehicle}\"\n[controller]\n\
+                     kind = \"passive-on\"\non_current_a = {current}\n[speed]\nconstant_kmh = 45.0\n"
+                ),
+            )
+            .unwrap();
+        }
+        std::fs::write(
+            dir.join("asmc.toml"),
+            "duration_s = 1.0\n[speed]\nconstant_kmh = 45.0\n",
+        )
+        .unwrap();
+    };
+    let sweep_td = [
+        "sweep",
+        "--controllers",
+        "passive-on",
+        "--v-steps",
+        "2",
+        "--factor-steps",
+        "1",
+        "--duration-s",
+        "1",
+        "--quiet",
+    ];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "stability",
+                "--v-min-kmh",
+                "40",
+                "--v-max-kmh",
+                "50",
+                "--damper-current-a",
+            ],
+            "--vehicle",
+        ),
+        (
+            vec![
+                "bifurcation",
+                "--v-min-kmh",
+                "45",
+                "--v-max-kmh",
+                "45",
+                "--duration-s",
+                "1",
+                "--window-s",
+                "0.25",
+                "--damper-current-a",
+            ],
+            "--vehicle",
+        ),
+        (
+            vec![
+                "sweep",
+                "--v-steps",
+                "2",
+                "--factor-steps",
+                "1",
+                "--quiet",
+                "--damper-current-a",
+            ],
+            "--vehicle",
+        ),
+        (
+            sweep_td.iter().copied().chain(["--on-current-a"]).collect(),
+            "--vehicle",
+        ),
+        (
+            vec![
+                "compare",
+                "--quick",
+                "--only",
+                "kick-0.5deg",
+                "--controllers",
+                "passive-on",
+                "--on-current-a",
+            ],
+            "--model-vehicle",
+        ),
+        (
+            vec![
+                "run",
+                "asmc.toml",
+                "--controller",
+                "passive-on",
+                "--on-current-a",
+            ],
+            "--model-vehicle",
+        ),
+        (
+            vec![
+                "report",
+                "asmc.toml",
+                "--controllers",
+                "passive-on",
+                "--on-current-a",
+            ],
+            "--model-vehicle",
+        ),
+        (vec!["reference-bench", "--damper-current-a"], "--vehicle"),
+    ];
     let dir = temp_dir();
-    std::fs::write(dir.join("small.toml"), "[damper]\nrated_current_a = 1.0\n").unwrap();
-    for args in [
-        &[
-            "stability",
-            "--vehicle",
-            "small.toml",
-            "--damper-current-a",
-            "1.5",
-            "--out",
-            "o",
-        ][..],
-        &[
-            "bifurcation",
-            "--vehicle",
-            "small.toml",
-            "--damper-current-a",
-            "1.5",
-            "--out",
-            "o",
-        ],
-        &[
-            "sweep",
-            "--vehicle",
-            "small.toml",
-            "--damper-current-a",
-            "1.5",
-            "--out",
-            "o",
-        ],
-        &[
-            "compare",
-            "--vehicle",
-            "small.toml",
-            "--on-current-a",
-            "1.5",
-            "--out",
-            "o",
-        ],
-    ] {
-        let o = run_in(&dir, args);
+    setup(&dir);
+    let reject = |args: &[&str]| {
+        let all: Vec<&str> = args.iter().copied().chain(["--out", "o"]).collect();
+        let o = run_in(&dir, &all);
         let err = text(&o.stderr);
-        assert!(!o.status.success(), "{args:?}");
+        assert!(!o.status.success(), "{all:?} accepted");
         assert!(
-            err.contains("1.5") && err.contains("0 <= value <= 1 A"),
-            "{args:?}: {err}"
+            err.contains("1.8") && err.contains("0 <= value <= 1.5 A"),
+            "{all:?}: {err}"
         );
-        assert!(!dir.join("o").exists(), "{args:?} wrote output");
+        assert!(!dir.join("o").exists(), "{all:?} wrote output");
+    };
+    for (args, vehicle_option) in &cases {
+        let mut a = args.clone();
+        a.extend(["1.8", vehicle_option, "small.toml"]);
+        reject(&a);
     }
+    // Scenario files: the file's own vehicle, and `--model-vehicle` overriding it.
+    reject(&["run", "on-small.toml"]);
+    reject(&["report", "on-small.toml"]);
+    reject(&["run", "on-nominal.toml", "--model-vehicle", "small.toml"]);
+    reject(&["report", "on-nominal.toml", "--model-vehicle", "small.toml"]);
+
+    // The 3 A coil takes 2.5 A (reference-bench needs SciPy: its rejection above suffices).
+    let accept = |args: &[&str]| -> String {
+        let all: Vec<&str> = args.iter().copied().chain(["--out", "o"]).collect();
+        let o = run_in(&dir, &all);
+        assert!(o.status.success(), "{all:?} failed: {}", text(&o.stderr));
+        std::fs::remove_dir_all(dir.join("o")).ok();
+        text(&o.stdout)
+    };
+    for (args, vehicle_option) in cases.iter().filter(|(a, _)| a[0] != "reference-bench") {
+        let mut a = args.clone();
+        a.extend(["2.5", vehicle_option, "big.toml"]);
+        accept(&a);
+    }
+    accept(&["report", "on-big.toml"]);
+    // The run's coil reaches the commanded 2.5 A (the 2 A coil would stop at 2 A).
+    let out = accept(&["run", "on-big.toml"]);
+    let peak: f64 = out
+        .lines()
+        .find(|l| l.contains("RMS / peak current"))
+        .and_then(|l| l.split('/').nth(2))
+        .and_then(|x| x.trim().trim_end_matches('A').trim().parse().ok())
+        .unwrap_or_else(|| panic!("no peak current in: {out}"));
+    assert!((peak - 2.5).abs() < 0.05, "peak current {peak} A");
     std::fs::remove_dir_all(&dir).ok();
 }

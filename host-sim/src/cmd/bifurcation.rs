@@ -310,8 +310,8 @@ pub struct BifurcationArgs {
     /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
-    /// Fit the MR damper and hold this coil current in A (0 to 2 A, the coil rating); without it
-    /// there is no damper (F_d = 0).
+    /// Fit the MR damper and hold this coil current in A (0 to the vehicle's coil rating);
+    /// without it there is no damper (F_d = 0).
     #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Option<f64>,
     /// Lowest speed, km/h: 1 to 250, at most `--v-max-kmh`.
@@ -367,7 +367,7 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         None => DamperSetting::Off,
         Some(i) => DamperSetting::Mr {
             damper: vehicle.damper.spencer,
-            current_a: arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?,
+            current_a: arg_range::check_current("--damper-current-a", i, &vehicle)?,
         },
     };
     run(&BifurcationOptions {

@@ -31,9 +31,10 @@ pub struct CompareArgs {
     )]
     pub controllers: Vec<String>,
     /// Current of `passive-on` in A; default: the least constant current (bisection to 0.02 A)
-    /// with which no scenario of the set shimmies. 0 to 2 A (the coil rating).
-    #[arg(long, alias = "on-current", allow_negative_numbers = true, value_parser = f32_in(crate::sim::arg_range::coil_current()))]
-    pub on_current_a: Option<f32>,
+    /// with which no scenario of the set shimmies. 0 to the coil rating of the vehicle the
+    /// firmware believes.
+    #[arg(long, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
+    pub on_current_a: Option<f64>,
     /// Short runs (a few seconds each).
     #[arg(long)]
     pub quick: bool,
@@ -359,7 +360,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         None => vehicle,
     };
     if let Some(i) = a.on_current_a {
-        crate::sim::arg_range::vehicle_current(&model).check("--on-current-a", f64::from(i))?;
+        crate::sim::arg_range::check_current("--on-current-a", i, &model)?;
     }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut specs = standard_scenarios(&vehicle, a.quick);
@@ -377,7 +378,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
     let on_current = match a.on_current_a {
         Some(i) => {
             println!("passive-on current: {i} A (given)");
-            i
+            i as f32
         }
         None => {
             let i_max = model.rated_current_a();

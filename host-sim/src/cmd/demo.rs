@@ -1,17 +1,42 @@
 //! The built-in demo (`shimmy-sim` with no arguments): damper off vs ASMC on a speed ramp
 //! through the Hopf window with road noise, wheel imbalance and a pothole, the data-driven mode
 //! meter running in the loop, and a self-contained Markdown report with plots and metrics.
+//! `--vehicle` and `--model-vehicle` run it on another vehicle (the ramp stays 20 -> 120 km/h).
 
 use crate::out::plot_util;
 use crate::out::report::{self, Report, ReportRun, Section};
+use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{LoopResult, RunMetrics};
-use crate::sim::demo_case::{demo_case, run_arm, ARMS};
+use crate::sim::demo_case::{demo_case_for, run_arm, ARMS};
 use crate::sim::standard::POTHOLE_NM;
+use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use shimmy_core::params::mps_to_kmh;
+use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// Options of the demo on the command line (`shimmy-sim [--vehicle V] [--model-vehicle M]`).
+#[derive(clap::Args, Clone, Debug)]
+pub struct DemoArgs {
+    /// The demo's simulated vehicle: a named set (nominal, gentle, hard) or a vehicle file
+    /// (TOML, see docs/vehicle-file.md) [default: nominal].
+    #[arg(long, visible_alias = "params")]
+    pub vehicle: Option<String>,
+    /// The vehicle the demo's firmware believes (its controller's and estimator's models,
+    /// gains, thresholds): a set or a file [default: the simulated vehicle].
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
+    /// Length of the speed ramp 20 -> 120 km/h, s: 1 to 600.
+    #[arg(long, default_value_t = RAMP_S_DEFAULT, allow_negative_numbers = true, value_parser = arg_range::f64_in(RAMP_S))]
+    pub ramp_s: f64,
+}
+
+/// The demo's ramp length: 1 to 600 s.
+pub const RAMP_S: Range = Range::closed(1.0, 600.0, "s");
+/// The demo's ramp length without `--ramp-s`, s.
+pub const RAMP_S_DEFAULT: f64 = 30.0;
 
 /// Demo options.
 #[derive(Clone, Debug)]
@@ -20,14 +45,38 @@ pub struct DemoOptions {
     pub out: PathBuf,
     /// Ramp duration, s (20 -> 120 km/h).
     pub ramp_s: f64,
+    /// The simulated vehicle and its name (as given: a set or a file).
+    pub plant: (String, Vehicle),
+    /// The vehicle the firmware believes and its name; `None`: the simulated one.
+    pub model: Option<(String, Vehicle)>,
 }
 
 impl Default for DemoOptions {
     fn default() -> Self {
         DemoOptions {
             out: PathBuf::from("out/demo"),
-            ramp_s: 30.0,
+            ramp_s: RAMP_S_DEFAULT,
+            plant: ("nominal".into(), Vehicle::nominal()),
+            model: None,
         }
+    }
+}
+
+impl DemoOptions {
+    /// The default demo with the options of `a` (range-checked, the vehicles loaded and
+    /// validated).
+    pub fn from_args(a: &DemoArgs) -> Result<Self> {
+        let mut o = DemoOptions {
+            ramp_s: RAMP_S.check("--ramp-s", a.ramp_s)?,
+            ..DemoOptions::default()
+        };
+        if let Some(v) = &a.vehicle {
+            o.plant = (v.clone(), vehicle_file::load(v).context("--vehicle")?);
+        }
+        if let Some(m) = &a.model_vehicle {
+            o.model = Some((m.clone(), vehicle_file::load(m).context("--model-vehicle")?));
+        }
+        Ok(o)
     }
 }
 
@@ -98,7 +147,9 @@ fn plot_meter(
 /// [`report::write`], the same writer as `shimmy-sim report`).
 pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
-    let case = demo_case(o.ramp_s)?;
+    let (plant_name, plant) = &o.plant;
+    let model = o.model.as_ref().map_or(plant, |(_, m)| m);
+    let case = demo_case_for(plant, model, o.ramp_s)?;
     let results: Vec<ReportRun> = ARMS
         .par_iter()
         .map(|&(label, arm)| {
@@ -116,9 +167,19 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     let mut intro = String::new();
     let _ = writeln!(
         intro,
-        "Plant: `nominal` 4-DOF solid axle with the Spencer MR damper (coil lag included); sensors: 14-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n"
+        "Plant: `{plant_name}` 4-DOF solid axle with the Spencer MR damper (coil lag included); sensors: {}-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n",
+        plant.sensors.encoder_bits
     );
-    let _ = writeln!(intro, "## Nominal Hopf window (no damper, eigenvalues)\n");
+    if let Some((model_name, _)) = &o.model {
+        let _ = writeln!(
+            intro,
+            "The firmware believes `{model_name}` (its controller's and estimator's models, gains and thresholds).\n"
+        );
+    }
+    let _ = writeln!(
+        intro,
+        "## Hopf window of `{plant_name}` (no damper, eigenvalues)\n"
+    );
     if case.crossings.is_empty() {
         let _ = writeln!(intro, "No Hopf crossing between 1 and 50 m/s.\n");
     }
@@ -151,7 +212,7 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
             description,
             runs: results,
             extra_plots: vec![(
-                "Data-driven mode meter (slow estimate) vs speed; shaded: the nominal no-damper Hopf window".into(),
+                format!("Data-driven mode meter (slow estimate) vs speed; shaded: the no-damper Hopf window of `{plant_name}`"),
                 "meter.png".into(),
             )],
         }],
@@ -164,10 +225,11 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     })
 }
 
-/// The no-argument command.
-pub fn command() -> Result<()> {
+/// The no-argument command (with `--vehicle` / `--model-vehicle` only).
+pub fn command(a: &DemoArgs) -> Result<()> {
+    let o = DemoOptions::from_args(a)?;
     println!("shimmy demo: damper off vs ASMC through the Hopf window (see `shimmy-sim --help` for the other commands)");
-    let out = run_demo(&DemoOptions::default())?;
+    let out = run_demo(&o)?;
     println!(
         "damper off: shimmy {:.1} s, peak yaw {:.2} deg | ASMC: shimmy {:.1} s, peak yaw {:.2} deg, coil energy {:.2} J",
         out.metrics[0].shimmy_s,

@@ -50,7 +50,8 @@ pub struct ReferenceBenchArgs {
     #[arg(long, default_value_t = 60.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub speed_kmh: f64,
     /// Constant coil current, in A (`--damper-current-a` as in `stability` and `bifurcation`;
-    /// the field keeps its name for callers that build the arguments): 0 to 2 A (the coil rating).
+    /// the field keeps its name for callers that build the arguments): 0 to the vehicle's coil
+    /// rating.
     #[arg(long = "damper-current-a", alias = "current-a", default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub current_a: f64,
     /// Initial in-phase wheel yaw, deg (large enough for the damper to slide): -20 to 20.
@@ -107,7 +108,6 @@ pub struct ReferenceResult {
 pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     DURATION_S.check("--duration-s", a.duration_s)?;
     arg_range::SPEED_KMH.check("--speed-kmh", a.speed_kmh)?;
-    arg_range::coil_current().check("--damper-current-a", a.current_a)?;
     YAW_DEG.check("--initial-yaw-deg", a.initial_yaw_deg)?;
     CL_RAMP_S.check("--cl-ramp-s", a.cl_ramp_s)?;
     CL_GAIN.check("--cl-gain-a-per-radps", a.cl_gain_a_per_radps)?;
@@ -115,6 +115,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
         bail!("--sweep-points {}: allowed 2 to 100000", a.sweep_points);
     }
     let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+    arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;

@@ -22,8 +22,8 @@ pub struct ReportArgs {
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to 2 A (the coil
-    /// rating).
+    /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to the coil rating
+    /// of the vehicle the firmware believes.
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle for every scenario (overrides each file's `[plant]`, sensors
@@ -82,21 +82,25 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     files
         .into_iter()
         .map(|f| {
-            let mut spec = scenario_file::load(&f)?;
-            spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
-            let specs = if controllers.is_empty() {
-                vec![spec]
+            let spec = scenario_file::load(&f)?;
+            // One run per `--controllers` entry, else the file's own controller.
+            let runs: Vec<Option<(&str, f64)>> = if controllers.is_empty() {
+                vec![None]
             } else {
                 controllers
                     .iter()
-                    .map(|c| {
-                        let mut s = spec.clone();
-                        s.controller = c.to_string();
-                        s.on_current_a = a.on_current_a;
-                        s
-                    })
+                    .map(|&c| Some((c, a.on_current_a)))
                     .collect()
             };
+            let specs = runs
+                .into_iter()
+                .map(|controller| {
+                    let mut s = spec.clone();
+                    s.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+                        .with_context(|| format!("scenario file {}", f.display()))?;
+                    Ok(s)
+                })
+                .collect::<Result<Vec<_>>>()?;
             Ok((f, specs))
         })
         .collect()

@@ -24,7 +24,8 @@ pub struct RunArgs {
     /// Controller (overrides the file's `controller.kind`; passive-on needs `--on-current-a`).
     #[arg(long)]
     pub controller: Option<String>,
-    /// Fixed current for `--controller passive-on`, in A: 0 to 2 A (the coil rating).
+    /// Fixed current for `--controller passive-on`, in A: 0 to the coil rating of the vehicle
+    /// the firmware believes.
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle (overrides the file's `[plant]`, sensors included): a named set
@@ -48,14 +49,15 @@ pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
-    spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
-    if let Some(c) = &a.controller {
-        let Some(c) = controller_name(c) else {
-            anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", "));
-        };
-        spec.controller = c.to_string();
-        spec.on_current_a = a.on_current_a;
-    }
+    let controller = match &a.controller {
+        Some(c) => match controller_name(c) {
+            Some(name) => Some((name, a.on_current_a)),
+            None => anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", ")),
+        },
+        None => None,
+    };
+    spec.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+        .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let out = out_dir(a, &spec);
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let (cfg, r) = scenario::run(&spec)?;

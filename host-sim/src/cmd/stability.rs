@@ -22,8 +22,8 @@ pub struct StabilityArgs {
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
-    /// coefficient (describing function). Without it there is no damper force. 0 to 2 A (the
-    /// coil rating).
+    /// coefficient (describing function). Without it there is no damper force. 0 to the
+    /// vehicle's coil rating.
     #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Option<f64>,
     /// Reference wheel-yaw amplitude for the describing function, deg: above 0, at most 20.
@@ -65,9 +65,6 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     arg_range::SPEED_KMH.check("--v-max-kmh", args.v_max_kmh)?;
     STEP_KMH.check("--step-kmh", args.step_kmh)?;
     REF_AMPLITUDE_DEG.check("--ref-amplitude-deg", args.ref_amplitude_deg)?;
-    if let Some(i) = args.damper_current_a {
-        arg_range::coil_current().check("--damper-current-a", i)?;
-    }
     anyhow::ensure!(
         args.v_max_kmh > args.v_min_kmh,
         "--v-min-kmh {} must be below --v-max-kmh {}",
@@ -77,7 +74,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     let vehicle = vehicle_file::load(&args.vehicle)?;
     let p = vehicle.plant;
     if let Some(i) = args.damper_current_a {
-        arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
+        arg_range::check_current("--damper-current-a", i, &vehicle)?;
     }
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let (c, damper) = match args.damper_current_a {

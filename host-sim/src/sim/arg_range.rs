@@ -5,9 +5,11 @@
 //! command line is parsed (exit status 2) with a message naming the option, the value and the
 //! allowed range. Checks that involve more than one option (`--v-min-kmh` below `--v-max-kmh`,
 //! grid sizes) use [`Range::check`] or [`ensure_count`] at the start of the command, still
-//! before anything is computed or written.
+//! before anything is computed or written; so does a coil current against the loaded vehicle's
+//! own coil rating ([`check_current`]).
 
 use anyhow::{bail, Result};
+use shimmy_core::vehicle::{find_field, Vehicle};
 
 /// A range of finite numbers with its unit: `lo <= x <= hi`, or `lo < x <= hi` when `lo_open`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,17 +90,27 @@ impl Range {
     }
 }
 
-/// Coil current of the MR damper: 0 A to the core's rated limit
-/// (`shimmy_core::control::actuator::CurrentLimits::default().i_max_a`, 2 A).
-pub fn coil_current() -> Range {
-    let i_max = shimmy_core::control::actuator::CurrentLimits::default().i_max_a;
-    Range::closed(0.0, f64::from(i_max), "A")
+/// Coil current as the command line parses it: 0 A to the largest coil rating a vehicle may
+/// have (the range of `damper.rated_current_a`). The vehicle's own rating is checked by
+/// [`check_current`] once the vehicle is loaded.
+pub fn any_coil_current() -> Range {
+    let hi = find_field("damper", "rated_current_a").map_or(0.0, |f| f.hi);
+    Range::closed(0.0, hi, "A")
 }
 
-/// Coil current of `vehicle`'s damper: 0 A to its rating (`damper.rated_current_a`), checked
-/// once the vehicle is loaded (the parse-time check is [`coil_current`], the reference coil's).
-pub fn vehicle_current(vehicle: &shimmy_core::vehicle::Vehicle) -> Range {
-    Range::closed(0.0, f64::from(vehicle.rated_current_a()), "A")
+/// Checks the coil current `i` given by `option` (a command-line option or a scenario file's
+/// field) against `vehicle`'s coil rating (`damper.rated_current_a`): 0 A to the rating. The
+/// one check of every current a command or a scenario asks of a damper.
+pub fn check_current(option: &str, i: f64, vehicle: &Vehicle) -> Result<f64> {
+    let rated = f64::from(vehicle.rated_current_a());
+    let range = Range::closed(0.0, rated, "A");
+    if !range.contains(i) {
+        bail!(
+            "{option} {i}: out of range; allowed: {} (the coil rating, damper.rated_current_a, of the vehicle)",
+            range.describe()
+        );
+    }
+    Ok(i)
 }
 
 /// Forward speed: 1 to 250 km/h.
@@ -124,10 +136,11 @@ pub fn speed_kmh(
     f64_in(SPEED_KMH)
 }
 
-/// A clap value parser for a coil current in A ([`coil_current`]).
+/// A clap value parser for a coil current in A ([`any_coil_current`]; the vehicle's own rating
+/// is checked later by [`check_current`]).
 pub fn current_a(
 ) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone + Send + Sync + 'static {
-    f64_in(coil_current())
+    f64_in(any_coil_current())
 }
 
 /// Number of items of a list (or grid) option: 1 to `max`.
@@ -151,7 +164,7 @@ mod tests {
             assert!(r.parse(bad).is_err(), "{bad}");
         }
         assert_eq!(Range::closed(0.0, 2.0, "A").parse("0"), Ok(0.0));
-        assert!(coil_current().contains(2.0) && !coil_current().contains(2.01));
+        assert!(any_coil_current().contains(10.0) && !any_coil_current().contains(10.01));
         let e = SPEED_KMH.check("--v-max-kmh", 300.0).unwrap_err();
         assert!(e.to_string().contains("--v-max-kmh 300"));
         assert!(ensure_count("--speeds-kmh", 0, 4).is_err());

@@ -1,6 +1,7 @@
-//! The demo's case (`shimmy-sim` with no arguments): the nominal plant on a speed ramp 20 -> 120
-//! km/h through the Hopf window with road noise, wheel imbalance and a pothole, and its two arms
-//! (damper off, ASMC). Shared by the demo command, the reference benchmark and the golden test.
+//! The demo's case (`shimmy-sim` with no arguments): the nominal plant (or `--vehicle`) on a
+//! speed ramp 20 -> 120 km/h through the Hopf window with road noise, wheel imbalance and a
+//! pothole, and its two arms (damper off, ASMC). Shared by the demo command, the reference
+//! benchmark and the golden test.
 
 use crate::model::disturbance::{Scenario, SpeedProfile};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
@@ -11,11 +12,13 @@ use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
 use shimmy_core::vehicle::Vehicle;
 
-/// The demo's case: the nominal plant, the ramp scenario and the facts the report states.
+/// The demo's case: the vehicles, the ramp scenario and the facts the report states.
 #[derive(Clone, Debug)]
 pub struct DemoCase {
-    /// The vehicle (simulated, and believed by the firmware).
+    /// The simulated vehicle.
     pub plant: Vehicle,
+    /// The vehicle the firmware believes (its controller's and estimator's models, gains).
+    pub model: Vehicle,
     /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
     pub scenario: Scenario,
     /// Hopf crossings of the plant without damper (1-50 m/s).
@@ -37,12 +40,14 @@ pub const ARMS: [(&str, Arm); 2] = [
 /// Builds the demo's case on the reference vehicle for a ramp of `ramp_s` seconds (all
 /// numbers computed).
 pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
-    demo_case_for(&Vehicle::nominal(), ramp_s)
+    let nominal = Vehicle::nominal();
+    demo_case_for(&nominal, &nominal, ramp_s)
 }
 
-/// The demo's case on `vehicle`.
-pub fn demo_case_for(vehicle: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
-    let p = vehicle.plant;
+/// The demo's case on the simulated vehicle `plant` with a firmware that believes `model`;
+/// the Hopf window and the pothole's speed are the simulated plant's.
+pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
+    let p = plant.plant;
     let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
         .context("hopf_crossings")?
         .iter()
@@ -68,7 +73,8 @@ pub fn demo_case_for(vehicle: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
     let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
     sc.impulses.push(pothole(t_hit, POTHOLE_NM));
     Ok(DemoCase {
-        plant: *vehicle,
+        plant: *plant,
+        model: *model,
         scenario: sc,
         crossings,
         window_kmh,
@@ -84,7 +90,7 @@ pub fn run_arm(
     ramp_s: f64,
     record_every: usize,
 ) -> Result<(LoopConfig, LoopResult)> {
-    let mut cfg = LoopConfig::new(&case.plant, arm, ramp_s);
+    let mut cfg = LoopConfig::new(&case.plant, arm, ramp_s).with_model(&case.model);
     cfg.record_every = record_every;
     let mut s = case.scenario.clone();
     let r = closed_loop::run(&cfg, &mut s, None)

@@ -7,6 +7,7 @@
 use crate::model::disturbance::{initial_yaw, Scenario};
 use crate::model::faults::FaultSpec;
 use crate::model::sensors::SensorConfig;
+use crate::sim::arg_range;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
@@ -31,6 +32,9 @@ pub const CONTROLLERS: [&str; 6] = [
 pub fn controller_name(name: &str) -> Option<&'static str> {
     Arm::from_name(name, 0.0).map(|a| a.name())
 }
+
+/// A scenario file's passive-on current, as error messages name it.
+pub const ON_CURRENT_FIELD: &str = "field `controller.on_current_a`";
 
 /// A validated scenario, ready to run.
 #[derive(Clone, Debug)]
@@ -99,21 +103,47 @@ impl ScenarioSpec {
         };
     }
 
-    /// Applies `--vehicle` (the simulated vehicle, [`Self::set_plant`]) and `--model-vehicle`
-    /// (what the firmware believes) when given: each a named set or a vehicle file.
-    pub fn override_vehicles(&mut self, vehicle: Option<&str>, model: Option<&str>) -> Result<()> {
+    /// Applies the command line's overrides when given: `--vehicle` (the simulated vehicle,
+    /// [`Self::set_plant`]) and `--model-vehicle` (what the firmware believes), each a named
+    /// set or a vehicle file, and `--controller` (one of [`CONTROLLERS`]) with its
+    /// `--on-current-a`; then checks the passive-on current against the believed vehicle's
+    /// coil rating ([`Self::check_on_current`]), naming the option or the file's field.
+    pub fn apply_overrides(
+        &mut self,
+        vehicle: Option<&str>,
+        model: Option<&str>,
+        controller: Option<(&str, f64)>,
+    ) -> Result<()> {
         if let Some(v) = vehicle {
             self.set_plant(vehicle_file::load(v).context("--vehicle")?);
         }
         if let Some(m) = model {
             self.model_vehicle = Some(vehicle_file::load(m).context("--model-vehicle")?);
         }
-        Ok(())
+        let source = match controller {
+            Some((name, on_current_a)) => {
+                self.controller = name.to_string();
+                self.on_current_a = on_current_a;
+                "--on-current-a"
+            }
+            None => ON_CURRENT_FIELD,
+        };
+        self.check_on_current(source)
     }
 
     /// The vehicle the firmware believes.
     pub fn model(&self) -> &Vehicle {
         self.model_vehicle.as_ref().unwrap_or(&self.plant)
+    }
+
+    /// Checks the passive-on current (when that is the controller) against the coil rating of
+    /// the vehicle the firmware believes, whose controller limits the command to it; `source`
+    /// names where the current was given (an option or a scenario file's field).
+    pub fn check_on_current(&self, source: &str) -> Result<()> {
+        if self.controller == "passive-on" {
+            arg_range::check_current(source, self.on_current_a, self.model())?;
+        }
+        Ok(())
     }
 
     /// The scenario's own controller as a closed-loop arm.

@@ -72,13 +72,13 @@ use crate::model::disturbance::{
 };
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::arg_range::Range;
+use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
 use shimmy_core::params::kmh_to_mps;
-use shimmy_core::vehicle::{SetError, Vehicle};
+use shimmy_core::vehicle::Vehicle;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -261,18 +261,7 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<Vehicle
     let mut v =
         vehicle_file::load_relative(spec, dir).with_context(|| format!("field `{key}.vehicle`"))?;
     for (name, value) in &section.overrides {
-        match v.set("plant", name, *value) {
-            Ok(()) => {}
-            Err(SetError::UnknownField) => bail!(
-                "field `{key}.overrides.{name}`: no such plant parameter, allowed: {}",
-                vehicle_file::field_names("plant").join(", ")
-            ),
-            Err(SetError::Invalid(e)) => bail!(
-                "{}",
-                e.to_string()
-                    .replacen("field `plant.", &format!("field `{key}.overrides."), 1)
-            ),
-        }
+        vehicle_file::set_field(&mut v, "plant", &format!("{key}.overrides"), name, *value)?;
     }
     v.validate()
         .with_context(|| format!("field `{key}.overrides`"))?;
@@ -303,12 +292,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
                 );
             };
             let on = match (kind, c.on_current_a) {
-                ("passive-on", Some(i)) => {
-                    // The firmware's limit: the coil rating of the vehicle it believes.
-                    let model = model_vehicle.as_ref().unwrap_or(&plant);
-                    let rated = arg_range::vehicle_current(model);
-                    in_range("controller.on_current_a", i, rated.lo, rated.hi, "A")?
-                }
+                ("passive-on", Some(i)) => i,
                 ("passive-on", None) => {
                     bail!("field `controller.on_current_a` is required for passive-on")
                 }
@@ -415,9 +399,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
             ("encoder_noise_lsb", s.encoder_noise_lsb),
         ] {
             if let Some(x) = value {
-                if let Err(SetError::Invalid(e)) = plant.set("sensors", name, x) {
-                    bail!("{e}");
-                }
+                vehicle_file::set_field(&mut plant, "sensors", "sensors", name, x)?;
             }
         }
     }
@@ -452,7 +434,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         scenario.impulses.first().map(|i| i.t0_s)
     };
 
-    Ok(ScenarioSpec {
+    let spec = ScenarioSpec {
         name,
         description: String::new(),
         plant,
@@ -467,7 +449,9 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         trace_every,
         faults,
         out_dir,
-    })
+    };
+    spec.check_on_current(ON_CURRENT_FIELD)?;
+    Ok(spec)
 }
 
 /// Validates one `[[fault]]` entry.

@@ -22,7 +22,7 @@
 
 use anyhow::{bail, Context, Result};
 use shimmy_core::params::ParamSet;
-use shimmy_core::vehicle::{self, SetError, Vehicle, FIELDS, SECTIONS};
+use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
 use std::path::{Path, PathBuf};
 
 /// The older name of the `[plant]` section (parameter files).
@@ -114,27 +114,31 @@ pub fn parse(text: &str) -> Result<Vehicle> {
                     other.type_str()
                 ),
             };
-            match v.set(section, name, x) {
-                Ok(()) => {}
-                Err(SetError::UnknownField) => bail!(
-                    "field `{key}.{name}`: no such field, allowed: {}",
-                    field_names(section).join(", ")
-                ),
-                Err(SetError::Invalid(e)) => bail!("{}", shown_in(e, key)),
-            }
+            set_field(&mut v, section, key, name, x)?;
         }
     }
     v.validate()?;
     Ok(v)
 }
 
-/// The error as the user wrote the section (`overrides.k_d`, not `plant.k_d`).
-fn shown_in(e: vehicle::VehicleError, key: &str) -> String {
-    let text = e.to_string();
-    if key == PLANT_ALIAS {
-        text.replacen("field `plant.", &format!("field `{PLANT_ALIAS}."), 1)
-    } else {
-        text
+/// Sets the field `section.name` of `v` to `x` (checked against its range), with an error
+/// naming the field as the user wrote it, `shown_as.name` (e.g. `overrides.k_d` under the
+/// older section name, `plant.overrides.k_d` in a scenario file).
+pub fn set_field(v: &mut Vehicle, section: &str, shown_as: &str, name: &str, x: f64) -> Result<()> {
+    match v.set(section, name, x) {
+        Ok(()) => Ok(()),
+        Err(SetError::UnknownField) => bail!(
+            "field `{shown_as}.{name}`: no such field, allowed: {}",
+            field_names(section).join(", ")
+        ),
+        Err(SetError::Invalid(e)) => bail!(
+            "{}",
+            e.to_string().replacen(
+                &format!("field `{section}."),
+                &format!("field `{shown_as}."),
+                1
+            )
+        ),
     }
 }
 

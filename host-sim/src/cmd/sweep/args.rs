@@ -2,9 +2,11 @@
 //! time-domain map), so that neither has to import the other.
 
 use crate::sim::arg_range::{self, Range};
+use crate::sim::scenario::controller_name;
 use anyhow::{bail, Result};
 use clap::Args;
-use shimmy_core::params::{Param, PlantParams};
+use shimmy_core::params::Param;
+use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
 /// Options of `shimmy-sim sweep`.
@@ -37,7 +39,7 @@ pub struct SweepArgs {
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=1001))]
     pub v_steps: Option<usize>,
     /// MR damper currents, A (one map each, as an equivalent viscous damper); none = no damper.
-    /// Each 0 to 2 A (the coil rating), at most 16.
+    /// Each 0 to the vehicle's coil rating, at most 16.
     #[arg(long, value_delimiter = ',', alias = "damper-currents", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub damper_current_a: Vec<f64>,
     /// Wheel-yaw amplitude of the damper's describing function, deg: above 0, at most 20.
@@ -55,7 +57,7 @@ pub struct SweepArgs {
     /// and controller, map of the final wheel-yaw amplitude with the linear Hopf boundary.
     #[arg(long, value_delimiter = ',')]
     pub controllers: Vec<String>,
-    /// Time-domain sweep: fixed current of `passive-on`, in A: 0 to 2 A (the coil rating).
+    /// Time-domain sweep: fixed current of `passive-on`, in A: 0 to the vehicle's coil rating.
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub on_current_a: f64,
     /// Time-domain sweep: simulated time per run, s: 1 to 600.
@@ -83,13 +85,15 @@ pub const MAX_CURRENTS: usize = 16;
 /// Most closed-loop runs (speeds x values x controllers) in one time-domain sweep.
 pub const MAX_RUNS: usize = 20_000;
 
-/// The grid axes: speeds in km/h, parameter values and the parameter, validated
-/// (`default_steps` = (speeds, values) when not given).
+/// The grid axes: speeds in km/h, parameter values and the parameter, validated, and the
+/// currents checked against `vehicle`'s coil rating (`default_steps` = (speeds, values) when
+/// not given).
 pub fn axes(
     a: &SweepArgs,
-    base: &PlantParams,
+    vehicle: &Vehicle,
     default_steps: (usize, usize),
 ) -> Result<(Vec<f64>, Vec<f64>, Param)> {
+    let base = &vehicle.plant;
     let Some(param) = Param::from_name(&a.param) else {
         let names: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
         bail!(
@@ -101,6 +105,15 @@ pub fn axes(
     let v_steps = a.v_steps.unwrap_or(default_steps.0);
     let factor_steps = a.factor_steps.unwrap_or(default_steps.1);
     check(a)?;
+    for &i in &a.damper_current_a {
+        arg_range::check_current("--damper-current-a", i, vehicle)?;
+    }
+    if a.controllers
+        .iter()
+        .any(|c| controller_name(c) == Some("passive-on"))
+    {
+        arg_range::check_current("--on-current-a", a.on_current_a, vehicle)?;
+    }
     if !(1..=401).contains(&factor_steps) || !(2..=1001).contains(&v_steps) {
         bail!("--factor-steps {factor_steps}, --v-steps {v_steps}: allowed 1 to 401 and 2 to 1001");
     }
@@ -120,8 +133,9 @@ pub fn axes(
     Ok((speeds_kmh, values, param))
 }
 
-/// The single-option ranges again (for arguments built in code rather than parsed) and the
-/// checks that involve several options: `--factor-min <= --factor-max`, `--v-min-kmh <
+/// The single-option ranges again (for arguments built in code rather than parsed; the
+/// currents are checked in [`axes`], against the vehicle) and the checks that involve several
+/// options: `--factor-min <= --factor-max`, `--v-min-kmh <
 /// --v-max-kmh`, at most [`MAX_CURRENTS`] currents and [`MAX_RUNS`] time-domain runs.
 pub fn check(a: &SweepArgs) -> Result<()> {
     FACTOR.check("--factor-min", a.factor_min)?;
@@ -129,12 +143,8 @@ pub fn check(a: &SweepArgs) -> Result<()> {
     arg_range::SPEED_KMH.check("--v-min-kmh", a.v_min_kmh)?;
     arg_range::SPEED_KMH.check("--v-max-kmh", a.v_max_kmh)?;
     REF_AMPLITUDE_DEG.check("--ref-amplitude-deg", a.ref_amplitude_deg)?;
-    arg_range::coil_current().check("--on-current-a", a.on_current_a)?;
     DURATION_S.check("--duration-s", a.duration_s)?;
     KICK_DEG.check("--kick-deg", a.kick_deg)?;
-    for &i in &a.damper_current_a {
-        arg_range::coil_current().check("--damper-current-a", i)?;
-    }
     if a.damper_current_a.len() > MAX_CURRENTS {
         bail!(
             "--damper-current-a: {} values; allowed: at most {MAX_CURRENTS}",

@@ -44,13 +44,12 @@ pub struct SweepMap {
 pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
     let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
     let base = vehicle.plant;
-    let (speeds_kmh, values, param) = axes(a, &base, (149, 41))?;
+    let (speeds_kmh, values, param) = axes(a, &vehicle, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
     if a.damper_current_a.is_empty() {
         dampers.push(("no damper".into(), 0.0));
     }
     for &i in &a.damper_current_a {
-        crate::sim::arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
         let d = damper_equivalent(
             &base,
             &vehicle.damper.spencer,

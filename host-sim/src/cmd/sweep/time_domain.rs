@@ -83,7 +83,7 @@ pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
 fn grid(a: &SweepArgs) -> Result<(Vehicle, TdGrid)> {
     let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
     let base = vehicle.plant;
-    let (speeds_kmh, values, param) = axes(a, &base, DEFAULT_STEPS)?;
+    let (speeds_kmh, values, param) = axes(a, &vehicle, DEFAULT_STEPS)?;
     let step = kmh_to_mps((a.v_max_kmh - a.v_min_kmh) / (speeds_kmh.len() - 1) as f64 / 4.0);
     let hopf = values
         .iter()
