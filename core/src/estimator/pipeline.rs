@@ -41,7 +41,10 @@ impl PipelineParams {
     /// empirical sigmas, the flutterometer's 3-sigma rule.
     pub fn tuned_fusion() -> FusionParams {
         FusionParams {
-            mismatch_sigmas: 4.0,
+            mismatch_sigmas: 2.5,
+            agreement_sigmas: 1.0,
+            offset_tau_max_s: 30.0,
+            offset_speed_window_mps: 1.0,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()
         }
@@ -69,8 +72,8 @@ impl PipelineParams {
         MonitorParams {
             zeta_low_on: 0.005,
             zeta_low_off: 0.015,
-            dv_low_on_mps: 2.2,
-            dv_low_off_mps: 2.4,
+            dv_low_on_mps: 1.4,
+            dv_low_off_mps: 1.6,
             zeta_crit_on: -0.02,
             zeta_crit_off: -0.01,
             dv_crit_on_mps: 1.0,
@@ -80,6 +83,7 @@ impl PipelineParams {
             amp_on_rad: 0.5f32.to_radians(),
             amp_off_rad: 0.25f32.to_radians(),
             release_s: 2.0,
+            data_sigmas: 1.0,
         }
     }
 }
@@ -126,7 +130,7 @@ impl<const N: usize> DataPipeline<N> {
     pub fn new(params: &PipelineParams) -> Result<Self, ConfigError> {
         Ok(Self {
             meter: MarginEstimator::new(params.estimator)?,
-            fusion: Fusion::new(params.fusion),
+            fusion: Fusion::new(params.fusion).matched_to(params.estimator.lambda_slow),
             monitor: Monitor::new(params.monitor),
         })
     }
@@ -325,8 +329,8 @@ mod tests {
             outputs += usize::from(a.is_some());
             with_model += usize::from(a.is_some_and(|o| o.report.zeta_model.is_some()));
         }
-        assert_eq!(outputs, 150);
-        assert!(with_model > 100, "{with_model}");
+        assert_eq!(outputs, 1500 / usize::from(pp.estimator.decimation));
+        assert!(3 * with_model > 2 * outputs, "{with_model} of {outputs}");
         assert_eq!(whole.level(), data.level());
     }
 }
