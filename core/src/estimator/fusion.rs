@@ -1,11 +1,10 @@
 //! Fusion of the data-driven damping (level) with the model-based slope and critical speed:
 //! "data for the level, model for the slope".
 //!
-//! - speed margin (`DataMarginUse::Always`) dV = min(dV_data, dV_model),
-//!   dV_data = max(zeta_hat, 0) / |dzeta/dV|_model, dV_model = max(V_crit,model - V, 0) (only
-//!   when the model reports an onset speed above V);
-//! - or (`DataMarginUse::WhenModelInconsistent`, the pipeline's) the model margin corrected by
-//!   the data when they disagree: the measured damping offset
+//! - speed margin: the model margin dV_model = V_crit,model - V (the model's onset speed above
+//!   V, or below it inside its window), corrected by the data (always with
+//!   `DataMarginUse::Always`; with `DataMarginUse::WhenModelInconsistent`, the pipeline's, only
+//!   when they disagree): the measured damping offset
 //!   delta = zeta_hat - zeta_model,window (the model damping averaged with the slow meter's own
 //!   forgetting, so a ramp's data lag is not mistaken for a mismatch) shifts the model's onset by
 //!   delta / |dzeta/dV|: dV = max(V_crit,model - V + delta / |dzeta/dV|, 0), in both directions;
@@ -49,7 +48,7 @@ pub struct FusionParams {
 /// When the (noisy) data-based speed margin is used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum DataMarginUse {
-    /// Always: margin = min(dV_data, dV_model).
+    /// Always: the data correct the model margin on every update (no consistency gate).
     #[default]
     Always,
     /// Only when the model has no onset above V or is flagged inconsistent with the data
@@ -257,8 +256,9 @@ impl Fusion {
                 .min(self.params.offset_tau_max_s);
             self.offset = match self.offset_t_s {
                 Some(t0) if tau > 0.0 => {
+                    // backward-Euler first-order average (no expf in the image)
                     let dt = (t - t0).clamp(0.0, 1.0);
-                    self.offset + (1.0 - libm::expf(-dt / tau)) * (raw - self.offset)
+                    self.offset + dt / (tau + dt) * (raw - self.offset)
                 }
                 _ => raw,
             };
@@ -297,41 +297,26 @@ impl Fusion {
             0.0
         };
         let model_onset = m.v_crit_onset_mps.filter(|x| x.is_finite());
-        let mut best: Option<(f32, MarginSource)> = None;
-        match self.params.data_margin {
-            DataMarginUse::Always => {
-                if data_valid && slope_ok {
-                    let dv = (r.zeta_data.max(0.0) as f64 * inv_slope) as f32;
-                    if dv.is_finite() {
-                        best = Some((dv, MarginSource::Data));
-                    }
-                }
-                if let Some(vc) = model_onset {
-                    let dv = (vc - v as f64).max(0.0) as f32;
-                    if best.is_none_or(|(b, _)| dv < b) {
-                        best = Some((dv, MarginSource::Model));
-                    }
-                }
+        let use_data = data_valid
+            && slope_ok
+            && match self.params.data_margin {
+                DataMarginUse::Always => true,
+                DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
+            };
+        let correction = if use_data { self.offset } else { 0.0 };
+        r.zeta_correction = correction;
+        let shift = correction as f64 * inv_slope;
+        let candidate = match model_onset {
+            Some(vc) if use_data => Some((vc - v as f64 + shift, MarginSource::Data)),
+            Some(vc) => Some((vc - v as f64, MarginSource::Model)),
+            None if use_data => {
+                Some(((m.zeta + correction as f64) * inv_slope, MarginSource::Data))
             }
-            DataMarginUse::WhenModelInconsistent => {
-                let use_data =
-                    data_valid && slope_ok && (!self.consistent || model_onset.is_none());
-                let correction = if use_data { self.offset } else { 0.0 };
-                r.zeta_correction = correction;
-                let shift = correction as f64 * inv_slope;
-                let candidate = match model_onset {
-                    Some(vc) if use_data => Some((vc - v as f64 + shift, MarginSource::Data)),
-                    Some(vc) => Some((vc - v as f64, MarginSource::Model)),
-                    None if use_data => {
-                        Some(((m.zeta + correction as f64) * inv_slope, MarginSource::Data))
-                    }
-                    None => None,
-                };
-                best = candidate
-                    .map(|(dv, src)| (dv.max(0.0) as f32, src))
-                    .filter(|(dv, _)| dv.is_finite());
-            }
-        }
+            None => None,
+        };
+        let best = candidate
+            .map(|(dv, src)| (dv.max(0.0) as f32, src))
+            .filter(|(dv, _)| dv.is_finite());
         if let Some((dv, src)) = best {
             r.speed_margin_mps = Some(dv);
             r.margin_source = src;
@@ -389,7 +374,7 @@ mod tests {
     }
 
     #[test]
-    fn margin_is_min_of_data_and_model() {
+    fn always_mode_corrects_the_model_margin_with_the_data() {
         let mut f = Fusion::new(FusionParams::default());
         let e = est(0.04, 0.01);
         let m = ModelMargin {
@@ -399,7 +384,7 @@ mod tests {
             v_crit_onset_mps: Some(25.0),
             valid: true,
         };
-        // data margin 0.04/0.004 = 10 m/s, model margin 25-20 = 5 m/s -> model, ttc 5/0.5 = 10 s
+        // model margin 25 - 20 = 5 m/s, moved by (0.04 - 0.045) / 0.004 = -1.25 m/s; ttc 3.75/0.5
         let r = f.update(&FusionInput {
             t_s: 0.0,
             speed_mps: 20.0,
@@ -408,11 +393,12 @@ mod tests {
             slow: &e,
             model: Some(&m),
         });
-        assert_eq!(r.margin_source, MarginSource::Model);
-        assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
-        assert!((r.time_to_critical_s.unwrap() - 10.0).abs() < 1e-4);
+        assert_eq!(r.margin_source, MarginSource::Data);
+        assert!((r.speed_margin_mps.unwrap() - 3.75).abs() < 1e-5, "{r:?}");
+        assert!((r.time_to_critical_s.unwrap() - 7.5).abs() < 1e-4);
         assert!(r.valid && r.model_consistent);
-        // no onset from the model -> data margin, decelerating -> no time to critical
+        // no onset from the model: its damping corrected by the data over the slope,
+        // (0.045 - 0.005) / 0.004 = 10 m/s; decelerating -> no time to critical
         let m2 = ModelMargin {
             v_crit_onset_mps: None,
             ..m

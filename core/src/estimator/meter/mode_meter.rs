@@ -295,6 +295,8 @@ pub struct MarginEstimator<T> {
     cfg: EstimatorConfig,
     fs_dec_hz: f64,
     n_reg: usize,
+    /// Extra (non-AR) regressors, at the front of the regressor.
+    extra: usize,
     /// Lags kept: the larger of the two orders.
     p: usize,
     p_fast: usize,
@@ -369,7 +371,7 @@ impl<T: Real> MarginEstimator<T> {
         let extra = if cfg.wheel_order_regressors { 2 } else { 0 }
             + usize::from(cfg.bias_regressor)
             + usize::from(cfg.damper_input_regressor);
-        let n_reg = p_slow + extra;
+        let n_reg = extra + p_slow;
         let tmax = cfg.trace_max.map(T::from_f32);
         let p0 = T::from_f32(cfg.p0);
         let dt = 1.0 / fs_dec;
@@ -377,6 +379,7 @@ impl<T: Real> MarginEstimator<T> {
         Ok(Self {
             fs_dec_hz: fs_dec,
             n_reg,
+            extra,
             p,
             p_fast,
             p_slow,
@@ -546,8 +549,7 @@ impl<T: Real> MarginEstimator<T> {
         let p = self.p.min(MAX_ORDER);
         let (p_fast, p_slow) = (self.p_fast.min(p), self.p_slow.min(p));
         if self.hist_len >= p {
-            let phi_fast = self.regressor(p_fast, wheel_active);
-            let phi_slow = self.regressor(p_slow, wheel_active);
+            let phi = self.regressor(p, wheel_active);
             let frozen = self.cfg.freeze_enabled && exc_rms < self.cfg.min_excitation_rms_rad;
             self.out.frozen = frozen;
             if frozen {
@@ -561,19 +563,19 @@ impl<T: Real> MarginEstimator<T> {
                 if self.pending_reset {
                     self.regime_change();
                 }
-                for (rls, tr, phi, pi) in [
-                    (&mut self.fast, &mut self.tr_fast, &phi_fast, p_fast),
-                    (&mut self.slow, &mut self.tr_slow, &phi_slow, p_slow),
+                for (rls, tr) in [
+                    (&mut self.fast, &mut self.tr_fast),
+                    (&mut self.slow, &mut self.tr_slow),
                 ] {
-                    match rls.update(phi, y) {
+                    match rls.update(&phi, y) {
                         Ok(e) => tr.innovation.push(e),
                         Err(_) => {
                             self.counters.rls_rejects = self.counters.rls_rejects.saturating_add(1)
                         }
                     }
                     if self.cfg.wheel_order_regressors && !wheel_active {
-                        rls.hold_direction(pi);
-                        rls.hold_direction(pi + 1);
+                        rls.hold_direction(0);
+                        rls.hold_direction(1);
                     }
                 }
             }
@@ -581,7 +583,7 @@ impl<T: Real> MarginEstimator<T> {
             Self::extract(
                 &self.cfg,
                 self.fs_dec_hz,
-                p_fast,
+                (self.extra, p_fast),
                 &self.fast,
                 &mut self.tr_fast,
                 frozen,
@@ -591,7 +593,7 @@ impl<T: Real> MarginEstimator<T> {
                 Self::extract(
                     &self.cfg,
                     self.fs_dec_hz,
-                    p_slow,
+                    (self.extra, p_slow),
                     &self.slow,
                     &mut self.tr_slow,
                     frozen,
@@ -611,19 +613,18 @@ impl<T: Real> MarginEstimator<T> {
         self.last_phase = self.phase;
     }
 
-    /// The ARX regressor with `p` lags: y[k-1..k-p], then cos/sin of the wheel-order phase, the
-    /// offset and the damper command (those enabled).
+    /// The ARX regressor, extras first so both instances share it: the enabled extras (cos/sin
+    /// of the wheel-order phase, the offset, the damper command; `self.extra` entries), then
+    /// y[k-1..k-p] for the larger order p. An instance of order q uses the first extra + q.
     fn regressor(&self, p: usize, wheel_active: bool) -> [T; N_MAX] {
-        let p = p.min(MAX_ORDER);
         let mut phi = [T::ZERO; N_MAX];
-        phi[..p].copy_from_slice(&self.hist[..p]);
-        let mut k = p;
+        let mut k = 0;
         if self.cfg.wheel_order_regressors {
             if wheel_active {
-                phi[k] = self.phase.cos();
-                phi[k + 1] = self.phase.sin();
+                phi[0] = self.phase.cos();
+                phi[1] = self.phase.sin();
             }
-            k += 2;
+            k = 2;
         }
         if self.cfg.bias_regressor {
             phi[k] = T::ONE;
@@ -631,21 +632,26 @@ impl<T: Real> MarginEstimator<T> {
         }
         if self.cfg.damper_input_regressor {
             phi[k] = self.u_prev;
+            k += 1;
+        }
+        for (slot, h) in phi.iter_mut().skip(k).zip(self.hist.iter().take(p)) {
+            *slot = *h;
         }
         phi
     }
 
+    /// Roots and mode of one instance; `(extra, p)`: its AR coefficients are theta[extra..extra + p].
     fn extract(
         cfg: &EstimatorConfig,
         fs: f64,
-        p: usize,
+        (extra, p): (usize, usize),
         rls: &Rls<T>,
         tr: &mut Track<T>,
         frozen: bool,
         counters: &mut MeterCounters,
     ) {
         let mut c = [T::ZERO; MAX_ORDER];
-        for (ci, th) in c.iter_mut().zip(rls.theta().iter()).take(p) {
+        for (ci, th) in c.iter_mut().zip(rls.theta().iter().skip(extra)).take(p) {
             *ci = -*th;
         }
         let coeffs = c.get(..p).unwrap_or(&[]);
@@ -678,10 +684,11 @@ impl<T: Real> MarginEstimator<T> {
                         tr.last_freq_hz = Some(m.freq_hz);
                         // the raw root: its sensitivity is that of the fitted polynomial
                         let raw = tr.roots.get(m.root_index).copied().unwrap_or_default();
-                        let a = rls.theta().get(..p).unwrap_or(&[]);
+                        let a = rls.theta().get(extra..extra + p).unwrap_or(&[]);
                         let cov_scale = tr.innovation.variance() / (T::ONE + rls.lambda());
-                        let sigma = zeta_sigma(a, raw, fs, |i, j| rls.p(i, j) * cov_scale)
-                            .map_or(f64::NAN, Real::to_f64);
+                        let sigma =
+                            zeta_sigma(a, raw, fs, |i, j| rls.p(extra + i, extra + j) * cov_scale)
+                                .map_or(f64::NAN, Real::to_f64);
                         tr.est.zeta = m.zeta as f32;
                         tr.est.freq_hz = m.freq_hz as f32;
                         tr.est.wn_hz = m.wn_hz as f32;
