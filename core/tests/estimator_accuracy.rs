@@ -136,7 +136,12 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
 /// same seeds as before the split).
 ///
 /// One deviation from (0.25 b, 1.5 b), measured and kept visible rather than hidden: at
-/// zeta = 0.1, 18 Hz the spread is 1.67 b (200 runs), tolerance 1.75 b. Sampling a continuous
+/// zeta = 0.1, 18 Hz the spread is 2.21 b (200 runs; 2.09 b in the default 30) with the
+/// meter's AR(8) slow instance, tolerance 2.3 b (it was 1.67 b with AR(6), tolerance 1.75 b). AR(8) is the default because on the simulated
+/// vehicle the in-phase yaw carries the tramp mode, the steering-wheel mode and two tyre-lag
+/// poles next to the shimmy mode, and AR(6) then reads the shimmy damping +1.9 b (10 km/h) to
+/// +3.9 b (120 km/h) high, an optimistic margin (`shimmy-sim meter-accuracy`,
+/// `docs/margin-estimator.md`); AR(8) buys that bias down for this spread. Sampling a continuous
 /// second-order mode gives an ARMA(2,1) process; the AR(6) represents its moving-average zero
 /// with four extra poles, and for a broad mode at 5.5 samples per cycle their estimation error
 /// leaks into the modal damping. Measured in exploratory runs (30-40 runs each): on exactly
@@ -157,7 +162,7 @@ fn one_mode_ambient_bias_and_spread_within_bound_18hz() {
                 snr_db: 20.0,
                 target: ModeSpec::unit(0.1, 18.0),
                 bias_tol: 0.25,
-                spread_tol: 1.75,
+                spread_tol: 2.3,
             },
             Case {
                 modes: vec![ModeSpec::unit(0.01, 18.0)],

@@ -49,6 +49,12 @@ enum Command {
     /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
     /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
     Margin(cmd::margin::MarginArgs),
+    /// The mode meter's damping estimate against the true shimmy-mode damping on the simulated
+    /// plant (constant speeds, damper off and on, seeds): bias, spread, sigma coverage.
+    MeterAccuracy(cmd::meter_accuracy::MeterAccuracyArgs),
+    /// Plant != model: warning lead over the true onset and false warnings at 70 % of it, with
+    /// the model nominal and the plant off by +-20 % in one parameter (or `hard`, `gentle`).
+    Mismatch(cmd::mismatch::MismatchArgs),
     /// Fault campaign: every sensor/coil fault (and combinations) injected into the supervised
     /// ASMC loop inside and outside the Hopf window: detection time, safe state, suppression.
     Faults(cmd::faults::FaultsArgs),
@@ -70,6 +76,8 @@ fn main() -> Result<()> {
         Some(Command::Compare(a)) => cmd::compare::command(&a),
         Some(Command::Run(a)) => cmd::run::command(&a),
         Some(Command::Margin(a)) => cmd::margin::command(&a),
+        Some(Command::MeterAccuracy(a)) => cmd::meter_accuracy::command(&a),
+        Some(Command::Mismatch(a)) => cmd::mismatch::command(&a),
         Some(Command::Faults(a)) => cmd::faults::command(&a),
         Some(Command::Report(a)) => cmd::report::command(&a),
         None => cmd::demo::command(&cli.demo),

@@ -3,17 +3,17 @@
 //! road noise (5 N m per wheel, 30 Hz corner, half common) and wheel imbalance (2 N m per wheel):
 //! - a 1 km/h/s ramp through the Hopf onset warns >= 5 km/h (>= 5 s) ahead of it;
 //! - a drive well below the window (15 and 20 km/h) raises no warning at all;
-//! - negative test: without the model-consistency gate on the data margin (fusion default
-//!   `DataMarginUse::Always`) the same 20 km/h drive raises false warnings.
+//! - with a wrong model (plant C_a +-20 %): an earlier warning and no standing alarm than with
+//!   the model alone; negative test: without the offset averaging over speed the corrected
+//!   margin false-warns at 70 % of the onset.
 //!
 //! The onset speed comes from an independent scan (`stability::hopf_crossings`), not from the
 //! pipeline. The 10-minute drives take ~5-10 s each in the debug profile (the same runs are
 //! available as `shimmy-sim margin --constant-kmh 15 --duration-s 600`).
-use shimmy_core::estimator::fusion::DataMarginUse;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::params::ParamSet;
-use shimmy_sim::cmd::margin::{run, MarginScenario};
+use shimmy_sim::sim::margin_run::{run, MarginScenario};
 
 /// Constant-speed drive per speed: 10 minutes [s].
 const DRIVE_S: f64 = 600.0;
@@ -67,13 +67,91 @@ fn no_false_warning_well_below_the_window() {
     }
 }
 
-#[test]
-fn negative_without_the_consistency_gate_the_data_margin_false_warns() {
-    // The data margin zeta_hat / |dzeta/dV| spreads by ~0.5 m/s at 20 km/h (ambient-data bound):
-    // used unconditionally it crosses the 2.2 m/s MarginLow threshold within a minute.
-    let mut pp = PipelineParams::default();
-    pp.fusion.data_margin = DataMarginUse::Always;
-    let (w, _) = drive(20.0, pp, 120.0);
-    println!("ungated: first warning {w:?}");
-    assert!(w.is_some(), "expected a false warning without the gate");
+/// The nominal-model pipeline on a plant that differs from it (reduced `shimmy-sim mismatch`).
+mod wrong_model {
+    use super::*;
+    use shimmy_sim::cmd::mismatch::{cases, drive_scenario, ramp_scenario, MismatchCase};
+    use shimmy_sim::sim::margin_run::{onset_kmh, MarginRun};
+
+    fn case(name: &str) -> MismatchCase {
+        cases(&shimmy_core::vehicle::Vehicle::nominal())
+            .into_iter()
+            .find(|c| c.name == name)
+            .expect("case")
+    }
+
+    /// The pipeline with the data correction switched off: data and model always "agree",
+    /// so the margin is the (wrong) model's alone, as before issue 14.
+    fn model_only() -> PipelineParams {
+        let mut pp = PipelineParams::default();
+        pp.fusion.mismatch_sigmas = f32::INFINITY;
+        pp.fusion.agreement_sigmas = f32::INFINITY;
+        pp
+    }
+
+    fn ramp(c: &MismatchCase, pp: PipelineParams) -> MarginRun {
+        let on = onset_kmh(&c.plant).expect("onset");
+        run(&ramp_scenario(c, 1.0, false, on), pp, 0).expect("run")
+    }
+
+    /// Plant C_a +20 % (true onset 23.69 km/h, the model says 29.35): the model alone warns
+    /// 1.24 km/h ahead (from the fast data damping, not from its margin, which reaches its
+    /// thresholds only past the true onset); the data correction moves the first warning to
+    /// 1.71 km/h ahead. The issue's 3 km/h is not reached (`shimmy-sim mismatch`): the slow
+    /// estimate's 10 s memory lags the 1 km/h/s ramp (docs/margin-estimator.md).
+    #[test]
+    fn less_stable_plant_warns_earlier_with_the_correction() {
+        let c = case("C_a +20 %");
+        let (l_with, _) = ramp(&c, PipelineParams::default())
+            .lead()
+            .expect("a warning");
+        let (l_without, _) = ramp(&c, model_only()).lead().expect("a warning");
+        println!(
+            "C_a +20 %: lead {l_with:.2} km/h with the correction, {l_without:.2} km/h model only"
+        );
+        assert!(l_with >= 1.5, "lead {l_with}");
+        assert!(l_with > l_without + 0.3, "{l_with} vs {l_without}");
+    }
+
+    /// Plant C_a -20 % (more stable: true onset 42.69 km/h) driven at 70 % of its onset,
+    /// 29.9 km/h, inside the model's window: the model alone keeps a standing alarm, the
+    /// corrected margin raises none (share of reports above Normal).
+    #[test]
+    fn more_stable_plant_raises_no_standing_alarm() {
+        let c = case("C_a -20 %");
+        let on = onset_kmh(&c.plant).expect("onset");
+        let share = |pp| {
+            let r = run(&drive_scenario(&c, false, on, 120.0), pp, 0).expect("run");
+            let warn = r.rows.iter().filter(|x| x.level > Level::Normal).count();
+            (warn as f64 / r.rows.len() as f64, r.warnings)
+        };
+        let (with, n_with) = share(PipelineParams::default());
+        let (without, _) = share(model_only());
+        println!(
+            "C_a -20 % at 70 % onset: warning {:.0} % of the time, {n_with} onsets (model only {:.0} %)",
+            100.0 * with,
+            100.0 * without
+        );
+        assert_eq!(n_with, 0, "warning share {with}");
+        assert!(without > 0.8, "model only: warning share {without}");
+    }
+
+    /// Negative: without averaging the offset over speed the corrected margin carries the
+    /// slow estimate's full scatter (zeta 0.028 +- 0.01 here) and the same drive false-warns.
+    #[test]
+    fn negative_without_the_offset_averaging_the_corrected_margin_false_warns() {
+        let c = case("C_a -20 %");
+        let on = onset_kmh(&c.plant).expect("onset");
+        let mut pp = PipelineParams::default();
+        pp.fusion.offset_tau_max_s = 0.0;
+        let r = run(&drive_scenario(&c, false, on, 120.0), pp, 0).expect("run");
+        println!(
+            "no offset averaging: {} warning onsets in 120 s",
+            r.warnings
+        );
+        assert!(
+            r.warnings > 0,
+            "expected false warnings without the averaging"
+        );
+    }
 }

@@ -1,11 +1,16 @@
 //! Fusion of the data-driven damping (level) with the model-based slope and critical speed:
 //! "data for the level, model for the slope".
 //!
-//! - speed margin dV = min(dV_data, dV_model), dV_data = max(zeta_hat, 0) / |dzeta/dV|_model,
-//!   dV_model = max(V_crit,model - V, 0) (only when the model reports an onset speed above V);
+//! - speed margin: the model margin dV_model = V_crit,model - V (the model's onset speed above
+//!   V, or below it inside its window), corrected by the data (always with
+//!   `DataMarginUse::Always`; with `DataMarginUse::WhenModelInconsistent`, the pipeline's, only
+//!   when they disagree): the measured damping offset
+//!   delta = zeta_hat - zeta_model,window (the model damping averaged with the slow meter's own
+//!   forgetting, so a ramp's data lag is not mistaken for a mismatch) shifts the model's onset by
+//!   delta / |dzeta/dV|: dV = max(V_crit,model - V + delta / |dzeta/dV|, 0), in both directions;
 //! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
 //!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
-//! - model consistency: |zeta_hat - zeta_model| > k sigma_zeta (k = 3) held for
+//! - model consistency: |delta| > k sigma_zeta (k = 3) held for
 //!   `mismatch_hold_s` sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
 //!
 //! The model-based quantities are plain inputs ([`ModelMargin`]), computed from the plant model
@@ -19,6 +24,15 @@ use super::model_margin::ModelMargin;
 pub struct FusionParams {
     /// Mismatch threshold in sigmas (3).
     pub mismatch_sigmas: f32,
+    /// Agreement threshold in sigmas: the flag clears (and a first check passes) only while
+    /// |delta| stays below this many sigmas (<= `mismatch_sigmas`: hysteresis).
+    pub agreement_sigmas: f32,
+    /// Longest averaging time of the damping offset delta, s (0: no averaging). The offset
+    /// is a function of speed, so it is averaged over a speed interval: time constant
+    /// min(`offset_tau_max_s`, `offset_speed_window_mps` / |acceleration|).
+    pub offset_tau_max_s: f32,
+    /// Speed interval the offset is averaged over, m/s.
+    pub offset_speed_window_mps: f32,
     /// Mismatch must persist this long to raise the flag, s.
     pub mismatch_hold_s: f32,
     /// Agreement must persist this long to clear the flag, s.
@@ -34,13 +48,17 @@ pub struct FusionParams {
 /// When the (noisy) data-based speed margin is used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum DataMarginUse {
-    /// Always: margin = min(dV_data, dV_model).
+    /// Always: the data correct the model margin on every update (no consistency gate).
     #[default]
     Always,
     /// Only when the model has no onset above V or is flagged inconsistent with the data
     /// (the flutterometer idea: data that agree with the model within k sigma confirm the
-    /// model's low-noise margin; data that disagree replace it). The ambient-data spread of
-    /// dV_data (~0.5 m/s at 20 km/h on the nominal plant) would otherwise cause false warnings.
+    /// model's low-noise margin; data that disagree correct it). The correction is the
+    /// measured damping offset delta carried to speed by the model slope: the model's onset
+    /// moves by delta / |dzeta/dV|, earlier when the plant is less damped than the model, later
+    /// when it is more damped. Without an onset above V the margin is
+    /// (zeta_model + delta) / |dzeta/dV|. The ambient-data spread of a data margin (~0.5 m/s
+    /// at 20 km/h on the nominal plant) would cause false warnings if it were always used.
     WhenModelInconsistent,
 }
 
@@ -48,6 +66,9 @@ impl Default for FusionParams {
     fn default() -> Self {
         Self {
             mismatch_sigmas: 3.0,
+            agreement_sigmas: 3.0,
+            offset_tau_max_s: 0.0,
+            offset_speed_window_mps: 2.0,
             mismatch_hold_s: 3.0,
             mismatch_release_s: 3.0,
             min_slope_per_mps: 1.0e-5,
@@ -115,11 +136,18 @@ pub struct MarginReport {
     pub time_to_critical_s: Option<f32>,
     /// False when data and model disagree by > k sigma for a sustained time.
     pub model_consistent: bool,
+    /// Measured damping offset delta = zeta_data - window-averaged zeta_model (0 without
+    /// a model or valid data).
+    pub zeta_offset: f32,
+    /// The part of `zeta_offset` applied to the model margin (0 while data and model agree).
+    pub zeta_correction: f32,
     /// The slow data estimate is valid.
     pub data_valid: bool,
     /// The fast data estimate is valid.
     pub fast_valid: bool,
-    /// The report carries a usable margin (data valid and a valid model).
+    /// The report carries a usable margin: data valid, a margin present and (with
+    /// `DataMarginUse::WhenModelInconsistent`) data and model compared for a full hold or
+    /// release time since the start.
     pub valid: bool,
 }
 
@@ -130,6 +158,16 @@ pub struct Fusion {
     mismatch_since_s: Option<f32>,
     agree_since_s: Option<f32>,
     consistent: bool,
+    /// Data and model have been compared for a full hold or release time since the start.
+    checked: bool,
+    /// Forgetting factor of the slow data estimate per update (None: compare with the
+    /// current model damping).
+    window_lambda: Option<f32>,
+    model_sum: f32,
+    model_weight: f32,
+    offset: f32,
+    /// Time of the last offset update (None before the first).
+    offset_t_s: Option<f32>,
 }
 
 fn finite_or(v: f32, d: f32) -> f32 {
@@ -148,7 +186,22 @@ impl Fusion {
             mismatch_since_s: None,
             agree_since_s: None,
             consistent: true,
+            checked: false,
+            window_lambda: None,
+            model_sum: 0.0,
+            model_weight: 0.0,
+            offset: 0.0,
+            offset_t_s: None,
         }
+    }
+
+    /// Compares the data with the model damping averaged over the slow estimate's own
+    /// exponential window (`lambda_slow` per update, one update per meter output): on a speed
+    /// ramp the data estimate lags by about its memory, and the same lag in the model side
+    /// keeps that lag out of the measured offset.
+    pub fn matched_to(mut self, lambda_slow: f32) -> Self {
+        self.window_lambda = (lambda_slow > 0.0 && lambda_slow < 1.0).then_some(lambda_slow);
+        self
     }
 
     /// Parameters.
@@ -187,44 +240,83 @@ impl Fusion {
         r.zeta_model = Some(m.zeta as f32);
         r.freq_model_hz = m.freq_hz.is_finite().then_some(m.freq_hz as f32);
 
+        // the model damping over the data's window, and the offset between them
+        let zm = m.zeta as f32;
+        let zm_window = match self.window_lambda {
+            Some(l) => {
+                self.model_sum = l * self.model_sum + zm;
+                self.model_weight = l * self.model_weight + 1.0;
+                self.model_sum / self.model_weight
+            }
+            None => zm,
+        };
+        if data_valid {
+            let raw = finite_or(r.zeta_data - zm_window, 0.0);
+            let tau = (self.params.offset_speed_window_mps / libm::fabsf(a).max(1e-3))
+                .min(self.params.offset_tau_max_s);
+            self.offset = match self.offset_t_s {
+                Some(t0) if tau > 0.0 => {
+                    // backward-Euler first-order average (no expf in the image)
+                    let dt = (t - t0).clamp(0.0, 1.0);
+                    self.offset + dt / (tau + dt) * (raw - self.offset)
+                }
+                _ => raw,
+            };
+            self.offset_t_s = Some(t);
+        }
+        r.zeta_offset = self.offset;
         // consistency with hysteresis in time
         if data_valid {
             let sigma = r.sigma_zeta_data.max(1e-6);
-            let mismatch =
-                libm::fabsf(r.zeta_data - m.zeta as f32) > self.params.mismatch_sigmas * sigma;
-            if mismatch {
+            let dev = libm::fabsf(self.offset) / sigma;
+            if dev > self.params.mismatch_sigmas {
                 self.agree_since_s = None;
                 let since = *self.mismatch_since_s.get_or_insert(t);
                 if t - since >= self.params.mismatch_hold_s {
                     self.consistent = false;
+                    self.checked = true;
                 }
-            } else {
+            } else if dev < self.params.agreement_sigmas {
                 self.mismatch_since_s = None;
                 let since = *self.agree_since_s.get_or_insert(t);
                 if t - since >= self.params.mismatch_release_s {
                     self.consistent = true;
+                    self.checked = true;
                 }
+            } else {
+                // between the two thresholds: neither decision advances
+                self.mismatch_since_s = None;
+                self.agree_since_s = None;
             }
         }
         let slope = m.dzeta_dv_per_mps;
-        let mut best: Option<(f32, MarginSource)> = None;
-        let model_onset = m.v_crit_onset_mps.filter(|x| x.is_finite());
-        let use_data = match self.params.data_margin {
-            DataMarginUse::Always => true,
-            DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
+        let slope_ok = libm::fabs(slope) >= self.params.min_slope_per_mps as f64;
+        let inv_slope = if slope_ok {
+            1.0 / libm::fabs(slope)
+        } else {
+            0.0
         };
-        if use_data && data_valid && libm::fabs(slope) >= self.params.min_slope_per_mps as f64 {
-            let dv = (r.zeta_data.max(0.0) as f64 / libm::fabs(slope)) as f32;
-            if dv.is_finite() {
-                best = Some((dv, MarginSource::Data));
+        let model_onset = m.v_crit_onset_mps.filter(|x| x.is_finite());
+        let use_data = data_valid
+            && slope_ok
+            && match self.params.data_margin {
+                DataMarginUse::Always => true,
+                DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
+            };
+        let correction = if use_data { self.offset } else { 0.0 };
+        r.zeta_correction = correction;
+        let shift = correction as f64 * inv_slope;
+        let candidate = match model_onset {
+            Some(vc) if use_data => Some((vc - v as f64 + shift, MarginSource::Data)),
+            Some(vc) => Some((vc - v as f64, MarginSource::Model)),
+            None if use_data => {
+                Some(((m.zeta + correction as f64) * inv_slope, MarginSource::Data))
             }
-        }
-        if let Some(vc) = model_onset {
-            let dv = (vc - v as f64).max(0.0) as f32;
-            if best.is_none_or(|(b, _)| dv < b) {
-                best = Some((dv, MarginSource::Model));
-            }
-        }
+            None => None,
+        };
+        let best = candidate
+            .map(|(dv, src)| (dv.max(0.0) as f32, src))
+            .filter(|(dv, _)| dv.is_finite());
         if let Some((dv, src)) = best {
             r.speed_margin_mps = Some(dv);
             r.margin_source = src;
@@ -241,7 +333,14 @@ impl Fusion {
         }
 
         r.model_consistent = self.consistent;
-        r.valid = data_valid && r.speed_margin_mps.is_some();
+        // The corrected margin is trusted only once data and model have been compared: before
+        // the first decision a wrong model's margin (e.g. 0 for a plant more stable than the
+        // model) would raise a warning that the comparison then withdraws.
+        let gate = match self.params.data_margin {
+            DataMarginUse::Always => true,
+            DataMarginUse::WhenModelInconsistent => self.checked,
+        };
+        r.valid = data_valid && gate && r.speed_margin_mps.is_some();
         r
     }
 }
@@ -275,7 +374,7 @@ mod tests {
     }
 
     #[test]
-    fn margin_is_min_of_data_and_model() {
+    fn always_mode_corrects_the_model_margin_with_the_data() {
         let mut f = Fusion::new(FusionParams::default());
         let e = est(0.04, 0.01);
         let m = ModelMargin {
@@ -285,7 +384,7 @@ mod tests {
             v_crit_onset_mps: Some(25.0),
             valid: true,
         };
-        // data margin 0.04/0.004 = 10 m/s, model margin 25-20 = 5 m/s -> model, ttc 5/0.5 = 10 s
+        // model margin 25 - 20 = 5 m/s, moved by (0.04 - 0.045) / 0.004 = -1.25 m/s; ttc 3.75/0.5
         let r = f.update(&FusionInput {
             t_s: 0.0,
             speed_mps: 20.0,
@@ -294,11 +393,12 @@ mod tests {
             slow: &e,
             model: Some(&m),
         });
-        assert_eq!(r.margin_source, MarginSource::Model);
-        assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
-        assert!((r.time_to_critical_s.unwrap() - 10.0).abs() < 1e-4);
+        assert_eq!(r.margin_source, MarginSource::Data);
+        assert!((r.speed_margin_mps.unwrap() - 3.75).abs() < 1e-5, "{r:?}");
+        assert!((r.time_to_critical_s.unwrap() - 7.5).abs() < 1e-4);
         assert!(r.valid && r.model_consistent);
-        // no onset from the model -> data margin, decelerating -> no time to critical
+        // no onset from the model: its damping corrected by the data over the slope,
+        // (0.045 - 0.005) / 0.004 = 10 m/s; decelerating -> no time to critical
         let m2 = ModelMargin {
             v_crit_onset_mps: None,
             ..m
@@ -385,10 +485,20 @@ mod tests {
         assert!(!r.model_consistent);
         assert_eq!(r.margin_source, MarginSource::Data, "{r:?}");
         assert_eq!(r.speed_margin_mps, Some(0.0));
+        // the model's 5 m/s moved by the measured offset: (0.004 - 0.012) / 0.004 = -2 m/s
         let lowish = est(0.004, 0.0005);
         r = step(&mut f, &lowish, t + 0.01);
         assert_eq!(r.margin_source, MarginSource::Data);
-        assert!((r.speed_margin_mps.unwrap() - 1.0).abs() < 1e-4);
+        assert!((r.speed_margin_mps.unwrap() - 3.0).abs() < 1e-4, "{r:?}");
+        assert!((r.zeta_correction + 0.008).abs() < 1e-6);
+        // more damped than the model: the onset moves away (no standing alarm)
+        let high = est(0.052, 0.001);
+        while t < 9.0 {
+            t += 0.01;
+            r = step(&mut f, &high, t);
+        }
+        assert!(!r.model_consistent);
+        assert!((r.speed_margin_mps.unwrap() - 15.0).abs() < 1e-3, "{r:?}");
         // with the default (Always) the same data margin is used at once
         let mut g = Fusion::new(FusionParams::default());
         let r = step(&mut g, &agree, 0.0);

@@ -8,8 +8,9 @@
 //! 2. [`model_margin`]: the model-based margin at the current speed (damping, its slope over
 //!    speed, the onset speed), updated incrementally so one call costs at most one eigen-solve
 //!    ([`model_margin::ModelMargin`]);
-//! 3. [`fusion`]: data for the level, model for the slope: speed margin, time to critical and a
-//!    data/model consistency flag ([`fusion::MarginReport`]);
+//! 3. [`fusion`]: the model for the shape, the data for the level: the model's speed margin,
+//!    corrected by the measured damping offset when data and model disagree, time to critical
+//!    and a data/model consistency flag ([`fusion::MarginReport`]);
 //! 4. [`monitor`]: warning levels with hysteresis and an event log, from the report and the
 //!    meter's yaw amplitude ([`monitor::Level`]);
 //! 5. [`pipeline`]: the one object the firmware and the simulator call every control tick

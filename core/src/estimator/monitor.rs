@@ -61,6 +61,10 @@ pub struct MonitorParams {
     pub amp_off_rad: f32,
     /// A level's release condition must hold this long before it is left, s.
     pub release_s: f32,
+    /// The damping thresholds compare zeta + `data_sigmas` x its reported sigma: a data
+    /// level is raised only when the estimate is below the threshold by that many of its own
+    /// sigmas (0: the estimate itself).
+    pub data_sigmas: f32,
 }
 
 impl Default for MonitorParams {
@@ -79,6 +83,7 @@ impl Default for MonitorParams {
             amp_on_rad: 0.01,
             amp_off_rad: 0.005,
             release_s: 1.0,
+            data_sigmas: 0.0,
         }
     }
 }
@@ -175,8 +180,9 @@ impl<const N: usize> Monitor<N> {
         if amp.is_finite() && amp > pick(p.amp_on_rad, p.amp_off_rad) {
             return Level::ShimmyPresent;
         }
-        let fast = r.fast_valid.then_some(r.zeta_fast);
-        let slow = r.data_valid.then_some(r.zeta_data);
+        let k = p.data_sigmas;
+        let fast = r.fast_valid.then_some(r.zeta_fast + k * r.sigma_zeta_fast);
+        let slow = r.data_valid.then_some(r.zeta_data + k * r.sigma_zeta_data);
         let dv = if r.valid { r.speed_margin_mps } else { None };
         let ttc = if r.valid { r.time_to_critical_s } else { None };
         if lt(fast, pick(p.zeta_crit_on, p.zeta_crit_off))

@@ -1,12 +1,9 @@
 //! `shimmy-sim margin`: the open-loop eigenvalue-margin demonstration (issue 5, "what to show").
 //!
-//! The plant runs open loop (damper off: `Damper::None`, i.e. no damper force at all) on a
-//! speed ramp with road noise and wheel imbalance; the measured wheel yaw angles, speed and
-//! acceleration feed the firmware's [`ShimmyPipeline`] every 1 ms exactly as on the target.
-//! Next to the report the *true* eigenvalues of the simulated plant are computed: the shimmy
-//! mode of A(V) at the true speed ([`ModeSelect::Shimmy`]) and the Hopf onset of the window by
-//! an independent scan ([`stability::hopf_crossings`]). Output: a table on stdout, `margin.csv`
-//! and `margin.png` under `--out`, and the warning lead time.
+//! The run itself (plant, disturbances, pipeline, true eigenvalues) is
+//! [`crate::sim::margin_run`]; this command prints the report once a second next to the true
+//! eigenvalue and writes `margin.csv`, `margin.png` and `summary.json` under `--out`, with the
+//! warning lead time.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -14,20 +11,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 use plotters::prelude::*;
-use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
-use shimmy_core::stability::{self, CrossingKind, ModeSelect};
-use shimmy_core::vehicle::Vehicle;
 
-use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
-use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::model::disturbance::SpeedProfile;
 use crate::sim::arg_range::{self, Range};
+use crate::sim::margin_run::{onset_kmh, run, MarginRow, MarginRun, MarginScenario};
 use crate::sim::vehicle_file;
-
-/// Control period, s.
-pub const DT_S: f64 = 1e-3;
 
 /// Ramp rate: 0.01 to 50 km/h per s.
 pub const RATE_KMH_PER_S: Range = Range::closed(0.01, 50.0, "km/h/s");
@@ -82,248 +71,6 @@ pub struct MarginArgs {
     pub out: PathBuf,
 }
 
-/// An open-loop margin scenario.
-#[derive(Clone, Debug)]
-pub struct MarginScenario {
-    /// Plant parameters of the simulated plant (and the pipeline's model unless `model`).
-    pub params: PlantParams,
-    /// The vehicle the pipeline believes (its model); `None`: `params`.
-    pub model: Option<Vehicle>,
-    /// Speed profile.
-    pub speed: SpeedProfile,
-    /// Simulated duration, s.
-    pub duration_s: f64,
-    /// Road-noise std per wheel, N m (corner 30 Hz, half common to both wheels).
-    pub noise_nm: f64,
-    /// Imbalance amplitude per wheel, N m (phases 0 and 1 rad).
-    pub imbalance_nm: f64,
-    /// Noise seed.
-    pub seed: u64,
-}
-
-impl MarginScenario {
-    /// Constant speed `v_kmh` for `settle_s`, then a ramp to `to_kmh` at `rate` km/h/s.
-    pub fn ramp(params: PlantParams, from_kmh: f64, to_kmh: f64, rate: f64, settle_s: f64) -> Self {
-        let t1 = settle_s + (to_kmh - from_kmh).abs() / rate.max(1e-6);
-        Self {
-            params,
-            model: None,
-            speed: SpeedProfile::Ramp {
-                v0_mps: kmh_to_mps(from_kmh),
-                v1_mps: kmh_to_mps(to_kmh),
-                t0_s: settle_s,
-                t1_s: t1,
-            },
-            duration_s: t1,
-            noise_nm: 5.0,
-            imbalance_nm: 2.0,
-            seed: 1,
-        }
-    }
-
-    /// Constant speed for `duration_s`.
-    pub fn constant(params: PlantParams, v_kmh: f64, duration_s: f64) -> Self {
-        Self {
-            params,
-            model: None,
-            speed: SpeedProfile::Constant(kmh_to_mps(v_kmh)),
-            duration_s,
-            noise_nm: 5.0,
-            imbalance_nm: 2.0,
-            seed: 1,
-        }
-    }
-
-    fn scenario(&self) -> Scenario {
-        let mut s = Scenario::new(self.speed.clone());
-        s.current_a = 0.0;
-        if self.noise_nm > 0.0 {
-            s.noise = Some(RoadNoise::new(self.noise_nm, 30.0, 0.5, self.seed));
-        }
-        if self.imbalance_nm > 0.0 {
-            s.imbalance = Some(Imbalance {
-                amplitude_nm: [self.imbalance_nm; 2],
-                phase_rad: [0.0, 1.0],
-                radius_m: self.params.r,
-            });
-        }
-        s
-    }
-}
-
-/// One recorded row (every decimated pipeline output, 100 Hz).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MarginRow {
-    /// Time, s.
-    pub t_s: f64,
-    /// True speed, km/h.
-    pub speed_kmh: f64,
-    /// True shimmy-mode damping of A(V) at the true speed (filled every `true_every` rows).
-    pub zeta_true: f64,
-    /// True shimmy-mode frequency, Hz.
-    pub freq_true_hz: f64,
-    /// True speed margin to the onset, km/h (onset - V; negative inside the window).
-    pub margin_true_kmh: f64,
-    /// Slow data damping.
-    pub zeta_data: f64,
-    /// Its sigma.
-    pub sigma_data: f64,
-    /// Fast data damping.
-    pub zeta_fast: f64,
-    /// Data valid (slow).
-    pub data_valid: bool,
-    /// Fast valid.
-    pub fast_valid: bool,
-    /// Model damping (pipeline's model margin).
-    pub zeta_model: f64,
-    /// Data frequency, Hz.
-    pub freq_data_hz: f64,
-    /// Reported speed margin, km/h (NaN when none).
-    pub margin_kmh: f64,
-    /// Time to critical, s (NaN when none).
-    pub ttc_s: f64,
-    /// Monitor level.
-    pub level: Level,
-    /// Yaw envelope amplitude, deg.
-    pub amplitude_deg: f64,
-    /// Mean wheel yaw, deg.
-    pub yaw_deg: f64,
-}
-
-/// Result of a run.
-#[derive(Clone, Debug)]
-pub struct MarginRun {
-    /// Rows at 100 Hz.
-    pub rows: Vec<MarginRow>,
-    /// Linear onset speed of the simulated plant, from an independent scan, km/h.
-    pub onset_kmh: Option<f64>,
-    /// First time the level left Normal: (t, speed km/h, level).
-    pub first_warning: Option<(f64, f64, Level)>,
-    /// Highest level reached.
-    pub max_level: Level,
-    /// Time at which the true speed crosses the onset, s.
-    pub onset_time_s: Option<f64>,
-    /// Largest eigen-solves done in one pipeline call.
-    pub max_solves_per_call: u8,
-    /// Model cycles completed.
-    pub model_cycles: u32,
-    /// Wall-clock time of the run, s.
-    pub wall_s: f64,
-}
-
-impl MarginRun {
-    /// Lead of the first warning before the onset: (km/h, s). Positive = before.
-    pub fn lead(&self) -> Option<(f64, f64)> {
-        let (t, v, _) = self.first_warning?;
-        Some((self.onset_kmh? - v, self.onset_time_s? - t))
-    }
-}
-
-/// The linear onset speed of `p` without damper by a 0.5 km/h scan + Brent (independent of the
-/// pipeline's incremental search).
-pub fn onset_kmh(p: &PlantParams) -> Option<f64> {
-    stability::hopf_crossings(
-        p,
-        0.0,
-        kmh_to_mps(1.0),
-        kmh_to_mps(150.0),
-        kmh_to_mps(0.5),
-        stability::DEFAULT_TOL_MPS,
-    )
-    .ok()?
-    .iter()
-    .find(|c| c.kind == CrossingKind::Onset)
-    .map(|c| mps_to_kmh(c.speed_mps))
-}
-
-/// Runs the open-loop scenario through the pipeline. `true_every`: compute the true
-/// eigenvalues every n-th row (0 = never).
-pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result<MarginRun> {
-    let wall = std::time::Instant::now();
-    let p = sc.params;
-    let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
-    let mut scen = sc.scenario();
-    let model = sc.model.map_or(p, |m| m.plant);
-    let mut pipe = ShimmyPipeline::<16>::new(model, pp).context("pipeline config")?;
-    let onset = onset_kmh(&p);
-    let n = (sc.duration_s / DT_S).round() as usize;
-    let mut rows = Vec::with_capacity(n / 10 + 1);
-    let mut first_warning = None;
-    let mut max_level = Level::Normal;
-    let mut onset_time = None;
-    let mut max_solves = 0u8;
-    let (mut zt, mut ft) = (f64::NAN, f64::NAN);
-    for k in 0..n {
-        let t = k as f64 * DT_S;
-        let u = scen.inputs(t, DT_S);
-        sim.advance(DT_S, &u)
-            .with_context(|| format!("integration failed at t = {t}"))?;
-        let t1 = t + DT_S;
-        let x = sim.state();
-        let v = sc.speed.at(t1);
-        let accel = (sc.speed.at(t1 + 0.5 * DT_S) - sc.speed.at(t1 - 0.5 * DT_S)) / DT_S;
-        if let (Some(on), None) = (onset, onset_time) {
-            if mps_to_kmh(v) >= on {
-                onset_time = Some(t1);
-            }
-        }
-        let sample = Sample {
-            psi_l_rad: x[idx::PSI_L] as f32,
-            psi_r_rad: x[idx::PSI_R] as f32,
-            wheel: WheelOrder::Speed {
-                speed_mps: v as f32,
-                radius_m: p.r as f32,
-            },
-            damper_cmd: 0.0,
-        };
-        let out = pipe.push(&sample, v as f32, accel as f32, t1 as f32);
-        max_solves = max_solves.max(pipe.model().solves_last_call());
-        let Some(o) = out else { continue };
-        if o.level > Level::Normal && first_warning.is_none() {
-            first_warning = Some((t1, mps_to_kmh(v), o.level));
-        }
-        max_level = max_level.max(o.level);
-        if true_every > 0 && rows.len() % true_every == 0 {
-            if let Ok(m) = stability::mode_at(&p, v, 0.0, ModeSelect::Shimmy) {
-                zt = m.zeta;
-                ft = m.freq_hz;
-            }
-        }
-        let r = &o.report;
-        rows.push(MarginRow {
-            t_s: t1,
-            speed_kmh: mps_to_kmh(v),
-            zeta_true: zt,
-            freq_true_hz: ft,
-            margin_true_kmh: onset.map_or(f64::NAN, |on| on - mps_to_kmh(v)),
-            zeta_data: r.zeta_data as f64,
-            sigma_data: r.sigma_zeta_data as f64,
-            zeta_fast: r.zeta_fast as f64,
-            data_valid: r.data_valid,
-            fast_valid: r.fast_valid,
-            zeta_model: r.zeta_model.map_or(f64::NAN, f64::from),
-            freq_data_hz: r.freq_hz as f64,
-            margin_kmh: r
-                .speed_margin_mps
-                .map_or(f64::NAN, |m| mps_to_kmh(m as f64)),
-            ttc_s: r.time_to_critical_s.map_or(f64::NAN, f64::from),
-            level: o.level,
-            amplitude_deg: (o.meter.amplitude_rad as f64).to_degrees(),
-            yaw_deg: (0.5 * (x[idx::PSI_L] + x[idx::PSI_R])).to_degrees(),
-        });
-    }
-    Ok(MarginRun {
-        rows,
-        onset_kmh: onset,
-        first_warning,
-        max_level,
-        onset_time_s: onset_time,
-        max_solves_per_call: max_solves,
-        model_cycles: pipe.model().cycles(),
-        wall_s: wall.elapsed().as_secs_f64(),
-    })
-}
-
 fn level_num(l: Level) -> u8 {
     match l {
         Level::Normal => 0,
@@ -331,6 +78,26 @@ fn level_num(l: Level) -> u8 {
         Level::ApproachingCritical => 2,
         Level::ShimmyPresent => 3,
     }
+}
+
+/// The run's key figures for scripts and CI (`summary.json`): the plant's linear onset, the
+/// model's onset, the first warning and its lead, and for a constant drive its duration and
+/// the number of warning onsets. Absent values are `null`.
+pub fn summary_json(sc: &MarginScenario, run: &MarginRun) -> serde_json::Value {
+    let lead = run.lead();
+    let constant = matches!(sc.speed, SpeedProfile::Constant(_));
+    serde_json::json!({
+        "plant_onset_kmh": run.onset_kmh,
+        "model_onset_kmh": sc.model.as_ref().and_then(onset_kmh),
+        "first_warning_kmh": run.first_warning.map(|(_, v, _)| v),
+        "first_warning_s": run.first_warning.map(|(t, _, _)| t),
+        "first_warning_level": run.first_warning.map(|(_, _, l)| format!("{l:?}")),
+        "lead_kmh": lead.map(|l| l.0),
+        "lead_s": lead.map(|l| l.1),
+        "max_level": format!("{:?}", run.max_level),
+        "duration_s": constant.then_some(sc.duration_s),
+        "warnings": constant.then_some(run.warnings),
+    })
 }
 
 /// Writes the rows as CSV.
@@ -513,7 +280,7 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     sc.noise_nm = a.noise_nm;
     sc.imbalance_nm = a.imbalance_nm;
     sc.seed = a.seed;
-    sc.model = Some(model);
+    sc.model = Some(model.plant);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
     let run = run(&sc, model.pipeline_params(), 10)?;
     println!(
@@ -564,6 +331,17 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     write_csv(&csv, &run.rows)?;
     let png = a.out.join("margin.png");
     plot(&png, &run, &a.vehicle)?;
-    println!("wrote {} and {}", csv.display(), png.display());
+    let json = a.out.join("summary.json");
+    std::fs::write(
+        &json,
+        serde_json::to_string_pretty(&summary_json(&sc, &run))? + "\n",
+    )
+    .with_context(|| format!("writing {}", json.display()))?;
+    println!(
+        "wrote {}, {} and {}",
+        csv.display(),
+        png.display(),
+        json.display()
+    );
     Ok(())
 }

@@ -8,6 +8,8 @@ pub mod compare;
 pub mod demo;
 pub mod faults;
 pub mod margin;
+pub mod meter_accuracy;
+pub mod mismatch;
 pub mod params;
 pub mod reference_bench;
 pub mod report;

@@ -6,6 +6,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use shimmy_core::eigen::ModeShape;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
 
@@ -52,9 +53,49 @@ pub const SENSITIVITY_PARAMS: [Param; 15] = [
     Param::IPhi,
 ];
 
-/// Onset/offset speeds (km/h) and onset frequency (Hz) of a parameter set (None where absent),
-/// searching 1..250 km/h.
-pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f64>)> {
+/// A crossing as the sensitivity table shows it: speed km/h, kind, frequency Hz, mode shape.
+pub type CrossingRow = (f64, stability::CrossingKind, f64, ModeShape);
+
+/// The Hopf crossings of a parameter set in 1..250 km/h. The first window (the first onset and
+/// the first offset above it) gets the table's columns; [`Window::all`] keeps every crossing, so
+/// a second instability inside the range is never hidden.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Window {
+    /// First onset, km/h.
+    pub onset_kmh: Option<f64>,
+    /// First offset above the first onset (the first offset when there is no onset), km/h.
+    pub offset_kmh: Option<f64>,
+    /// Frequency at the first onset, Hz.
+    pub onset_freq_hz: Option<f64>,
+    /// Every crossing, in increasing speed.
+    pub all: Vec<CrossingRow>,
+}
+
+impl Window {
+    /// The crossings beyond the first onset/offset pair.
+    pub fn others(&self) -> impl Iterator<Item = &CrossingRow> {
+        self.all
+            .iter()
+            .filter(move |c| Some(c.0) != self.onset_kmh && Some(c.0) != self.offset_kmh)
+    }
+
+    /// [`Window::others`] as text (`onset 197.12 km/h 44.1 Hz anti-phase-wheel-yaw; ...`),
+    /// `-` when there are none.
+    pub fn others_text(&self) -> String {
+        let v: Vec<String> = self
+            .others()
+            .map(|(v, k, f, m)| format!("{} {v:.2} km/h {f:.1} Hz {}", k.name(), m.name()))
+            .collect();
+        if v.is_empty() {
+            "-".into()
+        } else {
+            v.join("; ")
+        }
+    }
+}
+
+/// Every Hopf crossing of `p` (no damper) in 1..250 km/h.
+pub fn window_of(p: &PlantParams) -> Result<Window> {
     let xs = stability::hopf_crossings(
         p,
         0.0,
@@ -65,21 +106,26 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
     )
     .context("Hopf search")?;
     let on = xs.iter().find(|x| x.kind == stability::CrossingKind::Onset);
-    let off = xs
-        .iter()
-        .find(|x| x.kind == stability::CrossingKind::Offset);
-    Ok((
-        on.map(|x| mps_to_kmh(x.speed_mps)),
-        off.map(|x| mps_to_kmh(x.speed_mps)),
-        on.map(|x| x.freq_hz),
-    ))
+    let off = xs.iter().find(|x| {
+        x.kind == stability::CrossingKind::Offset && on.is_none_or(|o| x.speed_mps > o.speed_mps)
+    });
+    Ok(Window {
+        onset_kmh: on.map(|x| mps_to_kmh(x.speed_mps)),
+        offset_kmh: off.map(|x| mps_to_kmh(x.speed_mps)),
+        onset_freq_hz: on.map(|x| x.freq_hz),
+        all: xs
+            .iter()
+            .map(|x| (mps_to_kmh(x.speed_mps), x.kind, x.freq_hz, x.shape))
+            .collect(),
+    })
 }
 
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
     let p = vehicle_file::load(&args.vehicle)?.plant;
-    let (on0, off0, f0) = window_of(&p)?;
+    let w0 = window_of(&p)?;
+    let (on0, off0, f0) = (w0.onset_kmh, w0.offset_kmh, w0.onset_freq_hz);
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
         args.vehicle, args.percent
@@ -90,6 +136,9 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         opt(off0, 2),
         opt(f0, 2)
     );
+    if w0.others().next().is_some() {
+        println!("base, further crossings: {}", w0.others_text());
+    }
     println!(
         "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
         "param", "on -", "off -", "f -", "on +", "off +", "f +", "d on/d%", "d off/d%"
@@ -99,28 +148,34 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
     let mut f = fs::File::create(&path)?;
     writeln!(
         f,
-        "param,unit,base_value,factor,onset_kmh,offset_kmh,onset_freq_hz,base_onset_kmh,base_offset_kmh,base_onset_freq_hz"
+        "param,unit,base_value,factor,onset_kmh,offset_kmh,onset_freq_hz,base_onset_kmh,base_offset_kmh,base_onset_freq_hz,crossings,further_crossings"
     )?;
+    let mut further = Vec::new();
     let k = args.percent / 100.0;
     for q in SENSITIVITY_PARAMS {
         let mut res = Vec::new();
         for factor in [1.0 - k, 1.0 + k] {
             let w = window_of(&p.scaled(q, factor))?;
+            if w.others().next().is_some() {
+                further.push(format!("{} x{factor}: {}", q.name(), w.others_text()));
+            }
             writeln!(
                 f,
-                "{},{},{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
                 q.name(),
                 q.unit(),
                 p.get(q),
                 factor,
-                w.0.map_or(String::new(), |x| format!("{x:.6}")),
-                w.1.map_or(String::new(), |x| format!("{x:.6}")),
-                w.2.map_or(String::new(), |x| format!("{x:.6}")),
+                w.onset_kmh.map_or(String::new(), |x| format!("{x:.6}")),
+                w.offset_kmh.map_or(String::new(), |x| format!("{x:.6}")),
+                w.onset_freq_hz.map_or(String::new(), |x| format!("{x:.6}")),
                 on0.map_or(String::new(), |x| format!("{x:.6}")),
                 off0.map_or(String::new(), |x| format!("{x:.6}")),
                 f0.map_or(String::new(), |x| format!("{x:.6}")),
+                w.all.len(),
+                w.others_text(),
             )?;
-            res.push(w);
+            res.push((w.onset_kmh, w.offset_kmh, w.onset_freq_hz));
         }
         // Central-difference slope in km/h per % change.
         let slope = |a: Option<f64>, b: Option<f64>| match (a, b) {
@@ -139,6 +194,18 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
             slope(res[0].0, res[1].0),
             slope(res[0].1, res[1].1)
         );
+    }
+    if further.is_empty() {
+        println!("no crossing beyond the first onset/offset pair in any variant");
+    } else {
+        println!(
+            "crossings beyond the first onset/offset pair ({} of {} variants):",
+            further.len(),
+            2 * SENSITIVITY_PARAMS.len()
+        );
+        for l in &further {
+            println!("  {l}");
+        }
     }
     println!("wrote {}", path.display());
     Ok(())

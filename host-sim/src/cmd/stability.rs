@@ -195,24 +195,32 @@ fn print_crossings(crossings: &Crossings, v_min_kmh: f64, v_max_kmh: f64) {
             if x.converged { "" } else { " (NOT converged)" }
         );
     }
-    let on = crossings
-        .iter()
-        .find(|x| x.kind == stability::CrossingKind::Onset);
-    let off = crossings
-        .iter()
-        .find(|x| x.kind == stability::CrossingKind::Offset);
-    match (on, off) {
-        (Some(a), Some(b)) => println!(
-            "Hopf window: {:.2} .. {:.2} km/h ({:.2} km/h wide)",
-            mps_to_kmh(a.speed_mps),
-            mps_to_kmh(b.speed_mps),
-            mps_to_kmh(b.speed_mps - a.speed_mps)
-        ),
-        (Some(a), None) => println!(
+    // every unstable window: each onset with the next offset above it
+    let mut onset: Option<f64> = None;
+    for x in crossings {
+        match (x.kind, onset) {
+            (stability::CrossingKind::Onset, _) => onset = Some(x.speed_mps),
+            (stability::CrossingKind::Offset, Some(a)) => {
+                println!(
+                    "Hopf window: {:.2} .. {:.2} km/h ({:.2} km/h wide, {} mode at the offset)",
+                    mps_to_kmh(a),
+                    mps_to_kmh(x.speed_mps),
+                    mps_to_kmh(x.speed_mps - a),
+                    x.shape.name()
+                );
+                onset = None;
+            }
+            (stability::CrossingKind::Offset, None) => println!(
+                "unstable from the start of the range up to {:.2} km/h",
+                mps_to_kmh(x.speed_mps)
+            ),
+        }
+    }
+    if let Some(a) = onset {
+        println!(
             "unstable from {:.2} km/h up to the end of the range (no offset)",
-            mps_to_kmh(a.speed_mps)
-        ),
-        _ => {}
+            mps_to_kmh(a)
+        );
     }
 }
 

@@ -61,6 +61,9 @@ pub enum Damper {
     None,
     /// The Spencer modified Bouc-Wen MR damper.
     Mr(SpencerParams),
+    /// A linear viscous track-rod damper F_d = c v_d with c in N s/m: exactly the damper of
+    /// the linear analysis (`plant::linearise` with the same c), for checks against it.
+    Viscous(f64),
 }
 
 /// The tyre force law.
@@ -182,6 +185,12 @@ impl Plant {
                 dx[idx::Y] = 0.0;
                 dx[idx::Z] = 0.0;
                 0.0
+            }
+            Damper::Viscous(c) => {
+                dx[idx::U] = 0.0;
+                dx[idx::Y] = 0.0;
+                dx[idx::Z] = 0.0;
+                c * self.damper_stroke(x).1
             }
             Damper::Mr(sp) => {
                 let (xd, vd) = self.damper_stroke(x);

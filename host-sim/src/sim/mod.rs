@@ -8,6 +8,7 @@
 pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
+pub mod margin_run;
 pub mod open_loop;
 pub mod reference;
 pub mod scenario;

@@ -14,9 +14,9 @@
 //!    (steering angle) and u the damper command (optional);
 //! 4. [`roots`]: roots of `z^p - a_1 z^(p-1) - ... - a_p`, each with the forgetting bias of
 //!    its RLS undone ([`roots::ForgettingBias`]), s = ln(z) f_s, zeta = -Re(s)/|s|; the
-//!    least-damped pair in the shimmy band, tracked for continuity, with
-//!    sigma_zeta = sqrt(max(zeta, zeta_floor) / (w_n T_eff)), T_eff = 2 / ((1 - lambda) f_s)
-//!    (the ambient-data accuracy bound; the covariance-based root sensitivity is not used);
+//!    least-damped pair in the shimmy band, tracked for continuity, with sigma_zeta from the
+//!    fit's own covariance (innovation variance x P / (1 + lambda)) carried to zeta by the
+//!    root sensitivity ([`roots::zeta_sigma`]);
 //! 5. [`mode_meter`]: the meter itself ([`mode_meter::MarginEstimator`]) runs steps 1-4 and the
 //!    safeguards: freeze on low band energy (RMS of the 1 Hz high-passed decimated yaw below
 //!    `min_excitation_rms_rad`), covariance reset after a long freeze / on `regime_change()` /

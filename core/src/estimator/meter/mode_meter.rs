@@ -5,7 +5,7 @@
 use super::decimate::Decimator;
 use super::real::Real;
 use super::rls::{Rls, N_MAX};
-use super::roots::{aberth, select_mode, Cx, ForgettingBias, MAX_ORDER};
+use super::roots::{aberth, select_mode, zeta_sigma, Cx, ForgettingBias, MAX_ORDER};
 
 /// Configuration of the mode meter. `Default` is the tested design point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -19,8 +19,13 @@ pub struct EstimatorConfig {
     pub aa_stop_hz: f32,
     /// Anti-alias stop-band attenuation, dB.
     pub aa_atten_db: f32,
-    /// AR order p, 2..=8 (4-6 intended; 6 is the tested default).
+    /// AR order p of the slow (margin) instance, 2..=8 (8 is the tested default: on the
+    /// vehicle the in-phase yaw carries the tramp, steering-wheel and tyre-lag dynamics next
+    /// to the shimmy mode, and a lower order reads the shimmy damping high).
     pub ar_order: u8,
+    /// AR order of the fast (warning) instance, 2..=8 (6: its 4 s memory estimates fewer
+    /// coefficients with less scatter).
+    pub ar_order_fast: u8,
     /// Include cos/sin wheel-order regressors.
     pub wheel_order_regressors: bool,
     /// Include a constant (offset) regressor.
@@ -60,8 +65,6 @@ pub struct EstimatorConfig {
     pub track_tol_hz: f32,
     /// ... if its damping is within this of the least-damped pair.
     pub track_zeta_tol: f32,
-    /// Damping floor used in the sigma formula (sigma never collapses to 0 near zeta = 0).
-    pub sigma_zeta_floor: f32,
     /// Warm-up after a reset, in time constants 1/(1-lambda) of each RLS.
     pub warmup_time_constants: f32,
     /// Root-finder iteration bound (sweeps).
@@ -79,7 +82,8 @@ impl Default for EstimatorConfig {
             decimation: 10,
             aa_stop_hz: 80.0,
             aa_atten_db: 60.0,
-            ar_order: 6,
+            ar_order: 8,
+            ar_order_fast: 6,
             wheel_order_regressors: true,
             bias_regressor: true,
             damper_input_regressor: false,
@@ -99,7 +103,6 @@ impl Default for EstimatorConfig {
             band_hi_hz: 20.0,
             track_tol_hz: 1.0,
             track_zeta_tol: 0.02,
-            sigma_zeta_floor: 0.005,
             warmup_time_constants: 1.0,
             root_max_iter: 60,
             slow_roots_every: 1,
@@ -112,8 +115,8 @@ impl Default for EstimatorConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// ar_order outside 2..=8.
-    #[error("estimator ar_order outside 2..=8")]
+    /// ar_order or ar_order_fast outside 2..=8.
+    #[error("estimator ar_order or ar_order_fast outside 2..=8")]
     ArOrder,
     /// A forgetting factor outside (0, 1).
     #[error("estimator forgetting factor outside (0, 1)")]
@@ -182,7 +185,8 @@ pub enum EstimateStatus {
 pub struct ModeEstimate {
     /// Damping ratio of the tracked shimmy-band mode.
     pub zeta: f32,
-    /// One-sigma uncertainty of `zeta` (accuracy bound, see module docs).
+    /// One-sigma uncertainty of `zeta`: the fit's coefficient covariance carried to the root
+    /// (see module docs).
     pub sigma_zeta: f32,
     /// Damped frequency, Hz.
     pub freq_hz: f32,
@@ -224,26 +228,61 @@ pub struct MeterCounters {
     pub frozen_steps: u32,
 }
 
+/// Exponentially weighted mean square of an RLS instance's a-priori innovations, with the
+/// instance's own forgetting factor (normalised, so it is unbiased from the first sample on).
+#[derive(Clone, Copy, Debug)]
+struct InnovationVariance<T> {
+    lambda: T,
+    sum: T,
+    weight: T,
+}
+
+impl<T: Real> InnovationVariance<T> {
+    fn new(lambda: f64) -> Self {
+        Self {
+            lambda: T::from_f64(lambda),
+            sum: T::ZERO,
+            weight: T::ZERO,
+        }
+    }
+
+    fn push(&mut self, e: T) {
+        let sum = self.lambda * self.sum + e * e;
+        if sum.is_finite() {
+            self.sum = sum;
+            self.weight = self.lambda * self.weight + T::ONE;
+        }
+    }
+
+    fn variance(&self) -> T {
+        if self.weight > T::ZERO {
+            self.sum / self.weight
+        } else {
+            T::ZERO
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Track<T> {
     roots: [Cx<T>; MAX_ORDER],
     roots_ok: bool,
     last_freq_hz: Option<f64>,
     est: ModeEstimate,
-    t_eff_s: f64,
+    innovation: InnovationVariance<T>,
     bias: ForgettingBias<T>,
     warmup_updates: u32,
 }
 
 impl<T: Real> Track<T> {
-    fn new(lambda: f64, fs_dec_hz: f64, warmup_tc: f64) -> Self {
+    fn new(lambda: f64, warmup_tc: f64) -> Self {
         let tc = 1.0 / (1.0 - lambda);
         Self {
             roots: [Cx::default(); MAX_ORDER],
             roots_ok: false,
             last_freq_hz: None,
             est: ModeEstimate::default(),
-            t_eff_s: 2.0 / ((1.0 - lambda) * fs_dec_hz),
+            innovation: InnovationVariance::new(lambda),
             bias: ForgettingBias::new(lambda),
             warmup_updates: libm::ceil(warmup_tc * tc) as u32,
         }
@@ -256,7 +295,12 @@ pub struct MarginEstimator<T> {
     cfg: EstimatorConfig,
     fs_dec_hz: f64,
     n_reg: usize,
+    /// Extra (non-AR) regressors, at the front of the regressor.
+    extra: usize,
+    /// Lags kept: the larger of the two orders.
     p: usize,
+    p_fast: usize,
+    p_slow: usize,
     dec_y: Decimator<T>,
     dec_u: Decimator<T>,
     inv_scale: T,
@@ -290,10 +334,11 @@ pub struct MarginEstimator<T> {
 impl<T: Real> MarginEstimator<T> {
     /// Builds the estimator (all filter coefficients computed here).
     pub fn new(cfg: EstimatorConfig) -> Result<Self, ConfigError> {
-        let p = cfg.ar_order as usize;
-        if !(2..=MAX_ORDER).contains(&p) {
+        let (p_slow, p_fast) = (cfg.ar_order as usize, cfg.ar_order_fast as usize);
+        if !((2..=MAX_ORDER).contains(&p_slow) && (2..=MAX_ORDER).contains(&p_fast)) {
             return Err(ConfigError::ArOrder);
         }
+        let p = p_slow.max(p_fast);
         let lam_ok = |l: f32| l > 0.0 && l < 1.0;
         if !(lam_ok(cfg.lambda_fast) && lam_ok(cfg.lambda_slow)) {
             return Err(ConfigError::Lambda);
@@ -323,10 +368,10 @@ impl<T: Real> MarginEstimator<T> {
         if cfg.band_hi_hz as f64 >= 0.5 * fs_dec {
             return Err(ConfigError::Range);
         }
-        let n_reg = p
-            + if cfg.wheel_order_regressors { 2 } else { 0 }
+        let extra = if cfg.wheel_order_regressors { 2 } else { 0 }
             + usize::from(cfg.bias_regressor)
             + usize::from(cfg.damper_input_regressor);
+        let n_reg = extra + p_slow;
         let tmax = cfg.trace_max.map(T::from_f32);
         let p0 = T::from_f32(cfg.p0);
         let dt = 1.0 / fs_dec;
@@ -334,7 +379,10 @@ impl<T: Real> MarginEstimator<T> {
         Ok(Self {
             fs_dec_hz: fs_dec,
             n_reg,
+            extra,
             p,
+            p_fast,
+            p_slow,
             dec_y,
             dec_u,
             inv_scale: T::from_f64(1.0 / cfg.signal_scale_rad as f64),
@@ -346,18 +394,10 @@ impl<T: Real> MarginEstimator<T> {
             hist: [T::ZERO; MAX_ORDER],
             hist_len: 0,
             u_prev: T::ZERO,
-            fast: Rls::new(n_reg, T::from_f32(cfg.lambda_fast), p0, tmax),
+            fast: Rls::new(p_fast + extra, T::from_f32(cfg.lambda_fast), p0, tmax),
             slow: Rls::new(n_reg, T::from_f32(cfg.lambda_slow), p0, tmax),
-            tr_fast: Track::new(
-                cfg.lambda_fast as f64,
-                fs_dec,
-                cfg.warmup_time_constants as f64,
-            ),
-            tr_slow: Track::new(
-                cfg.lambda_slow as f64,
-                fs_dec,
-                cfg.warmup_time_constants as f64,
-            ),
+            tr_fast: Track::new(cfg.lambda_fast as f64, cfg.warmup_time_constants as f64),
+            tr_slow: Track::new(cfg.lambda_slow as f64, cfg.warmup_time_constants as f64),
             hp_prev_in: T::ZERO,
             hp_state: T::ZERO,
             hp_alpha: T::from_f64(hp_alpha),
@@ -385,7 +425,7 @@ impl<T: Real> MarginEstimator<T> {
         self.fs_dec_hz
     }
 
-    /// Regressor dimension of the ARX model.
+    /// Regressor dimension of the slow instance's ARX model.
     pub fn regressor_dim(&self) -> usize {
         self.n_reg
     }
@@ -507,25 +547,9 @@ impl<T: Real> MarginEstimator<T> {
 
         // `min` lets the optimiser drop the bounds checks (panic-free check).
         let p = self.p.min(MAX_ORDER);
+        let (p_fast, p_slow) = (self.p_fast.min(p), self.p_slow.min(p));
         if self.hist_len >= p {
-            // regressor
-            let mut phi = [T::ZERO; N_MAX];
-            phi[..p].copy_from_slice(&self.hist[..p]);
-            let mut k = p;
-            if self.cfg.wheel_order_regressors {
-                if wheel_active {
-                    phi[k] = self.phase.cos();
-                    phi[k + 1] = self.phase.sin();
-                }
-                k += 2;
-            }
-            if self.cfg.bias_regressor {
-                phi[k] = T::ONE;
-                k += 1;
-            }
-            if self.cfg.damper_input_regressor {
-                phi[k] = self.u_prev;
-            }
+            let phi = self.regressor(p, wheel_active);
             let frozen = self.cfg.freeze_enabled && exc_rms < self.cfg.min_excitation_rms_rad;
             self.out.frozen = frozen;
             if frozen {
@@ -539,13 +563,19 @@ impl<T: Real> MarginEstimator<T> {
                 if self.pending_reset {
                     self.regime_change();
                 }
-                for rls in [&mut self.fast, &mut self.slow] {
-                    if rls.update(&phi, y).is_err() {
-                        self.counters.rls_rejects = self.counters.rls_rejects.saturating_add(1);
+                for (rls, tr) in [
+                    (&mut self.fast, &mut self.tr_fast),
+                    (&mut self.slow, &mut self.tr_slow),
+                ] {
+                    match rls.update(&phi, y) {
+                        Ok(e) => tr.innovation.push(e),
+                        Err(_) => {
+                            self.counters.rls_rejects = self.counters.rls_rejects.saturating_add(1)
+                        }
                     }
                     if self.cfg.wheel_order_regressors && !wheel_active {
-                        rls.hold_direction(p);
-                        rls.hold_direction(p + 1);
+                        rls.hold_direction(0);
+                        rls.hold_direction(1);
                     }
                 }
             }
@@ -553,7 +583,7 @@ impl<T: Real> MarginEstimator<T> {
             Self::extract(
                 &self.cfg,
                 self.fs_dec_hz,
-                p,
+                (self.extra, p_fast),
                 &self.fast,
                 &mut self.tr_fast,
                 frozen,
@@ -563,7 +593,7 @@ impl<T: Real> MarginEstimator<T> {
                 Self::extract(
                     &self.cfg,
                     self.fs_dec_hz,
-                    p,
+                    (self.extra, p_slow),
                     &self.slow,
                     &mut self.tr_slow,
                     frozen,
@@ -583,17 +613,45 @@ impl<T: Real> MarginEstimator<T> {
         self.last_phase = self.phase;
     }
 
+    /// The ARX regressor, extras first so both instances share it: the enabled extras (cos/sin
+    /// of the wheel-order phase, the offset, the damper command; `self.extra` entries), then
+    /// y[k-1..k-p] for the larger order p. An instance of order q uses the first extra + q.
+    fn regressor(&self, p: usize, wheel_active: bool) -> [T; N_MAX] {
+        let mut phi = [T::ZERO; N_MAX];
+        let mut k = 0;
+        if self.cfg.wheel_order_regressors {
+            if wheel_active {
+                phi[0] = self.phase.cos();
+                phi[1] = self.phase.sin();
+            }
+            k = 2;
+        }
+        if self.cfg.bias_regressor {
+            phi[k] = T::ONE;
+            k += 1;
+        }
+        if self.cfg.damper_input_regressor {
+            phi[k] = self.u_prev;
+            k += 1;
+        }
+        for (slot, h) in phi.iter_mut().skip(k).zip(self.hist.iter().take(p)) {
+            *slot = *h;
+        }
+        phi
+    }
+
+    /// Roots and mode of one instance; `(extra, p)`: its AR coefficients are theta[extra..extra + p].
     fn extract(
         cfg: &EstimatorConfig,
         fs: f64,
-        p: usize,
+        (extra, p): (usize, usize),
         rls: &Rls<T>,
         tr: &mut Track<T>,
         frozen: bool,
         counters: &mut MeterCounters,
     ) {
         let mut c = [T::ZERO; MAX_ORDER];
-        for (ci, th) in c.iter_mut().zip(rls.theta().iter()).take(p) {
+        for (ci, th) in c.iter_mut().zip(rls.theta().iter().skip(extra)).take(p) {
             *ci = -*th;
         }
         let coeffs = c.get(..p).unwrap_or(&[]);
@@ -624,10 +682,13 @@ impl<T: Real> MarginEstimator<T> {
                     None => EstimateStatus::NoModeInBand,
                     Some(m) => {
                         tr.last_freq_hz = Some(m.freq_hz);
-                        let wn = 2.0 * core::f64::consts::PI * m.wn_hz;
-                        let z = m.zeta.max(cfg.sigma_zeta_floor as f64);
-                        // in T: f64 sqrt is software on the target
-                        let sigma = T::from_f64(z / (wn * tr.t_eff_s)).sqrt().to_f64();
+                        // the raw root: its sensitivity is that of the fitted polynomial
+                        let raw = tr.roots.get(m.root_index).copied().unwrap_or_default();
+                        let a = rls.theta().get(extra..extra + p).unwrap_or(&[]);
+                        let cov_scale = tr.innovation.variance() / (T::ONE + rls.lambda());
+                        let sigma =
+                            zeta_sigma(a, raw, fs, |i, j| rls.p(extra + i, extra + j) * cov_scale)
+                                .map_or(f64::NAN, Real::to_f64);
                         tr.est.zeta = m.zeta as f32;
                         tr.est.freq_hz = m.freq_hz as f32;
                         tr.est.wn_hz = m.wn_hz as f32;

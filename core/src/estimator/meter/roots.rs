@@ -213,6 +213,8 @@ pub struct Mode {
     pub freq_hz: f64,
     /// Natural frequency |s| / 2 pi, Hz.
     pub wn_hz: f64,
+    /// Index of the root in the slice [`select_mode`] chose from (0 from [`mode_of_root`]).
+    pub root_index: usize,
 }
 
 /// Maps a discrete pole z (upper half plane) at sample rate `fs_hz` to a continuous mode via
@@ -232,6 +234,7 @@ pub fn mode_of_root<T: Real>(z: Cx<T>, fs_hz: f64) -> Option<Mode> {
                 zeta: (-sr / mag).to_f64(),
                 freq_hz: (si / two_pi).to_f64(),
                 wn_hz: (mag / two_pi).to_f64(),
+                root_index: 0,
             });
         }
     }
@@ -304,11 +307,11 @@ pub fn select_mode<T: Real>(
     // Each root is mapped once (ln and atan2 are the costly part).
     let mut in_band = [Mode::default(); MAX_ORDER];
     let mut n = 0;
-    for z in roots.iter().take(MAX_ORDER) {
+    for (i, z) in roots.iter().enumerate().take(MAX_ORDER) {
         if let Some(m) = mode_of_root(*z, fs_hz) {
             if m.freq_hz >= f_lo_hz && m.freq_hz <= f_hi_hz {
                 if let Some(slot) = in_band.get_mut(n) {
-                    *slot = m;
+                    *slot = Mode { root_index: i, ..m };
                     n += 1;
                 }
             }
@@ -333,6 +336,55 @@ pub fn select_mode<T: Real>(
         }
     }
     Some(tracked.unwrap_or(best))
+}
+
+/// One-sigma uncertainty of the damping ratio of an AR root, from the covariance of the fitted
+/// coefficients by first-order root sensitivity (the delta method).
+///
+/// `a` are the AR coefficients of z^p - a_1 z^(p-1) - ... - a_p, `z` one of its roots, `cov(i, j)`
+/// the covariance of a_(i+1) and a_(j+1). A simple root moves by dz/da_k = z^(p-k) / F'(z); the
+/// continuous pole s = fs ln z by ds = fs dz / z; and zeta = -Re(s)/|s| by
+/// dzeta = (-Im(s)^2 dRe(s) + Re(s) Im(s) dIm(s)) / |s|^3. Returns `None` when the root is
+/// (numerically) multiple or the result is not finite.
+pub fn zeta_sigma<T: Real>(
+    a: &[T],
+    z: Cx<T>,
+    fs_hz: f64,
+    cov: impl Fn(usize, usize) -> T,
+) -> Option<T> {
+    let p = a.len().min(MAX_ORDER);
+    // Horner for F and F' together
+    let (mut f, mut d) = (Cx::new(T::ONE, T::ZERO), Cx::new(T::ZERO, T::ZERO));
+    for ak in a.iter().take(p) {
+        d = d.mul(z).add(f);
+        f = f.mul(z).sub(Cx::new(*ak, T::ZERO));
+    }
+    let fs = T::from_f64(fs_hz);
+    let dz_scale = Cx::new(fs, T::ZERO).div(d.mul(z));
+    if !dz_scale.is_finite() {
+        return None;
+    }
+    let sr = T::from_f64(0.5) * z.norm_sqr().ln() * fs;
+    let si = z.im.atan2(z.re) * fs;
+    let mag2 = sr * sr + si * si;
+    let mag3 = mag2 * mag2.sqrt();
+    let (g_re, g_im) = (-si * si / mag3, sr * si / mag3);
+    // gradient of zeta over a_1..a_p; z^(p-k) built from k = p (z^0) downwards
+    let mut g = [T::ZERO; MAX_ORDER];
+    let mut pow = Cx::new(T::ONE, T::ZERO);
+    for gk in g.iter_mut().take(p).rev() {
+        let ds = pow.mul(dz_scale);
+        *gk = g_re * ds.re + g_im * ds.im;
+        pow = pow.mul(z);
+    }
+    let mut var = T::ZERO;
+    for (i, gi) in g.iter().enumerate().take(p) {
+        for (j, gj) in g.iter().enumerate().take(p) {
+            var += *gi * cov(i, j) * *gj;
+        }
+    }
+    let sigma = if var > T::ZERO { var.sqrt() } else { T::ZERO };
+    sigma.is_finite().then_some(sigma)
 }
 
 #[cfg(test)]
@@ -591,5 +643,75 @@ mod tests {
         let fb = ForgettingBias::<f64>::new(0.998);
         assert_eq!(fb.shrink(1.0), 0.0);
         assert_eq!(fb.correct(Cx::new(0.0, 1.01)), Cx::new(0.0, 1.01));
+    }
+
+    /// The delta-method sigma against a Monte Carlo of the same coefficient covariance, rooted
+    /// by an independent solver (nalgebra's Schur of the companion matrix): the spread of the
+    /// perturbed polynomials' damping must match the first-order prediction.
+    #[test]
+    fn zeta_sigma_matches_monte_carlo_of_the_coefficients() {
+        use rand::{RngExt, SeedableRng};
+        use rand_distr::StandardNormal;
+        let fs = 50.0;
+        let pole = |zeta: f64, f: f64| {
+            let wn = 2.0 * core::f64::consts::PI * f;
+            let s = Complex::new(-zeta * wn, wn * (1.0 - zeta * zeta).sqrt());
+            (s / fs).exp()
+        };
+        let (zs, z2) = (pole(0.05, 7.0), pole(0.25, 11.0));
+        let roots = [
+            zs,
+            zs.conj(),
+            z2,
+            z2.conj(),
+            Complex::new(0.5, 0.0),
+            Complex::new(-0.3, 0.0),
+        ];
+        let c = poly_from_roots(&roots);
+        let a: Vec<f64> = c.iter().map(|v| -v).collect();
+        // a covariance with correlated neighbours (like the AR normal equations give)
+        let sd = 2e-4;
+        let cov = |i: usize, j: usize| -> f64 {
+            let d = i.abs_diff(j) as i32;
+            sd * sd * 0.6f64.powi(d)
+        };
+        let sigma = zeta_sigma(&a, Cx::new(zs.re, zs.im), fs, cov).unwrap();
+        let p = a.len();
+        let l = nalgebra::DMatrix::<f64>::from_fn(p, p, &cov)
+            .cholesky()
+            .unwrap()
+            .l();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let z_true = mode_of_root(Cx::new(zs.re, zs.im), fs).unwrap().zeta;
+        let n = 4000;
+        let mut sum2 = 0.0;
+        for _ in 0..n {
+            let e = nalgebra::DVector::<f64>::from_fn(p, |_, _| rng.sample(StandardNormal));
+            let d = &l * e;
+            let cp: Vec<f64> = (0..p).map(|k| -(a[k] + d[k])).collect();
+            let near = companion_eigs(&cp)
+                .into_iter()
+                .min_by(|x, y| (x - zs).norm().total_cmp(&(y - zs).norm()))
+                .unwrap();
+            let z = mode_of_root(Cx::new(near.re, near.im.abs()), fs)
+                .unwrap()
+                .zeta;
+            sum2 += (z - z_true).powi(2);
+        }
+        let mc = (sum2 / n as f64).sqrt();
+        assert!(
+            (sigma / mc - 1.0).abs() < 0.06,
+            "delta method {sigma:.3e} vs Monte Carlo {mc:.3e}"
+        );
+        // f32 gives the same to its precision
+        let a32: Vec<f32> = a.iter().map(|v| *v as f32).collect();
+        let s32 = zeta_sigma(&a32, Cx::new(zs.re as f32, zs.im as f32), fs, |i, j| {
+            cov(i, j) as f32
+        })
+        .unwrap();
+        assert!(
+            (f64::from(s32) / sigma - 1.0).abs() < 1e-2,
+            "f32 {s32} vs f64 {sigma}"
+        );
     }
 }

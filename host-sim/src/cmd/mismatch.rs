@@ -1,0 +1,343 @@
+//! `shimmy-sim mismatch`: does the warning survive a model that is wrong? (issue 14)
+//!
+//! The pipeline's model is the `--vehicle` (nominal by default); the simulated plant differs: each of C_a, sigma,
+//! K_d, e, t_p and the load -20 % and +20 % (the load scales F_z and C_a together: a constant
+//! cornering coefficient C_a / F_z), and the `hard` and `gentle` sets. Per case, open loop with
+//! the damper off, 5 N m road noise and 2 N m imbalance (`margin_run::run`):
+//!
+//! - ramps at 1, 2 and 4 km/h per s from 0.6 x the plant's true onset (30 s settle there) to
+//!   3 km/h past it: the first warning's lead over the true onset (an independent eigenvalue
+//!   scan of the plant, `margin_run::onset_kmh`) in km/h and s, and where the consistency flag first
+//!   drops;
+//! - the same 1 km/h/s ramp through the data-only arm (no model margin);
+//! - a constant drive at 70 % of the true onset (default 10 minutes), full pipeline and
+//!   data-only: warning onsets, as false warnings per hour.
+//!
+//! Targets: lead >= 3 km/h at 1 km/h/s in every single-parameter case, no false warning in any
+//! case. Writes `mismatch.md` and `mismatch.csv`; exits non-zero when a target is missed.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use rayon::prelude::*;
+use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::params::{Param, ParamSet, PlantParams};
+use shimmy_core::vehicle::Vehicle;
+
+use crate::out::table::opt;
+use crate::sim::arg_range::{self, Range};
+use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
+use crate::sim::vehicle_file;
+
+/// Required warning lead at 1 km/h/s in the single-parameter cases, km/h.
+pub const MIN_LEAD_KMH: f64 = 3.0;
+/// Constant-drive duration: 10 to 3600 s.
+pub const DRIVE_S: Range = Range::closed(10.0, 3600.0, "s");
+/// Ramp rate: 0.1 to 10 km/h per s.
+pub const RATE: Range = Range::closed(0.1, 10.0, "km/h/s");
+/// Settle time at the ramp's start speed, s.
+pub const SETTLE_S: f64 = 30.0;
+/// The ramp starts at this fraction of the true onset (at least 3 km/h).
+pub const RAMP_START_FRACTION: f64 = 0.6;
+/// The constant drive runs at this fraction of the true onset.
+pub const DRIVE_FRACTION: f64 = 0.7;
+
+/// Arguments of `shimmy-sim mismatch`.
+#[derive(Args, Debug, Clone)]
+pub struct MismatchArgs {
+    /// The vehicle the firmware believes (the pipeline's model and thresholds), and the base
+    /// the plants are varied from: a named set or a vehicle file (docs/vehicle-file.md).
+    #[arg(long, visible_alias = "model-vehicle", default_value = "nominal")]
+    pub vehicle: String,
+    /// Ramp rates, km/h per s, each 0.1 to 10 (the first one is also used by the data-only arm).
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4", value_parser = arg_range::f64_in(RATE))]
+    pub rates_kmh_per_s: Vec<f64>,
+    /// Constant drive at 70 % of the true onset, s: 10 to 3600.
+    #[arg(long, default_value_t = 600.0, value_parser = arg_range::f64_in(DRIVE_S))]
+    pub drive_s: f64,
+    /// Only the cases whose name contains this text (e.g. `C_a`).
+    #[arg(long)]
+    pub only: Option<String>,
+    /// Output directory (mismatch.md, mismatch.csv).
+    #[arg(long, default_value = "out/mismatch")]
+    pub out: PathBuf,
+}
+
+/// One plant/model pair.
+#[derive(Clone, Debug)]
+pub struct MismatchCase {
+    /// Name, e.g. `C_a +20 %`.
+    pub name: String,
+    /// The simulated plant.
+    pub plant: PlantParams,
+    /// The pipeline's model.
+    pub model: PlantParams,
+    /// A single parameter off by +-20 % (the lead target applies).
+    pub single_parameter: bool,
+}
+
+/// The study's cases for the model vehicle `model`: the plant equal to the model, the
+/// single-parameter +-20 % plants, and the `hard` and `gentle` sets as plants; the pipeline's
+/// model is always `model`'s plant.
+pub fn cases(model: &Vehicle) -> Vec<MismatchCase> {
+    let nom = model.plant;
+    let mut v = vec![MismatchCase {
+        name: "plant = model".into(),
+        plant: nom,
+        model: nom,
+        single_parameter: false,
+    }];
+    let singles: [(&str, &[Param]); 6] = [
+        ("C_a", &[Param::CA]),
+        ("sigma", &[Param::Sigma]),
+        ("K_d", &[Param::KD]),
+        ("e", &[Param::E]),
+        ("t_p", &[Param::TP]),
+        ("load (F_z, C_a)", &[Param::FZ, Param::CA]),
+    ];
+    for (name, params) in singles {
+        for pct in [-20.0, 20.0] {
+            let f = 1.0 + pct / 100.0;
+            let plant = params.iter().fold(nom, |p, &q| p.scaled(q, f));
+            v.push(MismatchCase {
+                name: format!("{name} {pct:+.0} %"),
+                plant,
+                model: nom,
+                single_parameter: true,
+            });
+        }
+    }
+    for set in [ParamSet::Hard, ParamSet::Gentle] {
+        v.push(MismatchCase {
+            name: format!("`{}` plant", set.name()),
+            plant: set.params(),
+            model: nom,
+            single_parameter: false,
+        });
+    }
+    v
+}
+
+/// One ramp through the onset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RampResult {
+    /// Ramp rate, km/h per s.
+    pub rate_kmh_per_s: f64,
+    /// First-warning lead over the true onset, km/h (None: no warning).
+    pub lead_kmh: Option<f64>,
+    /// The same in s.
+    pub lead_s: Option<f64>,
+    /// Speed at which the consistency flag first dropped, km/h.
+    pub inconsistent_kmh: Option<f64>,
+}
+
+/// Results of one case.
+#[derive(Clone, Debug)]
+pub struct CaseResult {
+    /// The case.
+    pub case: MismatchCase,
+    /// True linear onset of the plant, km/h.
+    pub plant_onset_kmh: Option<f64>,
+    /// The model's onset, km/h.
+    pub model_onset_kmh: Option<f64>,
+    /// One per ramp rate.
+    pub ramps: Vec<RampResult>,
+    /// Data-only arm at the first rate: (lead km/h, lead s).
+    pub data_only_lead: (Option<f64>, Option<f64>),
+    /// Speed of the constant drive, km/h.
+    pub drive_kmh: f64,
+    /// Warning onsets per hour in the constant drive, full pipeline.
+    pub false_per_h: f64,
+    /// The same, data-only arm.
+    pub data_only_false_per_h: f64,
+}
+
+impl CaseResult {
+    /// Lead at the first (slowest) ramp rate, km/h.
+    pub fn lead_kmh(&self) -> Option<f64> {
+        self.ramps.first().and_then(|r| r.lead_kmh)
+    }
+
+    /// The case meets its targets: no false warning; single-parameter cases with an onset also
+    /// lead by at least [`MIN_LEAD_KMH`].
+    pub fn passes(&self) -> bool {
+        let lead_ok = !self.case.single_parameter
+            || self.plant_onset_kmh.is_none()
+            || self.lead_kmh().is_some_and(|l| l >= MIN_LEAD_KMH);
+        lead_ok && self.false_per_h == 0.0
+    }
+}
+
+fn ramp_lead(r: &MarginRun) -> (Option<f64>, Option<f64>) {
+    r.lead().map_or((None, None), |(a, b)| (Some(a), Some(b)))
+}
+
+/// One ramp through the onset (or to 3 km/h past the model's onset when the plant has none).
+pub fn ramp_scenario(
+    case: &MismatchCase,
+    rate: f64,
+    data_only: bool,
+    onset_kmh: f64,
+) -> MarginScenario {
+    let start = (RAMP_START_FRACTION * onset_kmh).max(3.0);
+    let mut sc = MarginScenario::ramp(case.plant, start, onset_kmh + 3.0, rate, SETTLE_S);
+    sc.model = (!data_only).then_some(case.model);
+    sc
+}
+
+/// The constant drive at [`DRIVE_FRACTION`] of the onset.
+pub fn drive_scenario(
+    case: &MismatchCase,
+    data_only: bool,
+    onset_kmh: f64,
+    drive_s: f64,
+) -> MarginScenario {
+    let mut sc = MarginScenario::constant(case.plant, DRIVE_FRACTION * onset_kmh, drive_s);
+    sc.model = (!data_only).then_some(case.model);
+    sc
+}
+
+/// Runs one case: every ramp, the data-only ramp and both constant drives. Without a plant
+/// onset the model's onset sets the speeds (every warning is then a false one).
+pub fn run_case(
+    case: &MismatchCase,
+    rates: &[f64],
+    drive_s: f64,
+    pp: PipelineParams,
+) -> Result<CaseResult> {
+    let plant_on = onset_kmh(&case.plant);
+    let model_on = onset_kmh(&case.model);
+    let reference = plant_on
+        .or(model_on)
+        .context("neither plant nor model has an onset")?;
+    let mut ramps = Vec::new();
+    for &rate in rates {
+        let r = run(&ramp_scenario(case, rate, false, reference), pp, 0)?;
+        let (lead_kmh, lead_s) = ramp_lead(&r);
+        ramps.push(RampResult {
+            rate_kmh_per_s: rate,
+            lead_kmh,
+            lead_s,
+            inconsistent_kmh: r.first_inconsistent.map(|x| x.1),
+        });
+    }
+    let rate0 = rates.first().copied().unwrap_or(1.0);
+    let d = run(&ramp_scenario(case, rate0, true, reference), pp, 0)?;
+    let per_h = |r: &MarginRun| f64::from(r.warnings) * 3600.0 / drive_s;
+    let full = run(&drive_scenario(case, false, reference, drive_s), pp, 0)?;
+    let data = run(&drive_scenario(case, true, reference, drive_s), pp, 0)?;
+    Ok(CaseResult {
+        case: case.clone(),
+        plant_onset_kmh: plant_on,
+        model_onset_kmh: model_on,
+        ramps,
+        data_only_lead: ramp_lead(&d),
+        drive_kmh: DRIVE_FRACTION * reference,
+        false_per_h: per_h(&full),
+        data_only_false_per_h: per_h(&data),
+    })
+}
+
+/// The Markdown table.
+pub fn markdown(rows: &[CaseResult], rates: &[f64]) -> String {
+    let mut s = String::from("| plant | true onset [km/h] |");
+    for r in rates {
+        s += &format!(" lead at {r} km/h/s [km/h / s] |");
+    }
+    s += " flag drops at [km/h] | data-only lead [km/h / s] | drive [km/h] | false warnings/h (full / data-only) | target |\n|---|---|";
+    for _ in rates {
+        s += "---|";
+    }
+    s += "---|---|---|---|---|\n";
+    for r in rows {
+        s += &format!("| {} | {} |", r.case.name, opt(r.plant_onset_kmh, 2));
+        for x in &r.ramps {
+            s += &format!(" {} / {} |", opt(x.lead_kmh, 2), opt(x.lead_s, 1));
+        }
+        s += &format!(
+            " {} | {} / {} | {:.1} | {:.0} / {:.0} | {} |\n",
+            opt(r.ramps.first().and_then(|x| x.inconsistent_kmh), 1),
+            opt(r.data_only_lead.0, 2),
+            opt(r.data_only_lead.1, 1),
+            r.drive_kmh,
+            r.false_per_h,
+            r.data_only_false_per_h,
+            if r.passes() { "met" } else { "MISSED" }
+        );
+    }
+    s
+}
+
+/// `shimmy-sim mismatch`.
+pub fn command(a: &MismatchArgs) -> Result<()> {
+    DRIVE_S.check("--drive-s", a.drive_s)?;
+    arg_range::ensure_count("--rates-kmh-per-s", a.rates_kmh_per_s.len(), 8)?;
+    for &r in &a.rates_kmh_per_s {
+        RATE.check("--rates-kmh-per-s", r)?;
+    }
+    let vehicle = vehicle_file::load(&a.vehicle)?;
+    let all = cases(&vehicle);
+    let chosen: Vec<MismatchCase> = all
+        .iter()
+        .filter(|c| a.only.as_ref().is_none_or(|o| c.name.contains(o.as_str())))
+        .cloned()
+        .collect();
+    if chosen.is_empty() {
+        let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
+        bail!("--only matches no case; cases: {}", names.join(", "));
+    }
+    let wall = std::time::Instant::now();
+    let pp = vehicle.pipeline_params();
+    let rows: Vec<CaseResult> = chosen
+        .par_iter()
+        .map(|c| run_case(c, &a.rates_kmh_per_s, a.drive_s, pp))
+        .collect::<Result<_>>()?;
+    let md = markdown(&rows, &a.rates_kmh_per_s);
+    println!(
+        "plant vs model mismatch (model `{}`; open loop, damper off, 5 N m road noise, 2 N m imbalance; drive {:.0} s at 70 % of the true onset), {:.0} s wall",
+        a.vehicle,
+        a.drive_s,
+        wall.elapsed().as_secs_f64()
+    );
+    print!("{md}");
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
+    std::fs::write(a.out.join("mismatch.md"), &md)?;
+    let mut f = std::fs::File::create(a.out.join("mismatch.csv"))?;
+    writeln!(f, "case,plant_onset_kmh,model_onset_kmh,rate_kmh_per_s,lead_kmh,lead_s,first_inconsistent_kmh,data_only_lead_kmh,data_only_lead_s,drive_kmh,false_warnings_per_h,data_only_false_warnings_per_h,passes")?;
+    let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.3}"));
+    for r in &rows {
+        for x in &r.ramps {
+            writeln!(
+                f,
+                "\"{}\",{},{},{},{},{},{},{},{},{:.3},{:.1},{:.1},{}",
+                r.case.name,
+                o(r.plant_onset_kmh),
+                o(r.model_onset_kmh),
+                x.rate_kmh_per_s,
+                o(x.lead_kmh),
+                o(x.lead_s),
+                o(x.inconsistent_kmh),
+                o(r.data_only_lead.0),
+                o(r.data_only_lead.1),
+                r.drive_kmh,
+                r.false_per_h,
+                r.data_only_false_per_h,
+                r.passes()
+            )?;
+        }
+    }
+    let missed: Vec<&str> = rows
+        .iter()
+        .filter(|r| !r.passes())
+        .map(|r| r.case.name.as_str())
+        .collect();
+    if !missed.is_empty() {
+        bail!(
+            "targets missed (lead >= {MIN_LEAD_KMH} km/h in single-parameter cases, no false warning): {}",
+            missed.join(", ")
+        );
+    }
+    Ok(())
+}

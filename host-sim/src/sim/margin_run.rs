@@ -1,0 +1,322 @@
+//! The open-loop margin run behind `shimmy-sim margin` and `shimmy-sim mismatch`: the plant
+//! (damper off: `Damper::None`, no damper force at all) on a speed profile with road noise and
+//! wheel imbalance; the measured wheel yaw angles, speed and acceleration feed the firmware's
+//! pipeline every 1 ms exactly as on the target (`ShimmyPipeline`, or the data-only
+//! `DataPipeline` without a model margin). Next to the report the *true* eigenvalues of the
+//! simulated plant are computed: the shimmy mode of A(V) at the true speed
+//! ([`ModeSelect::Shimmy`]) and the Hopf onset by an independent scan
+//! ([`stability::hopf_crossings`]).
+
+use anyhow::{Context, Result};
+use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::{
+    DataPipeline, PipelineOutput, PipelineParams, ShimmyPipeline,
+};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
+use shimmy_core::stability::{self, CrossingKind, ModeSelect};
+
+use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
+use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+
+/// Control period, s.
+pub const DT_S: f64 = 1e-3;
+
+/// An open-loop margin scenario.
+#[derive(Clone, Debug)]
+pub struct MarginScenario {
+    /// Parameters of the simulated plant.
+    pub params: PlantParams,
+    /// Parameters of the pipeline's model (the same as `params` unless a mismatch is studied);
+    /// `None`: the data-only arm (mode meter, fusion and monitor without a model margin).
+    pub model: Option<PlantParams>,
+    /// Speed profile.
+    pub speed: SpeedProfile,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// Road-noise std per wheel, N m (corner 30 Hz, half common to both wheels).
+    pub noise_nm: f64,
+    /// Imbalance amplitude per wheel, N m (phases 0 and 1 rad).
+    pub imbalance_nm: f64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+impl MarginScenario {
+    /// Constant speed `v_kmh` for `settle_s`, then a ramp to `to_kmh` at `rate` km/h/s.
+    pub fn ramp(params: PlantParams, from_kmh: f64, to_kmh: f64, rate: f64, settle_s: f64) -> Self {
+        let t1 = settle_s + (to_kmh - from_kmh).abs() / rate.max(1e-6);
+        Self {
+            params,
+            model: Some(params),
+            speed: SpeedProfile::Ramp {
+                v0_mps: kmh_to_mps(from_kmh),
+                v1_mps: kmh_to_mps(to_kmh),
+                t0_s: settle_s,
+                t1_s: t1,
+            },
+            duration_s: t1,
+            noise_nm: 5.0,
+            imbalance_nm: 2.0,
+            seed: 1,
+        }
+    }
+
+    /// Constant speed for `duration_s`.
+    pub fn constant(params: PlantParams, v_kmh: f64, duration_s: f64) -> Self {
+        Self {
+            params,
+            model: Some(params),
+            speed: SpeedProfile::Constant(kmh_to_mps(v_kmh)),
+            duration_s,
+            noise_nm: 5.0,
+            imbalance_nm: 2.0,
+            seed: 1,
+        }
+    }
+
+    fn scenario(&self) -> Scenario {
+        let mut s = Scenario::new(self.speed.clone());
+        s.current_a = 0.0;
+        if self.noise_nm > 0.0 {
+            s.noise = Some(RoadNoise::new(self.noise_nm, 30.0, 0.5, self.seed));
+        }
+        if self.imbalance_nm > 0.0 {
+            s.imbalance = Some(Imbalance {
+                amplitude_nm: [self.imbalance_nm; 2],
+                phase_rad: [0.0, 1.0],
+                radius_m: self.params.r,
+            });
+        }
+        s
+    }
+}
+
+/// One recorded row (every decimated pipeline output, 100 Hz).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarginRow {
+    /// Time, s.
+    pub t_s: f64,
+    /// True speed, km/h.
+    pub speed_kmh: f64,
+    /// True shimmy-mode damping of A(V) at the true speed (filled every `true_every` rows).
+    pub zeta_true: f64,
+    /// True shimmy-mode frequency, Hz.
+    pub freq_true_hz: f64,
+    /// True speed margin to the onset, km/h (onset - V; negative inside the window).
+    pub margin_true_kmh: f64,
+    /// Slow data damping.
+    pub zeta_data: f64,
+    /// Its sigma.
+    pub sigma_data: f64,
+    /// Fast data damping.
+    pub zeta_fast: f64,
+    /// Data valid (slow).
+    pub data_valid: bool,
+    /// Fast valid.
+    pub fast_valid: bool,
+    /// Model damping (pipeline's model margin).
+    pub zeta_model: f64,
+    /// Data frequency, Hz.
+    pub freq_data_hz: f64,
+    /// Reported speed margin, km/h (NaN when none).
+    pub margin_kmh: f64,
+    /// Time to critical, s (NaN when none).
+    pub ttc_s: f64,
+    /// Monitor level.
+    pub level: Level,
+    /// Data and model agree (the fusion's consistency flag).
+    pub model_consistent: bool,
+    /// Yaw envelope amplitude, deg.
+    pub amplitude_deg: f64,
+    /// Mean wheel yaw, deg.
+    pub yaw_deg: f64,
+}
+
+/// Result of a run.
+#[derive(Clone, Debug)]
+pub struct MarginRun {
+    /// Rows at 100 Hz.
+    pub rows: Vec<MarginRow>,
+    /// Linear onset speed of the simulated plant, from an independent scan, km/h.
+    pub onset_kmh: Option<f64>,
+    /// First time the level left Normal: (t, speed km/h, level).
+    pub first_warning: Option<(f64, f64, Level)>,
+    /// Number of warning onsets (transitions from Normal to a higher level).
+    pub warnings: u32,
+    /// Highest level reached.
+    pub max_level: Level,
+    /// First time the consistency flag dropped: (t, speed km/h).
+    pub first_inconsistent: Option<(f64, f64)>,
+    /// Time at which the true speed crosses the onset, s.
+    pub onset_time_s: Option<f64>,
+    /// Largest eigen-solves done in one pipeline call.
+    pub max_solves_per_call: u8,
+    /// Model cycles completed.
+    pub model_cycles: u32,
+    /// Wall-clock time of the run, s.
+    pub wall_s: f64,
+}
+
+impl MarginRun {
+    /// Lead of the first warning before the onset: (km/h, s). Positive = before.
+    pub fn lead(&self) -> Option<(f64, f64)> {
+        let (t, v, _) = self.first_warning?;
+        Some((self.onset_kmh? - v, self.onset_time_s? - t))
+    }
+}
+
+/// The linear onset speed of `p` without damper by a 0.5 km/h scan + Brent (independent of the
+/// pipeline's incremental search).
+pub fn onset_kmh(p: &PlantParams) -> Option<f64> {
+    stability::hopf_crossings(
+        p,
+        0.0,
+        kmh_to_mps(1.0),
+        kmh_to_mps(150.0),
+        kmh_to_mps(0.5),
+        stability::DEFAULT_TOL_MPS,
+    )
+    .ok()?
+    .iter()
+    .find(|c| c.kind == CrossingKind::Onset)
+    .map(|c| mps_to_kmh(c.speed_mps))
+}
+
+/// The pipeline of a run: the full one (model tracker stepped every call) or the data-only arm.
+enum Pipe {
+    Full(Box<ShimmyPipeline<16>>),
+    DataOnly(Box<DataPipeline<16>>),
+}
+
+impl Pipe {
+    fn new(model: Option<PlantParams>, pp: PipelineParams) -> Result<Self> {
+        Ok(match model {
+            Some(m) => Pipe::Full(Box::new(
+                ShimmyPipeline::new(m, pp).context("pipeline config")?,
+            )),
+            None => Pipe::DataOnly(Box::new(DataPipeline::new(&pp).context("pipeline config")?)),
+        })
+    }
+
+    fn push(&mut self, s: &Sample, v: f32, a: f32, t: f32) -> Option<PipelineOutput> {
+        match self {
+            Pipe::Full(p) => p.push(s, v, a, t),
+            Pipe::DataOnly(p) => p.push(s, v, a, t, None),
+        }
+    }
+
+    fn solves_last_call(&self) -> u8 {
+        match self {
+            Pipe::Full(p) => p.model().solves_last_call(),
+            Pipe::DataOnly(_) => 0,
+        }
+    }
+
+    fn cycles(&self) -> u32 {
+        match self {
+            Pipe::Full(p) => p.model().cycles(),
+            Pipe::DataOnly(_) => 0,
+        }
+    }
+}
+
+/// Runs the open-loop scenario through the pipeline. `true_every`: compute the true
+/// eigenvalues every n-th row (0 = never).
+pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result<MarginRun> {
+    let wall = std::time::Instant::now();
+    let p = sc.params;
+    let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
+    let mut scen = sc.scenario();
+    let mut pipe = Pipe::new(sc.model, pp)?;
+    let mut first_inconsistent = None;
+    let onset = onset_kmh(&p);
+    let n = (sc.duration_s / DT_S).round() as usize;
+    let mut rows = Vec::with_capacity(n / 10 + 1);
+    let mut first_warning = None;
+    let mut warnings = 0u32;
+    let mut last_level = Level::Normal;
+    let mut max_level = Level::Normal;
+    let mut onset_time = None;
+    let mut max_solves = 0u8;
+    let (mut zt, mut ft) = (f64::NAN, f64::NAN);
+    for k in 0..n {
+        let t = k as f64 * DT_S;
+        let u = scen.inputs(t, DT_S);
+        sim.advance(DT_S, &u)
+            .with_context(|| format!("integration failed at t = {t}"))?;
+        let t1 = t + DT_S;
+        let x = sim.state();
+        let v = sc.speed.at(t1);
+        let accel = (sc.speed.at(t1 + 0.5 * DT_S) - sc.speed.at(t1 - 0.5 * DT_S)) / DT_S;
+        if let (Some(on), None) = (onset, onset_time) {
+            if mps_to_kmh(v) >= on {
+                onset_time = Some(t1);
+            }
+        }
+        let sample = Sample {
+            psi_l_rad: x[idx::PSI_L] as f32,
+            psi_r_rad: x[idx::PSI_R] as f32,
+            wheel: WheelOrder::Speed {
+                speed_mps: v as f32,
+                radius_m: p.r as f32,
+            },
+            damper_cmd: 0.0,
+        };
+        let out = pipe.push(&sample, v as f32, accel as f32, t1 as f32);
+        max_solves = max_solves.max(pipe.solves_last_call());
+        let Some(o) = out else { continue };
+        if o.level > Level::Normal && first_warning.is_none() {
+            first_warning = Some((t1, mps_to_kmh(v), o.level));
+        }
+        if o.level > Level::Normal && last_level == Level::Normal {
+            warnings += 1;
+        }
+        last_level = o.level;
+        max_level = max_level.max(o.level);
+        if !o.report.model_consistent && first_inconsistent.is_none() {
+            first_inconsistent = Some((t1, mps_to_kmh(v)));
+        }
+        if true_every > 0 && rows.len() % true_every == 0 {
+            if let Ok(m) = stability::mode_at(&p, v, 0.0, ModeSelect::Shimmy) {
+                zt = m.zeta;
+                ft = m.freq_hz;
+            }
+        }
+        let r = &o.report;
+        rows.push(MarginRow {
+            t_s: t1,
+            speed_kmh: mps_to_kmh(v),
+            zeta_true: zt,
+            freq_true_hz: ft,
+            margin_true_kmh: onset.map_or(f64::NAN, |on| on - mps_to_kmh(v)),
+            zeta_data: r.zeta_data as f64,
+            sigma_data: r.sigma_zeta_data as f64,
+            zeta_fast: r.zeta_fast as f64,
+            data_valid: r.data_valid,
+            fast_valid: r.fast_valid,
+            zeta_model: r.zeta_model.map_or(f64::NAN, f64::from),
+            freq_data_hz: r.freq_hz as f64,
+            margin_kmh: r
+                .speed_margin_mps
+                .map_or(f64::NAN, |m| mps_to_kmh(m as f64)),
+            ttc_s: r.time_to_critical_s.map_or(f64::NAN, f64::from),
+            level: o.level,
+            model_consistent: r.model_consistent,
+            amplitude_deg: (o.meter.amplitude_rad as f64).to_degrees(),
+            yaw_deg: (0.5 * (x[idx::PSI_L] + x[idx::PSI_R])).to_degrees(),
+        });
+    }
+    Ok(MarginRun {
+        rows,
+        onset_kmh: onset,
+        first_warning,
+        warnings,
+        max_level,
+        first_inconsistent,
+        onset_time_s: onset_time,
+        max_solves_per_call: max_solves,
+        model_cycles: pipe.cycles(),
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
+}
