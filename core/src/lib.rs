@@ -11,7 +11,9 @@
 //! - [`estimator`]: the margin path: mode meter, model margin, fusion, monitor, pipeline
 //!   (`docs/margin-estimator.md`);
 //! - [`supervisor`]: sensor-frame checks, faults, mode policy, and the supervised controller
-//!   the firmware and the simulator call every 1 ms.
+//!   the firmware and the simulator call every 1 ms;
+//! - [`vehicle`]: one vehicle (plant, damper, sensors, gains, thresholds) with one validation by
+//!   plausible range; the controller's and the estimator's parameters are derived from it.
 //!
 //! Rules for everything in here: no heap, no panics on the control path, time is an input,
 //! units are in the names.
@@ -54,6 +56,11 @@ pub mod stability;
     )
 )]
 pub mod supervisor;
+#[cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+pub mod vehicle;
 
 /// Crate version, reported by the firmware at boot and by the simulator in its reports.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -208,6 +208,36 @@ impl Param {
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|p| p.name() == name)
     }
+
+    /// The physically plausible range `(lo, hi)`, both included, that [`PlantParams::validate`]
+    /// accepts: wide enough for a small car's and a heavy truck's front axle (the named sets sit
+    /// well inside), narrow enough to reject a typo by orders of magnitude (mu = 1000,
+    /// F_z = 1e12). Dampings, the spin inertia, the trails and the roll-centre height may be 0.
+    pub const fn range(self) -> (f64, f64) {
+        match self {
+            Param::IK => (0.1, 200.0),
+            Param::IP => (0.0, 200.0),
+            Param::R => (0.1, 1.5),
+            Param::HR => (0.0, 2.0),
+            Param::IPhi => (1.0, 1.0e4),
+            Param::KPhi => (1.0e3, 1.0e8),
+            Param::CPhi => (0.0, 1.0e6),
+            Param::CA => (1.0e3, 2.0e6),
+            Param::Sigma => (0.02, 3.0),
+            Param::E => (0.0, 0.5),
+            Param::TP => (0.0, 0.5),
+            Param::LT => (0.02, 1.0),
+            Param::KTr => (1.0e3, 1.0e8),
+            Param::KD => (10.0, 1.0e8),
+            Param::IS => (1.0, 60.0),
+            Param::JSw => (1.0e-3, 5.0),
+            Param::CSw => (0.0, 1.0e3),
+            Param::CK => (0.0, 1.0e4),
+            Param::FZ => (100.0, 1.0e5),
+            Param::Mu => (0.05, 1.5),
+            Param::CS => (0.5, 3.0),
+        }
+    }
 }
 
 impl PlantParams {
@@ -259,17 +289,14 @@ impl PlantParams {
         self.with(p, v * factor)
     }
 
-    /// Checks that every parameter is finite and physically meaningful (inertias, stiffnesses,
-    /// lengths positive; dampings and the spin inertia non-negative). Returns the first offender.
+    /// Checks that every parameter is finite and inside its plausible range ([`Param::range`]).
+    /// Returns the first offender.
     pub fn validate(&self) -> Result<(), (Param, f64)> {
         for p in Param::ALL {
             let v = self.get(p);
-            let may_be_zero = matches!(
-                p,
-                Param::IP | Param::CPhi | Param::CSw | Param::CK | Param::E | Param::TP | Param::HR
-            );
-            let ok = v.is_finite() && if may_be_zero { v >= 0.0 } else { v > 0.0 };
-            if !ok {
+            let (lo, hi) = p.range();
+            // NaN is in no range; infinities fail the bounds.
+            if !(lo..=hi).contains(&v) {
                 return Err((p, v));
             }
         }

@@ -15,9 +15,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print and validate a parameter set (a name: nominal, gentle, hard; or a TOML file).
+    /// Print and validate a vehicle (a name: nominal, gentle, hard; or a vehicle file): every
+    /// field with its unit and allowed range.
     Params {
-        /// Named set or TOML file (`base = "nominal"` plus `[overrides]` by field name).
+        /// Named set or vehicle file (TOML: `base = "nominal"` plus sections of fields by name,
+        /// docs/vehicle-file.md; parameter files with `[overrides]` are vehicle files).
         #[arg(default_value = "nominal")]
         params: String,
     },

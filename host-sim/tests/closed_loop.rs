@@ -11,7 +11,7 @@ use shimmy_sim::sim::scenario::ScenarioSpec;
 use shimmy_sim::sim::standard::standard_scenarios;
 
 fn spec(name: &str) -> ScenarioSpec {
-    standard_scenarios(false)
+    standard_scenarios(&shimmy_core::vehicle::Vehicle::nominal(), false)
         .into_iter()
         .find(|s| s.name == name)
         .expect("scenario")
@@ -24,7 +24,7 @@ fn closed_loop_is_deterministic() {
     let mut s = spec("ramp");
     s.duration_s = 1.5;
     let run = |seed: u64| {
-        let mut cfg = LoopConfig::new(s.plant, Arm::Mr(ControllerKind::Asmc), s.duration_s);
+        let mut cfg = LoopConfig::new(&s.plant, Arm::Mr(ControllerKind::Asmc), s.duration_s);
         cfg.sensors = SensorConfig {
             seed,
             ..SensorConfig::default()

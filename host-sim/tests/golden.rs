@@ -77,7 +77,7 @@ fn parse(text: &str) -> Vec<[f64; 7]> {
 fn demo_asmc(change: impl FnOnce(&mut LoopConfig)) -> LoopResult {
     let ramp_s = DemoOptions::default().ramp_s;
     let case = demo_case::demo_case(ramp_s).unwrap();
-    let (mut cfg, _) = (LoopConfig::new(case.plant, ARMS[1].1, ramp_s), ());
+    let (mut cfg, _) = (LoopConfig::new(&case.plant, ARMS[1].1, ramp_s), ());
     cfg.record_every = EVERY;
     change(&mut cfg);
     let mut s = case.scenario.clone();

@@ -322,7 +322,7 @@ fn damper_off_limit_cycle_inside_window_decay_outside() {
     let v_in = most_unstable_speed_mps(&p);
     for (d, start_deg) in [
         (DamperSetting::Off, 0.05),
-        (DamperSetting::Current(0.0), 3.0),
+        (DamperSetting::reference_mr(0.0), 3.0),
     ] {
         let r = run_speed(&p, d, v_in, f64::to_radians(start_deg), 12.0, 1.0).expect("run");
         println!(
@@ -339,7 +339,7 @@ fn damper_off_limit_cycle_inside_window_decay_outside() {
     }
     let r = run_speed(
         &p,
-        DamperSetting::Current(0.0),
+        DamperSetting::reference_mr(0.0),
         v_in,
         0.05f64.to_radians(),
         6.0,
@@ -369,7 +369,7 @@ fn damper_at_2a_suppresses_shimmy_at_every_speed() {
         let v_kmh = 5.0 + 10.0 * f64::from(k);
         let r = run_speed(
             &p,
-            DamperSetting::Current(2.0),
+            DamperSetting::reference_mr(2.0),
             kmh_to_mps(v_kmh),
             3f64.to_radians(),
             4.0,

@@ -240,7 +240,7 @@ fn speeds_kmh() -> Vec<f64> {
 
 #[test]
 fn failsafe_current_stops_shimmy_in_the_time_domain() {
-    let fs = DamperSetting::Current(f64::from(FAILSAFE_CURRENT_A));
+    let fs = DamperSetting::reference_mr(f64::from(FAILSAFE_CURRENT_A));
     // Nominal set from 3 deg, hard set from the 0.5 deg design amplitude: no shimmy anywhere.
     for (set, psi0) in [(ParamSet::Nominal, 3.0), (ParamSet::Hard, 0.5)] {
         for v in speeds_kmh() {
@@ -254,7 +254,7 @@ fn failsafe_current_stops_shimmy_in_the_time_domain() {
         // Negative: without current the same check finds shimmy somewhere.
         let worst = speeds_kmh()
             .into_iter()
-            .map(|v| end_amplitude_deg(set, DamperSetting::Current(0.0), v, psi0))
+            .map(|v| end_amplitude_deg(set, DamperSetting::reference_mr(0.0), v, psi0))
             .fold(0.0, f64::max);
         assert!(
             worst > DECAY_FRACTION * psi0,
@@ -272,7 +272,7 @@ fn failsafe_current_stops_shimmy_in_the_time_domain() {
 fn hard_set_large_disturbance_beats_any_fixed_current() {
     let a = end_amplitude_deg(
         ParamSet::Hard,
-        DamperSetting::Current(SpencerParams::steering().u_max),
+        DamperSetting::reference_mr(SpencerParams::steering().u_max),
         20.0,
         3.0,
     );

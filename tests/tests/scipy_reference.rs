@@ -8,7 +8,7 @@ use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};
 fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
     let out = std::env::temp_dir().join(format!("shimmy-scipy-ref-{}", std::process::id()));
     let args = ReferenceBenchArgs {
-        params: "nominal".into(),
+        vehicle: "nominal".into(),
         duration_s: 2.0,
         speed_kmh: 60.0,
         current_a: 0.5,

@@ -117,18 +117,6 @@ pub struct ControlParams {
     pub psi_limit_rad: f32,
 }
 
-impl ControlParams {
-    /// The defaults with the nominal plant data (I_k, c_k, l_t) taken from `plant` (e.g. a
-    /// vehicle with another steering arm). Studies of model error keep the defaults and change
-    /// the simulated plant instead.
-    pub fn with_nominal(plant: &crate::params::PlantParams) -> Self {
-        ControlParams {
-            nominal: NominalPlant::from_params(plant),
-            ..ControlParams::default()
-        }
-    }
-}
-
 impl Default for ControlParams {
     /// Defaults for the reference plant's nominal parameter set and the fitted damper.
     /// fallback: the fail-safe current [`actuator::FAILSAFE_CURRENT_A`] (a passive-on current

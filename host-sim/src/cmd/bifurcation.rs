@@ -5,6 +5,7 @@
 
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
+use crate::sim::reference::shimmy_mode_with_damper;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -48,8 +49,9 @@ pub struct BifurcationRow {
     pub small: RunSummary,
     /// From the large start.
     pub large: RunSummary,
-    /// Real part (1/s) of the least-damped oscillatory eigenvalue of the FD Jacobian at this
-    /// speed (no damper, linear tyres): the linear prediction to compare with.
+    /// Real part (1/s) of the shimmy mode (tracked by its shape) of the plant as the small start
+    /// runs: A(V) with the damper's equivalent viscous coefficient at its current and the small
+    /// start's amplitude (c = 0 without damper): the linear prediction to compare with.
     pub eig_re_per_s: f64,
 }
 
@@ -111,8 +113,18 @@ pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRo
         .iter()
         .enumerate()
         .map(|(i, &v)| {
-            let eig_re_per_s = crate::model::plant::least_damped_mode(&o.params, kmh_to_mps(v))
-                .map_or(f64::NAN, |e| e.0);
+            let (damper, current) = match &o.damper {
+                DamperSetting::Off => (None, 0.0),
+                DamperSetting::Mr { damper, current_a } => (Some(damper), *current_a),
+            };
+            let eig_re_per_s = shimmy_mode_with_damper(
+                &o.params,
+                damper,
+                kmh_to_mps(v),
+                current,
+                o.small_deg.to_radians(),
+            )
+            .map_or(f64::NAN, |(m, _)| m.re);
             Ok(BifurcationRow {
                 eig_re_per_s,
                 v_kmh: v,
@@ -131,7 +143,7 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
     let wall = t0.elapsed().as_secs_f64();
     let damper = match o.damper {
         DamperSetting::Off => "no damper".to_string(),
-        DamperSetting::Current(i) => format!("MR damper at {i} A"),
+        DamperSetting::Mr { current_a, .. } => format!("MR damper at {current_a} A"),
     };
     println!(
         "bifurcation: `{}`, {damper}; {} s runs, amplitude = peak |psi_L| over the last {} s",
@@ -157,7 +169,10 @@ pub fn run(o: &BifurcationOptions) -> Result<()> {
             r.eig_re_per_s
         );
     }
-    println!("amplitudes in deg; (*) least-damped eigenvalue of the FD Jacobian, no damper");
+    println!(
+        "amplitudes in deg; (*) shimmy mode of A(V) with the damper's c_eq at its current and \
+         the small start's amplitude (no damper: c = 0)"
+    );
     if let Some((lo, hi)) = window(&rows, |r| r.small.shimmies()) {
         println!("small disturbances end in shimmy from {lo} to {hi} km/h (grid points)");
     } else {
@@ -193,7 +208,7 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
     writeln!(
         w,
-        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_no_damper_per_s"
+        "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_shimmy_per_s"
     )?;
     for r in rows {
         writeln!(
@@ -291,9 +306,10 @@ pub const WINDOW_S: Range = Range::above(0.0, 300.0, "s");
 /// Command-line arguments of `shimmy-sim bifurcation`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BifurcationArgs {
-    /// Named parameter set or TOML file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Fit the MR damper and hold this coil current in A (0 to 2 A, the coil rating); without it
     /// there is no damper (F_d = 0).
     #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
@@ -346,16 +362,17 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.duration_s,
         a.window_s
     );
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
     let damper = match a.damper_current_a {
         None => DamperSetting::Off,
-        Some(i) => {
-            DamperSetting::Current(arg_range::coil_current().check("--damper-current-a", i)?)
-        }
+        Some(i) => DamperSetting::Mr {
+            damper: vehicle.damper.spencer,
+            current_a: arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?,
+        },
     };
-    let params = crate::sim::paramfile::load(&a.params)?;
     run(&BifurcationOptions {
-        params,
-        params_name: a.params.clone(),
+        params: vehicle.plant,
+        params_name: a.vehicle.clone(),
         damper,
         v_min_kmh: a.v_min_kmh,
         v_max_kmh: a.v_max_kmh,

@@ -9,9 +9,11 @@ use crate::sim::arg_range::{f32_in, Range};
 use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
 use crate::sim::scenario::{self, ScenarioSpec};
 use crate::sim::standard::standard_scenarios;
+use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::{ControlParams, ControllerKind};
+use shimmy_core::vehicle::Vehicle;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -62,12 +64,20 @@ pub struct CompareArgs {
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
     #[arg(long)]
     pub ideal_sensors: bool,
+    /// Vehicle the scenario set runs on: a named set (nominal, gentle, hard) or a vehicle file
+    /// (TOML, see docs/vehicle-file.md). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
+    /// The vehicle the firmware believes (controller model, gains; the gain options above
+    /// override its gains): a named set or a vehicle file; default: `--vehicle`.
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
 }
 
 impl CompareArgs {
-    /// The control parameters: defaults with the overrides applied.
-    pub fn control_params(&self) -> ControlParams {
-        let mut c = ControlParams::default();
+    /// The control parameters: the model vehicle's with the overrides applied.
+    pub fn control_params(&self, model: &Vehicle) -> ControlParams {
+        let mut c = model.control_params();
         if let Some(v) = self.dead_zone {
             c.asmc.dead_zone_radps = v;
         }
@@ -134,7 +144,7 @@ pub fn least_suppressing_current(
             Ok(run_one(
                 s,
                 Arm::Mr(ControllerKind::PassiveOn { current_a: i_max }),
-                &ControlParams::default(),
+                &s.model().control_params(),
             )?
             .0
             .shimmies())
@@ -159,7 +169,7 @@ pub fn least_suppressing_current(
                 Ok(!run_one(
                     s,
                     Arm::Mr(ControllerKind::PassiveOn { current_a: i }),
-                    &ControlParams::default(),
+                    &s.model().control_params(),
                 )?
                 .0
                 .shimmies())
@@ -343,8 +353,19 @@ pub fn run_all(
 
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
+    let vehicle = vehicle_file::load(&a.vehicle)?;
+    let model = match &a.model_vehicle {
+        Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
+        None => vehicle,
+    };
+    if let Some(i) = a.on_current_a {
+        crate::sim::arg_range::vehicle_current(&model).check("--on-current-a", f64::from(i))?;
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut specs = standard_scenarios(a.quick);
+    let mut specs = standard_scenarios(&vehicle, a.quick);
+    for s in &mut specs {
+        s.model_vehicle = Some(model);
+    }
     if a.ideal_sensors {
         for s in &mut specs {
             s.sensors = SensorConfig::ideal();
@@ -359,9 +380,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
             i
         }
         None => {
-            let i_max = shimmy_core::control::ControlParams::default()
-                .limits
-                .i_max_a;
+            let i_max = model.rated_current_a();
             let (i, beyond) = least_suppressing_current(&specs, i_max, 0.02)?;
             println!("passive-on current: {i:.3} A (least constant current with no shimmy in any scenario that {i_max} A can stabilise, bisection to 0.02 A)");
             if !beyond.is_empty() {
@@ -382,7 +401,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         println!("scenario {:<22} {}", s.name, s.description);
     }
     let wall = std::time::Instant::now();
-    let rows = run_all(&specs, &arms, &a.control_params())?;
+    let rows = run_all(&specs, &arms, &a.control_params(&model))?;
     let wall_s = wall.elapsed().as_secs_f64();
     let tab = table(&rows, &specs);
     println!("\n{tab}");

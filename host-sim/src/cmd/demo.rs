@@ -149,7 +149,6 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
         sections: vec![Section {
             name: "ramp 20-120 km/h".into(),
             description,
-            plant: case.plant,
             runs: results,
             extra_plots: vec![(
                 "Data-driven mode meter (slow estimate) vs speed; shaded: the nominal no-damper Hopf window".into(),

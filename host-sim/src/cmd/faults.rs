@@ -13,20 +13,32 @@ use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
+use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
-use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::params::{kmh_to_mps, ParamSet, PlantParams};
+use shimmy_core::control::ControllerKind;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
+use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::supervisor::policy::Mode;
+use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// Peak wheel yaw after the fault below which shimmy counts as suppressed: 0.5 deg.
 pub const SUPPRESSED_BELOW_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
-/// Nominal Hopf window without damper, km/h (`shimmy-sim stability`).
-pub const WINDOW_KMH: (f64, f64) = (29.35, 84.15);
+/// The Hopf window of `plant` without damper, km/h (onset to offset between 1 and 70 m/s, as
+/// `shimmy-sim stability` finds it); `None` if it has none.
+pub fn window_kmh(plant: &PlantParams) -> Option<(f64, f64)> {
+    let c = stability::hopf_crossings(plant, 0.0, 1.0, 70.0, 0.25, 1e-3).ok()?;
+    let on = c.iter().find(|x| x.kind == CrossingKind::Onset)?;
+    let off = c
+        .iter()
+        .find(|x| x.kind != CrossingKind::Onset && x.speed_mps > on.speed_mps)
+        .map_or(f64::INFINITY, |x| x.speed_mps);
+    Some((mps_to_kmh(on.speed_mps), mps_to_kmh(off)))
+}
 
 /// One campaign case: a name and its faults (empty: the healthy reference).
 #[derive(Clone, Debug)]
@@ -182,8 +194,10 @@ pub fn standard_cases() -> Vec<Case> {
 /// The disturbance and timing of a campaign run.
 #[derive(Clone, Copy, Debug)]
 pub struct Setup {
-    /// The true plant.
-    pub plant: PlantParams,
+    /// The true vehicle (plant, damper, sensors).
+    pub plant: Vehicle,
+    /// The vehicle the firmware believes (controller model and gains); `None`: `plant`.
+    pub model_vehicle: Option<Vehicle>,
     /// Fault injection time, s.
     pub fault_s: f64,
     /// Yaw kick (half-sine torque on both wheels) time, s.
@@ -205,7 +219,8 @@ impl Default for Setup {
     /// (20 Hz corner, half common); 5 s.
     fn default() -> Self {
         Setup {
-            plant: ParamSet::Nominal.params(),
+            plant: Vehicle::nominal(),
+            model_vehicle: None,
             fault_s: 1.0,
             kick_s: 1.1,
             kick_nm: 100.0,
@@ -273,8 +288,8 @@ pub fn build(
     faults: &[FaultMode],
     speed_kmh: f64,
 ) -> (LoopConfig, Scenario) {
-    let mut cfg = LoopConfig::new(setup.plant, arm, setup.duration_s);
-    cfg.control = ControlParams::default();
+    let model = setup.model_vehicle.as_ref().unwrap_or(&setup.plant);
+    let mut cfg = LoopConfig::new(&setup.plant, arm, setup.duration_s).with_model(model);
     cfg.sensors.seed = setup.seed;
     cfg.estimator = false;
     cfg.record_every = 50;
@@ -327,7 +342,8 @@ pub fn run_case(
         case: c.name.clone(),
         arm: arm.name().to_string(),
         speed_kmh,
-        in_window: (WINDOW_KMH.0..=WINDOW_KMH.1).contains(&speed_kmh),
+        in_window: window_kmh(&setup.plant.plant)
+            .is_some_and(|(on, off)| (on..=off).contains(&speed_kmh)),
         injected: !c.faults.is_empty(),
         detect_ms: first.map(|t| (t - setup.fault_s) * 1e3),
         detected: detected.join("+"),
@@ -395,6 +411,14 @@ pub struct FaultsArgs {
     /// fault, so no injected fault can be detected and those checks fail.
     #[arg(long, default_value_t = 5.0, alias = "duration", allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
+    /// The vehicle the firmware believes (controller model, gains): a named set or a vehicle
+    /// file; default: `--vehicle`.
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
 }
 
 impl FaultsArgs {
@@ -550,6 +574,11 @@ pub fn verdict(bad: &[String]) -> Result<()> {
 pub fn command(a: &FaultsArgs) -> Result<()> {
     let cases = a.cases()?;
     let setup = Setup {
+        plant: vehicle_file::load(&a.vehicle)?,
+        model_vehicle: match &a.model_vehicle {
+            Some(m) => Some(vehicle_file::load(m).context("--model-vehicle")?),
+            None => None,
+        },
         duration_s: a.duration_s,
         ..Setup::default()
     };
@@ -557,7 +586,8 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
     println!(
-        "fault campaign: ASMC under SafeController, nominal plant, fault at {} s, kick {} N m x {} ms at {} s, road noise {} N m; {} runs in {:.1} s wall",
+        "fault campaign: ASMC under SafeController, vehicle `{}`, fault at {} s, kick {} N m x {} ms at {} s, road noise {} N m; {} runs in {:.1} s wall",
+        a.vehicle,
         setup.fault_s,
         setup.kick_nm,
         setup.kick_duration_s * 1e3,

@@ -19,11 +19,12 @@ use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind, ModeSelect};
+use shimmy_core::vehicle::Vehicle;
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
 use crate::sim::arg_range::{self, Range};
-use crate::sim::paramfile;
+use crate::sim::vehicle_file;
 
 /// Control period, s.
 pub const DT_S: f64 = 1e-3;
@@ -40,9 +41,14 @@ pub const DURATION_S: Range = Range::above(0.0, 3600.0, "s");
 /// Arguments of `shimmy-sim margin`.
 #[derive(Args, Debug, Clone)]
 pub struct MarginArgs {
-    /// Parameter set name or TOML file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
+    /// The vehicle the firmware believes (the pipeline's model and thresholds): a named set or
+    /// a vehicle file; default: `--vehicle`.
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
     /// Ramp start speed, km/h: 1 to 250.
     #[arg(long, default_value_t = 15.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub ramp_from_kmh: f64,
@@ -79,8 +85,10 @@ pub struct MarginArgs {
 /// An open-loop margin scenario.
 #[derive(Clone, Debug)]
 pub struct MarginScenario {
-    /// Plant parameters (the simulated plant *and* the pipeline's model).
+    /// Plant parameters of the simulated plant (and the pipeline's model unless `model`).
     pub params: PlantParams,
+    /// The vehicle the pipeline believes (its model); `None`: `params`.
+    pub model: Option<Vehicle>,
     /// Speed profile.
     pub speed: SpeedProfile,
     /// Simulated duration, s.
@@ -99,6 +107,7 @@ impl MarginScenario {
         let t1 = settle_s + (to_kmh - from_kmh).abs() / rate.max(1e-6);
         Self {
             params,
+            model: None,
             speed: SpeedProfile::Ramp {
                 v0_mps: kmh_to_mps(from_kmh),
                 v1_mps: kmh_to_mps(to_kmh),
@@ -116,6 +125,7 @@ impl MarginScenario {
     pub fn constant(params: PlantParams, v_kmh: f64, duration_s: f64) -> Self {
         Self {
             params,
+            model: None,
             speed: SpeedProfile::Constant(kmh_to_mps(v_kmh)),
             duration_s,
             noise_nm: 5.0,
@@ -233,7 +243,8 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
     let p = sc.params;
     let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
     let mut scen = sc.scenario();
-    let mut pipe = ShimmyPipeline::<16>::new(p, pp).context("pipeline config")?;
+    let model = sc.model.map_or(p, |m| m.plant);
+    let mut pipe = ShimmyPipeline::<16>::new(model, pp).context("pipeline config")?;
     let onset = onset_kmh(&p);
     let n = (sc.duration_s / DT_S).round() as usize;
     let mut rows = Vec::with_capacity(n / 10 + 1);
@@ -416,7 +427,7 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
     }
     panel(
         &parts[0],
-        &format!("{title}: shimmy-mode damping (true A(V) at true speed, model, data)"),
+        &format!("{title}: shimmy-mode damping (true: shimmy mode by shape of the simulated plant's A(V), no damper fitted, at the true speed; model; data)"),
         t,
         (-0.05, 0.2),
         &[
@@ -483,7 +494,12 @@ pub fn check(a: &MarginArgs) -> Result<()> {
 /// `shimmy-sim margin`.
 pub fn command(a: &MarginArgs) -> Result<()> {
     check(a)?;
-    let p = paramfile::load(&a.params)?;
+    let vehicle = vehicle_file::load(&a.vehicle)?;
+    let model = match &a.model_vehicle {
+        Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
+        None => vehicle,
+    };
+    let p = vehicle.plant;
     let mut sc = match a.constant_kmh {
         Some(v) => MarginScenario::constant(p, v, a.duration_s),
         None => MarginScenario::ramp(
@@ -497,12 +513,16 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     sc.noise_nm = a.noise_nm;
     sc.imbalance_nm = a.imbalance_nm;
     sc.seed = a.seed;
+    sc.model = Some(model);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
-    let pp = PipelineParams::default();
-    let run = run(&sc, pp, 10)?;
+    let run = run(&sc, model.pipeline_params(), 10)?;
     println!(
-        "open loop, damper off (no damper force), params `{}`, noise {} N m, imbalance {} N m, seed {}",
-        a.params, sc.noise_nm, sc.imbalance_nm, sc.seed
+        "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m, seed {}",
+        a.vehicle,
+        a.model_vehicle.as_deref().unwrap_or(&a.vehicle),
+        sc.noise_nm,
+        sc.imbalance_nm,
+        sc.seed
     );
     println!(
         "simulated {:.1} s in {:.1} s wall ({:.0}x real time); model cycles {}, max eigen-solves per 1 ms call {}",
@@ -543,7 +563,7 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     let csv = a.out.join("margin.csv");
     write_csv(&csv, &run.rows)?;
     let png = a.out.join("margin.png");
-    plot(&png, &run, &a.params)?;
+    plot(&png, &run, &a.vehicle)?;
     println!("wrote {} and {}", csv.display(), png.display());
     Ok(())
 }

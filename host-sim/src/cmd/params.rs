@@ -1,15 +1,26 @@
-//! `shimmy-sim params`: print and validate a parameter set (a name or a TOML file).
+//! `shimmy-sim params`: print and validate a vehicle (a set name or a vehicle file).
 
-use crate::sim::paramfile;
+use crate::sim::vehicle_file;
 use anyhow::Result;
-use shimmy_core::params::Param;
+use shimmy_core::vehicle::{FIELDS, SECTIONS};
 
-/// Prints every parameter of the set `spec` with its unit (after validating it).
+/// Prints every field of the vehicle `spec`, section by section, with its unit and allowed range
+/// (after validating it).
 pub fn command(spec: &str) -> Result<()> {
-    let p = paramfile::load(spec)?;
-    println!("parameter set `{spec}` (valid)");
-    for q in Param::ALL {
-        println!("  {:<6} = {:>14.6} {}", q.name(), p.get(q), q.unit());
+    let v = vehicle_file::load(spec)?;
+    println!("vehicle `{spec}` (valid)");
+    for section in SECTIONS {
+        println!("[{section}]");
+        for f in FIELDS.iter().filter(|f| f.section == section) {
+            println!(
+                "  {:<22} = {:>14.6} {:<16} ({} ..= {})",
+                f.name,
+                v.get(f),
+                f.unit,
+                f.lo,
+                f.hi
+            );
+        }
     }
     Ok(())
 }

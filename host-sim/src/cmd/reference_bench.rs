@@ -39,9 +39,10 @@ pub const CL_GAIN: Range = Range::closed(0.0, 1000.0, "A/(rad/s)");
 /// Options of `shimmy-sim reference-bench`.
 #[derive(Args, Debug)]
 pub struct ReferenceBenchArgs {
-    /// Parameter set (name or TOML file).
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Simulated time of the time-domain run, s: above 0, at most 600.
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
@@ -113,8 +114,8 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     if !(2..=100_000).contains(&a.sweep_points) {
         bail!("--sweep-points {}: allowed 2 to 100000", a.sweep_points);
     }
-    let params = crate::sim::paramfile::load(&a.params)?;
-    let damper = SpencerParams::steering();
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+    let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
 
@@ -252,9 +253,7 @@ fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> 
         .impulses
         .first()
         .context("the demo has a pothole")?;
-    let i_max = shimmy_core::control::ControlParams::default()
-        .limits
-        .i_max_a;
+    let i_max = case.plant.rated_current_a();
     let mut s = String::from("\n[ramp]\n");
     let _ = writeln!(s, "duration_s = {ramp_s:e}");
     let _ = writeln!(
@@ -278,7 +277,7 @@ fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> 
     let _ = writeln!(s, "rtol = 1e-7\natol = 1e-10");
     let _ = writeln!(s, "[ramp.plant]");
     for q in Param::ALL {
-        let _ = writeln!(s, "{} = {:e}", q.name(), case.plant.get(q));
+        let _ = writeln!(s, "{} = {:e}", q.name(), case.plant.plant.get(q));
     }
     Ok(s)
 }
@@ -342,7 +341,7 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
     let _ = writeln!(
         t,
         "reference bench: {} at {} km/h, MR damper at {} A, {} deg start, {} s; sweep of {} speeds",
-        a.params, a.speed_kmh, a.current_a, a.initial_yaw_deg, a.duration_s, a.sweep_points
+        a.vehicle, a.speed_kmh, a.current_a, a.initial_yaw_deg, a.duration_s, a.sweep_points
     );
     let _ = writeln!(
         t,

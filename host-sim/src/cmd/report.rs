@@ -26,6 +26,13 @@ pub struct ReportArgs {
     /// rating).
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
+    /// The simulated vehicle for every scenario (overrides each file's `[plant]`, sensors
+    /// included): a named set or a vehicle file (TOML, see docs/vehicle-file.md).
+    #[arg(long, visible_alias = "params")]
+    pub vehicle: Option<String>,
+    /// The vehicle the firmware believes, for every scenario (overrides each file's `[model]`).
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
 }
 
 /// The shipped standard scenario folder: `host-sim/scenarios` below the working directory if it
@@ -75,7 +82,8 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     files
         .into_iter()
         .map(|f| {
-            let spec = scenario_file::load(&f)?;
+            let mut spec = scenario_file::load(&f)?;
+            spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
             let specs = if controllers.is_empty() {
                 vec![spec]
             } else {
@@ -124,7 +132,6 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
                     s.initial_yaw_rad.to_degrees(),
                     s.sensors.encoder_bits
                 ),
-                plant: s.plant,
                 runs: Vec::new(),
                 extra_plots: Vec::new(),
             }
@@ -198,6 +205,8 @@ mod tests {
             out: out.clone(),
             controllers: vec!["passive-off".into(), "asmc".into()],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         command(&a).unwrap();
         let md = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -242,6 +251,8 @@ mod tests {
             out: out.clone(),
             controllers: vec![],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         let e = format!("{:#}", command(&a).unwrap_err());
         assert!(e.contains("duration_s"), "{e}");
@@ -262,6 +273,8 @@ mod tests {
             out: tmp("std"),
             controllers: vec![],
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         let plan = plan(&a).unwrap();
         assert!(plan.len() >= 7, "{} files", plan.len());

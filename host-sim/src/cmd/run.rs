@@ -27,6 +27,13 @@ pub struct RunArgs {
     /// Fixed current for `--controller passive-on`, in A: 0 to 2 A (the coil rating).
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
+    /// The simulated vehicle (overrides the file's `[plant]`, sensors included): a named set
+    /// (nominal, gentle, hard) or a vehicle file (TOML, see docs/vehicle-file.md).
+    #[arg(long, visible_alias = "params")]
+    pub vehicle: Option<String>,
+    /// The vehicle the firmware believes (overrides the file's `[model]`): a set or a file.
+    #[arg(long)]
+    pub model_vehicle: Option<String>,
 }
 
 /// The output folder of a run: `--out`, else the file's `output.dir`, else `out/<name>` with
@@ -41,6 +48,7 @@ pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
     let mut spec = scenario_file::load(&a.scenario)?;
+    spec.override_vehicles(a.vehicle.as_deref(), a.model_vehicle.as_deref())?;
     if let Some(c) = &a.controller {
         let Some(c) = controller_name(c) else {
             anyhow::bail!("--controller {c}: allowed: {}", CONTROLLERS.join(", "));
@@ -61,8 +69,7 @@ pub fn command(a: &RunArgs) -> Result<()> {
     plot_margin(
         &margin_png,
         &spec.name,
-        &spec.plant,
-        &[(spec.controller.as_str(), &r)],
+        &[(spec.controller.as_str(), &cfg, &r)],
     )?;
 
     let deg = 180.0 / PI;
@@ -161,6 +168,8 @@ mod tests {
             out: Some(out.clone()),
             controller: None,
             on_current_a: 1.0,
+            vehicle: None,
+            model_vehicle: None,
         };
         // The command path itself (with a file on disk).
         let file = out.with_extension("toml");

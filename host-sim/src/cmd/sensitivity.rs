@@ -10,14 +10,15 @@ use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
 
 use crate::out::table::opt;
-use crate::sim::paramfile;
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SensitivityArgs {
-    /// Named set (nominal, gentle, hard) or TOML parameter file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Relative change applied down and up in %: above 0, at most 90.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::arg_range::f64_in(PERCENT))]
     pub percent: f64,
@@ -77,11 +78,11 @@ pub fn window_of(p: &PlantParams) -> Result<(Option<f64>, Option<f64>, Option<f6
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
-    let p = paramfile::load(&args.params)?;
+    let p = vehicle_file::load(&args.vehicle)?.plant;
     let (on0, off0, f0) = window_of(&p)?;
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
-        args.params, args.percent
+        args.vehicle, args.percent
     );
     println!(
         "base: onset {} km/h, offset {} km/h, onset frequency {} Hz",

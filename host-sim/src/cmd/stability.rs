@@ -12,14 +12,15 @@ use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_T
 
 use crate::model::damper_equiv::damper_equivalent;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::paramfile;
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
-    /// Named set (nominal, gentle, hard) or TOML parameter file.
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
     /// coefficient (describing function). Without it there is no damper force. 0 to 2 A (the
     /// coil rating).
@@ -73,19 +74,27 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    let p = paramfile::load(&args.params)?;
+    let vehicle = vehicle_file::load(&args.vehicle)?;
+    let p = vehicle.plant;
+    if let Some(i) = args.damper_current_a {
+        arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
+    }
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let (c, damper) = match args.damper_current_a {
         None => (0.0, None),
         Some(i) => {
-            let d = damper_equivalent(&p, i, args.ref_amplitude_deg, v_min, v_max)?;
+            let d = damper_equivalent(
+                &p,
+                &vehicle.damper.spencer,
+                i,
+                args.ref_amplitude_deg,
+                v_min,
+                v_max,
+            )?;
             (d.c_eq_nspm, Some(d))
         }
     };
-    println!(
-        "stability of straight running: parameter set `{}`",
-        args.params
-    );
+    println!("stability of straight running: vehicle `{}`", args.vehicle);
     match damper {
         None => println!("damper: none (F_d = 0)"),
         Some(d) => println!(
@@ -153,7 +162,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     let ccsv = args.out.join("crossings.csv");
     write_crossings_csv(&ccsv, &crossings)?;
     let png = args.out.join("stability.png");
-    plot(&png, &rows, &crossings, &args.params, c)?;
+    plot(&png, &rows, &crossings, &args.vehicle, c)?;
     println!(
         "wrote {}, {}, {}",
         csv.display(),

@@ -118,18 +118,18 @@ pub struct DamperEquivalent {
     pub c_eq_nspm: f64,
 }
 
-/// Energy-equivalent viscous coefficient of the MR damper at `current_a`, evaluated at the
+/// Energy-equivalent viscous coefficient of the MR damper `sp` at `current_a`, evaluated at the
 /// frequency of the shimmy (in-phase wheel-yaw) mode at the speed where the damper-free growth
 /// rate of the critical mode is largest in [v_min, v_max]; the frequency is updated once with
 /// the damper in place (a two-pass fixed point: the mode frequency moves little with c).
 pub fn damper_equivalent(
     p: &PlantParams,
+    sp: &SpencerParams,
     current_a: f64,
     ref_amp_deg: f64,
     v_min_mps: f64,
     v_max_mps: f64,
 ) -> Result<DamperEquivalent, EigenError> {
-    let sp = SpencerParams::steering();
     let amp = stroke_amplitude_m(p.l_t, ref_amp_deg.to_radians());
     let n = 100;
     let mut v_ref = v_min_mps;
@@ -143,10 +143,10 @@ pub fn damper_equivalent(
         }
     }
     let mut freq = stability::mode_at(p, v_ref, 0.0, ModeSelect::Shimmy)?.freq_hz;
-    let mut c = mr_equivalent_viscous(&sp, current_a, freq, amp);
+    let mut c = mr_equivalent_viscous(sp, current_a, freq, amp);
     for _ in 0..1 {
         freq = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy)?.freq_hz;
-        c = mr_equivalent_viscous(&sp, current_a, freq, amp);
+        c = mr_equivalent_viscous(sp, current_a, freq, amp);
     }
     Ok(DamperEquivalent {
         current_a,

@@ -10,6 +10,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
+use shimmy_core::vehicle::SensorCalibration;
 use std::collections::VecDeque;
 use std::f64::consts::PI;
 
@@ -58,6 +59,21 @@ impl Default for SensorConfig {
 }
 
 impl SensorConfig {
+    /// The sensors of a vehicle (its encoder resolution and noise, speed calibration error and
+    /// current full scale); delays, speed and current noise and the seed as in [`Default`].
+    /// The reference vehicle's sensors are exactly the default.
+    pub fn from_vehicle(cal: &SensorCalibration) -> Self {
+        let bits = u32::from(cal.encoder_bits);
+        SensorConfig {
+            encoder_bits: bits,
+            encoder_noise_rad: f64::from(cal.encoder_noise_lsb) * 2.0 * PI
+                / f64::from(1u32 << bits.min(31)),
+            speed_scale_error: f64::from(cal.speed_scale_error),
+            current_full_scale_a: f64::from(cal.current_full_scale_a),
+            ..SensorConfig::default()
+        }
+    }
+
     /// Ideal sensors: no quantisation, no noise, no delay.
     pub fn ideal() -> Self {
         SensorConfig {
@@ -326,6 +342,15 @@ impl Sensors {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_reference_vehicles_sensors_are_the_default() {
+        let v = shimmy_core::vehicle::Vehicle::nominal();
+        assert_eq!(
+            SensorConfig::from_vehicle(&v.sensors),
+            SensorConfig::default()
+        );
+    }
 
     #[test]
     fn encoder_quantises_to_14_bits_and_wraps() {

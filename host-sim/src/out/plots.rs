@@ -1,13 +1,15 @@
 //! The run plots several commands share: time histories of closed-loop runs ([`plot_runs`]) and
-//! the mode meter's damping estimate against the plant's eigenvalue ([`plot_margin`]).
+//! the mode meter's damping estimate against the plant's eigenvalue as it runs ([`plot_margin`]).
 
 use crate::out::plot_util::{self, COLORS};
-use crate::sim::closed_loop::{LoopResult, TraceRow};
+use crate::sim::closed_loop::{LoopConfig, LoopResult, TraceRow};
+use crate::sim::reference::{reference_line, REFERENCE_LABEL};
 use anyhow::Result;
 use plotters::prelude::*;
-use shimmy_core::params::PlantParams;
-use shimmy_core::stability::{self, ModeSelect};
 use std::path::Path;
+
+/// Spacing of the reference line's points, s (each costs two describing-function evaluations).
+pub const REFERENCE_EVERY_S: f64 = 0.25;
 
 /// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
 pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
@@ -72,27 +74,26 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
     Ok(())
 }
 
-/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to the
-/// damping ratio of the plant's shimmy mode from A(V) at the true speed without damper (the
-/// margin the plant has on its own; the measured closed-loop damping lies above it when the
-/// damper works).
+/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to its
+/// reference line (same colour): the damping ratio of the plant's shimmy mode as the run goes,
+/// linearised with the damper's equivalent viscous coefficient at the run's current and
+/// amplitude ([`crate::sim::reference`]). The caption says so.
 pub fn plot_margin(
     path: &Path,
     title: &str,
-    plant: &PlantParams,
-    runs: &[(&str, &LoopResult)],
+    runs: &[(&str, &LoopConfig, &LoopResult)],
 ) -> Result<()> {
     let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let t_end = runs
         .iter()
-        .filter_map(|(_, r)| r.meter.last().map(|m| m.t_s))
+        .filter_map(|(_, _, r)| r.meter.last().map(|m| m.t_s))
         .fold(0.1f64, f64::max);
     let (lo, hi) = (-0.15, 0.3);
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("{title}: damping ratio of the shimmy mode (meter: dots +- sigma; A(V) without damper: line)"),
-            ("sans-serif", 16),
+            format!("{title}: shimmy-mode damping ratio. Dots +- sigma: mode meter. Lines: {REFERENCE_LABEL}"),
+            ("sans-serif", 14),
         )
         .margin(8)
         .x_label_area_size(35)
@@ -100,23 +101,18 @@ pub fn plot_margin(
         .build_cartesian_2d(0.0..t_end, lo..hi)?;
     plot_util::mesh(&mut chart, "time [s]", "zeta [-]")?;
     chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
-    if let Some((_, r)) = runs.first() {
-        let model: Vec<(f64, f64)> = r
-            .meter
+    for (i, (name, cfg, r)) in runs.iter().enumerate() {
+        let c = COLORS[(i + 1) % COLORS.len()];
+        let line: Vec<(f64, f64)> = reference_line(cfg, r, REFERENCE_EVERY_S)
             .iter()
-            .step_by(10)
-            .filter_map(|row| {
-                stability::mode_at(plant, row.speed_mps.max(0.1), 0.0, ModeSelect::Shimmy)
-                    .ok()
-                    .map(|m| (row.t_s, m.zeta.clamp(lo, hi)))
-            })
+            .map(|p| (p.t_s, p.mode.zeta.clamp(lo, hi)))
             .collect();
         chart
-            .draw_series(LineSeries::new(model, BLUE.stroke_width(2)))?
-            .label("A(V), no damper")
-            .legend(plot_util::line_marker(BLUE, 2));
+            .draw_series(LineSeries::new(line, c.stroke_width(2)))?
+            .label(format!("reference (plant as it runs), {name}"))
+            .legend(plot_util::line_marker(c, 2));
     }
-    for (i, (name, r)) in runs.iter().enumerate() {
+    for (i, (name, _, r)) in runs.iter().enumerate() {
         let c = COLORS[(i + 1) % COLORS.len()];
         let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
         chart.draw_series(valid.iter().map(|m| {

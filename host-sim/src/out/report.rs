@@ -5,15 +5,15 @@
 //! closed-loop runs of one or more controllers. [`write()`] produces in the output folder:
 //! `report.md`, `metrics.csv` (every run, units in the header), per section `<name>-time.png`
 //! (wheel yaw, coil current, gain vs time), `<name>-margin.png` (the mode meter's damping
-//! estimate next to the true eigenvalue of the plant's shimmy mode at the same speed, when the
+//! estimate next to each run's reference line, the plant's shimmy mode as it runs, when the
 //! meter ran) and one trace CSV per run.
 
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::out::table::opt;
 use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
+use crate::sim::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
-use shimmy_core::params::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -50,8 +50,6 @@ pub struct Section {
     pub name: String,
     /// Markdown text under the heading.
     pub description: String,
-    /// The true plant (for the eigenvalue line of the margin plot).
-    pub plant: PlantParams,
     /// The runs, one per controller.
     pub runs: Vec<ReportRun>,
     /// Further plots already written into the output folder: (caption, file name).
@@ -194,18 +192,19 @@ pub fn write(out: &Path, report: &Report) -> Result<Written> {
             "Wheel yaw, coil current and switching gain:\n\n![{} time histories]({time_png})\n",
             sec.name
         );
-        let with_meter: Vec<(&str, &LoopResult)> = runs
+        let with_meter: Vec<(&str, &LoopConfig, &LoopResult)> = sec
+            .runs
             .iter()
-            .copied()
-            .filter(|(_, r)| r.meter.iter().any(|m| m.valid))
+            .filter(|r| r.result.meter.iter().any(|m| m.valid))
+            .map(|r| (r.label.as_str(), &r.cfg, &r.result))
             .collect();
         if !with_meter.is_empty() {
             let margin_png = format!("{slug}-margin.png");
-            plot_margin(&out.join(&margin_png), &sec.name, &sec.plant, &with_meter)?;
+            plot_margin(&out.join(&margin_png), &sec.name, &with_meter)?;
             plots.push(out.join(&margin_png));
             let _ = writeln!(
                 md,
-                "Mode meter (data) vs the true eigenvalue of the plant's shimmy mode without damper:\n\n![{} margin]({margin_png})\n",
+                "Mode meter (data) vs the reference line, the {REFERENCE_LABEL}:\n\n![{} margin]({margin_png})\n",
                 sec.name
             );
         }

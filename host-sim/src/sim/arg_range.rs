@@ -95,6 +95,12 @@ pub fn coil_current() -> Range {
     Range::closed(0.0, f64::from(i_max), "A")
 }
 
+/// Coil current of `vehicle`'s damper: 0 A to its rating (`damper.rated_current_a`), checked
+/// once the vehicle is loaded (the parse-time check is [`coil_current`], the reference coil's).
+pub fn vehicle_current(vehicle: &shimmy_core::vehicle::Vehicle) -> Range {
+    Range::closed(0.0, f64::from(vehicle.rated_current_a()), "A")
+}
+
 /// Forward speed: 1 to 250 km/h.
 pub const SPEED_KMH: Range = Range::closed(1.0, 250.0, "km/h");
 

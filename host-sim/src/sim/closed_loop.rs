@@ -29,6 +29,7 @@ use shimmy_core::control::{
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
+use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::SupervisorEvent;
 use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
@@ -36,6 +37,7 @@ use shimmy_core::supervisor::frame::MarginStatus;
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
+use shimmy_core::vehicle::Vehicle;
 
 /// What sits on the track rod and drives it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,9 +71,12 @@ impl Arm {
 pub struct LoopConfig {
     /// The true plant (the controller knows only `control.nominal`).
     pub plant: PlantParams,
+    /// The true damper (the controller knows only `control.mr`); `Arm::NoDamper` removes it.
+    pub damper: SpencerParams,
     /// Damper and controller.
     pub arm: Arm,
-    /// Controller gains and limits.
+    /// Controller gains and limits, and the controller's model of plant and damper: what the
+    /// firmware believes ([`Self::with_model`]).
     pub control: ControlParams,
     /// Sensor models.
     pub sensors: SensorConfig,
@@ -99,27 +104,37 @@ pub struct LoopConfig {
 }
 
 impl LoopConfig {
-    /// Defaults: 1 kHz, default sensors and control gains, trace at 200 Hz, meter on,
-    /// Dopri5 rtol 1e-7, 4 Ohm coil (the firmware's `CoilParams` default), plant at rest.
-    pub fn new(plant: PlantParams, arm: Arm, duration_s: f64) -> Self {
+    /// The loop around `vehicle` (plant, damper, sensors and coil from it; the controller's
+    /// model and gains from it too, see [`Self::with_model`] for a firmware that believes
+    /// another vehicle): 1 kHz, trace at 200 Hz, meter on, Dopri5 rtol 1e-7, plant at rest.
+    pub fn new(vehicle: &Vehicle, arm: Arm, duration_s: f64) -> Self {
         LoopConfig {
-            plant,
+            plant: vehicle.plant,
+            damper: vehicle.damper.spencer,
             arm,
-            control: ControlParams::default(),
-            sensors: SensorConfig::default(),
+            control: vehicle.control_params(),
+            sensors: SensorConfig::from_vehicle(&vehicle.sensors),
             dt_s: 1e-3,
             duration_s,
             record_every: 5,
             estimator: true,
             method: Method::default(),
-            coil_resistance_ohm: f64::from(
-                shimmy_core::control::actuator::CoilParams::default().r_coil_ohm,
-            ),
+            coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
             x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
-            supervisor: SupervisorParams::default(),
+            supervisor: vehicle.supervisor_params(),
             supervised: true,
         }
+    }
+
+    /// The same loop with a firmware that believes `model` (the controller's plant and damper
+    /// model, gains and limits; the supervisor's fail-safe current and coil full scale); the
+    /// simulated plant, damper and sensors stay.
+    #[must_use]
+    pub fn with_model(mut self, model: &Vehicle) -> Self {
+        self.control = model.control_params();
+        self.supervisor = model.supervisor_params();
+        self
     }
 }
 
@@ -471,10 +486,7 @@ pub fn run(
     let wall = std::time::Instant::now();
     let (damper, kind) = match cfg.arm {
         Arm::NoDamper => (Damper::None, ControllerKind::PassiveOff),
-        Arm::Mr(k) => (
-            Damper::Mr(shimmy_core::mr_damper::SpencerParams::steering()),
-            k,
-        ),
+        Arm::Mr(k) => (Damper::Mr(cfg.damper), k),
     };
     let plant = Plant::new(cfg.plant, damper);
     let mut sim = Simulator::with_method(plant, cfg.x0, cfg.method);

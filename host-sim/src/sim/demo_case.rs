@@ -7,14 +7,15 @@ use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
+use shimmy_core::vehicle::Vehicle;
 
 /// The demo's case: the nominal plant, the ramp scenario and the facts the report states.
 #[derive(Clone, Debug)]
 pub struct DemoCase {
-    /// The true (and nominal) plant.
-    pub plant: PlantParams,
+    /// The vehicle (simulated, and believed by the firmware).
+    pub plant: Vehicle,
     /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
     pub scenario: Scenario,
     /// Hopf crossings of the plant without damper (1-50 m/s).
@@ -33,9 +34,15 @@ pub const ARMS: [(&str, Arm); 2] = [
     ("ASMC", Arm::Mr(ControllerKind::Asmc)),
 ];
 
-/// Builds the demo's case for a ramp of `ramp_s` seconds (all numbers computed).
+/// Builds the demo's case on the reference vehicle for a ramp of `ramp_s` seconds (all
+/// numbers computed).
 pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
-    let p = ParamSet::Nominal.params();
+    demo_case_for(&Vehicle::nominal(), ramp_s)
+}
+
+/// The demo's case on `vehicle`.
+pub fn demo_case_for(vehicle: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
+    let p = vehicle.plant;
     let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
         .context("hopf_crossings")?
         .iter()
@@ -61,7 +68,7 @@ pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
     let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
     sc.impulses.push(pothole(t_hit, POTHOLE_NM));
     Ok(DemoCase {
-        plant: p,
+        plant: *vehicle,
         scenario: sc,
         crossings,
         window_kmh,
@@ -77,7 +84,7 @@ pub fn run_arm(
     ramp_s: f64,
     record_every: usize,
 ) -> Result<(LoopConfig, LoopResult)> {
-    let mut cfg = LoopConfig::new(case.plant, arm, ramp_s);
+    let mut cfg = LoopConfig::new(&case.plant, arm, ramp_s);
     cfg.record_every = record_every;
     let mut s = case.scenario.clone();
     let r = closed_loop::run(&cfg, &mut s, None)

@@ -1,5 +1,5 @@
 //! The simulation layer: runs the model -- the closed loop with the core's controller, open-loop
-//! plant runs, parameter and scenario files (the one [`scenario::ScenarioSpec`], turned into a
+//! plant runs, vehicle and scenario files (the one [`scenario::ScenarioSpec`], turned into a
 //! loop configuration and run), the standard scenario set, the demo case and the allowed ranges
 //! of the commands' numeric options.
 //!
@@ -9,7 +9,8 @@ pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
 pub mod open_loop;
-pub mod paramfile;
+pub mod reference;
 pub mod scenario;
 pub mod scenario_file;
 pub mod standard;
+pub mod vehicle_file;

@@ -62,18 +62,30 @@ impl RunSummary {
 pub enum DamperSetting {
     /// No damper (F_d = 0).
     Off,
-    /// The MR damper with a constant coil current, A.
-    Current(f64),
+    /// The MR damper `damper` with a constant coil current `current_a`, A.
+    Mr {
+        /// The damper (a vehicle's `damper.spencer`).
+        damper: SpencerParams,
+        /// Coil current, A.
+        current_a: f64,
+    },
 }
 
 impl DamperSetting {
+    /// The reference vehicle's MR damper at `current_a`.
+    pub fn reference_mr(current_a: f64) -> Self {
+        DamperSetting::Mr {
+            damper: SpencerParams::steering(),
+            current_a,
+        }
+    }
+
     fn plant(self, params: &PlantParams) -> (Plant, f64) {
         match self {
             DamperSetting::Off => (Plant::new(*params, Damper::None), 0.0),
-            DamperSetting::Current(i) => (
-                Plant::new(*params, Damper::Mr(SpencerParams::steering())),
-                i,
-            ),
+            DamperSetting::Mr { damper, current_a } => {
+                (Plant::new(*params, Damper::Mr(damper)), current_a)
+            }
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The one scenario description of the simulator, [`ScenarioSpec`]: what a closed-loop run
-//! needs (plant, inputs, initial state, sensors, faults, controller), whether it comes from a
+//! needs (the plant's vehicle and the vehicle the firmware believes, inputs, initial state,
+//! sensors, faults, controller), whether it comes from a
 //! scenario file (`scenario_file`) or from the built-in standard set (`standard`), and the one
 //! way to turn it into a [`LoopConfig`] and run it.
 
@@ -7,9 +8,10 @@ use crate::model::disturbance::{initial_yaw, Scenario};
 use crate::model::faults::FaultSpec;
 use crate::model::sensors::SensorConfig;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
+use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
 use shimmy_core::control::ControlParams;
-use shimmy_core::params::PlantParams;
+use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
 /// The controller names, one per controller, as they appear in tables, legends and file names
@@ -37,8 +39,11 @@ pub struct ScenarioSpec {
     pub name: String,
     /// One line on what it is (plot titles of `compare`); empty for scenario files.
     pub description: String,
-    /// The true plant (the controllers know only the nominal set).
-    pub plant: PlantParams,
+    /// The true vehicle: the simulated plant, damper and sensors.
+    pub plant: Vehicle,
+    /// The vehicle the firmware believes (its controller's and estimator's models, gains and
+    /// thresholds); `None`: the plant's vehicle ([`Self::model`]).
+    pub model_vehicle: Option<Vehicle>,
     /// Controller name, one of [`CONTROLLERS`] (callers running several controllers override it).
     pub controller: String,
     /// Fixed current of `passive-on`, in A.
@@ -64,22 +69,51 @@ pub struct ScenarioSpec {
 impl ScenarioSpec {
     /// A scenario with the defaults of a file that gives only these: no description, the plant
     /// at rest, no settling metric, ASMC, default sensors, a trace at 200 Hz, no faults.
-    pub fn new(name: &str, plant: PlantParams, scenario: Scenario, duration_s: f64) -> Self {
+    /// The sensors are the plant vehicle's; the firmware believes the plant's vehicle.
+    pub fn new(name: &str, plant: &Vehicle, scenario: Scenario, duration_s: f64) -> Self {
         ScenarioSpec {
             name: name.to_string(),
             description: String::new(),
-            plant,
+            plant: *plant,
+            model_vehicle: None,
             controller: "asmc".to_string(),
             on_current_a: 0.0,
             initial_yaw_rad: 0.0,
             scenario,
             duration_s,
             t_dist_s: None,
-            sensors: SensorConfig::default(),
+            sensors: SensorConfig::from_vehicle(&plant.sensors),
             trace_every: 5,
             faults: Vec::new(),
             out_dir: None,
         }
+    }
+
+    /// Replaces the simulated vehicle (and with it the sensors' calibration; the noise seed
+    /// stays), e.g. for `--vehicle` on the command line.
+    pub fn set_plant(&mut self, plant: Vehicle) {
+        self.plant = plant;
+        self.sensors = SensorConfig {
+            seed: self.sensors.seed,
+            ..SensorConfig::from_vehicle(&plant.sensors)
+        };
+    }
+
+    /// Applies `--vehicle` (the simulated vehicle, [`Self::set_plant`]) and `--model-vehicle`
+    /// (what the firmware believes) when given: each a named set or a vehicle file.
+    pub fn override_vehicles(&mut self, vehicle: Option<&str>, model: Option<&str>) -> Result<()> {
+        if let Some(v) = vehicle {
+            self.set_plant(vehicle_file::load(v).context("--vehicle")?);
+        }
+        if let Some(m) = model {
+            self.model_vehicle = Some(vehicle_file::load(m).context("--model-vehicle")?);
+        }
+        Ok(())
+    }
+
+    /// The vehicle the firmware believes.
+    pub fn model(&self) -> &Vehicle {
+        self.model_vehicle.as_ref().unwrap_or(&self.plant)
     }
 
     /// The scenario's own controller as a closed-loop arm.
@@ -93,9 +127,10 @@ impl ScenarioSpec {
     }
 }
 
-/// The closed-loop configuration of `spec` driven by `arm` (default control gains).
+/// The closed-loop configuration of `spec` driven by `arm`: the plant vehicle simulated, the
+/// model vehicle's controller model and gains.
 pub fn loop_config(spec: &ScenarioSpec, arm: Arm) -> LoopConfig {
-    let mut cfg = LoopConfig::new(spec.plant, arm, spec.duration_s);
+    let mut cfg = LoopConfig::new(&spec.plant, arm, spec.duration_s).with_model(spec.model());
     cfg.sensors = spec.sensors;
     cfg.record_every = spec.trace_every;
     cfg.x0 = initial_yaw(spec.initial_yaw_rad);
@@ -103,7 +138,8 @@ pub fn loop_config(spec: &ScenarioSpec, arm: Arm) -> LoopConfig {
     cfg
 }
 
-/// Runs `spec` with `arm` and the control parameters `control`.
+/// Runs `spec` with `arm` and the control parameters `control` (e.g. the model vehicle's with
+/// a study's gain overrides).
 pub fn run_arm(
     spec: &ScenarioSpec,
     arm: Arm,
@@ -117,7 +153,7 @@ pub fn run_arm(
     Ok((cfg, result))
 }
 
-/// Runs `spec` with its own controller and the default control parameters.
+/// Runs `spec` with its own controller and the model vehicle's control parameters.
 pub fn run(spec: &ScenarioSpec) -> Result<(LoopConfig, LoopResult)> {
-    run_arm(spec, spec.arm()?, &ControlParams::default())
+    run_arm(spec, spec.arm()?, &spec.model().control_params())
 }

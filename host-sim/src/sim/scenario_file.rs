@@ -7,9 +7,14 @@
 //! duration_s = 60.0
 //! seed = 7                        # road noise and sensor noise
 //!
-//! [plant]
-//! params = "nominal"              # nominal | gentle | hard | path to a parameter file
-//! overrides = { c_a = 72000.0 }   # optional, by field name (see `shimmy-sim params`)
+//! [plant]                         # the simulated vehicle
+//! vehicle = "nominal"             # nominal | gentle | hard | path to a vehicle file, relative
+//!                                 # to this file (`params` is the older name of this key)
+//! overrides = { c_a = 72000.0 }   # optional: plant fields by name (see `shimmy-sim params`)
+//!
+//! [model]                         # optional: the vehicle the firmware believes (its controller's
+//! vehicle = "nominal"             # and estimator's models, gains, thresholds); default: the
+//! overrides = { c_a = 90000.0 }   # plant's vehicle. Same keys as [plant].
 //!
 //! [controller]
 //! kind = "asmc"                   # no-damper | passive-off | passive-on | smc | asmc | skyhook
@@ -38,7 +43,7 @@
 //! [driver]                        # lane_change or slalom
 //! slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
 //!
-//! [sensors]
+//! [sensors]                       # optional: overrides the plant vehicle's `[sensors]`
 //! encoder_bits = 14
 //! encoder_noise_lsb = 0.5
 //!
@@ -68,13 +73,13 @@ use crate::model::disturbance::{
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::paramfile;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
-use shimmy_core::params::{kmh_to_mps, Param};
+use shimmy_core::params::kmh_to_mps;
+use shimmy_core::vehicle::{SetError, Vehicle};
 use std::collections::BTreeMap;
-use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 #[derive(Deserialize)]
@@ -84,7 +89,8 @@ struct File {
     duration_s: f64,
     #[serde(default = "default_seed")]
     seed: u64,
-    plant: Option<PlantSection>,
+    plant: Option<VehicleSection>,
+    model: Option<VehicleSection>,
     controller: Option<ControllerSection>,
     speed: SpeedSection,
     initial: Option<InitialSection>,
@@ -120,8 +126,9 @@ fn default_seed() -> u64 {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct PlantSection {
-    params: Option<String>,
+struct VehicleSection {
+    #[serde(alias = "params")]
+    vehicle: Option<String>,
     #[serde(default)]
     overrides: BTreeMap<String, f64>,
 }
@@ -208,7 +215,7 @@ struct SlalomSection {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SensorSection {
-    encoder_bits: Option<u32>,
+    encoder_bits: Option<f64>,
     encoder_noise_lsb: Option<f64>,
 }
 
@@ -229,7 +236,7 @@ fn in_range(field: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<f64
     }
 }
 
-/// Reads and validates a scenario file.
+/// Reads and validates a scenario file; vehicle files it names are found relative to it.
 pub fn load(path: &Path) -> Result<ScenarioSpec> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -237,34 +244,53 @@ pub fn load(path: &Path) -> Result<ScenarioSpec> {
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    parse(&text, &stem).with_context(|| format!("in scenario file {}", path.display()))
+    let dir = path.parent().unwrap_or(Path::new(""));
+    parse_in(&text, &stem, dir).with_context(|| format!("in scenario file {}", path.display()))
 }
 
-/// Parses and validates scenario TOML; `default_name` names the run when the file does not.
+/// Parses and validates scenario TOML; `default_name` names the run when the file does not;
+/// vehicle files are looked up relative to the working directory.
 pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
+    parse_in(text, default_name, Path::new(""))
+}
+
+/// The vehicle of a `[plant]` or `[model]` section (`key`): the named set or file, then the
+/// plant overrides, validated as a whole.
+fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<Vehicle> {
+    let spec = section.vehicle.as_deref().unwrap_or("nominal");
+    let mut v =
+        vehicle_file::load_relative(spec, dir).with_context(|| format!("field `{key}.vehicle`"))?;
+    for (name, value) in &section.overrides {
+        match v.set("plant", name, *value) {
+            Ok(()) => {}
+            Err(SetError::UnknownField) => bail!(
+                "field `{key}.overrides.{name}`: no such plant parameter, allowed: {}",
+                vehicle_file::field_names("plant").join(", ")
+            ),
+            Err(SetError::Invalid(e)) => bail!(
+                "{}",
+                e.to_string()
+                    .replacen("field `plant.", &format!("field `{key}.overrides."), 1)
+            ),
+        }
+    }
+    v.validate()
+        .with_context(|| format!("field `{key}.overrides`"))?;
+    Ok(v)
+}
+
+/// [`parse`] with vehicle files looked up relative to `dir` (the scenario file's folder).
+pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSpec> {
     let f: File = toml::from_str(text)?;
     let duration_s = in_range("duration_s", f.duration_s, 0.01, 3600.0, "s")?;
 
-    let params = match &f.plant {
-        Some(p) => {
-            let base = p.params.as_deref().unwrap_or("nominal");
-            let mut params = paramfile::load(base).context("field `plant.params`")?;
-            for (name, value) in &p.overrides {
-                let Some(param) = Param::from_name(name) else {
-                    bail!("field `plant.overrides.{name}`: no such parameter (see `shimmy-sim params`)");
-                };
-                params = params.with(param, *value);
-            }
-            if let Err((param, value)) = params.validate() {
-                bail!(
-                    "field `plant.overrides.{}` = {value}: must be finite and positive ({})",
-                    param.name(),
-                    param.unit()
-                );
-            }
-            params
-        }
-        None => paramfile::load("nominal")?,
+    let mut plant = match &f.plant {
+        Some(p) => vehicle_of("plant", p, dir)?,
+        None => Vehicle::nominal(),
+    };
+    let model_vehicle = match &f.model {
+        Some(m) => Some(vehicle_of("model", m, dir)?),
+        None => None,
     };
 
     let (controller, on_current_a) = match &f.controller {
@@ -278,7 +304,9 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
             };
             let on = match (kind, c.on_current_a) {
                 ("passive-on", Some(i)) => {
-                    let rated = arg_range::coil_current();
+                    // The firmware's limit: the coil rating of the vehicle it believes.
+                    let model = model_vehicle.as_ref().unwrap_or(&plant);
+                    let rated = arg_range::vehicle_current(model);
                     in_range("controller.on_current_a", i, rated.lo, rated.hi, "A")?
                 }
                 ("passive-on", None) => {
@@ -339,7 +367,7 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         scenario.imbalance = Some(Imbalance {
             amplitude_nm: [a, a],
             phase_rad,
-            radius_m: params.r,
+            radius_m: plant.plant.r,
         });
     }
     if let Some(d) = &f.driver {
@@ -380,25 +408,19 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         Some(i) => in_range("initial.yaw_deg", i.yaw_deg, -10.0, 10.0, "deg")?.to_radians(),
         None => 0.0,
     };
-    let (encoder_bits, encoder_noise_lsb) = match &f.sensors {
-        Some(s) => (
-            in_range(
-                "sensors.encoder_bits",
-                f64::from(s.encoder_bits.unwrap_or(14)),
-                8.0,
-                24.0,
-                "bit",
-            )? as u32,
-            in_range(
-                "sensors.encoder_noise_lsb",
-                s.encoder_noise_lsb.unwrap_or(0.5),
-                0.0,
-                100.0,
-                "LSB",
-            )?,
-        ),
-        None => (14, 0.5),
-    };
+    // The scenario's sensors override the plant vehicle's, through the vehicle's validation.
+    if let Some(s) = &f.sensors {
+        for (name, value) in [
+            ("encoder_bits", s.encoder_bits),
+            ("encoder_noise_lsb", s.encoder_noise_lsb),
+        ] {
+            if let Some(x) = value {
+                if let Err(SetError::Invalid(e)) = plant.set("sensors", name, x) {
+                    bail!("{e}");
+                }
+            }
+        }
+    }
     let name = f.name.clone().unwrap_or_else(|| default_name.to_string());
     let (out_dir, trace_every) = match &f.output {
         Some(o) => (
@@ -420,10 +442,8 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
         .map(|(i, fs)| parse_fault(i, fs, duration_s))
         .collect::<Result<Vec<_>>>()?;
     let sensors = SensorConfig {
-        encoder_bits,
-        encoder_noise_rad: encoder_noise_lsb * 2.0 * PI / f64::from(1u32 << encoder_bits.min(31)),
         seed: f.seed,
-        ..SensorConfig::default()
+        ..SensorConfig::from_vehicle(&plant.sensors)
     };
     // Settling is measured from the initial perturbation (t = 0), else from the first impulse.
     let t_dist_s = if initial_yaw_rad != 0.0 {
@@ -435,7 +455,8 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
     Ok(ScenarioSpec {
         name,
         description: String::new(),
-        plant: params,
+        plant,
+        model_vehicle,
         controller,
         on_current_a,
         initial_yaw_rad,
@@ -671,8 +692,13 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
     fn a_complete_file_parses_into_the_run() {
         let s = parse(GOOD, "x").unwrap();
         assert_eq!(s.name, "ramp");
-        assert_eq!(s.plant.c_a, 72000.0);
-        assert_eq!(s.plant.k_d, 5000.0, "hard set");
+        assert_eq!(s.plant.plant.c_a, 72000.0);
+        assert_eq!(s.plant.plant.k_d, 5000.0, "hard set");
+        assert_eq!(
+            s.model(),
+            &s.plant,
+            "no [model]: the firmware believes the plant"
+        );
         assert_eq!(s.controller, "passive-on");
         assert!((s.scenario.speed.at(15.0) - kmh_to_mps(70.0)).abs() < 1e-12);
         assert_eq!(s.scenario.impulses.len(), 1);
@@ -816,6 +842,47 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             let e = err(&format!("{base}[[fault]]\n{entry}\n"));
             assert!(e.contains(field) && e.contains(range), "{entry}: {e}");
         }
+    }
+
+    #[test]
+    fn plant_and_model_vehicles_resolve_relative_to_the_scenario_file() {
+        let dir = std::env::temp_dir().join(format!("shimmy-sc-vehicle-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("vehicles")).unwrap();
+        std::fs::write(dir.join("vehicles/truck.toml"), "[plant]\nf_z = 30000.0\n").unwrap();
+        let base = "duration_s = 1.0\n[speed]\nconstant_kmh = 50.0\n";
+        let s = parse_in(
+            &format!("{base}[plant]\nvehicle = \"vehicles/truck.toml\"\n[model]\nvehicle = \"nominal\"\noverrides = {{ c_a = 80000.0 }}\n"),
+            "x",
+            &dir,
+        )
+        .unwrap();
+        assert_eq!(s.plant.plant.f_z, 30000.0);
+        assert_eq!(s.model().plant.f_z, 6200.0);
+        assert_eq!(s.model().plant.c_a, 80000.0);
+        // Relative to the scenario's folder, not to the working directory.
+        let e = format!(
+            "{:#}",
+            parse(
+                &format!("{base}[plant]\nvehicle = \"vehicles/truck.toml\"\n"),
+                "x"
+            )
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("plant.vehicle") && e.contains("no such file"),
+            "{e}"
+        );
+        let e = format!(
+            "{:#}",
+            parse_in(
+                &format!("{base}[model]\noverrides = {{ mu = 1000.0 }}\n"),
+                "x",
+                &dir
+            )
+            .unwrap_err()
+        );
+        assert!(e.contains("model.overrides.mu") && e.contains("1.5"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

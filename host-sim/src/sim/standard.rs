@@ -6,8 +6,9 @@ use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
 use crate::sim::scenario::ScenarioSpec;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
 use shimmy_core::stability::{mode_at, ModeSelect};
+use shimmy_core::vehicle::Vehicle;
 
 /// The speed (m/s) where the no-damper shimmy mode grows fastest (largest real part of the
 /// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
@@ -51,10 +52,11 @@ pub fn road(seed: u64, p: &PlantParams) -> (RoadNoise, Imbalance) {
     )
 }
 
-/// The standard scenario set. `quick` shortens the runs (for tests).
-pub fn standard_scenarios(quick: bool) -> Vec<ScenarioSpec> {
-    let nominal = ParamSet::Nominal.params();
-    let v_fg = fastest_growth_speed(&nominal);
+/// The standard scenario set on `vehicle` (its plant, damper, sensors; the firmware believes
+/// it). `quick` shortens the runs (for tests).
+pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
+    let nominal = vehicle;
+    let v_fg = fastest_growth_speed(&nominal.plant);
     let dur = if quick { 4.0 } else { 10.0 };
     let mut out = vec![
         ScenarioSpec {
@@ -97,7 +99,7 @@ pub fn standard_scenarios(quick: bool) -> Vec<ScenarioSpec> {
             t0_s: 0.0,
             t1_s: t_ramp,
         });
-        let (n, im) = road(11, &nominal);
+        let (n, im) = road(11, &nominal.plant);
         s.noise = Some(n);
         s.imbalance = Some(im);
         // The pothole where the ramp passes the fastest-growth speed.
@@ -126,19 +128,24 @@ pub fn standard_scenarios(quick: bool) -> Vec<ScenarioSpec> {
             ..ScenarioSpec::new("slalom", nominal, s, dur)
         });
     }
-    // Robustness: the hard set and +-20 % on C_a, sigma, e (3 deg kick at the perturbed
-    // plant's fastest-growth speed; the controllers keep the nominal model).
-    let mut variants: Vec<(String, PlantParams)> = vec![("hard".into(), ParamSet::Hard.params())];
+    // Robustness: the hard set (half K_d) and +-20 % on C_a, sigma, e (3 deg kick at the
+    // perturbed plant's fastest-growth speed; the firmware keeps believing `vehicle`).
+    let mut variants: Vec<(String, PlantParams)> =
+        vec![("hard".into(), nominal.plant.scaled(Param::KD, 0.5))];
     for q in [Param::CA, Param::Sigma, Param::E] {
         for f in [0.8, 1.2] {
             variants.push((
                 format!("{}{:+.0}%", q.name(), (f - 1.0) * 100.0),
-                nominal.scaled(q, f),
+                nominal.plant.scaled(q, f),
             ));
         }
     }
     for (name, p) in variants {
         let v = fastest_growth_speed(&p);
+        let plant = Vehicle {
+            plant: p,
+            ..*vehicle
+        };
         out.push(ScenarioSpec {
             description: format!(
                 "{BIG_KICK_DEG} deg disturbance, plant `{name}` at its fastest-growth speed {:.1} km/h",
@@ -146,7 +153,8 @@ pub fn standard_scenarios(quick: bool) -> Vec<ScenarioSpec> {
             ),
             initial_yaw_rad: BIG_KICK_DEG.to_radians(),
             t_dist_s: Some(0.0),
-            ..ScenarioSpec::new(&format!("kick-3deg-{name}"), p, Scenario::constant_speed(v), dur)
+            model_vehicle: Some(*vehicle),
+            ..ScenarioSpec::new(&format!("kick-3deg-{name}"), &plant, Scenario::constant_speed(v), dur)
         });
     }
     out

@@ -10,9 +10,10 @@ use std::path::PathBuf;
 /// Options of `shimmy-sim sweep`.
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
-    /// Base parameter set (name or TOML file).
-    #[arg(long, default_value = "nominal")]
-    pub params: String,
+    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
+    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    #[arg(long, visible_alias = "params", default_value = "nominal")]
+    pub vehicle: String,
     /// Parameter varied on the vertical axis (field name, see `shimmy-sim params`).
     #[arg(long, default_value = "k_d")]
     pub param: String,

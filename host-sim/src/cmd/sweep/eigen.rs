@@ -42,15 +42,18 @@ pub struct SweepMap {
 
 /// Computes the maps.
 pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
-    let base = crate::sim::paramfile::load(&a.params)?;
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+    let base = vehicle.plant;
     let (speeds_kmh, values, param) = axes(a, &base, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
     if a.damper_current_a.is_empty() {
         dampers.push(("no damper".into(), 0.0));
     }
     for &i in &a.damper_current_a {
+        crate::sim::arg_range::vehicle_current(&vehicle).check("--damper-current-a", i)?;
         let d = damper_equivalent(
             &base,
+            &vehicle.damper.spencer,
             i,
             a.ref_amplitude_deg,
             kmh_to_mps(a.v_min_kmh),
@@ -132,10 +135,10 @@ pub fn command(a: &SweepArgs) -> Result<()> {
         let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name()));
         let png = a.out.join(format!("sweep-{}-{tag}.png", param.name()));
         write_csv(&grid, &boundary, param, map)?;
-        plot(&png, param, map, &a.params)?;
+        plot(&png, param, map, &a.vehicle)?;
         println!(
             "{} ({}, c = {:.1} N s/m): Hopf boundary vs {} [{}]",
-            a.params,
+            a.vehicle,
             map.damper,
             map.c_nspm,
             param.name(),
@@ -278,7 +281,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            params: "nominal".into(),
+            vehicle: "nominal".into(),
             param: "k_d".into(),
             factor_min: 0.8,
             factor_max: 1.0,

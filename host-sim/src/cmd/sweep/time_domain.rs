@@ -18,8 +18,9 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -79,8 +80,9 @@ pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
         .collect()
 }
 
-fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
-    let base = crate::sim::paramfile::load(&a.params)?;
+fn grid(a: &SweepArgs) -> Result<(Vehicle, TdGrid)> {
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+    let base = vehicle.plant;
     let (speeds_kmh, values, param) = axes(a, &base, DEFAULT_STEPS)?;
     let step = kmh_to_mps((a.v_max_kmh - a.v_min_kmh) / (speeds_kmh.len() - 1) as f64 / 4.0);
     let hopf = values
@@ -103,7 +105,7 @@ fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
         })
         .collect::<Result<_>>()?;
     Ok((
-        base,
+        vehicle,
         TdGrid {
             param,
             speeds_kmh,
@@ -113,8 +115,9 @@ fn grid(a: &SweepArgs) -> Result<(PlantParams, TdGrid)> {
     ))
 }
 
+/// One run: the vehicle with the swept parameter changed, its firmware still believing `base`.
 fn point(
-    base: &PlantParams,
+    base: &Vehicle,
     g: &TdGrid,
     j: usize,
     i: usize,
@@ -122,7 +125,11 @@ fn point(
     a: &SweepArgs,
 ) -> Result<TdPoint> {
     let (value, v_kmh) = (g.values[j], g.speeds_kmh[i]);
-    let mut cfg = LoopConfig::new(base.with(g.param, value), arm, a.duration_s);
+    let plant = Vehicle {
+        plant: base.plant.with(g.param, value),
+        ..*base
+    };
+    let mut cfg = LoopConfig::new(&plant, arm, a.duration_s).with_model(base);
     cfg.estimator = false;
     cfg.record_every = usize::MAX;
     cfg.sensors.seed = a.seed;
@@ -369,7 +376,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
         let c = a.out.join(format!("td-{name}-{}.csv", m.controller));
         std::fs::write(&c, csv(&g, m))?;
         let png = a.out.join(format!("td-{name}-{}.png", m.controller));
-        plot(&png, &g, m, &a.params, scale_deg)?;
+        plot(&png, &g, m, &a.vehicle, scale_deg)?;
         files.push(c);
         files.push(png);
     }
@@ -385,7 +392,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            params: "nominal".into(),
+            vehicle: "nominal".into(),
             param: "k_d".into(),
             factor_min: 1.0,
             factor_max: 1.0,

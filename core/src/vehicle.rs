@@ -1,0 +1,1116 @@
+//! One vehicle: everything that differs from one car (or truck) to the next, in one value that
+//! the simulator reads from a TOML file and the firmware can later read from flash.
+//!
+//! A [`Vehicle`] holds the plant parameters, the MR damper (the simulator's Spencer model of it,
+//! the firmware's invertible model of it, the coil rating and resistance), the sensors'
+//! calibration, the controller's gains and the warning thresholds. The controller's, the
+//! supervisor's and the estimator's parameters are derived from it
+//! ([`Vehicle::control_params`], [`Vehicle::supervisor_params`], [`Vehicle::pipeline_params`]),
+//! never from a hidden default; [`Vehicle::nominal`] reproduces today's defaults exactly (a
+//! test compares them).
+//!
+//! Every scalar is described once in [`FIELDS`]: section, name, unit, plausible range and a line
+//! of documentation. Setting a field by name ([`Vehicle::set`]) and validating a whole vehicle
+//! ([`Vehicle::validate`]) both go through that table, so a file, a flash image and a
+//! hand-built value are held to the same ranges. Errors ([`VehicleError`]) name the field, the
+//! value and the allowed range. No heap, no panics.
+
+use crate::control::actuator::{CoilParams, CurrentLimits};
+use crate::control::conditioning::ConditioningParams;
+use crate::control::mr_model::MrModel;
+use crate::control::smc::{AsmcParams, NominalPlant, SmcParams};
+use crate::control::ControlParams;
+use crate::estimator::fusion::FusionParams;
+use crate::estimator::monitor::MonitorParams;
+use crate::estimator::pipeline::PipelineParams;
+use crate::mr_damper::SpencerParams;
+use crate::params::{Param, ParamSet, PlantParams};
+use crate::supervisor::params::SupervisorParams;
+
+/// The MR damper of the vehicle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DamperSpec {
+    /// The physical damper as the simulator models it (Spencer modified Bouc-Wen); `u_max` is
+    /// the coil rating, A.
+    pub spencer: SpencerParams,
+    /// What the firmware believes about the damper (the invertible Bingham model); its
+    /// `i_max_a` is the same coil rating.
+    pub model: MrModel,
+    /// The coil and its driver.
+    pub coil: CoilParams,
+}
+
+/// Calibration and quality of the sensors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorCalibration {
+    /// Wheel-yaw encoder resolution, bits.
+    pub encoder_bits: u8,
+    /// Encoder noise, standard deviation in LSB.
+    pub encoder_noise_lsb: f32,
+    /// Wheel-speed scale error of the calibrated tone wheel / rolling radius: measured speed =
+    /// (1 + this) true speed.
+    pub speed_scale_error: f32,
+    /// Full scale of the coil-current measurement, A.
+    pub current_full_scale_a: f32,
+}
+
+impl Default for SensorCalibration {
+    /// The reference board: a 14-bit AS5047P with 0.5 LSB rms noise, an exact speed
+    /// calibration, a 2.5 A current channel.
+    fn default() -> Self {
+        SensorCalibration {
+            encoder_bits: 14,
+            encoder_noise_lsb: 0.5,
+            speed_scale_error: 0.0,
+            current_full_scale_a: 2.5,
+        }
+    }
+}
+
+/// The controller's gains (the law's structure and the conditioning chain are fixed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerGains {
+    /// Sliding surface and fixed-gain SMC.
+    pub smc: SmcParams,
+    /// Adaptation law of the ASMC.
+    pub asmc: AsmcParams,
+    /// Skyhook coefficient, N s/m.
+    pub skyhook_ns_per_m: f32,
+    /// Slew limit of the coil command, A/s.
+    pub slew_a_per_s: f32,
+    /// Speed gate: below it the damper gets the minimum current, m/s.
+    pub min_speed_mps: f32,
+}
+
+impl Default for ControllerGains {
+    fn default() -> Self {
+        let c = ControlParams::default();
+        ControllerGains {
+            smc: c.smc,
+            asmc: c.asmc,
+            skyhook_ns_per_m: c.skyhook_ns_per_m,
+            slew_a_per_s: c.limits.slew_a_per_s,
+            min_speed_mps: c.min_speed_mps,
+        }
+    }
+}
+
+/// Everything vehicle-specific, in one value (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vehicle {
+    /// The steering plant.
+    pub plant: PlantParams,
+    /// The MR damper.
+    pub damper: DamperSpec,
+    /// The sensors.
+    pub sensors: SensorCalibration,
+    /// The controller's gains.
+    pub controller: ControllerGains,
+    /// The warning thresholds of the margin monitor.
+    pub thresholds: MonitorParams,
+    /// The fusion of data and model margins (its disagreement threshold is a vehicle field).
+    pub fusion: FusionParams,
+}
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Self::nominal()
+    }
+}
+
+impl Vehicle {
+    /// The reference car: the nominal plant with today's damper, sensors, gains and thresholds.
+    pub fn nominal() -> Self {
+        Self::with_plant(PlantParams::nominal())
+    }
+
+    /// A named plant set with the reference damper, sensors, gains and thresholds.
+    pub fn from_set(set: ParamSet) -> Self {
+        Self::with_plant(set.params())
+    }
+
+    /// `plant` with the reference damper, sensors, gains and thresholds.
+    pub fn with_plant(plant: PlantParams) -> Self {
+        Vehicle {
+            plant,
+            damper: DamperSpec {
+                spencer: SpencerParams::steering(),
+                model: MrModel::FITTED,
+                coil: CoilParams::default(),
+            },
+            sensors: SensorCalibration::default(),
+            controller: ControllerGains::default(),
+            thresholds: PipelineParams::tuned_monitor(),
+            fusion: PipelineParams::tuned_fusion(),
+        }
+    }
+
+    /// The coil rating, A (the largest current the controller commands and the damper takes).
+    pub fn rated_current_a(&self) -> f32 {
+        self.damper.model.i_max_a
+    }
+
+    /// The controller's parameters: its plant model (I_k, c_k, l_t) from [`Self::plant`], its
+    /// damper model and limits from [`Self::damper`], its gains from [`Self::controller`]. The
+    /// fail-safe current is the coil rating (the largest damping the damper gives; see
+    /// [`crate::control::actuator::FAILSAFE_CURRENT_A`]).
+    pub fn control_params(&self) -> ControlParams {
+        let rated = self.rated_current_a();
+        ControlParams {
+            conditioning: ConditioningParams::default(),
+            nominal: NominalPlant::from_params(&self.plant),
+            mr: self.damper.model,
+            smc: self.controller.smc,
+            asmc: self.controller.asmc,
+            skyhook_ns_per_m: self.controller.skyhook_ns_per_m,
+            limits: CurrentLimits {
+                i_min_a: 0.0,
+                i_max_a: rated,
+                slew_a_per_s: self.controller.slew_a_per_s,
+            },
+            fallback_current_a: rated,
+            min_speed_mps: self.controller.min_speed_mps,
+            psi_limit_rad: ControlParams::default().psi_limit_rad,
+        }
+    }
+
+    /// The supervisor's thresholds with this vehicle's coil: the fail-safe current is the coil
+    /// rating and a coil-current reading at the measurement's full scale counts as saturated.
+    pub fn supervisor_params(&self) -> SupervisorParams {
+        SupervisorParams {
+            failsafe_current_a: self.rated_current_a(),
+            coil_full_scale_a: self.sensors.current_full_scale_a,
+            ..SupervisorParams::default()
+        }
+    }
+
+    /// The margin pipeline's parameters with this vehicle's warning thresholds (its model is
+    /// [`Self::plant`], passed to the pipeline next to these).
+    pub fn pipeline_params(&self) -> PipelineParams {
+        PipelineParams {
+            monitor: self.thresholds,
+            fusion: self.fusion,
+            ..PipelineParams::default()
+        }
+    }
+
+    /// Sets the field `section.name` to `value` after checking it against the field's range.
+    pub fn set(&mut self, section: &str, name: &str, value: f64) -> Result<(), SetError> {
+        let field = find_field(section, name).ok_or(SetError::UnknownField)?;
+        field.check(value).map_err(SetError::Invalid)?;
+        (field.set)(self, value);
+        Ok(())
+    }
+
+    /// The value of `field`.
+    pub fn get(&self, field: &Field) -> f64 {
+        (field.get)(self)
+    }
+
+    /// Checks every field against its range, then the rules that tie fields together
+    /// (hysteresis order of the thresholds, K_min <= K_init <= K_max, one coil rating).
+    /// Returns the first offender.
+    pub fn validate(&self) -> Result<(), VehicleError> {
+        for field in FIELDS {
+            field.check(self.get(field))?;
+        }
+        match RULES.iter().find(|r| !(r.holds)(self)) {
+            Some(rule) => Err(VehicleError {
+                section: rule.section,
+                name: rule.name,
+                value: (rule.value)(self),
+                problem: Problem::Inconsistent(rule.rule),
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The sections of a vehicle file, in order.
+pub const SECTIONS: [&str; 6] = [
+    "plant",
+    "damper",
+    "damper_model",
+    "sensors",
+    "controller",
+    "thresholds",
+];
+
+/// One scalar of a [`Vehicle`]: where it lives, its unit, its plausible range and what it is.
+#[derive(Clone, Copy, Debug)]
+pub struct Field {
+    /// Section of the vehicle file (one of [`SECTIONS`]).
+    pub section: &'static str,
+    /// Field name inside the section.
+    pub name: &'static str,
+    /// SI unit (`-` for none).
+    pub unit: &'static str,
+    /// Smallest allowed value (included).
+    pub lo: f64,
+    /// Largest allowed value (included).
+    pub hi: f64,
+    /// Only whole numbers are allowed.
+    pub integer: bool,
+    /// One line on what it is.
+    pub doc: &'static str,
+    get: fn(&Vehicle) -> f64,
+    set: fn(&mut Vehicle, f64),
+}
+
+impl Field {
+    /// `value` is finite, inside `[lo, hi]` and whole if it must be.
+    pub fn check(&self, value: f64) -> Result<(), VehicleError> {
+        let problem = if !(self.lo..=self.hi).contains(&value) {
+            Problem::OutOfRange {
+                lo: self.lo,
+                hi: self.hi,
+                unit: self.unit,
+            }
+        } else if self.integer && value != libm::round(value) {
+            Problem::NotInteger {
+                lo: self.lo,
+                hi: self.hi,
+            }
+        } else {
+            return Ok(());
+        };
+        Err(VehicleError {
+            section: self.section,
+            name: self.name,
+            value,
+            problem,
+        })
+    }
+}
+
+/// What is wrong with a field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Problem {
+    /// Outside the field's range `[lo, hi]` (or not finite).
+    OutOfRange {
+        /// Smallest allowed value.
+        lo: f64,
+        /// Largest allowed value.
+        hi: f64,
+        /// Unit of the field.
+        unit: &'static str,
+    },
+    /// Not a whole number in `[lo, hi]`.
+    NotInteger {
+        /// Smallest allowed value.
+        lo: f64,
+        /// Largest allowed value.
+        hi: f64,
+    },
+    /// Inside its range but in conflict with another field; the rule that is broken.
+    Inconsistent(&'static str),
+}
+
+/// A field that fails validation, with its value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VehicleError {
+    /// Section of the offending field.
+    pub section: &'static str,
+    /// Name of the offending field.
+    pub name: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// What is wrong.
+    pub problem: Problem,
+}
+
+impl VehicleError {
+    /// `(section, name)` of the offending field.
+    pub fn path(&self) -> (&'static str, &'static str) {
+        (self.section, self.name)
+    }
+}
+
+impl core::fmt::Display for VehicleError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "field `{}.{}` = {}: ",
+            self.section, self.name, self.value
+        )?;
+        match self.problem {
+            Problem::OutOfRange { lo, hi, unit } => {
+                write!(f, "out of range; allowed: {lo} <= value <= {hi} {unit}")
+            }
+            Problem::NotInteger { lo, hi } => {
+                write!(f, "must be a whole number, {lo} <= value <= {hi}")
+            }
+            Problem::Inconsistent(rule) => write!(f, "{rule}"),
+        }
+    }
+}
+
+impl core::error::Error for VehicleError {}
+
+/// Why [`Vehicle::set`] refused a value.
+#[derive(Clone, Copy, Debug, thiserror::Error)]
+pub enum SetError {
+    /// No field of that name in that section.
+    #[error("no such field")]
+    UnknownField,
+    /// The value fails the field's check.
+    #[error("{0}")]
+    Invalid(VehicleError),
+}
+
+/// The field `section.name`, if there is one.
+pub fn find_field(section: &str, name: &str) -> Option<&'static Field> {
+    FIELDS
+        .iter()
+        .find(|f| f.section == section && f.name == name)
+}
+
+/// A rule between fields, reported against the field `section.name` (whose value is `value`).
+struct Rule {
+    section: &'static str,
+    name: &'static str,
+    rule: &'static str,
+    value: fn(&Vehicle) -> f64,
+    holds: fn(&Vehicle) -> bool,
+}
+
+const RULES: &[Rule] = &[
+    Rule {
+        section: "damper",
+        name: "rated_current_a",
+        rule: "the firmware model's current limit (damper.model.i_max_a) must be the coil rating \
+               (the Spencer model's u_max)",
+        value: |v| v.damper.spencer.u_max,
+        holds: |v| v.damper.model.i_max_a == v.damper.spencer.u_max as f32,
+    },
+    Rule {
+        section: "controller",
+        name: "k_init_radps2",
+        rule: "must lie between k_min_radps2 and k_max_radps2",
+        value: |v| f64::from(v.controller.asmc.k_init_radps2),
+        holds: |v| {
+            let a = &v.controller.asmc;
+            a.k_min_radps2 <= a.k_init_radps2 && a.k_init_radps2 <= a.k_max_radps2
+        },
+    },
+    Rule {
+        section: "thresholds",
+        name: "zeta_low_off",
+        value: |v| f64::from(v.thresholds.zeta_low_off),
+        rule: "must not be below zeta_low_on (hysteresis)",
+        holds: |v| v.thresholds.zeta_low_off >= v.thresholds.zeta_low_on,
+    },
+    Rule {
+        section: "thresholds",
+        name: "dv_low_off_mps",
+        value: |v| f64::from(v.thresholds.dv_low_off_mps),
+        rule: "must not be below dv_low_on_mps (hysteresis)",
+        holds: |v| v.thresholds.dv_low_off_mps >= v.thresholds.dv_low_on_mps,
+    },
+    Rule {
+        section: "thresholds",
+        name: "zeta_crit_off",
+        value: |v| f64::from(v.thresholds.zeta_crit_off),
+        rule: "must not be below zeta_crit_on (hysteresis)",
+        holds: |v| v.thresholds.zeta_crit_off >= v.thresholds.zeta_crit_on,
+    },
+    Rule {
+        section: "thresholds",
+        name: "dv_crit_off_mps",
+        value: |v| f64::from(v.thresholds.dv_crit_off_mps),
+        rule: "must not be below dv_crit_on_mps (hysteresis)",
+        holds: |v| v.thresholds.dv_crit_off_mps >= v.thresholds.dv_crit_on_mps,
+    },
+    Rule {
+        section: "thresholds",
+        name: "ttc_off_s",
+        value: |v| f64::from(v.thresholds.ttc_off_s),
+        rule: "must not be below ttc_on_s (hysteresis)",
+        holds: |v| v.thresholds.ttc_off_s >= v.thresholds.ttc_on_s,
+    },
+    Rule {
+        section: "thresholds",
+        name: "amp_off_rad",
+        value: |v| f64::from(v.thresholds.amp_off_rad),
+        rule: "must not be above amp_on_rad (hysteresis)",
+        holds: |v| v.thresholds.amp_off_rad <= v.thresholds.amp_on_rad,
+    },
+];
+
+/// Conversion of a stored scalar to and from the table's f64.
+trait Scalar: Copy {
+    fn to_f64(self) -> f64;
+    fn from_f64(x: f64) -> Self;
+}
+
+impl Scalar for f64 {
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+}
+
+impl Scalar for f32 {
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    fn from_f64(x: f64) -> Self {
+        x as f32
+    }
+}
+
+impl Scalar for u8 {
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    fn from_f64(x: f64) -> Self {
+        // Only called after the range check (whole numbers within u8).
+        x as u8
+    }
+}
+
+macro_rules! plant_field {
+    ($p:ident, $doc:literal) => {
+        Field {
+            section: "plant",
+            name: Param::$p.name(),
+            unit: Param::$p.unit(),
+            lo: Param::$p.range().0,
+            hi: Param::$p.range().1,
+            integer: false,
+            doc: $doc,
+            get: |v| v.plant.get(Param::$p),
+            set: |v, x| v.plant = v.plant.with(Param::$p, x),
+        }
+    };
+}
+
+macro_rules! field {
+    ($section:literal, $name:literal, $unit:literal, $lo:expr, $hi:expr, $doc:literal,
+     |$v:ident| $place:expr) => {
+        field!(@ $section, $name, $unit, $lo, $hi, false, $doc, |$v| $place)
+    };
+    (int $section:literal, $name:literal, $unit:literal, $lo:expr, $hi:expr, $doc:literal,
+     |$v:ident| $place:expr) => {
+        field!(@ $section, $name, $unit, $lo, $hi, true, $doc, |$v| $place)
+    };
+    (@ $section:literal, $name:literal, $unit:literal, $lo:expr, $hi:expr, $int:expr,
+     $doc:literal, |$v:ident| $place:expr) => {
+        Field {
+            section: $section,
+            name: $name,
+            unit: $unit,
+            lo: $lo,
+            hi: $hi,
+            integer: $int,
+            doc: $doc,
+            get: |$v| Scalar::to_f64($place),
+            set: |$v, x| $place = Scalar::from_f64(x),
+        }
+    };
+}
+
+/// Every scalar of a [`Vehicle`], section by section (the one source of the vehicle file's
+/// fields, their units, ranges and documentation; `docs/vehicle-file.md` is checked against it).
+pub static FIELDS: &[Field] = &[
+    plant_field!(IK, "wheel-assembly yaw inertia about the kingpin I_k"),
+    plant_field!(IP, "wheel spin inertia I_p (gyroscopic coupling)"),
+    plant_field!(R, "rolling radius R"),
+    plant_field!(HR, "roll-centre height h_r"),
+    plant_field!(IPhi, "axle roll inertia I_phi"),
+    plant_field!(KPhi, "tramp (roll) stiffness K_phi"),
+    plant_field!(CPhi, "tramp damping c_phi"),
+    plant_field!(CA, "cornering stiffness per tyre C_a"),
+    plant_field!(Sigma, "tyre relaxation length sigma"),
+    plant_field!(E, "caster (mechanical) trail e"),
+    plant_field!(TP, "pneumatic trail t_p"),
+    plant_field!(LT, "steering-arm length l_t (damper stroke per wheel yaw)"),
+    plant_field!(KTr, "track-rod stiffness referred to the kingpin K_tr"),
+    plant_field!(KD, "drag link + gear stiffness at the kingpin K_d"),
+    plant_field!(IS, "overall steering ratio i_s"),
+    plant_field!(JSw, "steering-wheel inertia J_sw"),
+    plant_field!(CSw, "steering-wheel damping c_sw"),
+    plant_field!(CK, "kingpin damping c_k"),
+    plant_field!(FZ, "static load per front wheel F_z"),
+    plant_field!(
+        Mu,
+        "tyre-road friction coefficient mu (Magic Formula peak D = mu F_z)"
+    ),
+    plant_field!(CS, "Magic-Formula shape factor C_s"),
+    // The physical damper (Spencer modified Bouc-Wen, `mr_damper`).
+    Field {
+        section: "damper",
+        name: "rated_current_a",
+        unit: "A",
+        lo: 0.1,
+        hi: 10.0,
+        integer: false,
+        doc: "coil rating: the Spencer model's u_max, the firmware model's and the controller's \
+              current limit and the fail-safe current",
+        get: |v| v.damper.spencer.u_max,
+        set: |v, x| {
+            v.damper.spencer.u_max = x;
+            v.damper.model.i_max_a = x as f32;
+        },
+    },
+    field!(
+        "damper",
+        "coil_resistance_ohm",
+        "Ohm",
+        0.1,
+        100.0,
+        "coil resistance (coil energy, PWM duty)",
+        |v| v.damper.coil.r_coil_ohm
+    ),
+    field!(
+        "damper",
+        "c0a",
+        "N s/m",
+        0.0,
+        1.0e5,
+        "viscous coefficient c0 at 0 A",
+        |v| v.damper.spencer.c0a
+    ),
+    field!(
+        "damper",
+        "c0b",
+        "N s/(m A)",
+        0.0,
+        1.0e5,
+        "c0 per ampere",
+        |v| v.damper.spencer.c0b
+    ),
+    field!(
+        "damper",
+        "k0",
+        "N/m",
+        0.0,
+        1.0e6,
+        "internal stiffness k0",
+        |v| v.damper.spencer.k0
+    ),
+    field!(
+        "damper",
+        "c1a",
+        "N s/m",
+        1.0,
+        1.0e6,
+        "viscous coefficient c1 at 0 A",
+        |v| v.damper.spencer.c1a
+    ),
+    field!(
+        "damper",
+        "c1b",
+        "N s/(m A)",
+        0.0,
+        1.0e6,
+        "c1 per ampere",
+        |v| v.damper.spencer.c1b
+    ),
+    field!(
+        "damper",
+        "k1",
+        "N/m",
+        0.0,
+        1.0e5,
+        "accumulator stiffness k1",
+        |v| v.damper.spencer.k1
+    ),
+    field!(
+        "damper",
+        "x0",
+        "m",
+        -0.1,
+        0.1,
+        "accumulator initial displacement x0",
+        |v| v.damper.spencer.x0
+    ),
+    field!(
+        "damper",
+        "alpha_a",
+        "N/m",
+        0.0,
+        1.0e6,
+        "Bouc-Wen coefficient alpha at 0 A",
+        |v| v.damper.spencer.alpha_a
+    ),
+    field!(
+        "damper",
+        "alpha_b",
+        "N/(m A)",
+        0.0,
+        1.0e6,
+        "alpha per ampere",
+        |v| v.damper.spencer.alpha_b
+    ),
+    field!(
+        "damper",
+        "gamma",
+        "1/m^2",
+        0.0,
+        1.0e8,
+        "hysteresis shape gamma",
+        |v| v.damper.spencer.gamma
+    ),
+    field!(
+        "damper",
+        "beta",
+        "1/m^2",
+        0.0,
+        1.0e8,
+        "hysteresis shape beta",
+        |v| v.damper.spencer.beta
+    ),
+    field!(
+        "damper",
+        "a_bw",
+        "-",
+        0.0,
+        1.0e4,
+        "hysteresis scale A",
+        |v| v.damper.spencer.a_bw
+    ),
+    field!("damper", "n", "-", 1.0, 4.0, "hysteresis exponent n", |v| v
+        .damper
+        .spencer
+        .n),
+    field!(
+        "damper",
+        "eta",
+        "1/s",
+        1.0,
+        1.0e4,
+        "coil + driver bandwidth eta",
+        |v| v.damper.spencer.eta
+    ),
+    // What the firmware believes about the damper (`control::mr_model`).
+    field!(
+        "damper_model",
+        "f_ca_n",
+        "N",
+        0.0,
+        1.0e4,
+        "yield force at 0 A",
+        |v| v.damper.model.f_ca_n
+    ),
+    field!(
+        "damper_model",
+        "f_cb_n_per_a",
+        "N/A",
+        0.0,
+        1.0e5,
+        "yield force per ampere",
+        |v| v.damper.model.f_cb_n_per_a
+    ),
+    field!(
+        "damper_model",
+        "c_a_ns_per_m",
+        "N s/m",
+        0.0,
+        1.0e5,
+        "viscous coefficient at 0 A",
+        |v| v.damper.model.c_a_ns_per_m
+    ),
+    field!(
+        "damper_model",
+        "c_b_ns_per_m_a",
+        "N s/(m A)",
+        1.0,
+        1.0e5,
+        "viscous coefficient per ampere",
+        |v| v.damper.model.c_b_ns_per_m_a
+    ),
+    field!(
+        "damper_model",
+        "v0_mps",
+        "m/s",
+        1.0e-4,
+        1.0,
+        "smoothing velocity of the yield force",
+        |v| v.damper.model.v0_mps
+    ),
+    // Sensors.
+    field!(int "sensors", "encoder_bits", "bit", 8.0, 20.0, "wheel-yaw encoder resolution",
+        |v| v.sensors.encoder_bits),
+    field!(
+        "sensors",
+        "encoder_noise_lsb",
+        "LSB",
+        0.0,
+        10.0,
+        "encoder noise (standard deviation)",
+        |v| v.sensors.encoder_noise_lsb
+    ),
+    field!(
+        "sensors",
+        "speed_scale_error",
+        "-",
+        -0.2,
+        0.2,
+        "wheel-speed calibration error: measured = (1 + this) true speed",
+        |v| v.sensors.speed_scale_error
+    ),
+    field!(
+        "sensors",
+        "current_full_scale_a",
+        "A",
+        0.5,
+        20.0,
+        "full scale of the coil-current measurement",
+        |v| v.sensors.current_full_scale_a
+    ),
+    // Controller gains.
+    field!(
+        "controller",
+        "lambda_per_s",
+        "1/s",
+        0.1,
+        100.0,
+        "sliding-surface slope lambda",
+        |v| v.controller.smc.lambda_per_s
+    ),
+    field!(
+        "controller",
+        "phi_radps",
+        "rad/s",
+        1.0e-3,
+        10.0,
+        "boundary-layer half width phi",
+        |v| v.controller.smc.phi_radps
+    ),
+    field!(
+        "controller",
+        "k_radps2",
+        "rad/s^2",
+        0.0,
+        1.0e3,
+        "fixed switching gain K of the SMC",
+        |v| v.controller.smc.k_radps2
+    ),
+    field!(
+        "controller",
+        "gamma",
+        "rad/s^2 per rad",
+        0.0,
+        1.0e5,
+        "ASMC adaptation rate gamma",
+        |v| v.controller.asmc.gamma
+    ),
+    field!(
+        "controller",
+        "sigma_per_s",
+        "1/s",
+        0.0,
+        100.0,
+        "ASMC leakage sigma",
+        |v| v.controller.asmc.sigma_per_s
+    ),
+    field!(
+        "controller",
+        "dead_zone_radps",
+        "rad/s",
+        0.0,
+        10.0,
+        "ASMC dead zone on the sliding variable s",
+        |v| v.controller.asmc.dead_zone_radps
+    ),
+    field!(
+        "controller",
+        "k_min_radps2",
+        "rad/s^2",
+        0.0,
+        1.0e3,
+        "ASMC lower gain bound",
+        |v| v.controller.asmc.k_min_radps2
+    ),
+    field!(
+        "controller",
+        "k_max_radps2",
+        "rad/s^2",
+        0.0,
+        1.0e3,
+        "ASMC upper gain bound",
+        |v| v.controller.asmc.k_max_radps2
+    ),
+    field!(
+        "controller",
+        "k_init_radps2",
+        "rad/s^2",
+        0.0,
+        1.0e3,
+        "ASMC gain at start-up",
+        |v| v.controller.asmc.k_init_radps2
+    ),
+    field!(
+        "controller",
+        "skyhook_ns_per_m",
+        "N s/m",
+        0.0,
+        1.0e5,
+        "skyhook coefficient",
+        |v| v.controller.skyhook_ns_per_m
+    ),
+    field!(
+        "controller",
+        "slew_a_per_s",
+        "A/s",
+        1.0,
+        1.0e6,
+        "slew limit of the coil command",
+        |v| v.controller.slew_a_per_s
+    ),
+    field!(
+        "controller",
+        "min_speed_mps",
+        "m/s",
+        0.0,
+        30.0,
+        "speed gate: minimum current below this speed",
+        |v| v.controller.min_speed_mps
+    ),
+    // Warning thresholds of the margin monitor.
+    field!(
+        "thresholds",
+        "zeta_low_on",
+        "-",
+        -0.5,
+        0.5,
+        "MarginLow when slow data zeta < this",
+        |v| v.thresholds.zeta_low_on
+    ),
+    field!(
+        "thresholds",
+        "zeta_low_off",
+        "-",
+        -0.5,
+        0.5,
+        "... cleared above this",
+        |v| v.thresholds.zeta_low_off
+    ),
+    field!(
+        "thresholds",
+        "dv_low_on_mps",
+        "m/s",
+        0.0,
+        30.0,
+        "MarginLow when speed margin < this",
+        |v| v.thresholds.dv_low_on_mps
+    ),
+    field!(
+        "thresholds",
+        "dv_low_off_mps",
+        "m/s",
+        0.0,
+        30.0,
+        "... cleared above this",
+        |v| v.thresholds.dv_low_off_mps
+    ),
+    field!(
+        "thresholds",
+        "zeta_crit_on",
+        "-",
+        -0.5,
+        0.5,
+        "ApproachingCritical when fast data zeta < this",
+        |v| v.thresholds.zeta_crit_on
+    ),
+    field!(
+        "thresholds",
+        "zeta_crit_off",
+        "-",
+        -0.5,
+        0.5,
+        "... cleared above this",
+        |v| v.thresholds.zeta_crit_off
+    ),
+    field!(
+        "thresholds",
+        "dv_crit_on_mps",
+        "m/s",
+        0.0,
+        30.0,
+        "ApproachingCritical when speed margin < this",
+        |v| v.thresholds.dv_crit_on_mps
+    ),
+    field!(
+        "thresholds",
+        "dv_crit_off_mps",
+        "m/s",
+        0.0,
+        30.0,
+        "... cleared above this",
+        |v| v.thresholds.dv_crit_off_mps
+    ),
+    field!(
+        "thresholds",
+        "ttc_on_s",
+        "s",
+        0.0,
+        600.0,
+        "ApproachingCritical when time to critical < this",
+        |v| v.thresholds.ttc_on_s
+    ),
+    field!(
+        "thresholds",
+        "ttc_off_s",
+        "s",
+        0.0,
+        600.0,
+        "... cleared above this",
+        |v| v.thresholds.ttc_off_s
+    ),
+    field!(
+        "thresholds",
+        "amp_on_rad",
+        "rad",
+        0.0,
+        0.5,
+        "ShimmyPresent when amplitude > this",
+        |v| v.thresholds.amp_on_rad
+    ),
+    field!(
+        "thresholds",
+        "amp_off_rad",
+        "rad",
+        0.0,
+        0.5,
+        "... cleared below this",
+        |v| v.thresholds.amp_off_rad
+    ),
+    field!(
+        "thresholds",
+        "release_s",
+        "s",
+        0.0,
+        60.0,
+        "dwell before a level is released",
+        |v| v.thresholds.release_s
+    ),
+    field!(
+        "thresholds",
+        "mismatch_sigmas",
+        "-",
+        1.0,
+        10.0,
+        "data and model disagree beyond this many reported sigmas (the data margin then \
+         replaces the model's)",
+        |v| v.fusion.mismatch_sigmas
+    ),
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_nominal_vehicle_reproduces_todays_defaults() {
+        let v = Vehicle::nominal();
+        assert_eq!(v.control_params(), ControlParams::default());
+        assert_eq!(v.pipeline_params(), PipelineParams::default());
+        assert_eq!(v.supervisor_params(), SupervisorParams::default());
+        assert_eq!(v.damper.spencer, SpencerParams::steering());
+        assert!(v.validate().is_ok());
+        for set in ParamSet::ALL {
+            assert!(Vehicle::from_set(set).validate().is_ok(), "{}", set.name());
+        }
+    }
+
+    #[test]
+    fn the_controller_model_follows_the_vehicle() {
+        let mut v = Vehicle::nominal();
+        v.set("plant", "l_t", 0.3).unwrap();
+        v.set("plant", "i_k", 9.0).unwrap();
+        v.set("damper", "rated_current_a", 3.0).unwrap();
+        let c = v.control_params();
+        assert_eq!(c.nominal.l_t_m, 0.3);
+        assert_eq!(c.nominal.i_k_kgm2, 9.0);
+        assert_eq!(
+            (c.mr.i_max_a, c.limits.i_max_a, c.fallback_current_a),
+            (3.0, 3.0, 3.0)
+        );
+        assert_eq!(v.supervisor_params().failsafe_current_a, 3.0);
+        assert_eq!(v.damper.spencer.u_max, 3.0);
+        assert!(v.validate().is_ok());
+    }
+
+    #[test]
+    fn every_field_round_trips_and_the_table_has_no_duplicates() {
+        for (i, f) in FIELDS.iter().enumerate() {
+            assert!(SECTIONS.contains(&f.section), "{}", f.name);
+            assert!(f.lo <= f.hi, "{}", f.name);
+            assert!(FIELDS[..i]
+                .iter()
+                .all(|g| (g.section, g.name) != (f.section, f.name)));
+            let mut v = Vehicle::nominal();
+            let x = if f.integer { f.hi } else { 0.5 * (f.lo + f.hi) };
+            v.set(f.section, f.name, x).unwrap();
+            assert!((v.get(f) - x).abs() <= 1e-6 * x.abs(), "{}", f.name);
+        }
+        // Every plant parameter is in the table once.
+        for p in Param::ALL {
+            assert!(find_field("plant", p.name()).is_some(), "{}", p.name());
+        }
+    }
+
+    #[test]
+    fn bad_values_name_the_field_value_and_range() {
+        let mut v = Vehicle::nominal();
+        let Err(SetError::Invalid(e)) = v.set("plant", "mu", 1000.0) else {
+            panic!("mu = 1000 accepted")
+        };
+        assert_eq!(e.path(), ("plant", "mu"));
+        assert!(matches!(
+            e.problem,
+            Problem::OutOfRange {
+                lo: 0.05,
+                hi: 1.5,
+                ..
+            }
+        ));
+        assert!(matches!(
+            v.set("plant", "f_z", 1e12),
+            Err(SetError::Invalid(_))
+        ));
+        assert!(matches!(
+            v.set("plant", "f_z", f64::NAN),
+            Err(SetError::Invalid(_))
+        ));
+        assert!(matches!(
+            v.set("plant", "mud", 1.0),
+            Err(SetError::UnknownField)
+        ));
+        let Err(SetError::Invalid(e)) = v.set("sensors", "encoder_bits", 12.5) else {
+            panic!("12.5 bits accepted")
+        };
+        assert!(matches!(e.problem, Problem::NotInteger { .. }));
+        // Nothing was half-applied.
+        assert_eq!(v, Vehicle::nominal());
+        // A value built by hand (e.g. read from flash) is held to the same table.
+        let mut w = Vehicle::nominal();
+        w.plant.mu = 1000.0;
+        assert_eq!(w.validate().unwrap_err().path(), ("plant", "mu"));
+    }
+
+    #[test]
+    fn rules_between_fields_are_checked() {
+        let mut v = Vehicle::nominal();
+        v.set("thresholds", "dv_low_off_mps", 1.0).unwrap();
+        let e = v.validate().unwrap_err();
+        assert_eq!(e.path(), ("thresholds", "dv_low_off_mps"));
+        assert!(matches!(e.problem, Problem::Inconsistent(_)));
+        let mut w = Vehicle::nominal();
+        w.damper.model.i_max_a = 1.0;
+        assert_eq!(
+            w.validate().unwrap_err().path(),
+            ("damper", "rated_current_a")
+        );
+        let mut k = Vehicle::nominal();
+        k.set("controller", "k_init_radps2", 40.0).unwrap();
+        assert_eq!(
+            k.validate().unwrap_err().path(),
+            ("controller", "k_init_radps2")
+        );
+    }
+}

@@ -1,0 +1,258 @@
+//! Vehicle files (TOML) into a `shimmy_core::vehicle::Vehicle`, and `FILE|SET` on the command
+//! line: a named set (`nominal`, `gentle`, `hard`: the plant set with the reference damper,
+//! sensors, gains and thresholds) or a file that starts from a named set and sets fields by
+//! name, section by section (`docs/vehicle-file.md` lists every field, unit, default, range):
+//!
+//! ```toml
+//! base = "nominal"        # optional, default "nominal"
+//! [plant]                 # `[overrides]` is the same section under its older name
+//! k_d = 5000.0            # N m/rad
+//! [damper]
+//! rated_current_a = 2.5   # A
+//! [damper_model]          # what the firmware believes about the damper
+//! [sensors]
+//! [controller]
+//! [thresholds]
+//! ```
+//!
+//! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
+//! sections they leave out take their defaults. Every value goes through the core's one
+//! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
+//! naming the field, the value and the allowed range; nothing is half-applied.
+
+use anyhow::{bail, Context, Result};
+use shimmy_core::params::ParamSet;
+use shimmy_core::vehicle::{self, SetError, Vehicle, FIELDS, SECTIONS};
+use std::path::{Path, PathBuf};
+
+/// The older name of the `[plant]` section (parameter files).
+const PLANT_ALIAS: &str = "overrides";
+
+/// Resolves `spec` (a set name or the path of a vehicle file) to a validated vehicle.
+pub fn load(spec: &str) -> Result<Vehicle> {
+    load_relative(spec, Path::new(""))
+}
+
+/// [`load`] with a relative path taken relative to `dir` (e.g. the folder of the scenario file
+/// that names the vehicle). Set names win over files of the same name.
+pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
+    if let Some(set) = ParamSet::from_name(spec) {
+        return Ok(Vehicle::from_set(set));
+    }
+    let path: PathBuf = if Path::new(spec).is_absolute() {
+        PathBuf::from(spec)
+    } else {
+        dir.join(spec)
+    };
+    if !path.is_file() {
+        bail!(
+            "vehicle `{spec}`: no such file ({}) and not a named set ({})",
+            path.display(),
+            set_names()
+        );
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("reading vehicle file {}", path.display()))?;
+    parse(&text).with_context(|| format!("in vehicle file {}", path.display()))
+}
+
+/// Parses the TOML text of a vehicle file.
+pub fn parse(text: &str) -> Result<Vehicle> {
+    let table: toml::Table = toml::from_str(text)?;
+    if table.is_empty() {
+        bail!(
+            "empty vehicle file: give at least `base` (one of {}) or one section ({})",
+            set_names(),
+            SECTIONS.join(", ")
+        );
+    }
+    let base = match table.get("base") {
+        None => "nominal",
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = ParamSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}`, allowed: {}",
+            set_names()
+        );
+    };
+    if table.contains_key("plant") && table.contains_key(PLANT_ALIAS) {
+        bail!("field `{PLANT_ALIAS}`: the same section as `plant`; give only one of them");
+    }
+    let mut v = Vehicle::from_set(set);
+    for (key, value) in &table {
+        if key == "base" {
+            continue;
+        }
+        let section = if key == PLANT_ALIAS {
+            "plant"
+        } else {
+            key.as_str()
+        };
+        if !SECTIONS.contains(&section) {
+            bail!(
+                "field `{key}`: no such section, allowed: base, {}, {PLANT_ALIAS}",
+                SECTIONS.join(", ")
+            );
+        }
+        let Some(entries) = value.as_table() else {
+            bail!(
+                "field `{key}`: expected a section of numbers, found {}",
+                value.type_str()
+            );
+        };
+        for (name, value) in entries {
+            let x = match value {
+                toml::Value::Float(x) => *x,
+                toml::Value::Integer(i) => *i as f64,
+                other => bail!(
+                    "field `{key}.{name}`: expected a number, found {}",
+                    other.type_str()
+                ),
+            };
+            match v.set(section, name, x) {
+                Ok(()) => {}
+                Err(SetError::UnknownField) => bail!(
+                    "field `{key}.{name}`: no such field, allowed: {}",
+                    field_names(section).join(", ")
+                ),
+                Err(SetError::Invalid(e)) => bail!("{}", shown_in(e, key)),
+            }
+        }
+    }
+    v.validate()?;
+    Ok(v)
+}
+
+/// The error as the user wrote the section (`overrides.k_d`, not `plant.k_d`).
+fn shown_in(e: vehicle::VehicleError, key: &str) -> String {
+    let text = e.to_string();
+    if key == PLANT_ALIAS {
+        text.replacen("field `plant.", &format!("field `{PLANT_ALIAS}."), 1)
+    } else {
+        text
+    }
+}
+
+/// The fields of `section`, in table order.
+pub fn field_names(section: &str) -> Vec<&'static str> {
+    FIELDS
+        .iter()
+        .filter(|f| f.section == section)
+        .map(|f| f.name)
+        .collect()
+}
+
+/// The named sets, for messages.
+pub fn set_names() -> String {
+    ParamSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The field table as Markdown, one table per section (field, unit, default, range, meaning):
+/// the body of `docs/vehicle-file.md` between its markers (a test keeps them equal).
+pub fn field_table_markdown() -> String {
+    let nominal = Vehicle::nominal();
+    let mut out = String::new();
+    for section in SECTIONS {
+        out.push_str(&format!(
+            "\n### `[{section}]`\n\n| field | unit | default | allowed | meaning |\n|---|---|---:|---|---|\n"
+        ));
+        for f in FIELDS.iter().filter(|f| f.section == section) {
+            let allowed = if f.integer {
+                format!("{} ..= {}, whole", f.lo, f.hi)
+            } else {
+                format!("{} ..= {}", f.lo, f.hi)
+            };
+            out.push_str(&format!(
+                "| `{}` | {} | {} | {allowed} | {} |\n",
+                f.name,
+                f.unit,
+                format_default(nominal.get(f)),
+                f.doc
+            ));
+        }
+    }
+    out
+}
+
+/// Shortest text that reads back to the f32 or f64 default (f32 fields print as e.g. 0.04, not
+/// 0.03999999910593033).
+fn format_default(x: f64) -> String {
+    let as_f32 = x as f32;
+    if f64::from(as_f32) == x {
+        format!("{as_f32}")
+    } else {
+        format!("{x}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn named_sets_and_sections() {
+        assert_eq!(load("hard").unwrap(), Vehicle::from_set(ParamSet::Hard));
+        let v =
+            parse("base = \"gentle\"\n[overrides]\nk_d = 5000\n[damper]\nrated_current_a = 2.5\n")
+                .unwrap();
+        assert_eq!(v.plant.k_d, 5000.0);
+        assert_eq!(v.plant.c_sw, 2.0);
+        assert_eq!(v.control_params().limits.i_max_a, 2.5);
+        let w = parse("[plant]\nk_d = 5000.0\n").unwrap();
+        assert_eq!(w.plant.k_d, 5000.0);
+        assert_eq!(w.plant.c_sw, 3.0);
+    }
+
+    #[test]
+    fn the_plant_alias_keeps_the_users_name_in_messages() {
+        let e = format!("{:#}", parse("[overrides]\nsigma = -0.6\n").unwrap_err());
+        assert!(e.contains("overrides.sigma"), "{e}");
+        let e = format!(
+            "{:#}",
+            parse("[plant]\nk_d = 1.0\n[overrides]\nk_d = 2.0\n").unwrap_err()
+        );
+        assert!(e.contains("overrides"), "{e}");
+    }
+
+    #[test]
+    fn docs_table_lists_every_field() {
+        let t = field_table_markdown();
+        for f in FIELDS {
+            assert!(t.contains(&format!("| `{}` |", f.name)), "{}", f.name);
+        }
+    }
+
+    /// docs/vehicle-file.md carries the generated table between its markers (re-bless with
+    /// `SHIMMY_BLESS=1 cargo test -p shimmy-sim --lib vehicle_file`).
+    #[test]
+    fn docs_vehicle_file_md_is_the_field_table() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/vehicle-file.md");
+        let doc = std::fs::read_to_string(&path).unwrap();
+        let (begin, end) = (DOC_BEGIN, DOC_END);
+        let i = doc.find(begin).expect("begin marker") + begin.len();
+        let j = doc.find(end).expect("end marker");
+        let want = field_table_markdown();
+        if std::env::var("SHIMMY_BLESS").is_ok_and(|v| v == "1") {
+            let new = format!("{}{want}\n{}", &doc[..i], &doc[j..]);
+            std::fs::write(&path, new).unwrap();
+            return;
+        }
+        assert_eq!(
+            doc[i..j].trim(),
+            want.trim(),
+            "docs/vehicle-file.md is out of date: SHIMMY_BLESS=1 cargo test -p shimmy-sim --lib vehicle_file"
+        );
+    }
+
+    const DOC_BEGIN: &str = "<!-- generated: shimmy_core::vehicle::FIELDS -->";
+    const DOC_END: &str = "<!-- end of generated table -->";
+}
