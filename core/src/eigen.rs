@@ -190,9 +190,11 @@ impl Mode {
 /// (plus a tiny absolute floor): real eigenvalues from the Schur form have Im exactly 0.
 pub const OSCILLATORY_REL_IM: f64 = 1e-7;
 
-/// True when `s` is one of an oscillatory (complex) pair.
+/// True when `s` is one of an oscillatory (complex) pair: |Im| > `OSCILLATORY_REL_IM` |s| +
+/// 1e-12, tested squared (no soft-float `hypot` on the M4).
 pub fn is_oscillatory(s: Complex<f64>) -> bool {
-    libm::fabs(s.im) > OSCILLATORY_REL_IM * libm::hypot(s.re, s.im) + 1e-12
+    let excess = libm::fabs(s.im) - 1e-12;
+    excess > 0.0 && excess * excess > OSCILLATORY_REL_IM * OSCILLATORY_REL_IM * s.norm_sqr()
 }
 
 /// Largest real part over all eigenvalues, 1/s.
@@ -276,8 +278,10 @@ fn inverse_iteration<T: SolveFloat>(
 /// vector and two with their adjoint (P M = L U, so M^H y = x is U^H, L^H and P^-1) for the
 /// left one, which (A - lambda I)^H w = 0 makes a left eigenvector. Two steps, not three: the
 /// shift is within ~1e-6 max|a_ij| of lambda, so each step shrinks the other components by
-/// that over the eigenvalue gap (< 1e-3). Same normalisation as [`eigenvector`]; half the LUs
-/// of [`eigenvector_of`] + [`left_eigenvector_of`].
+/// that over the eigenvalue gap (< 1e-3). Unit 2-norm, phase as the iteration leaves it (what
+/// uses them, the eigenvalue derivative and the mode shape, does not depend on it; rotating
+/// them costs ~13 k soft-float instructions each on the M4); half the LUs of
+/// [`eigenvector_of`] + [`left_eigenvector_of`].
 pub fn eigenvectors_of<T: SolveFloat>(
     a: &StateMatrix,
     lambda: Complex<f64>,
@@ -297,9 +301,7 @@ pub fn eigenvectors_of<T: SolveFloat>(
         w = unit_array(lu.solve_adjoint(&w))?;
     }
     let wide = |x: [Complex<T>; N_STATES]| {
-        phase_normalised(CVector::from_fn(|i, _| {
-            Complex::new(x[i].re.to_f64(), x[i].im.to_f64())
-        }))
+        CVector::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
     };
     Ok((wide(v), wide(w)))
 }
@@ -421,10 +423,12 @@ impl<T: SolveFloat, const N: usize> ComplexLu<T, N> {
     }
 }
 
-/// Rotates `v` so that its largest entry is real and positive.
+/// Rotates `v` so that its largest entry is real and positive. The largest entry by |c|^2 and
+/// one square root: `hypot` per entry in soft-float f64 cost ~4 k instructions each on the M4
+/// (`cargo xtask bench`, eigenvector rows).
 fn phase_normalised(v: CVector) -> CVector {
     let (imax, _) = v.iter().enumerate().fold((0, -1.0), |(bi, bn), (i, c)| {
-        let n = cabs(*c);
+        let n = c.norm_sqr();
         if n > bn {
             (i, n)
         } else {
@@ -432,7 +436,7 @@ fn phase_normalised(v: CVector) -> CVector {
         }
     });
     let pivot = v[imax];
-    let pn = cabs(pivot);
+    let pn = libm::sqrt(pivot.norm_sqr());
     if pn > 0.0 {
         let rot = pivot.conj() / Complex::new(pn, 0.0);
         v.map(|c| c * rot)
@@ -516,7 +520,7 @@ impl Eigenpair {
             .iter()
             .zip(self.right.iter())
             .fold(Complex::new(0.0, 0.0), |acc, (w, v)| acc + w.conj() * v);
-        if cabs(den) == 0.0 {
+        if den.re == 0.0 && den.im == 0.0 {
             return None;
         }
         let d = num / den;
@@ -688,16 +692,23 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
     } else {
         (0.0, 0.0, 0.0)
     };
-    let wheel_amp = cabs(v[PSI_L]).max(cabs(v[PSI_R]));
-    let disp = wheel_amp.max(cabs(v[PHI])).max(cabs(v[THETA_SW]) / i_s);
-    let tyre = cabs(v[A_L]).max(cabs(v[A_R]));
+    // magnitudes as the square root of the largest |c|^2 (one sqrt, not a hypot per entry)
+    let wheel_amp = libm::sqrt(v[PSI_L].norm_sqr().max(v[PSI_R].norm_sqr()));
+    let disp = libm::sqrt(
+        v[PSI_L]
+            .norm_sqr()
+            .max(v[PSI_R].norm_sqr())
+            .max(v[PHI].norm_sqr())
+            .max(v[THETA_SW].norm_sqr() / (i_s * i_s)),
+    );
+    let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
     let tyre_ratio = if disp > 0.0 {
         tyre / disp
     } else {
         f64::INFINITY
     };
     let steering_wheel_ratio = if wheel_amp > 0.0 {
-        cabs(v[THETA_SW]) / (i_s * wheel_amp)
+        libm::sqrt(v[THETA_SW].norm_sqr()) / (i_s * wheel_amp)
     } else {
         f64::INFINITY
     };
@@ -706,7 +717,7 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
     let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
         ModeShape::TyreLag
     } else if fw >= fp && fw >= fs {
-        if cabs(v[PSI_L] + v[PSI_R]) >= cabs(v[PSI_L] - v[PSI_R]) {
+        if (v[PSI_L] + v[PSI_R]).norm_sqr() >= (v[PSI_L] - v[PSI_R]).norm_sqr() {
             ModeShape::InPhaseWheelYaw
         } else {
             ModeShape::AntiPhaseWheelYaw
@@ -849,23 +860,20 @@ mod tests {
         check::<f32>();
     }
 
-    /// One LU for both vectors gives the same vectors as the two separate inverse iterations
-    /// (up to the phase, which both normalise the same way).
+    /// One LU for both vectors gives the vectors of the two separate inverse iterations (all
+    /// unit-norm: equal up to a phase, |r^H e| = 1).
     #[test]
     fn one_lu_gives_the_right_and_the_left_eigenvector() {
         let p = ParamSet::Nominal.params();
+        let along = |x: &CVector, y: &CVector| (x.adjoint() * y)[(0, 0)].norm();
         for v_mps in [3.0, 12.0, 30.0] {
             let a = linearise(&p, v_mps, 0.0);
             for l in eigenvalues(&a).unwrap() {
                 let (r, w) = eigenvectors_of::<f64>(&a, l).unwrap();
-                assert!(
-                    (r - eigenvector(&a, l).unwrap()).norm() < 1e-8,
-                    "V={v_mps} {l}"
-                );
-                assert!(
-                    (w - left_eigenvector(&a, l).unwrap()).norm() < 1e-8,
-                    "V={v_mps} {l}"
-                );
+                let e = eigenvector(&a, l).unwrap();
+                assert!((along(&r, &e) - 1.0).abs() < 1e-8, "V={v_mps} {l}");
+                let e = left_eigenvector(&a, l).unwrap();
+                assert!((along(&w, &e) - 1.0).abs() < 1e-8, "V={v_mps} {l}");
             }
         }
     }

@@ -653,13 +653,14 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             let pred = tr.lambda + tr.dl_dv * (v - tr.speed_mps);
             vals.iter()
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
-                .map(|l| (cabs(*l - pred), *l))
+                .map(|l| ((*l - pred).norm_sqr(), *l))
                 .fold(None::<(f64, Complex<f64>)>, |best, c| match best {
                     Some(b) if b.0 <= c.0 => Some(b),
                     _ => Some(c),
                 })
                 // a start farther than 10 % of |lambda| from the prediction is another branch
-                .filter(|(d, _)| *d <= 0.1 * cabs(pred))
+                // (squared magnitudes: no soft-float hypot per candidate)
+                .filter(|(d2, _)| *d2 <= 0.01 * pred.norm_sqr())
                 .map(|(_, l)| l)
         });
         match tracked {
@@ -1010,11 +1011,6 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             .find(|k| k.speed_mps < v)
             .map(as_crossing);
     }
-}
-
-/// |c| via libm (num-complex's `norm` is std-only).
-fn cabs(c: Complex<f64>) -> f64 {
-    libm::hypot(c.re, c.im)
 }
 
 #[cfg(test)]
