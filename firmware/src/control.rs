@@ -6,17 +6,17 @@
 //! errors; each counted) -> `shimmy_core::supervisor::safe_controller::SafeController::step`
 //! (the one validation policy: range, rate, stuck, left/right agreement, speed plausibility, coil
 //! checks, timing; fault records, Normal / Degraded / FailSafe with recovery hysteresis; the
-//! core controller; the final clamp and slew limit) -> coil current command ->
-//! [`crate::drivers::coil_pwm::CoilDriver::set_current_a`]. [`supervised_step`] is that chain.
+//! core controller; the final clamp and slew limit) -> coil current command -> [`drive_coil`]
+//! (closed current loop on the measured current). [`supervised_step`] is that chain up to the
+//! command.
 
+use crate::drivers::coil_pwm::CoilDriver;
 use crate::drivers::wheel_speed::SpeedStatus;
 use crate::sensors::{SampleSet, SensorFault};
+use embedded_hal::pwm::SetDutyCycle;
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
-
-/// Control period, us (the supervisor's time stamps advance by this per step).
-pub const PERIOD_US: u32 = 1000;
 
 /// Counters of the control loop. Every fault increments one; nothing is silent. Logged by the
 /// telemetry and at the end of a QEMU run.
@@ -132,10 +132,11 @@ pub fn encoder_reading(r: Result<f32, SensorFault>) -> EncoderReading {
     e
 }
 
-/// The raw frame of control step `step`: the driver results decoded into the supervisor's
-/// input; the driver-level faults (bus, parity, error flag, tone-wheel glitch, ADC) are
-/// counted here, everything else is judged by the supervisor.
-pub fn raw_frame(s: &SampleSet, step: u32, h: &mut Health) -> RawFrame {
+/// The raw frame of one sample set: the driver results decoded into the supervisor's input,
+/// time-stamped by the free-running capture timer; the driver-level faults (bus, parity,
+/// error flag, tone-wheel glitch, ADC) are counted here, everything else is judged by the
+/// supervisor.
+pub fn raw_frame(s: &SampleSet, h: &mut Health) -> RawFrame {
     for r in [s.psi_l_rad, s.psi_r_rad] {
         if let Err(f) = r {
             h.count(f);
@@ -160,12 +161,31 @@ pub fn raw_frame(s: &SampleSet, step: u32, h: &mut Health) -> RawFrame {
         }
     };
     RawFrame {
-        t_us: step.wrapping_mul(PERIOD_US),
+        t_us: s.t_us,
         left: encoder_reading(s.psi_l_rad),
         right: encoder_reading(s.psi_r_rad),
         speed_mps: s.speed.speed_mps,
         speed_valid,
         coil_current_a: Some(coil_current_a),
+    }
+}
+
+/// Applies one step's output to the coil: off when the supervisor reports the coil open or
+/// shorted (`damper_available == false`), otherwise the command, closed loop on the trusted
+/// measured current of the step (open loop while the measurement is not trusted).
+pub fn drive_coil<P: SetDutyCycle>(
+    coil: &mut CoilDriver<P>,
+    out: &SafeOutput,
+) -> Result<(), P::Error> {
+    if out.verdict.damper_available {
+        coil.set_current_a(
+            out.current_cmd_a,
+            out.validated.coil_current_a,
+            out.validated.dt_s,
+        )
+        .map(|_| ())
+    } else {
+        coil.off()
     }
 }
 
@@ -175,11 +195,10 @@ pub fn raw_frame(s: &SampleSet, step: u32, h: &mut Health) -> RawFrame {
 pub fn supervised_step(
     ctrl: &mut SafeController,
     s: &SampleSet,
-    step: u32,
     margin: MarginStatus,
     h: &mut Health,
 ) -> SafeOutput {
-    let frame = raw_frame(s, step, h);
+    let frame = raw_frame(s, h);
     let before = ctrl.supervisor().mode();
     let out = ctrl.step(&frame, margin);
     if out.verdict.mode != before {
@@ -200,6 +219,7 @@ mod tests {
     fn good(k: u32) -> SampleSet {
         let y = 0.01 * libm::sinf(k as f32 * 0.05);
         SampleSet {
+            t_us: k.wrapping_mul(1000),
             psi_l_rad: Ok(y),
             psi_r_rad: Ok(y * 0.98),
             speed: SpeedReading {
@@ -222,8 +242,8 @@ mod tests {
         s.psi_l_rad = Err(SensorFault::Parity);
         s.speed.status = SpeedStatus::Starting;
         s.coil_current_a = Err(SensorFault::Saturated);
-        let f = raw_frame(&s, 7, &mut h);
-        assert_eq!(f.t_us, 7000);
+        let f = raw_frame(&s, &mut h);
+        assert_eq!(f.t_us, 0);
         assert!(!f.speed_valid && f.coil_current_a.is_some_and(f32::is_nan));
         assert_eq!((h.enc_parity, h.current_faults), (1, 1));
     }
@@ -243,7 +263,7 @@ mod tests {
             if k == 300 {
                 s.psi_r_rad = Err(SensorFault::ErrorFlag(2));
             }
-            let o = supervised_step(&mut c, &s, k, MarginStatus::NotUsed, &mut h);
+            let o = supervised_step(&mut c, &s, MarginStatus::NotUsed, &mut h);
             assert!(o.current_cmd_a.is_finite());
             if modes.last() != Some(&o.verdict.mode) {
                 modes.push(o.verdict.mode);
@@ -272,6 +292,30 @@ mod tests {
         assert_eq!(c.supervisor().record(FaultKind::RightFlag).activations, 1);
         // Recovery times: left clears 1 s after step 100, right 1 s after step 300.
         assert_eq!(h.degraded_steps + h.failsafe_steps, 1300 - 100 + 1);
+    }
+
+    /// The frame time stamp is the capture timer's, not the step count: a control period that
+    /// comes 6 ms late (the 1 kHz interrupt blocked) raises `timing` and FailSafe; on time it
+    /// raises nothing. (With the step count as the time stamp the supervisor could not see it.)
+    #[test]
+    fn a_late_period_is_a_timing_fault() {
+        let mut c = safe_controller();
+        let mut h = Health::default();
+        let mut t_us = 0u32;
+        let mut last = None;
+        for k in 0..1200u32 {
+            t_us += if k == 1100 { 6000 } else { 1000 };
+            let s = SampleSet { t_us, ..good(k) };
+            let o = supervised_step(&mut c, &s, MarginStatus::NotUsed, &mut h);
+            if k < 1100 {
+                assert!(o.verdict.faults.is_empty(), "k={k} {:?}", o.verdict);
+            }
+            last = Some(o);
+        }
+        let o = last.unwrap();
+        assert!(o.verdict.faults.contains(FaultKind::Timing));
+        assert_eq!(o.verdict.mode, Mode::FailSafe);
+        assert_eq!(c.supervisor().missed_samples(), 5);
     }
 
     #[test]

@@ -6,8 +6,10 @@
 #![cfg_attr(target_os = "none", no_std)]
 
 pub mod calibration;
+pub mod clock;
 pub mod control;
 pub mod drivers;
+pub mod fault_memory;
 pub mod monitoring;
 pub mod replay;
 pub mod sensors;
@@ -17,7 +19,7 @@ pub mod sim;
 pub mod board;
 #[cfg(target_os = "none")]
 pub mod periph;
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "panic-check")))]
 pub mod runtime;
 #[cfg(target_os = "none")]
 pub mod stack;

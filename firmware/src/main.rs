@@ -2,7 +2,7 @@
 //!
 //! | task | runs | priority | work |
 //! |---|---|---|---|
-//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> coil PWM; pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
+//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
 //! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
 //!
@@ -21,10 +21,12 @@ mod app {
     use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
     use shimmy_core::estimator::model_margin::ModelMargin;
     use shimmy_core::params::PlantParams;
+    use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
     use shimmy_firmware::board::{self, Board};
-    use shimmy_firmware::control::{supervised_step, Health};
+    use shimmy_firmware::control::{drive_coil, supervised_step, Health};
+    use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::monitoring::{
         safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
@@ -51,6 +53,10 @@ mod app {
         board: Board,
         ctrl: SafeController,
         step: u32,
+        /// The fault memory of this run (written back when it changes).
+        record: ResetRecord,
+        /// A reset loop was detected at boot: stay in the safe state.
+        hold_safe: bool,
         tx: Producer<'static, MeterSample>,
         rx: Consumer<'static, MeterSample>,
         data: DataMargin,
@@ -61,20 +67,44 @@ mod app {
     #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
     fn init(cx: init::Context) -> (Shared, Local) {
         shimmy_firmware::stack::paint();
+        // An overflow into the statics faults instead (MemManage: coil off, reported, reset).
+        let mut core = cx.core;
+        shimmy_firmware::stack::guard(&mut core.MPU, &mut core.SCB);
         defmt::info!(
             "{=str} booted (core {=str}); fail-safe coil current {=f32} A",
             shimmy_firmware::BANNER,
             shimmy_core::VERSION,
             FAILSAFE_CURRENT_A
         );
-        log_reset_cause(&cx.device.RCC);
-        let board = board::init(cx.device);
+        let cause = reset_cause(&cx.device.RCC);
+        let (record, policy) = ResetRecord::on_boot(&persist::load(), cause);
+        persist::store(&record);
+        let latched = FaultSet::from_bits(record.latched_faults);
+        let coil_dead =
+            latched.contains(FaultKind::CoilOpen) || latched.contains(FaultKind::CoilShort);
+        let hold_safe = policy == BootPolicy::HoldSafe;
+        defmt::warn!(
+            "reset record: {=u32} resets since power-on, {=u8} abnormal in a row within 60 s, latched faults {=u32:#x}{=str}",
+            record.resets,
+            record.quick_resets,
+            latched.bits(),
+            if hold_safe {
+                "; RESET LOOP: holding the safe state, controller not run"
+            } else {
+                ""
+            }
+        );
+        let mut ctrl = safe_controller();
+        ctrl.supervisor_mut().restore_latched(latched);
+        let board = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
         let Ok(data) = DataMargin::new() else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
+        // The watchdog runs since the board's first line; init ends here.
+        board.watchdog.feed();
         (
             Shared {
                 health: Health::default(),
@@ -84,8 +114,10 @@ mod app {
             },
             Local {
                 board,
-                ctrl: safe_controller(),
+                ctrl,
                 step: 0,
+                record,
+                hold_safe,
                 tx,
                 rx,
                 data,
@@ -135,11 +167,24 @@ mod app {
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx], shared = [health, margin])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         let entry = b.timer.now_ticks();
         b.timer.clear_update();
+        if *cx.local.hold_safe {
+            // Reset loop: the fixed safe current (coil off if a coil fault is latched), the
+            // watchdog fed, nothing else run.
+            let f = cx.local.ctrl.supervisor().faults();
+            let dead = f.contains(FaultKind::CoilOpen) || f.contains(FaultKind::CoilShort);
+            let _ = if dead {
+                b.coil.off()
+            } else {
+                b.coil.fail_safe().map(|_| ())
+            };
+            b.watchdog.feed();
+            return;
+        }
         let latency = b.timer.entry_latency_ticks(entry);
         let step = *cx.local.step;
         let mut health = cx.shared.health;
@@ -149,8 +194,8 @@ mod app {
 
         let samples = b.sensors.sample(PERIOD_TICKS);
         let status = margin.lock(|m| *m);
-        let out = health.lock(|h| supervised_step(cx.local.ctrl, &samples, step, status, h));
-        let pwm_ok = b.coil.set_current_a(out.current_cmd_a).is_ok();
+        let out = health.lock(|h| supervised_step(cx.local.ctrl, &samples, status, h));
+        let pwm_ok = drive_coil(&mut b.coil, &out).is_ok();
 
         let dropped = cx.local.tx.enqueue(MeterSample::of(step, &out)).is_err();
         let busy = step.is_multiple_of(METER_DECIMATION) && meter::spawn().is_err();
@@ -164,6 +209,12 @@ mod app {
             h.meter_dropped += u32::from(dropped);
             h.steps += 1;
         });
+        // Fault memory: uptime (whole seconds) and the latched faults survive a reset.
+        let uptime_ms = (step / 1000).wrapping_mul(1000);
+        let latched = cx.local.ctrl.supervisor().latched().bits();
+        if cx.local.record.update(uptime_ms, latched) {
+            persist::store(cx.local.record);
+        }
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
         *cx.local.step = step.wrapping_add(1);
@@ -223,29 +274,39 @@ mod app {
         }
     }
 
-    /// Logs why the MCU (re)started (RCC_CSR reset flags, RM0090 6.3.21) and clears the flags.
+    /// Why the MCU (re)started (RCC_CSR reset flags, RM0090 6.3.21), logged; clears the flags.
     /// A power-on also sets the brown-out flag, so power-on is tested first.
-    fn log_reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) {
+    fn reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) -> ResetCause {
         let f = rcc.csr().read();
-        let cause = if f.wdgrstf().bit_is_set() {
-            "independent watchdog (the control loop stopped completing steps)"
+        let (cause, text) = if f.wdgrstf().bit_is_set() {
+            (
+                ResetCause::Watchdog,
+                "independent watchdog (the control loop stopped completing steps)",
+            )
         } else if f.wwdgrstf().bit_is_set() {
-            "window watchdog"
+            (ResetCause::Watchdog, "window watchdog")
         } else if f.sftrstf().bit_is_set() {
-            "software reset (panic or fault handler)"
+            (
+                ResetCause::Software,
+                "software reset (panic or fault handler)",
+            )
         } else if f.porrstf().bit_is_set() {
-            "power-on"
+            (ResetCause::PowerOn, "power-on")
         } else if f.borrstf().bit_is_set() {
-            "brown-out (supply below the BOR level)"
+            (
+                ResetCause::PowerOn,
+                "brown-out (supply below the BOR level)",
+            )
         } else if f.lpwrrstf().bit_is_set() {
-            "low-power management"
+            (ResetCause::Other, "low-power management")
         } else if f.padrstf().bit_is_set() {
-            "reset pin (NRST, debug probe)"
+            (ResetCause::Pin, "reset pin (NRST, debug probe)")
         } else {
-            "none flagged"
+            (ResetCause::Other, "none flagged")
         };
         rcc.csr().modify(|_, w| w.rmvf().set_bit());
-        defmt::warn!("reset cause: {=str}", cause);
+        defmt::warn!("reset cause: {=str}", text);
+        cause
     }
 
     fn level_name(l: shimmy_core::estimator::monitor::Level) -> &'static str {

@@ -186,7 +186,7 @@ pub fn replay(
         let step = k as u32;
         d.samples += 1;
         let frame = RawFrame {
-            t_us: step.wrapping_mul(crate::control::PERIOD_US),
+            t_us: step.wrapping_mul(shimmy_core::supervisor::frame::NOMINAL_PERIOD_US),
             left: reading(&mut trk[0], l, fault, true),
             right: reading(&mut trk[1], r, fault, false),
             speed_mps: v,

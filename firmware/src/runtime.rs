@@ -56,6 +56,54 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     finish(Outcome::Failure)
 }
 
+/// The MemManage fault of the stack guard (`stack::guard`): the stack pointer is inside the
+/// guard, so nothing may be pushed. Move it back to the top of RAM (abandoning the overflowed
+/// frames) and report from there.
+///
+/// # Safety
+/// Only the vector table calls it.
+#[unsafe(naked)]
+#[no_mangle]
+pub unsafe extern "C" fn MemoryManagement() -> ! {
+    core::arch::naked_asm!(
+        "ldr r0, ={top}",
+        "msr msp, r0",
+        "b {report}",
+        top = sym _stack_start,
+        report = sym stack_overflow,
+    )
+}
+
+extern "C" {
+    static _stack_start: u32;
+}
+
+/// Reports a stack overflow caught by the guard and ends the run (board: reset, coil off out
+/// of reset; QEMU: exit status from [`STACK_OVERFLOW_OUTCOME`]).
+extern "C" fn stack_overflow() -> ! {
+    // Coil off before anything else (the PWM keeps its last duty until the reset).
+    coil_off();
+    defmt::error!("stack overflow: the stack guard caught it (MemManage); coil off, run ended");
+    finish(STACK_OVERFLOW_OUTCOME)
+}
+
+/// How a caught stack overflow ends the run: a failure, except in the guard's own test binary.
+#[cfg(not(feature = "stack-guard-test"))]
+const STACK_OVERFLOW_OUTCOME: Outcome = Outcome::Failure;
+/// How a caught stack overflow ends the run: the guard test expects exactly this.
+#[cfg(feature = "stack-guard-test")]
+const STACK_OVERFLOW_OUTCOME: Outcome = Outcome::Success;
+
+/// Coil PWM off by register (TIM4 CCR1 = 0), usable from a fault handler.
+fn coil_off() {
+    #[cfg(not(feature = "qemu"))]
+    // SAFETY: a single store to TIM4's compare register; the control task is not running (the
+    // fault handler has the highest priority) and the run ends right after.
+    unsafe {
+        (*crate::hal::pac::TIM4::ptr()).ccr1().write(|w| w.bits(0));
+    }
+}
+
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
     defmt::error!(

@@ -44,6 +44,9 @@ impl<E> From<coil_current::Error<E>> for SensorFault {
 /// Raw results of one sampling of every sensor.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleSet {
+    /// Time stamp of the sampling, us: the free-running 1 MHz capture timer (TIM5 on the
+    /// board), so a late or missed control period shows in the supervisor's `timing` check.
+    pub t_us: u32,
     /// Left wheel yaw, rad.
     pub psi_l_rad: Result<f32, SensorFault>,
     /// Right wheel yaw, rad.
@@ -87,11 +90,14 @@ pub struct Sensors<SL, SR, P, A> {
 impl<SL: SpiDevice, SR: SpiDevice, P: PulseCapture, A: AdcChannel> Sensors<SL, SR, P, A> {
     /// Reads everything once; `dt_ticks` is the control period in capture-timer ticks.
     pub fn sample(&mut self, dt_ticks: u32) -> SampleSet {
+        // The capture timer counts at `SpeedConfig::tick_hz` = 1 MHz (calibration test).
+        let t_us = self.pulses.now_ticks();
         let psi_l_rad = self.left.read_rad();
         let psi_r_rad = self.right.read_rad();
         let speed = self.speed.update(self.pulses.take(), dt_ticks);
         let coil_current_a = self.current.read_a().map_err(SensorFault::from);
         SampleSet {
+            t_us,
             psi_l_rad,
             psi_r_rad,
             speed,

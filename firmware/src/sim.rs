@@ -224,6 +224,10 @@ impl SimPulses {
 }
 
 impl PulseCapture for SimPulses {
+    fn now_ticks(&mut self) -> u32 {
+        self.world.step().wrapping_mul(TICKS_PER_STEP)
+    }
+
     fn take(&mut self) -> PulseSample {
         let step = self.world.step();
         let t = u64::from(step) * u64::from(TICKS_PER_STEP);
@@ -248,28 +252,62 @@ impl PulseCapture for SimPulses {
     }
 }
 
-/// ADC that reads the current the simulated coil carries for the commanded duty.
+/// The true electrical data of the simulated coil (may differ from the driver's nominal
+/// [`COIL`]: a hot coil, another supply).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimCoil {
+    /// Resistance, ohm.
+    pub r_ohm: f32,
+    /// Inductance, H.
+    pub l_h: f32,
+    /// Supply voltage, V.
+    pub supply_v: f32,
+}
+
+impl SimCoil {
+    /// The coil as the driver assumes it ([`COIL`]).
+    pub const NOMINAL: SimCoil = SimCoil {
+        r_ohm: COIL.coil_ohm,
+        l_h: COIL.coil_h,
+        supply_v: COIL.supply_v,
+    };
+}
+
+/// ADC of the simulated shunt: the coil current of the average model L di/dt = d V - R i
+/// (i >= 0), advanced by one control period with the duty of the last period at each read
+/// (the control step reads once per period, before it writes the new duty).
 pub struct SimAdc {
     world: &'static SimWorld,
-    /// Coil resistance / supply used to turn duty into current.
-    pub amps_per_duty: f32,
+    coil: SimCoil,
+    /// 1 - exp(-T R / L) for one period T (computed once: a read costs no `expf`).
+    alpha: f32,
+    current_a: f32,
 }
 
 impl SimAdc {
-    /// ADC of the simulated shunt; `amps_per_duty` = supply / coil resistance.
-    pub fn new(world: &'static SimWorld, amps_per_duty: f32) -> Self {
+    /// The shunt of `coil`, at 0 A.
+    pub fn new(world: &'static SimWorld, coil: SimCoil) -> Self {
+        let period_s = TICKS_PER_STEP as f32 * 1e-6;
         SimAdc {
             world,
-            amps_per_duty,
+            coil,
+            alpha: 1.0 - libm::expf(-period_s * coil.r_ohm / coil.l_h),
+            current_a: 0.0,
         }
+    }
+
+    /// The simulated coil current, A.
+    pub fn current_a(&self) -> f32 {
+        self.current_a
     }
 }
 
 impl AdcChannel for SimAdc {
     type Error = Infallible;
     fn read_counts(&mut self) -> Result<u16, Infallible> {
-        let a = self.world.duty() * self.amps_per_duty;
-        let c = SHUNT.offset_counts + a / SHUNT.amps_per_count();
+        let steady_a = self.world.duty() * self.coil.supply_v / self.coil.r_ohm;
+        self.current_a = (self.current_a + self.alpha * (steady_a - self.current_a)).max(0.0);
+        let c = SHUNT.offset_counts + self.current_a / SHUNT.amps_per_count();
         Ok(libm::roundf(c).clamp(0.0, f32::from(SHUNT.full_scale_counts())) as u16)
     }
 }
@@ -301,6 +339,35 @@ impl embedded_hal::pwm::SetDutyCycle for SimPwm {
     }
 }
 
+/// The true coil current after `steps` control periods of a 2 A command through the
+/// firmware's coil driver (nominal [`COIL`] parameters) into `coil`: with the measured shunt
+/// current fed back (`closed_loop`) or open loop. `world` carries only the duty here. Host and
+/// on-target test.
+pub fn coil_current_after(
+    world: &'static SimWorld,
+    coil: SimCoil,
+    closed_loop: bool,
+    steps: u32,
+) -> f32 {
+    use crate::drivers::coil_current::CoilCurrentSensor;
+    use crate::drivers::coil_pwm::CoilDriver;
+    let mut drv = match CoilDriver::new(SimPwm::new(world), COIL) {
+        Ok(d) => d,
+        Err(e) => match e {},
+    };
+    let mut shunt = CoilCurrentSensor::new(SimAdc::new(world, coil), SHUNT);
+    let period_s = TICKS_PER_STEP as f32 * 1e-6;
+    for _ in 0..steps {
+        let measured = shunt.read_a().ok();
+        let fb = if closed_loop { measured } else { None };
+        if let Err(e) = drv.set_current_a(2.0, fb, period_s) {
+            match e {}
+        }
+    }
+    let _ = shunt.read_a();
+    shunt.adc().current_a()
+}
+
 /// What a run of `steps` steps must have counted (each injected fault exactly once).
 pub fn expected_faults(steps: u32) -> (u32, u32, u32) {
     let c = |s: u32| u32::from(steps > s);
@@ -311,18 +378,19 @@ pub fn expected_faults(steps: u32) -> (u32, u32, u32) {
     )
 }
 
-/// Coil of the simulation and the reference board: 4 ohm hot, 12 V supply, 2 A maximum.
-pub const COIL: crate::drivers::coil_pwm::CoilConfig = crate::drivers::coil_pwm::CoilConfig {
-    coil_ohm: 4.0,
-    supply_v: 12.0,
-    max_current_a: 2.0,
-};
+/// Coil of the simulation and the reference board (one definition, in the calibration).
+pub use crate::calibration::COIL;
 
 /// The simulated sensor set.
 pub type SimSensors = crate::sensors::Sensors<SimEncoder, SimEncoder, SimPulses, SimAdc>;
 
-/// Builds the simulated sensors on `world`.
+/// Builds the simulated sensors on `world`, with the nominal coil.
 pub fn sensors(world: &'static SimWorld) -> SimSensors {
+    sensors_with_coil(world, SimCoil::NOMINAL)
+}
+
+/// Builds the simulated sensors on `world`, the shunt reading the current of `coil`.
+pub fn sensors_with_coil(world: &'static SimWorld, coil: SimCoil) -> SimSensors {
     use crate::drivers::as5047p::{AngleTracker, As5047p};
     use crate::drivers::coil_current::CoilCurrentSensor;
     use crate::drivers::wheel_speed::WheelSpeed;
@@ -340,7 +408,7 @@ pub fn sensors(world: &'static SimWorld) -> SimSensors {
         },
         pulses: SimPulses::new(world),
         speed: WheelSpeed::new(SPEED_CONFIG),
-        current: CoilCurrentSensor::new(SimAdc::new(world, COIL.supply_v / COIL.coil_ohm), SHUNT),
+        current: CoilCurrentSensor::new(SimAdc::new(world, coil), SHUNT),
     }
 }
 
@@ -352,7 +420,7 @@ pub fn run_closed_loop(
     ctrl: &mut shimmy_core::supervisor::safe_controller::SafeController,
     steps: u32,
 ) -> crate::control::Health {
-    use crate::control::{supervised_step, Health};
+    use crate::control::{drive_coil, supervised_step, Health};
     use crate::drivers::coil_pwm::CoilDriver;
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::policy::Mode;
@@ -365,7 +433,7 @@ pub fn run_closed_loop(
     for step in 0..steps {
         world.set_step(step);
         let set = s.sample(TICKS_PER_STEP);
-        let out = supervised_step(ctrl, &set, step, MarginStatus::NotUsed, &mut h);
+        let out = supervised_step(ctrl, &set, MarginStatus::NotUsed, &mut h);
         if let (Mode::Normal, Some((l, r))) = (out.verdict.mode, out.validated.angles_rad) {
             // One count of quantisation (0.38 mrad) plus f32 rounding.
             let tol = 1.5 * crate::drivers::as5047p::RAD_PER_COUNT;
@@ -376,7 +444,7 @@ pub fn run_closed_loop(
             // The estimate is bounded by pulse distance / time since edge between edges.
             assert!(v <= SPEED_MPS * 1.001, "speed at {step}");
         }
-        if let Err(e) = coil.set_current_a(out.current_cmd_a) {
+        if let Err(e) = drive_coil(&mut coil, &out) {
             match e {}
         }
         h.steps += 1;
@@ -441,9 +509,41 @@ mod tests {
         use crate::drivers::coil_pwm::CoilDriver;
         let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
         let mut coil = CoilDriver::new(SimPwm::new(world), COIL).unwrap();
-        let mut cs = CoilCurrentSensor::new(SimAdc::new(world, 3.0), SHUNT);
-        coil.set_current_a(1.5).unwrap();
-        // Duty quantised to 1/1000 (3 mA) and ADC to 0.8 mA.
-        assert!((cs.read_a().unwrap() - 1.5).abs() < 5e-3);
+        let mut cs = CoilCurrentSensor::new(SimAdc::new(world, SimCoil::NOMINAL), SHUNT);
+        coil.set_current_a(1.5, None, 1e-3).unwrap();
+        // 100 periods = 19 L/R: settled. Duty quantised to 1/1000 (3 mA), ADC to 1.1 mA.
+        let mut i = 0.0;
+        for _ in 0..100 {
+            i = cs.read_a().unwrap();
+        }
+        assert!((i - 1.5).abs() < 5e-3, "{i}");
+    }
+
+    /// The closed current loop holds 2 A into a hot coil (+50 % R) and on a 14 V supply; the
+    /// open-loop map d = I R / V of the nominal coil misses by 33 % (hot coil: 1.33 A), or
+    /// drives 2.33 A, above the coil rating (14 V).
+    #[test]
+    fn closed_loop_holds_the_current_of_a_hot_coil_and_a_high_supply() {
+        let cases = [
+            (1.5f32, 12.0f32, -1.0 / 3.0),
+            (1.0, 14.0, 1.0 / 6.0),
+            (1.5, 14.0, -2.0 / 9.0),
+        ];
+        for (r_factor, supply_v, open_error) in cases {
+            let coil = SimCoil {
+                r_ohm: COIL.coil_ohm * r_factor,
+                supply_v,
+                ..SimCoil::NOMINAL
+            };
+            let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
+            let closed = coil_current_after(world, coil, true, 300);
+            let open = coil_current_after(world, coil, false, 300);
+            println!("R x {r_factor}, {supply_v} V: closed {closed:.3} A, open {open:.3} A");
+            assert!((closed - 2.0).abs() < 0.02 * 2.0, "closed loop {closed}");
+            assert!(
+                (open / 2.0 - 1.0 - open_error).abs() < 0.01,
+                "open loop {open}"
+            );
+        }
     }
 }

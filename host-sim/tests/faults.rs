@@ -143,6 +143,9 @@ fn without_the_supervisor_a_frozen_encoder_pair_lets_shimmy_grow() {
         faults: vec![FaultMode::Stuck(Side::Both)],
         note: "",
         handleable: true,
+        quiet: false,
+        min_duration_s: 0.0,
+        lasts_s: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     let (bare, _) = fault_campaign::run_case(&s, arm, &c, V_KMH, false).unwrap();
@@ -176,6 +179,9 @@ fn nan_encoder_is_caught_by_both_layers() {
         faults: vec![FaultMode::Nan(Side::Left)],
         note: "",
         handleable: true,
+        quiet: false,
+        min_duration_s: 0.0,
+        lasts_s: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     let (bare, _) = fault_campaign::run_case(&setup(), arm, &c, V_KMH, false).unwrap();
@@ -245,6 +251,9 @@ fn a_lost_or_frozen_speed_does_not_switch_the_damper_off() {
             faults,
             note: "",
             handleable: true,
+            quiet: false,
+            min_duration_s: 0.0,
+            lasts_s: None,
         };
         let (r, _) = fault_campaign::run_case(&s, arm, &c, v_kmh, true).unwrap();
         println!(
@@ -285,6 +294,9 @@ fn lost_speed_with_both_encoders_failed_holds_the_failsafe_current() {
         faults: vec![FaultMode::ErrorFlag(Side::Both), FaultMode::SpeedPulsesLost],
         note: "",
         handleable: true,
+        quiet: false,
+        min_duration_s: 0.0,
+        lasts_s: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     for v_kmh in [45.0, 60.0] {
@@ -318,6 +330,9 @@ fn a_genuine_braking_to_standstill_raises_no_fault() {
         faults: vec![],
         note: "",
         handleable: true,
+        quiet: false,
+        min_duration_s: 0.0,
+        lasts_s: None,
     };
     let v0 = V_KMH / 3.6;
     let (cfg, mut sc) = fault_campaign::build(&s, Arm::Mr(ControllerKind::Asmc), &c.faults, V_KMH);
@@ -339,4 +354,159 @@ fn a_genuine_braking_to_standstill_raises_no_fault() {
     assert!(log.detected.is_empty(), "{:?}", log.records);
     assert_eq!(log.worst_mode, Mode::Normal);
     assert_eq!(r.series.cmd_a.last().copied(), Some(0.0));
+}
+
+// ---- coil drive and coil checks, latent and intermittent faults ---------------------------
+
+fn asmc() -> Arm {
+    Arm::Mr(ControllerKind::Asmc)
+}
+
+/// The fail-safe 2 A into a hot coil (+50 % resistance): both encoders fail, FailSafe at 2 A.
+/// The board's closed current loop delivers 2 A (the campaign's coil-current check passes); the
+/// old open-loop drive (d = I R / V with the nominal 4 ohm) delivers 1.33 A, 33 % short, and
+/// the check fails.
+#[test]
+fn the_current_loop_delivers_the_failsafe_current_into_a_hot_coil() {
+    use shimmy_sim::model::coil_drive::CoilDrive;
+    let c = pick(&["coil-hot x1.5+error-flag-both"]).remove(0);
+    let mut coil = Vec::new();
+    for drive in [CoilDrive::ClosedLoop, CoilDrive::OpenLoop] {
+        let s = Setup {
+            coil_drive: drive,
+            ..setup()
+        };
+        let (r, _) = fault_campaign::run_case(&s, asmc(), &c, V_KMH, true).unwrap();
+        println!(
+            "{drive:?}: {} at {:.2} A command, coil {:.3} A, peak {:.3} deg",
+            r.final_mode.name(),
+            r.final_cmd_a,
+            r.final_coil_a,
+            r.peak_after_rad.to_degrees()
+        );
+        assert_eq!(r.final_mode, Mode::FailSafe);
+        assert_eq!(r.final_cmd_a, f64::from(FAILSAFE_CURRENT_A));
+        let failed = fault_campaign::check(std::slice::from_ref(&r));
+        coil.push((r.final_coil_a, failed));
+    }
+    let (closed, ok) = &coil[0];
+    assert!((closed - 2.0).abs() < 0.05 * 2.0, "closed loop: {closed} A");
+    assert!(ok.is_empty(), "{ok:?}");
+    let (open, failed) = &coil[1];
+    assert!((open - 2.0 / 1.5).abs() < 0.02, "open loop: {open} A");
+    assert!(
+        failed.iter().any(|l| l.contains("coil carries")),
+        "the campaign check sees the deficit: {failed:?}"
+    );
+}
+
+/// A chattering coil connector (open 30 ms of every 50 ms): the accumulating coil check
+/// flags it (latched `coil-open`, 0 A); with the old rule (the mismatch timer restarts at the
+/// first good sample: an infinite drain rate) it is never flagged.
+#[test]
+fn a_chattering_coil_connector_is_flagged() {
+    let c = pick(&["coil-intermittent 30/50"]).remove(0);
+    let (new, _) = fault_campaign::run_case(&setup(), asmc(), &c, V_KMH, true).unwrap();
+    let (old, _) = fault_campaign::run_case_with(&setup(), asmc(), &c, V_KMH, |cfg| {
+        cfg.supervisor.coil_heal_ratio = f32::INFINITY;
+    })
+    .unwrap();
+    println!(
+        "accumulating: detected {} after {:?} ms, {} at {} A; restarting timer: detected {:?}",
+        new.detected,
+        new.detect_ms,
+        new.final_mode.name(),
+        new.final_cmd_a,
+        old.detected
+    );
+    assert!(new.detected.contains(FaultKind::CoilOpen.name()));
+    assert!(new.detect_ms.unwrap() < 500.0);
+    assert_eq!((new.final_mode, new.final_cmd_a), (Mode::FailSafe, 0.0));
+    assert!(fault_campaign::check(&[new]).is_empty());
+    assert!(!old.detected.contains(FaultKind::CoilOpen.name()));
+    assert!(!fault_campaign::check(&[old]).is_empty());
+}
+
+/// The coil opens on a quiet road while the controller demands ~0 A. The test pulse
+/// finds it within about a second; without the pulse the coil checks never run and the open
+/// coil goes unnoticed for the whole run.
+#[test]
+fn an_open_coil_at_idle_is_found_by_the_test_pulse() {
+    let c = pick(&["coil-open quiet"]).remove(0);
+    let (new, _) = fault_campaign::run_case(&setup(), asmc(), &c, V_KMH, true).unwrap();
+    let (old, _) = fault_campaign::run_case_with(&setup(), asmc(), &c, V_KMH, |cfg| {
+        cfg.supervisor.coil_test_current_a = 0.0;
+    })
+    .unwrap();
+    println!(
+        "test pulse: detected {} after {:?} ms; without: {:?} ({})",
+        new.detected, new.detect_ms, old.detect_ms, old.detected
+    );
+    assert!(new.detected.contains(FaultKind::CoilOpen.name()));
+    assert!(new.detect_ms.unwrap() < 1200.0, "{:?}", new.detect_ms);
+    assert_eq!((new.final_mode, new.final_cmd_a), (Mode::FailSafe, 0.0));
+    assert!(!old.detected.contains(FaultKind::CoilOpen.name()));
+    assert!(!fault_campaign::check(&[old]).is_empty());
+}
+
+/// One failed encoder read every 1.5 s (longer than the 1 s recovery). With the recurrence
+/// escalation the third within 10 s latches `left-read`: Degraded for good, the mode settled.
+/// With the window off (the old rule) Normal/Degraded toggle to the end of the run and the
+/// campaign's settled-mode check fails.
+#[test]
+fn an_intermittent_encoder_read_is_latched_instead_of_toggling() {
+    let c = pick(&["dropout-left 1/1500"]).remove(0);
+    let (new, _) = fault_campaign::run_case(&setup(), asmc(), &c, V_KMH, true).unwrap();
+    let (old, _) = fault_campaign::run_case_with(&setup(), asmc(), &c, V_KMH, |cfg| {
+        cfg.supervisor.intermittent_window_s = 0.0;
+    })
+    .unwrap();
+    println!(
+        "escalation: {} mode changes, last at {:?} s, latched {}; without: {} changes, last at {:?} s",
+        new.mode_changes, new.last_mode_change_s, new.escalated, old.mode_changes, old.last_mode_change_s
+    );
+    assert!(new.escalated.contains(FaultKind::LeftRead.name()));
+    assert_eq!(new.mode_changes, 5);
+    assert_eq!(new.final_mode, Mode::Degraded);
+    assert!(fault_campaign::check(std::slice::from_ref(&new)).is_empty());
+    assert!(old.mode_changes > new.mode_changes);
+    assert!(old.escalated.is_empty());
+    assert!(fault_campaign::check(&[old])
+        .iter()
+        .any(|l| l.contains("mode still changing")));
+}
+
+/// Faults that end: an encoder flag, both encoders (FailSafe), a lost pulse train and lost
+/// frames, each 0.5 s long at 45 km/h. Every run ends in Normal with nothing active or latched,
+/// and passes every campaign check. The check can fail: an open coil that closes again after
+/// 0.5 s stays latched (by design), and the recovery check reports it.
+#[test]
+fn faults_that_end_are_recovered_from() {
+    let cases = pick(&[
+        "parity-left 0.5s",
+        "error-flag-both 0.5s",
+        "speed-pulses-lost 0.5s",
+        "frame-loss 10/100 0.5s",
+    ]);
+    let rows = fault_campaign::campaign(&setup(), &cases, &[V_KMH]).unwrap();
+    print!("{}", fault_campaign::markdown(&rows));
+    let bad = fault_campaign::check(&rows);
+    assert!(bad.is_empty(), "{bad:#?}");
+    for r in rows.iter().filter(|r| r.arm != "no-damper") {
+        assert!(r.ended && r.detected(), "{}", r.case);
+        assert_eq!(r.final_mode, Mode::Normal, "{}", r.case);
+        assert!(
+            r.final_faults.is_empty() && r.escalated.is_empty(),
+            "{}",
+            r.case
+        );
+    }
+    let open = Case {
+        lasts_s: Some(0.5),
+        ..pick(&["coil-open"]).remove(0)
+    };
+    let (r, _) = fault_campaign::run_case(&setup(), asmc(), &open, V_KMH, true).unwrap();
+    assert!(r.final_faults.contains(FaultKind::CoilOpen.name()));
+    let bad = fault_campaign::check(&[r]);
+    assert!(bad.iter().any(|l| l.contains("the fault ended")), "{bad:?}");
 }

@@ -6,7 +6,7 @@
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
-//!                                against the budgets (flash <= 92 KiB, static RAM <= 24 KiB),
+//!                                against the budgets (flash <= 96 KiB, static RAM <= 24 KiB),
 //!                                flash by crate, largest symbols, and where the bytes go
 //!                                that no sized symbol covers
 //! cargo xtask conformance        replay the committed sensor trace on the host and under QEMU
@@ -109,7 +109,13 @@ fn test() -> Result<(), String> {
             // Links only if no panic is reachable (firmware/src/bin/panic-free-check.rs).
             build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
         }),
+        ("panic-free firmware glue (link check)", || {
+            // The control task's glue around the core step (firmware/src/bin/panic-free-glue.rs).
+            build_firmware("panic-free-glue", &["panic-check"]).map(|_| "no reachable panic".into())
+        }),
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
+        ("stack overflow caught by the guard (QEMU)", stack_guard),
+        ("fault memory across resets (QEMU)", reset_memory),
         (
             "host/target conformance (trace replay, bit-identical)",
             conformance::step,
@@ -205,6 +211,34 @@ fn on_target_tests() -> Step {
         return Err(format!("unexpected summary: {summary}"));
     }
     Ok(summary.trim_start_matches("INFO ").to_string())
+}
+
+/// The reset record must survive three resets under QEMU, restore the latched coil short and
+/// hold the safe state at the third quick reset (firmware/src/bin/reset-memory.rs).
+fn reset_memory() -> Step {
+    let elf = build_firmware("reset-memory", &["qemu"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    run.log
+        .iter()
+        .find(|l| l.contains("reset memory ok"))
+        .map(|_| "record survived 3 resets, latch restored (0 A), reset loop held".to_string())
+        .ok_or_else(|| "the run ended without the final report".to_string())
+}
+
+/// A stack overflow must end in the guard's fault handler (firmware/src/bin/stack-guard.rs):
+/// a clean exit and the handler's report, not a HardFault after corrupting the statics.
+fn stack_guard() -> Step {
+    let elf = build_firmware("stack-guard", &["qemu", "stack-guard-test"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    run.log
+        .iter()
+        .find(|l| l.contains("stack overflow: the stack guard caught it"))
+        .map(|_| "overflow ended in the guard's handler (coil off, reported)".to_string())
+        .ok_or_else(|| "the run ended without the guard's report".to_string())
 }
 
 /// The harness must turn a failing assertion into a failed run: build it with one test that
@@ -320,6 +354,12 @@ fn size() -> Result<(), String> {
 fn run_in_qemu(bin: &str) -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
+    if bin == "stack-guard" {
+        return stack_guard().map(|s| println!("xtask: {s}"));
+    }
+    if bin == "reset-memory" {
+        return reset_memory().map(|s| println!("xtask: {s}"));
+    }
     let elf = build_firmware(bin, &["qemu"])?;
     let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;
     run.print();

@@ -333,7 +333,6 @@ enum Search {
 enum Phase {
     Idle,
     Modes,
-    Shimmy,
     /// Newton on the Hopf condition for known crossing `index`, step `iter`.
     Track {
         index: usize,
@@ -509,19 +508,20 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         self.work.errors = self.work.errors.saturating_add(1);
     }
 
-    /// One bounded eigen-solve of A(v), counted (the only place that solves, so the per-call
+    /// One bounded eigen-solve of `a`, counted (the only place that solves, so the per-call
     /// count is exact).
-    fn solve(&mut self, v: f64) -> Result<eigen::Eigenvalues, eigen::EigenError> {
+    fn solve(&mut self, a: &eigen::StateMatrix) -> Result<eigen::Eigenvalues, eigen::EigenError> {
         self.solves_last_call = self.solves_last_call.saturating_add(1);
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
-        eigen::eigenvalues_of::<T>(&linearise(&self.p, v, self.work.c_damper_nspm))
+        eigen::eigenvalues_of::<T>(a)
     }
 
     /// The critical oscillatory eigenvalue at `v` (its Re is g(v)): one eigen-solve.
     fn g(&mut self, v: f64) -> Option<Complex<f64>> {
+        let a = linearise(&self.p, v, self.work.c_damper_nspm);
         match self
-            .solve(v)
+            .solve(&a)
             .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
         {
             Ok(m) if m.re.is_finite() => Some(m.eigenvalue()),
@@ -592,10 +592,6 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 self.modes();
                 None
             }
-            Phase::Shimmy => {
-                self.shimmy();
-                None
-            }
             Phase::Track { index, iter } => {
                 self.phase = self.track(index, iter);
                 None
@@ -630,10 +626,12 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         }
     }
 
-    /// The Schur solve at V: critical mode, max Re, and the shimmy start (tracked or selected).
+    /// The Schur solve at V: critical mode, max Re, and the shimmy start (tracked or selected),
+    /// then the shimmy step on the same A in the same call (one eigen-solve plus LUs).
     fn modes(&mut self) {
         let v = self.work.speed_mps;
-        let vals = match self.solve(v) {
+        let a = linearise(&self.p, v, self.work.c_damper_nspm);
+        let vals = match self.solve(&a) {
             Ok(vals) => vals,
             Err(_) => {
                 self.error();
@@ -668,16 +666,15 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 self.shimmy_start = l;
                 self.shimmy_from_track = true;
                 self.work.shimmy_found = true;
-                self.phase = Phase::Shimmy;
             }
-            None => self.select_shimmy(&vals),
+            None => self.select_shimmy(&a, &vals),
         }
+        self.shimmy(&a);
     }
 
     /// Cold: the shimmy mode by mode shape over all oscillatory pairs (one LU each).
-    fn select_shimmy(&mut self, vals: &eigen::Eigenvalues) {
-        let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
-        let (l, found) = match stability::select_mode_of::<T>(&self.p, &a, vals, ModeSelect::Shimmy)
+    fn select_shimmy(&mut self, a: &eigen::StateMatrix, vals: &eigen::Eigenvalues) {
+        let (l, found) = match stability::select_mode_of::<T>(&self.p, a, vals, ModeSelect::Shimmy)
         {
             Ok(m) => (m.eigenvalue(), true),
             Err(_) => (self.work.critical.eigenvalue(), false),
@@ -685,16 +682,14 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         self.shimmy_start = l;
         self.shimmy_from_track = false;
         self.work.shimmy_found = found;
-        self.phase = Phase::Shimmy;
     }
 
     /// The shimmy mode's right and left eigenvectors (one LU), its shape check (tracked start)
     /// and d zeta/dV.
-    fn shimmy(&mut self) {
+    fn shimmy(&mut self, a: &eigen::StateMatrix) {
         let v = self.work.speed_mps;
-        let a = linearise(&self.p, v, self.work.c_damper_nspm);
         let lambda = self.shimmy_start;
-        let ep = match eigen::eigenvectors_of::<T>(&a, lambda) {
+        let ep = match eigen::eigenvectors_of::<T>(a, lambda) {
             Ok((right, left)) => Some(Eigenpair {
                 lambda,
                 right,

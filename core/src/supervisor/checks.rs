@@ -18,10 +18,17 @@
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
 //! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`; then held while V < `speed_low_mps` |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
-//! | `CoilOpen` | command > `coil_min_cmd_a` and measured < `coil_open_ratio` x command for `coil_fault_s` |
-//! | `CoilShort` | measured > command + `coil_over_a` (or at the ADC full scale when that is above it) for `coil_fault_s` |
+//! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) > `coil_min_expected_a` and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
+//! | `CoilShort` | measured > expected + `coil_over_a` (or at the ADC full scale when that is above it), accumulated the same way |
 //! | `CoilSensor` | measured coil current NaN/Inf |
 //! | `MarginUnavailable` | the margin estimate is invalid for `margin_invalid_s` (advisory) |
+//!
+//! Latent coil faults: after `coil_test_idle_s` without an open check (little current
+//! demanded) the verdict asks for a test pulse of `coil_test_current_a` for `coil_test_pulse_s`.
+//!
+//! Intermittent faults: the `intermittent_count`-th activation of a fault within
+//! `intermittent_window_s` of the first latches it (`SupervisorEvent::Latched`, until
+//! [`Supervisor::clear_latched`]), so a recurring glitch does not toggle the mode forever.
 //!
 //! Rate bound: the no-damper shimmy limit cycle of the reference plant peaks at ~7 deg at
 //! ~7 Hz, i.e. ~5.4 rad/s; the default 25 rad/s also passes 0.2 rad at the 20 Hz edge of the
@@ -52,6 +59,13 @@ use super::policy::{decide, Mode, SpeedUse, SupervisorVerdict};
 pub enum SupervisorEvent {
     /// A fault became active.
     Raised {
+        /// Time stamp, us.
+        t_us: u32,
+        /// Which.
+        kind: FaultKind,
+    },
+    /// A fault recurred often enough to be latched (intermittent).
+    Latched {
         /// Time stamp, us.
         t_us: u32,
         /// Which.
@@ -99,11 +113,18 @@ pub struct Supervisor {
     speed_floor: (f32, u32),
     speed_suspect: bool,
     speed_trusted: Option<(f32, u32)>,
+    coil_expected_a: f32,
     coil_mismatch_s: [f32; 2],
+    coil_idle_s: f32,
+    coil_pulse_left_s: f32,
     margin_invalid_s: f32,
     absent_s: [f32; N_FAULTS],
+    /// Per kind: time stamp of the first activation in the current recurrence window and the
+    /// activations since.
+    recurrences: [(u32, u8); N_FAULTS],
     records: [FaultRecord; N_FAULTS],
     active: FaultSet,
+    escalated: FaultSet,
     mode: Mode,
     events: heapless::Deque<SupervisorEvent, EVENT_CAPACITY>,
     dropped_events: u32,
@@ -121,6 +142,16 @@ fn within(x: f32, bound: f32) -> bool {
 #[inline]
 fn seconds_since(now_us: u32, earlier_us: u32) -> f32 {
     now_us.wrapping_sub(earlier_us) as f32 * 1e-6
+}
+
+/// A frame interval usable in the coil lag: NaN or negative -> 0, at most 1 s.
+#[inline]
+fn clamp_dt(dt_s: f32) -> f32 {
+    if dt_s > 0.0 {
+        dt_s.min(1.0)
+    } else {
+        0.0
+    }
 }
 
 /// |x| for the checks (NaN stays NaN and fails every `<=`).
@@ -141,11 +172,16 @@ impl Supervisor {
             speed_floor: (0.0, 0),
             speed_suspect: false,
             speed_trusted: None,
+            coil_expected_a: 0.0,
             coil_mismatch_s: [0.0; 2],
+            coil_idle_s: 0.0,
+            coil_pulse_left_s: 0.0,
             margin_invalid_s: 0.0,
             absent_s: [0.0; N_FAULTS],
+            recurrences: [(0, 0); N_FAULTS],
             records: [FaultRecord::default(); N_FAULTS],
             active: FaultSet::EMPTY,
+            escalated: FaultSet::EMPTY,
             mode: Mode::Normal,
             events: heapless::Deque::new(),
             dropped_events: 0,
@@ -199,16 +235,55 @@ impl Supervisor {
         core::iter::from_fn(move || self.events.pop_front())
     }
 
-    /// Clears latched faults (coil open/short): call on an ignition cycle or after service.
+    /// Faults latched because they recurred ([`SupervisorParams::intermittent_count`] times
+    /// within the window); they stay active until [`Supervisor::clear_latched`].
+    pub fn escalated(&self) -> FaultSet {
+        self.escalated
+    }
+
+    /// Active faults that only [`Supervisor::clear_latched`] removes: coil open/short and the
+    /// escalated intermittent faults.
+    pub fn latched(&self) -> FaultSet {
+        let mut l = self.escalated;
+        for k in self.active.iter().filter(|k| k.latched()) {
+            l.insert(k);
+        }
+        l
+    }
+
+    /// Restores latched faults remembered across a reset (see [`Supervisor::latched`]): they
+    /// are active from the first frame on and stay until [`Supervisor::clear_latched`]. Kinds
+    /// that neither latch nor escalate are ignored.
+    pub fn restore_latched(&mut self, set: FaultSet) {
+        for k in set.iter() {
+            if !(k.latched() || k.escalates()) || self.active.contains(k) {
+                continue;
+            }
+            if !k.latched() {
+                self.escalated.insert(k);
+            }
+            self.active.insert(k);
+            if let Some(r) = self.records.get_mut(k as usize) {
+                r.active = true;
+                r.activations = r.activations.saturating_add(1);
+            }
+            self.log(SupervisorEvent::Latched { t_us: 0, kind: k });
+        }
+    }
+
+    /// Clears latched faults (coil open/short, escalated intermittent faults) and the
+    /// recurrence counts: call on an ignition cycle or after service.
     pub fn clear_latched(&mut self) {
         for k in FaultKind::ALL {
-            if k.latched() {
+            if k.latched() || self.escalated.contains(k) {
                 self.active.0 &= !k.bit();
                 if let Some(r) = self.records.get_mut(k as usize) {
                     r.active = false;
                 }
             }
         }
+        self.escalated = FaultSet::EMPTY;
+        self.recurrences = [(0, 0); N_FAULTS];
         self.coil_mismatch_s = [0.0; 2];
     }
 
@@ -357,23 +432,57 @@ impl Supervisor {
         within(seconds_since(t_us, t), self.p.speed_hold_s).then_some(v)
     }
 
-    /// Coil check against the command of the previous step `last_cmd_a`.
+    /// Coil checks against the command of the previous step `last_cmd_a`, passed through the
+    /// coil's lag (the expected current); schedules the test pulse while no check can run.
     fn check_coil(&mut self, f: &RawFrame, last_cmd_a: f32, dt_s: f32, det: &mut FaultSet) {
+        let p = self.p;
+        // The current the coil should carry now: first-order lag of the applied command
+        // (backward Euler, no `expf`: lags the true coil by a fraction of a sample, which only
+        // makes the check more tolerant; a NaN or negative dt holds it).
+        let dt = clamp_dt(dt_s);
+        let alpha = dt / (p.coil_tau_s + dt);
+        // The gap to the command decays; below 1 uA it is closed, so a steady command is reached
+        // exactly (f32 rounding would otherwise stall a few ulps short of it).
+        let gap = (1.0 - alpha) * (last_cmd_a - self.coil_expected_a);
+        let expected = if abs(gap) < 1e-6 {
+            last_cmd_a
+        } else {
+            last_cmd_a - gap
+        };
+        self.coil_expected_a = if expected.is_finite() { expected } else { 0.0 };
         let Some(i_meas) = f.coil_current_a else {
             self.coil_mismatch_s = [0.0; 2];
+            self.coil_idle_s = 0.0;
+            self.coil_pulse_left_s = 0.0;
             return;
         };
         if !i_meas.is_finite() {
             det.insert(FaultKind::CoilSensor);
+            self.coil_idle_s = 0.0;
+            self.coil_pulse_left_s = 0.0;
             return;
         }
-        let p = self.p;
-        let open = last_cmd_a > p.coil_min_cmd_a && i_meas < p.coil_open_ratio * last_cmd_a;
-        let over_a = last_cmd_a + p.coil_over_a;
+        let e = self.coil_expected_a;
+        let over_a = e + p.coil_over_a;
         let short =
             i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
-        for (acc, cond) in self.coil_mismatch_s.iter_mut().zip([open, short]) {
-            *acc = if cond { (*acc + dt_s).min(1e3) } else { 0.0 };
+        let checkable = e > p.coil_min_expected_a;
+        let open = checkable && i_meas < p.coil_open_ratio * e;
+        let heal = dt_s * p.coil_heal_ratio;
+        // Open: judged only while enough current is expected (held otherwise); short: always.
+        for (acc, (cond, judged)) in self
+            .coil_mismatch_s
+            .iter_mut()
+            .zip([(open, checkable), (short, true)])
+        {
+            if cond {
+                *acc = (*acc + dt_s).min(1e3);
+            } else if judged {
+                *acc = (*acc - heal).max(0.0);
+            }
+            if !acc.is_finite() {
+                *acc = 0.0;
+            }
         }
         if self.coil_mismatch_s[0] >= p.coil_fault_s {
             det.insert(FaultKind::CoilOpen);
@@ -381,6 +490,29 @@ impl Supervisor {
         if self.coil_mismatch_s[1] >= p.coil_fault_s {
             det.insert(FaultKind::CoilShort);
         }
+        // Test pulse: after `coil_test_idle_s` without an open check (and never into a coil
+        // already found dead).
+        let dead =
+            self.active.contains(FaultKind::CoilOpen) || self.active.contains(FaultKind::CoilShort);
+        if checkable {
+            self.coil_idle_s = 0.0;
+        } else {
+            self.coil_idle_s = (self.coil_idle_s + dt_s).min(1e6);
+        }
+        if self.coil_pulse_left_s > 0.0 {
+            self.coil_pulse_left_s -= dt_s;
+        } else if !dead && p.coil_test_current_a > 0.0 && self.coil_idle_s >= p.coil_test_idle_s {
+            self.coil_pulse_left_s = p.coil_test_pulse_s;
+            self.coil_idle_s = 0.0;
+        }
+        if dead || !self.coil_pulse_left_s.is_finite() {
+            self.coil_pulse_left_s = 0.0;
+        }
+    }
+
+    /// The expected coil current (the applied command through the coil's lag), A.
+    pub fn coil_expected_a(&self) -> f32 {
+        self.coil_expected_a
     }
 
     /// Validates one frame. `last_cmd_a` is the coil command applied since the previous frame
@@ -463,7 +595,10 @@ impl Supervisor {
                 .held_speed(f.t_us)
                 .map_or(SpeedUse::Unknown, SpeedUse::Held),
         };
-        let verdict = decide(self.active, det, speed_use, &self.p);
+        let mut verdict = decide(self.active, det, speed_use, &self.p);
+        if self.coil_pulse_left_s > 0.0 && verdict.damper_available {
+            verdict.test_current_a = Some(p.coil_test_current_a);
+        }
         if verdict.mode != self.mode {
             log_warn!(
                 "supervisor: mode {} -> {}",
@@ -508,10 +643,13 @@ impl Supervisor {
     }
 
     fn update_active(&mut self, det: FaultSet, t_us: u32, dt_s: f32) {
-        let recovery = self.p.recovery_s;
+        let p = self.p;
         for (i, k) in FaultKind::ALL.into_iter().enumerate() {
-            let (Some(rec), Some(absent)) = (self.records.get_mut(i), self.absent_s.get_mut(i))
-            else {
+            let (Some(rec), Some(absent), Some(recur)) = (
+                self.records.get_mut(i),
+                self.absent_s.get_mut(i),
+                self.recurrences.get_mut(i),
+            ) else {
                 continue;
             };
             let was = self.active.contains(k);
@@ -525,11 +663,26 @@ impl Supervisor {
                     rec.active = true;
                     self.active.insert(k);
                     log_warn!("supervisor: fault {} raised", k.name());
+                    // Recurrence count: a new window when the last one started too long ago.
+                    let (t0, n) = *recur;
+                    *recur = if n == 0 || seconds_since(t_us, t0) > p.intermittent_window_s {
+                        (t_us, 1)
+                    } else {
+                        (t0, n.saturating_add(1))
+                    };
+                    let escalate = k.escalates()
+                        && recur.1 >= p.intermittent_count
+                        && !self.escalated.contains(k);
                     self.log(SupervisorEvent::Raised { t_us, kind: k });
+                    if escalate {
+                        self.escalated.insert(k);
+                        log_warn!("supervisor: fault {} latched (intermittent)", k.name());
+                        self.log(SupervisorEvent::Latched { t_us, kind: k });
+                    }
                 }
-            } else if was && !k.latched() {
+            } else if was && !k.latched() && !self.escalated.contains(k) {
                 *absent = (*absent + dt_s).min(1e6);
-                if *absent >= recovery {
+                if *absent >= p.recovery_s {
                     rec.active = false;
                     self.active.0 &= !k.bit();
                     log_info!("supervisor: fault {} cleared", k.name());

@@ -119,6 +119,20 @@ impl FaultKind {
     pub const fn latched(self) -> bool {
         matches!(self, FaultKind::CoilOpen | FaultKind::CoilShort)
     }
+
+    /// Latched when it recurs (`SupervisorParams::intermittent_count` activations within the
+    /// window): every fault except the two suspicions that a healthy vehicle can raise
+    /// repeatedly (`BothStuckSuspect` on a smooth road, `MarginUnavailable` at low excitation)
+    /// and the kinds that latch at once.
+    pub const fn escalates(self) -> bool {
+        !matches!(
+            self,
+            FaultKind::BothStuckSuspect
+                | FaultKind::MarginUnavailable
+                | FaultKind::CoilOpen
+                | FaultKind::CoilShort
+        )
+    }
 }
 
 /// A set of faults (bit set over [`FaultKind`]).
@@ -145,6 +159,11 @@ impl FaultSet {
     /// Whether the set is empty.
     pub const fn is_empty(self) -> bool {
         self.0 == 0
+    }
+
+    /// The set of raw bits (bit i = `FaultKind::ALL[i]`; bits beyond the kinds are dropped).
+    pub const fn from_bits(bits: u32) -> FaultSet {
+        FaultSet(bits & ((1 << N_FAULTS) - 1))
     }
 
     /// The raw bits (bit i = `FaultKind::ALL[i]`).

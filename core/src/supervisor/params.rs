@@ -41,14 +41,33 @@ pub struct SupervisorParams {
     pub speed_hold_s: f32,
     /// Largest time-stamp gap before `Timing`, us.
     pub max_gap_us: u32,
-    /// Coil checks only run above this command, A.
-    pub coil_min_cmd_a: f32,
-    /// Open coil: measured below this fraction of the command.
+    /// The coil's time constant L/R, s: the coil checks compare the measured current with the
+    /// command passed through this first-order lag (the *expected* current), so a command step
+    /// is not a mismatch.
+    pub coil_tau_s: f32,
+    /// Coil checks only run while the expected current is above this, A.
+    pub coil_min_expected_a: f32,
+    /// Open coil: measured below this fraction of the expected current.
     pub coil_open_ratio: f32,
-    /// Short: measured above command + this, A.
+    /// Short: measured above the expected current + this, A.
     pub coil_over_a: f32,
-    /// Coil mismatch must last this long, s (>> the coil's L/R = 5 ms).
+    /// Accumulated mismatch time that raises a coil fault, s (>> the coil's L/R = 5 ms). The
+    /// accumulator grows by the time of a mismatch and drains by `coil_heal_ratio` x the time
+    /// of a match, so an intermittent fault (a chattering connector) adds up instead of being
+    /// forgotten at the first good sample.
     pub coil_fault_s: f32,
+    /// Drain rate of the mismatch accumulator while the current matches (fraction of real
+    /// time): a mismatch present more than `h / (1 + h)` of the time (h = this) adds up to a fault.
+    pub coil_heal_ratio: f32,
+    /// Test-pulse current, A (0 disables): when the coil checks could not run for
+    /// `coil_test_idle_s` (the expected current stayed below `coil_min_expected_a`), the command
+    /// is raised to at least this for `coil_test_pulse_s`, so an open coil is found while the
+    /// controller demands little current.
+    pub coil_test_current_a: f32,
+    /// Length of a test pulse, s.
+    pub coil_test_pulse_s: f32,
+    /// Time without a coil check before a test pulse, s.
+    pub coil_test_idle_s: f32,
     /// Full scale of the coil-current measurement, A: a reading at or above it means "at least
     /// this much" (ADC saturated), so it counts as over-current whenever full scale is at least
     /// command plus `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A =
@@ -58,6 +77,11 @@ pub struct SupervisorParams {
     pub margin_invalid_s: f32,
     /// A fault must be absent this long before it leaves the active set, s.
     pub recovery_s: f32,
+    /// A fault that becomes active this many times within `intermittent_window_s` of the first
+    /// of them is latched (intermittent: it would otherwise toggle the mode forever).
+    pub intermittent_count: u8,
+    /// Window of the recurrence count, s.
+    pub intermittent_window_s: f32,
     /// Fail-safe current, A.
     pub failsafe_current_a: f32,
     /// Below this trusted speed the safe current is 0 A, m/s.
@@ -72,8 +96,13 @@ impl Default for SupervisorParams {
     /// sample-to-sample noise (10 sigma of the simulator's 0.05 m/s wheel-speed noise; the
     /// board's tone-wheel `jump_margin_mps` is 0.5 m/s too); low-speed plausibility below the
     /// controller's 2 m/s gate, the last trusted speed held for 1 s; gap 5 ms (4 missed samples); coil
-    /// checks above 0.2 A, open < 25 %, short > +0.5 A or a saturated 2.5 A reading, for 50 ms
-    /// (10 L/R); margin 10 s; recovery 1 s.
+    /// checks against the command through the coil's L/R = 1/190 s (the simulator's damper lag)
+    /// while that is above 0.2 A: open < 25 %, short > +0.5 A or a saturated 2.5 A reading, for
+    /// 50 ms of mismatch (10 L/R) draining at a quarter of real time (a mismatch more than 20 %
+    /// of the time adds up); a 0.4 A x 80 ms test pulse after 1 s without a check (the
+    /// check runs from 3.6 ms into the pulse, so an open coil is flagged 54 ms into it); margin
+    /// 10 s; recovery 1 s; latched on the 3rd activation within 10 s of the first (one bad read in
+    /// 1,500 frames: latched at the third, 3 s after the first; one in 15 s never).
     fn default() -> Self {
         SupervisorParams {
             psi_limit_rad: 0.8,
@@ -89,13 +118,20 @@ impl Default for SupervisorParams {
             speed_low_mps: 2.0,
             speed_hold_s: 1.0,
             max_gap_us: 5000,
-            coil_min_cmd_a: 0.2,
+            coil_tau_s: 1.0 / 190.0,
+            coil_min_expected_a: 0.2,
             coil_open_ratio: 0.25,
             coil_over_a: 0.5,
             coil_fault_s: 0.05,
+            coil_heal_ratio: 0.25,
+            coil_test_current_a: 0.4,
+            coil_test_pulse_s: 0.08,
+            coil_test_idle_s: 1.0,
             coil_full_scale_a: 2.5,
             margin_invalid_s: 10.0,
             recovery_s: 1.0,
+            intermittent_count: 3,
+            intermittent_window_s: 10.0,
             failsafe_current_a: FAILSAFE_CURRENT_A,
             zero_current_below_mps: ZERO_CURRENT_SAFE_BELOW_MPS,
         }

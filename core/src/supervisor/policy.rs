@@ -70,6 +70,8 @@ pub struct SupervisorVerdict {
     pub detected: FaultSet,
     /// False when the coil cannot be driven (open/short): the damper is passive-off.
     pub damper_available: bool,
+    /// The coil test pulse: the command is raised to at least this, A (`None`: no pulse).
+    pub test_current_a: Option<f32>,
 }
 
 /// The speed the policy may use for one frame.
@@ -126,5 +128,6 @@ pub(super) fn decide(
         faults: a,
         detected: det,
         damper_available: !coil_dead,
+        test_current_a: None,
     }
 }

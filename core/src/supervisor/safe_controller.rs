@@ -99,6 +99,8 @@ impl SafeController {
                 (c.current_cmd_a.max(floor), Some(c))
             }
         };
+        // The coil test pulse only raises the command (more current is only more damping).
+        let target = target.max(verdict.test_current_a.unwrap_or(0.0));
         // Final clamp (NaN -> i_min) and slew limit: the output contract holds whatever
         // happened above.
         let lim = self.out.apply(target, v.dt_s);

@@ -516,7 +516,15 @@ fn margin_unavailable_is_advisory() {
 
 #[test]
 fn event_log_drops_oldest() {
-    let mut s = safe();
+    // Recurrence escalation off (a window of 0 s): every parity error is a new activation.
+    let mut s = SafeController::new(
+        ControllerKind::Asmc,
+        ControlParams::default(),
+        SupervisorParams {
+            intermittent_window_s: 0.0,
+            ..SupervisorParams::default()
+        },
+    );
     // Alternate a parity error and 1.1 s of health: raise/clear/mode events.
     let mut k = 0;
     for _ in 0..20 {
@@ -734,4 +742,229 @@ fn short_at_max_command_is_seen_through_a_saturated_adc() {
             "full scale {fs}"
         );
     }
+}
+
+// ---- coil checks over a window, test pulse, escalation of intermittent faults --------------
+
+/// Coil with an exact first-order lag of time constant `tau_s` (the supervisor's model of it is
+/// a backward-Euler lag of the nominal L/R).
+fn lagged_coil(i: &mut f32, cmd: f32, tau_s: f32) -> f32 {
+    *i += (cmd - *i) * (1.0 - libm::expf(-1e-3 / tau_s));
+    *i
+}
+
+fn coil_faults(s: &SafeController) -> (bool, bool) {
+    let f = s.supervisor().faults();
+    (
+        f.contains(FaultKind::CoilOpen),
+        f.contains(FaultKind::CoilShort),
+    )
+}
+
+/// A healthy coil under ASMC on a large shimmy signal (the command switches between 0 and 2 A
+/// all the time) raises no coil fault, for a coil faster or slower than the model (hot: R
+/// +50 % makes L/R shorter; cold: R -20 %).
+#[test]
+fn healthy_coil_under_chattering_commands_raises_no_coil_fault() {
+    for tau in [1.0 / 190.0, 1.0 / 285.0, 1.0 / 152.0] {
+        let mut s = safe();
+        let mut i = 0.0;
+        let mut switches = 0;
+        let mut last = 0.0;
+        for k in 0..10_000 {
+            let mut f = frame(k, 20.0);
+            f.coil_current_a = Some(lagged_coil(&mut i, s.last_command_a(), tau));
+            let o = s.step(&f, MarginStatus::NotUsed);
+            if (o.current_cmd_a - last).abs() > 0.5 {
+                switches += 1;
+            }
+            last = o.current_cmd_a;
+            assert!(
+                o.verdict.faults.is_empty(),
+                "tau {tau}, k={k}: {:?}",
+                o.verdict
+            );
+        }
+        assert!(
+            switches > 100,
+            "the command chatters: {switches} steps > 0.5 A"
+        );
+    }
+}
+
+/// A connector that is open 30 ms of every 50 ms (the shunt reads 0 A then) while 1.5 A is
+/// commanded: never 50 ms in a row, but 60 % of the time. The accumulating window flags it;
+/// the old rule (the mismatch timer restarts at the first good sample: an infinite drain
+/// rate) never does.
+#[test]
+fn chattering_coil_connector_is_flagged() {
+    for (heal, expect) in [(0.25f32, true), (f32::INFINITY, false)] {
+        let mut s = SafeController::new(
+            ControllerKind::PassiveOn { current_a: 1.5 },
+            ControlParams::default(),
+            SupervisorParams {
+                coil_heal_ratio: heal,
+                ..SupervisorParams::default()
+            },
+        );
+        let mut i = 0.0;
+        let mut found = None;
+        for k in 0..3000u32 {
+            let mut f = frame(k, 20.0);
+            let open = k >= 500 && (k - 500) % 50 < 30;
+            let cmd = if open { 0.0 } else { s.last_command_a() };
+            f.coil_current_a = Some(lagged_coil(&mut i, cmd, 1.0 / 190.0));
+            s.step(&f, MarginStatus::NotUsed);
+            if found.is_none() && coil_faults(&s).0 {
+                found = Some(k);
+            }
+        }
+        assert_eq!(found.is_some(), expect, "drain {heal}: {found:?}");
+        if let Some(k) = found {
+            // Each 50 ms cycle adds ~30 ms - 20 ms x 0.25 = 25 ms (less the coil's decay).
+            assert!(k < 500 + 200, "found at {k}");
+        }
+    }
+}
+
+/// The coil opens while the controller demands nothing (quiet road, ASMC at 0 A). Without a
+/// command above 0.2 A no check can run; the test pulse (0.4 A for 80 ms after 1 s without a
+/// check) finds it within about a second. With the pulse disabled it is never found.
+#[test]
+fn open_coil_at_idle_is_found_by_the_test_pulse() {
+    for (pulse_a, expect) in [(0.4f32, true), (0.0, false)] {
+        let mut s = SafeController::new(
+            ControllerKind::Asmc,
+            ControlParams::default(),
+            SupervisorParams {
+                coil_test_current_a: pulse_a,
+                ..SupervisorParams::default()
+            },
+        );
+        let mut i = 0.0;
+        let mut pulses = 0;
+        let mut found = None;
+        for k in 0..10_000u32 {
+            // A quiet road: 0.1 mrad of yaw (inside the controller's quiet zone, but moving, so
+            // not a frozen pair).
+            let (l, r) = yaw(k);
+            let mut f = RawFrame::ok(k * 1000, 1e-3 * l, 1e-3 * r, 20.0);
+            let open = k >= 3000;
+            let cmd = if open { 0.0 } else { s.last_command_a() };
+            f.coil_current_a = Some(lagged_coil(&mut i, cmd, 1.0 / 190.0));
+            let o = s.step(&f, MarginStatus::NotUsed);
+            if o.verdict.test_current_a.is_some() && o.current_cmd_a > 0.0 && k < 3000 {
+                pulses += 1;
+            }
+            if found.is_none() && o.verdict.faults.contains(FaultKind::CoilOpen) {
+                found = Some(k);
+            }
+            if k < 3000 {
+                assert!(o.verdict.faults.is_empty(), "healthy idle coil, k={k}");
+            }
+        }
+        if expect {
+            // Healthy: a pulse of 80 steps roughly every 1.09 s.
+            assert!(pulses >= 2 * 80, "pulses {pulses}");
+            let k = found.expect("found by the pulse");
+            assert!(k < 3000 + 1200, "found {} ms after the opening", k - 3000);
+        } else {
+            assert_eq!((pulses, found), (0, None));
+        }
+    }
+}
+
+/// One bad encoder read (parity) every 1,500 frames. Old rule (the recurrence window off):
+/// Normal/Degraded toggle forever (two mode changes per glitch). With escalation the third
+/// glitch within 10 s latches `left-flag`: Degraded (2 A floor) for good, reported once, until
+/// `clear_latched`. One glitch every 15 s (outside the 10 s window) is never latched.
+#[test]
+fn intermittent_encoder_fault_escalates_instead_of_toggling() {
+    let run_glitches = |window_s: f32, every: u32, n: u32| {
+        let mut s = SafeController::new(
+            ControllerKind::Asmc,
+            ControlParams::default(),
+            SupervisorParams {
+                intermittent_window_s: window_s,
+                ..SupervisorParams::default()
+            },
+        );
+        let mut changes = Vec::new();
+        let mut mode = Mode::Normal;
+        for k in 0..n {
+            let o = run(&mut s, k, 1, |k, mut f| {
+                if k % every == every - 1 {
+                    f.left.parity_ok = false;
+                }
+                f
+            });
+            if o.verdict.mode != mode {
+                changes.push(k);
+                mode = o.verdict.mode;
+            }
+        }
+        (s, changes, mode)
+    };
+    // 20 glitches in 31.1 s, each one Degraded and, 1 s later, Normal again.
+    let (_, old, _) = run_glitches(0.0, 1500, 31_100);
+    assert_eq!(old.len(), 40, "old rule: toggles at every glitch: {old:?}");
+    let (mut s, new, mode) = run_glitches(10.0, 1500, 31_100);
+    // Degraded, Normal, Degraded, Normal, then latched Degraded at the third glitch.
+    assert_eq!(new.len(), 5, "{new:?}");
+    assert_eq!(new.last(), Some(&4499));
+    assert_eq!(mode, Mode::Degraded);
+    assert!(s.supervisor().escalated().contains(FaultKind::LeftFlag));
+    assert!(s.supervisor().latched().contains(FaultKind::LeftFlag));
+    let latched_events = s
+        .supervisor()
+        .events()
+        .filter(|e| matches!(e, SupervisorEvent::Latched { .. }))
+        .count();
+    assert_eq!(latched_events, 1);
+    s.supervisor_mut().clear_latched();
+    let o = run(&mut s, 31_100, 1, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::Normal);
+    // Rare glitches are not escalated: every one recovers.
+    let (s, rare, mode) = run_glitches(10.0, 15_000, 61_100);
+    assert_eq!(rare.len(), 8, "{rare:?}");
+    assert_eq!(mode, Mode::Normal);
+    assert!(s.supervisor().escalated().is_empty());
+}
+
+/// Latched faults remembered across a reset are active from the first frame: a coil found
+/// shorted before the reset gets 0 A (FailSafe), never the fail-safe 2 A; an escalated encoder
+/// fault keeps its Degraded floor; both stay until `clear_latched`.
+#[test]
+fn restored_latched_faults_hold_from_the_first_frame() {
+    let mut set = FaultSet::EMPTY;
+    set.insert(FaultKind::CoilShort);
+    let mut s = safe();
+    s.supervisor_mut().restore_latched(set);
+    let mut f = frame(0, 20.0);
+    f.coil_current_a = Some(0.0);
+    let o = s.step(&f, MarginStatus::NotUsed);
+    assert_eq!((o.verdict.mode, o.current_cmd_a), (Mode::FailSafe, 0.0));
+    assert!(!o.verdict.damper_available);
+    let o = run(&mut s, 1, 3000, |_, mut f| {
+        f.coil_current_a = Some(0.0);
+        f
+    });
+    assert_eq!((o.verdict.mode, o.current_cmd_a), (Mode::FailSafe, 0.0));
+    let mut s = safe();
+    let mut set = FaultSet::EMPTY;
+    set.insert(FaultKind::LeftRead);
+    // Kinds that neither latch nor escalate are not restored.
+    set.insert(FaultKind::MarginUnavailable);
+    s.supervisor_mut().restore_latched(set);
+    let o = run(&mut s, 0, 3000, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::Degraded);
+    assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+    assert!(!o.verdict.faults.contains(FaultKind::MarginUnavailable));
+    assert_eq!(
+        FaultSet::from_bits(s.supervisor().latched().bits()).len(),
+        1
+    );
+    s.supervisor_mut().clear_latched();
+    let o = run(&mut s, 3000, 1, |_, f| f);
+    assert_eq!(o.verdict.mode, Mode::Normal);
 }

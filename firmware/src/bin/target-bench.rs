@@ -266,7 +266,7 @@ mod bench {
 
     fn control_step() -> u32 {
         use shimmy_core::supervisor::frame::MarginStatus;
-        use shimmy_firmware::control::{supervised_step, Health};
+        use shimmy_firmware::control::{drive_coil, supervised_step, Health};
         use shimmy_firmware::drivers::coil_pwm::CoilDriver;
         use shimmy_firmware::monitoring::safe_controller;
         use shimmy_firmware::sim::{self, SimPwm, SimWorld};
@@ -284,8 +284,8 @@ mod bench {
             WORLD.set_step(step);
             let mut one = || {
                 let s = sensors.sample(sim::TICKS_PER_STEP);
-                let o = supervised_step(&mut ctrl, &s, step, MarginStatus::Valid, &mut h);
-                let _ = coil.set_current_a(o.current_cmd_a);
+                let o = supervised_step(&mut ctrl, &s, MarginStatus::Valid, &mut h);
+                let _ = drive_coil(&mut coil, &o);
             };
             if step < 1100 {
                 one();
@@ -537,7 +537,8 @@ mod bench {
             per_s * LOAD_CPI,
             LOAD_CPI
         );
-        u32::try_from(per_s * LOAD_CPI * 1000 / 168_000_000).unwrap_or(u32::MAX)
+        // rounded up: a load just over a per-mille step must not pass as the step below
+        u32::try_from((per_s * LOAD_CPI * 1000).div_ceil(168_000_000)).unwrap_or(u32::MAX)
     }
 
     fn sinf() -> u32 {

@@ -42,7 +42,7 @@ mod harness {
             run: wheel_speed,
         },
         Test {
-            name: "coil::shunt_scaling_and_pwm_clamp",
+            name: "coil::shunt_scaling_pwm_clamp_and_current_loop",
             run: coil,
         },
         Test {
@@ -135,14 +135,25 @@ mod harness {
 
     fn coil() {
         use shimmy_firmware::drivers::coil_pwm::{CoilDriver, FAILSAFE_CURRENT_A};
-        use shimmy_firmware::sim::{SimPwm, SimWorld, COIL, SHUNT};
+        use shimmy_firmware::sim::{coil_current_after, SimCoil, SimPwm, SimWorld, COIL, SHUNT};
         static WORLD: SimWorld = SimWorld::new();
         let Ok(mut d) = CoilDriver::new(SimPwm::new(&WORLD), COIL);
         assert!(d.commanded_a() == FAILSAFE_CURRENT_A);
-        let _ = d.set_current_a(7.0);
+        let _ = d.set_current_a(7.0, None, 1e-3);
         assert!(d.commanded_a() == COIL.max_current_a);
-        let _ = d.set_current_a(f32::NAN);
+        let _ = d.set_current_a(f32::NAN, None, 1e-3);
         assert!(d.commanded_a() == FAILSAFE_CURRENT_A);
+        // Closed current loop: 2 A into a hot coil (+50 % R) within 2 %, where open loop
+        // gives 1.33 A.
+        static HOT: SimWorld = SimWorld::new();
+        let hot = SimCoil {
+            r_ohm: 1.5 * COIL.coil_ohm,
+            ..SimCoil::NOMINAL
+        };
+        let closed = coil_current_after(&HOT, hot, true, 300);
+        let open = coil_current_after(&HOT, hot, false, 300);
+        assert!((closed - 2.0).abs() < 0.04);
+        assert!((open - 4.0 / 3.0).abs() < 0.02);
         // 1 A = 0.75 V at the ADC = 931 counts of 3.3 V / 4096.
         assert!((SHUNT.amps_per_count() * 931.0 - 1.0).abs() < 1e-3);
         // The ADC range covers the coil's maximum current.

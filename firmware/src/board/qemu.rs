@@ -24,9 +24,15 @@ const TIMER_CLOCK_HZ: u32 = 1_000_000_000;
 /// The parts of this variant the application gets.
 pub type Board = BoardParts<BoardSensors, Pwm>;
 
-/// Brings up the simulated board.
-pub fn init(dp: pac::Peripherals) -> Board {
-    let coil = match CoilDriver::new(SimPwm::new(&WORLD), sim::COIL) {
+/// Brings up the simulated board; the coil at the fail-safe current, or off (`coil_off`: a
+/// coil fault latched before the reset).
+pub fn init(dp: pac::Peripherals, coil_off: bool) -> Board {
+    let pwm = SimPwm::new(&WORLD);
+    let coil = match if coil_off {
+        CoilDriver::new_off(pwm, sim::COIL)
+    } else {
+        CoilDriver::new(pwm, sim::COIL)
+    } {
         Ok(c) => c,
         Err(e) => match e {},
     };

@@ -1,5 +1,6 @@
-//! STM32F405RG board layer: clocks, pins and peripherals (stm32f4xx-hal), wrapped in the
-//! drivers of [`crate::drivers`]. Wiring: README, "Firmware" / "Wiring".
+//! STM32F405RG board layer: clocks (HSE with a bounded start-up, else HSI: [`crate::clock`];
+//! the watchdog runs before), pins and peripherals (stm32f4xx-hal), wrapped in the drivers of
+//! [`crate::drivers`]. Wiring: README, "Firmware" / "Wiring".
 //!
 //! | function                     | peripheral       | pins                                  |
 //! |------------------------------|------------------|---------------------------------------|
@@ -13,7 +14,7 @@
 use super::parts::BoardParts;
 use crate::drivers::as5047p::{AngleTracker, As5047p};
 use crate::drivers::coil_current::{AdcChannel, CoilCurrentSensor};
-use crate::drivers::coil_pwm::{CoilConfig, CoilDriver};
+use crate::drivers::coil_pwm::CoilDriver;
 use crate::drivers::wheel_speed::{PulseCapture, PulseSample, WheelSpeed};
 use crate::hal::{
     adc::{config::AdcConfig, config::SampleTime, Adc},
@@ -38,14 +39,8 @@ pub type Pwm = PwmChannel<pac::TIM4, 0>;
 /// The board's sensor set.
 pub type BoardSensors = Sensors<EncLeft, EncRight, BoardPulses, BoardAdc>;
 
-use crate::calibration::{SHUNT, WHEEL_SPEED as SPEED};
-
-/// Coil: 4 ohm hot, 12 V supply, 2 A maximum (the reference damper's u_max).
-pub const COIL: CoilConfig = CoilConfig {
-    coil_ohm: 4.0,
-    supply_v: 12.0,
-    max_current_a: 2.0,
-};
+use crate::calibration::{COIL, SHUNT, WHEEL_SPEED as SPEED};
+use crate::clock::ClockSource;
 
 /// Raw counts of straight ahead of the two encoders.
 /// TODO(calibration): store per vehicle (flash) after a straight-ahead calibration.
@@ -68,6 +63,11 @@ pub struct BoardPulses {
 }
 
 impl PulseCapture for BoardPulses {
+    fn now_ticks(&mut self) -> u32 {
+        // SAFETY: reading TIM5 CNT (read-only use of a register the manager owns).
+        unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
+    }
+
     fn take(&mut self) -> PulseSample {
         // SAFETY: reading TIM5 CNT (read-only use of a register the manager owns).
         let now = unsafe { (*pac::TIM5::ptr()).cnt().read().bits() };
@@ -108,14 +108,33 @@ impl AdcChannel for BoardAdc {
 pub type Board = BoardParts<BoardSensors, Pwm>;
 
 /// Brings up the board: 168 MHz from the 8 MHz HSE, peripherals, coil at the fail-safe
-/// current, watchdog running, control timer started (its interrupt fires once `init` returns).
-pub fn init(dp: pac::Peripherals) -> Board {
-    let mut rcc = dp.RCC.freeze(
-        rcc::Config::hse(8.MHz())
-            .sysclk(168.MHz())
-            .pclk1(42.MHz())
-            .pclk2(84.MHz()),
+/// current (or off: `coil_off`, a coil fault latched before the reset), watchdog running,
+/// control timer started (its interrupt fires once `init` returns).
+pub fn init(dp: pac::Peripherals, coil_off: bool) -> Board {
+    // Watchdog first: a clock that does not start must not hang the boot unsupervised.
+    let watchdog = Watchdog::start(dp.IWDG);
+    // The HAL waits for the HSE without a bound: start it here and give it a bounded time.
+    // SAFETY: RCC CR is only touched here, before the HAL takes the RCC; HSEON is set with a
+    // read-modify-write and cleared again if the crystal does not start.
+    let rcc_regs = unsafe { &*pac::RCC::ptr() };
+    rcc_regs.cr().modify(|_, w| w.hseon().set_bit());
+    let source = crate::clock::choose(
+        || rcc_regs.cr().read().hserdy().bit_is_set(),
+        crate::clock::HSE_STARTUP_POLLS,
+        || watchdog.feed(),
     );
+    let base = match source {
+        ClockSource::Hse => rcc::Config::hse(8.MHz()),
+        ClockSource::Hsi => {
+            rcc_regs.cr().modify(|_, w| w.hseon().clear_bit());
+            rcc::Config::hsi()
+        }
+    };
+    defmt::warn!("clock source: {=str}", source.name());
+    let mut rcc = dp
+        .RCC
+        .freeze(base.sysclk(168.MHz()).pclk1(42.MHz()).pclk2(84.MHz()));
+    watchdog.feed();
     let timer_clock_hz = rcc.clocks.timclk1().raw();
     let gpioa = dp.GPIOA.split(&mut rcc);
     let gpiob = dp.GPIOB.split(&mut rcc);
@@ -124,7 +143,11 @@ pub fn init(dp: pac::Peripherals) -> Board {
     let (_, (pwm_ch1, ..)) = dp.TIM4.pwm_hz(20.kHz(), &mut rcc);
     let mut pwm = pwm_ch1.with(gpiob.pb6);
     pwm.enable();
-    let coil = match CoilDriver::new(pwm, COIL) {
+    let coil = match if coil_off {
+        CoilDriver::new_off(pwm, COIL)
+    } else {
+        CoilDriver::new(pwm, COIL)
+    } {
         Ok(c) => c,
         Err(e) => match e {},
     };
@@ -188,7 +211,7 @@ pub fn init(dp: pac::Peripherals) -> Board {
         current,
     };
 
-    let watchdog = Watchdog::start(dp.IWDG);
+    watchdog.feed();
     Board {
         sensors,
         coil,

@@ -65,6 +65,11 @@ impl<A: AdcChannel> CoilCurrentSensor<A> {
         }
     }
 
+    /// The ADC channel (for inspection).
+    pub fn adc(&self) -> &A {
+        &self.adc
+    }
+
     /// Converts raw counts to amps (offset removed).
     pub fn counts_to_a(&self, counts: u16) -> f32 {
         (f32::from(counts) - self.cfg.offset_counts) * self.amps_per_count

@@ -26,6 +26,10 @@ pub struct PulseSample {
 pub trait PulseCapture {
     /// Takes what was captured since the last call.
     fn take(&mut self) -> PulseSample;
+
+    /// The free-running count of the capture timer now, ticks (wraps): the control loop's time
+    /// base (at 1 MHz a tick is a microsecond).
+    fn now_ticks(&mut self) -> u32;
 }
 
 /// Configuration of the speed computation.

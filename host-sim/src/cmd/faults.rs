@@ -8,6 +8,7 @@
 //! Runs are independent and go in parallel (rayon). Output: a table on stdout, `faults.csv` and
 //! `faults.md` under `--out` (default `out/faults/`).
 
+use crate::model::coil_drive::CoilDrive;
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::out::table::opt;
@@ -20,6 +21,7 @@ use rayon::prelude::*;
 use shimmy_core::control::ControllerKind;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::supervisor::checks::SupervisorEvent;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
@@ -52,6 +54,14 @@ pub struct Case {
     /// The supervisor can keep shimmy suppressed (false: the actuator itself is lost; the
     /// firmware can only go to its safe state and report it).
     pub handleable: bool,
+    /// A quiet road: no yaw kick and a fifth of the road noise (a latent fault the controller
+    /// gives no current to reveal).
+    pub quiet: bool,
+    /// Shortest run for this case, s (an intermittent fault needs several periods).
+    pub min_duration_s: f64,
+    /// The faults end this long after they start, s (`None`: to the end of the run). A fault
+    /// that ends must be recovered from: Normal at the end, nothing active or latched.
+    pub lasts_s: Option<f64>,
 }
 
 fn case(name: &str, faults: Vec<FaultMode>, note: &'static str) -> Case {
@@ -60,6 +70,35 @@ fn case(name: &str, faults: Vec<FaultMode>, note: &'static str) -> Case {
         faults,
         note,
         handleable: true,
+        quiet: false,
+        min_duration_s: 0.0,
+        lasts_s: None,
+    }
+}
+
+/// `c` with its faults ending after `lasts_s` (a recovery case, named `<name> <lasts_s>s`).
+fn ending(c: Case, lasts_s: f64) -> Case {
+    Case {
+        name: format!("{} {lasts_s}s", c.name),
+        lasts_s: Some(lasts_s),
+        // Fault at 1 s, 1 s of recovery, then the settled-mode window.
+        min_duration_s: 2.0 + lasts_s + SETTLED_S + 0.5,
+        ..c
+    }
+}
+
+impl Case {
+    /// The campaign set-up for this case: a quiet road if it asks for one, at least its
+    /// duration, its fault end.
+    pub fn setup(&self, setup: &Setup) -> Setup {
+        let quiet = if self.quiet { 0.0 } else { 1.0 };
+        Setup {
+            kick_nm: quiet * setup.kick_nm,
+            noise_nm: (0.2 + 0.8 * quiet) * setup.noise_nm,
+            duration_s: setup.duration_s.max(self.min_duration_s),
+            fault_end_s: self.lasts_s.map(|d| setup.fault_s + d),
+            ..*setup
+        }
     }
 }
 
@@ -156,12 +195,12 @@ pub fn standard_cases() -> Vec<Case> {
         lost_actuator(
             "coil-open",
             vec![F::CoilOpen],
-            "CANNOT be handled: no current reaches the coil, the damper is passive-off (0 A). Seen once > 0.2 A is commanded for 50 ms; latched; the firmware commands 0 A and reports damper_available = false (driver warning / service); passive-off is stable outside the window and for small disturbances inside it",
+            "CANNOT be handled: no current reaches the coil, the damper is passive-off (0 A). Seen after 50 ms with > 0.2 A expected (the kick, or a test pulse at idle); latched; the firmware commands 0 A and reports damper_available = false (driver warning / service); passive-off is stable outside the window and for small disturbances inside it",
         ),
         lost_actuator(
             "coil-short x5",
             vec![F::CoilShort(5.0)],
-            "CANNOT be handled: the current bypasses the coil, damper passive-off. Seen once > 0.2 A is commanded for 50 ms (or the shunt ADC saturates); latched; 0 A (driving a short only heats it), damper_available = false",
+            "CANNOT be handled: the current bypasses the coil, damper passive-off. Seen after 50 ms of more than 0.5 A above the expected current (or a saturated shunt ADC); latched; 0 A (driving a short only heats it), damper_available = false",
         ),
         case(
             "nan-left+stuck-right",
@@ -188,6 +227,79 @@ pub fn standard_cases() -> Vec<Case> {
             vec![F::Noise(Side::Left, deg(2.0)), F::SpeedLost],
             "two independent faults",
         ),
+        Case {
+            min_duration_s: 8.0,
+            ..case(
+                "dropout-left 1/1500",
+                vec![F::Dropout {
+                    side: Side::Left,
+                    period: 1500,
+                    length: 1,
+                }],
+                "intermittent: one failed read every 1.5 s, longer than the 1 s recovery; latched at the 3rd within 10 s (Degraded, 2 A floor) instead of toggling Normal/Degraded forever (8 s run)",
+            )
+        },
+        lost_actuator(
+            "coil-intermittent 30/50",
+            vec![F::CoilIntermittent {
+                period: 50,
+                length: 30,
+            }],
+            "chattering connector, open 30 ms of every 50 ms: never 50 ms in a row, but the mismatch accumulates (drains at 1/4 while the current matches); latched, 0 A",
+        ),
+        Case {
+            quiet: true,
+            ..lost_actuator(
+                "coil-open quiet",
+                vec![F::CoilOpen],
+                "opens on a quiet road (no kick, 1 N m road noise) while the controller demands ~0 A: found by the test pulse (0.4 A x 80 ms after 1 s without a coil check, so within ~1.1 s; here a pulse starts at the fault time); latched, 0 A",
+            )
+        },
+        case(
+            "coil-hot x1.5",
+            vec![F::CoilHot(1.5)],
+            "coil resistance +50 %: the closed current loop holds the command (open loop: -33 %); nothing to report (not expected to be detected)",
+        ),
+        case(
+            "coil-hot x1.5+error-flag-both",
+            vec![F::CoilHot(1.5), F::ErrorFlag(Side::Both)],
+            "fail-safe 2 A into a hot coil: the current loop delivers it (open loop: 1.33 A)",
+        ),
+        ending(
+            case(
+                "parity-left",
+                vec![F::Parity(Side::Left)],
+                "recovery: the fault ends after 0.5 s; Normal 1 s later, nothing latched",
+            ),
+            0.5,
+        ),
+        ending(
+            case(
+                "error-flag-both",
+                vec![F::ErrorFlag(Side::Both)],
+                "recovery from FailSafe: Normal 1 s after the end, the controller restarted",
+            ),
+            0.5,
+        ),
+        ending(
+            case(
+                "speed-pulses-lost",
+                vec![F::SpeedPulsesLost],
+                "recovery: the pulse train comes back after 0.5 s (the reading is back above 2 m/s); Normal 1 s later",
+            ),
+            0.5,
+        ),
+        ending(
+            case(
+                "frame-loss 10/100",
+                vec![F::FrameLoss {
+                    period: 100,
+                    length: 10,
+                }],
+                "recovery from a timing fault: Normal 1 s after the last gap",
+            ),
+            0.5,
+        ),
     ]
 }
 
@@ -212,11 +324,15 @@ pub struct Setup {
     pub duration_s: f64,
     /// Seed (road and sensor noise).
     pub seed: u64,
+    /// How the command reaches the coil (the board's closed current loop by default).
+    pub coil_drive: CoilDrive,
+    /// The faults end at this time, s (`None`: they last to the end of the run).
+    pub fault_end_s: Option<f64>,
 }
 
 impl Default for Setup {
     /// Nominal plant; fault at 1.0 s, a 100 N m x 20 ms kick at 1.1 s; 5 N m road noise
-    /// (20 Hz corner, half common); 5 s.
+    /// (20 Hz corner, half common); 5 s; the board's closed-loop coil drive.
     fn default() -> Self {
         Setup {
             plant: Vehicle::nominal(),
@@ -228,6 +344,8 @@ impl Default for Setup {
             noise_nm: 5.0,
             duration_s: 5.0,
             seed: 3,
+            coil_drive: CoilDrive::ClosedLoop,
+            fault_end_s: None,
         }
     }
 }
@@ -263,6 +381,20 @@ pub struct CaseResult {
     pub amp_end_rad: f64,
     /// Commands that broke the output contract (NaN or outside [0, i_max]).
     pub invalid_commands: u64,
+    /// Supervisor mode changes after the fault.
+    pub mode_changes: usize,
+    /// Time of the last mode change, s (`None`: none).
+    pub last_mode_change_s: Option<f64>,
+    /// Run length, s.
+    pub duration_s: f64,
+    /// The command was constant over the last 0.5 s (so the coil current must equal it).
+    pub cmd_steady_at_end: bool,
+    /// Faults latched at the end because they recurred (names, `+`-joined).
+    pub escalated: String,
+    /// The faults ended before the end of the run (a recovery case).
+    pub ended: bool,
+    /// Faults still active at the end (names, `+`-joined).
+    pub final_faults: String,
     /// Notes.
     pub note: &'static str,
     /// See [`Case::handleable`].
@@ -293,9 +425,14 @@ pub fn build(
     cfg.sensors.seed = setup.seed;
     cfg.estimator = false;
     cfg.record_every = 50;
+    cfg.coil_drive = setup.coil_drive;
     cfg.faults = faults
         .iter()
-        .map(|&m| FaultSpec::from(m, setup.fault_s))
+        .map(|&mode| FaultSpec {
+            mode,
+            start_s: setup.fault_s,
+            end_s: setup.fault_end_s,
+        })
         .collect();
     let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(speed_kmh)));
     sc.noise = Some(RoadNoise::new(setup.noise_nm, 20.0, 0.5, setup.seed));
@@ -315,8 +452,21 @@ pub fn run_case(
     speed_kmh: f64,
     supervised: bool,
 ) -> Result<(CaseResult, LoopResult)> {
+    run_case_with(setup, arm, c, speed_kmh, |cfg| cfg.supervised = supervised)
+}
+
+/// [`run_case`] with the loop configuration changed by `tweak` (e.g. other supervisor
+/// thresholds, to show what a check prevents).
+pub fn run_case_with(
+    setup: &Setup,
+    arm: Arm,
+    c: &Case,
+    speed_kmh: f64,
+    tweak: impl FnOnce(&mut LoopConfig),
+) -> Result<(CaseResult, LoopResult)> {
+    let setup = &c.setup(setup);
     let (mut cfg, mut sc) = build(setup, arm, &c.faults, speed_kmh);
-    cfg.supervised = supervised;
+    tweak(&mut cfg);
     let r = closed_loop::run(&cfg, &mut sc, None)
         .with_context(|| format!("{} at {speed_kmh} km/h: integration failed", c.name))?;
     let k_f = ((setup.fault_s / cfg.dt_s).round() as usize).min(r.series.psi_l_rad.len());
@@ -334,6 +484,24 @@ pub fn run_case(
         .min(r.series.coil_a.len())
         .max(1);
     let coil_tail = &r.series.coil_a[r.series.coil_a.len() - tail..];
+    let cmd_tail = &r.series.cmd_a[r.series.cmd_a.len().saturating_sub(tail)..];
+    let cmd_steady_at_end = cmd_tail.windows(2).all(|w| w[0] == w[1]);
+    let changes: Vec<f64> = log
+        .events
+        .iter()
+        .filter(|(t, e)| {
+            *t >= setup.fault_s - 1e-9 && matches!(e, SupervisorEvent::ModeChange { .. })
+        })
+        .map(|(t, _)| *t)
+        .collect();
+    let escalated: Vec<&str> = log
+        .events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            SupervisorEvent::Latched { kind, .. } => Some(kind.name()),
+            _ => None,
+        })
+        .collect();
     let mut detected: Vec<&str> = log.detected.iter().map(|k| k.name()).collect();
     if log.missed_samples > 0 {
         detected.push("missed-samples");
@@ -354,6 +522,18 @@ pub fn run_case(
         peak_after_rad,
         amp_end_rad: m.amp_end_rad,
         invalid_commands: log.invalid_commands,
+        mode_changes: changes.len(),
+        last_mode_change_s: changes.last().copied(),
+        duration_s: setup.duration_s,
+        cmd_steady_at_end,
+        escalated: escalated.join("+"),
+        ended: c.lasts_s.is_some(),
+        final_faults: log
+            .final_faults
+            .iter()
+            .map(|k| k.name())
+            .collect::<Vec<_>>()
+            .join("+"),
         note: c.note,
         handleable: c.handleable,
     };
@@ -465,20 +645,29 @@ fn suppressed_cell(r: &CaseResult) -> &'static str {
 /// The table as markdown.
 pub fn markdown(rows: &[CaseResult]) -> String {
     let mut s = String::from(
-        "| fault | arm | speed [km/h] | window | detect [ms] | detected | worst mode | final mode | cmd / coil at end [A] | peak yaw after fault [deg] | end amplitude [deg] | suppressed | note |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| fault | arm | speed [km/h] | window | detect [ms] | detected | worst mode | final mode | mode changes | latched | cmd / coil at end [A] | peak yaw after fault [deg] | end amplitude [deg] | suppressed | note |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
+    let dash = |x: &str| {
+        if x.is_empty() {
+            "-".to_string()
+        } else {
+            x.to_string()
+        }
+    };
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.0} | {} | {} | {} | {} | {} | {:.2} / {:.2} | {:.3} | {:.3} | {} | {} |",
+            "| {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {} | {:.2} / {:.2} | {:.3} | {:.3} | {} | {} |",
             r.case,
             r.arm,
             r.speed_kmh,
             if r.in_window { "in" } else { "out" },
             opt(r.detect_ms, 0),
-            if r.detected.is_empty() { "-" } else { &r.detected },
+            dash(&r.detected),
             r.worst_mode.name(),
             r.final_mode.name(),
+            r.mode_changes,
+            dash(&r.escalated),
             r.final_cmd_a,
             r.final_coil_a,
             r.peak_after_rad.to_degrees(),
@@ -493,12 +682,12 @@ pub fn markdown(rows: &[CaseResult]) -> String {
 /// The table as CSV.
 pub fn csv(rows: &[CaseResult]) -> String {
     let mut s = String::from(
-        "fault,arm,speed_kmh,in_window,detect_ms,detected,worst_mode,final_mode,final_cmd_a,final_coil_a,peak_after_deg,amp_end_deg,suppressed,invalid_commands\n",
+        "fault,arm,speed_kmh,in_window,detect_ms,detected,worst_mode,final_mode,mode_changes,latched,final_cmd_a,final_coil_a,peak_after_deg,amp_end_deg,suppressed,invalid_commands\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{:.4},{:.4},{:.5},{:.5},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.5},{:.5},{},{}",
             r.case,
             r.arm,
             r.speed_kmh,
@@ -507,6 +696,8 @@ pub fn csv(rows: &[CaseResult]) -> String {
             r.detected,
             r.worst_mode.name(),
             r.final_mode.name(),
+            r.mode_changes,
+            r.escalated,
             r.final_cmd_a,
             r.final_coil_a,
             r.peak_after_rad.to_degrees(),
@@ -518,12 +709,54 @@ pub fn csv(rows: &[CaseResult]) -> String {
     s
 }
 
+/// The mode must not change in the last this many seconds of a run (a fault that recurs must
+/// not keep toggling the mode), s.
+pub const SETTLED_S: f64 = 1.5;
+
+/// Largest relative error of the coil current against a steady command (>= 0.5 A) at the end.
+pub const COIL_CURRENT_TOL: f64 = 0.05;
+
 /// Summary checks: every injected fault detected (except the cases whose note says it is not
 /// expected), shimmy suppressed for every ASMC run where the actuator is left, fail-safe at 0 A
-/// where it is lost, no invalid command anywhere. Returns the lines that fail.
+/// where it is lost, no invalid command anywhere, the mode settled (no change in the last
+/// [`SETTLED_S`]), a steady command of at least 0.5 A carried by the coil within
+/// [`COIL_CURRENT_TOL`], and after a fault that ended: Normal, nothing active or latched.
+/// Returns the lines that fail.
 pub fn check(rows: &[CaseResult]) -> Vec<String> {
     let mut bad = Vec::new();
     for r in rows.iter().filter(|r| r.arm != "no-damper") {
+        if r.ended
+            && (r.final_mode != Mode::Normal
+                || !r.final_faults.is_empty()
+                || !r.escalated.is_empty())
+        {
+            bad.push(format!(
+                "{} at {} km/h: the fault ended but the run ends {} with {:?} active, {:?} latched",
+                r.case,
+                r.speed_kmh,
+                r.final_mode.name(),
+                r.final_faults,
+                r.escalated
+            ));
+        }
+        if let Some(t) = r.last_mode_change_s {
+            if t > r.duration_s - SETTLED_S {
+                bad.push(format!(
+                    "{} at {} km/h: mode still changing at {t:.3} s ({} changes)",
+                    r.case, r.speed_kmh, r.mode_changes
+                ));
+            }
+        }
+        if r.handleable
+            && r.cmd_steady_at_end
+            && r.final_cmd_a >= 0.5
+            && (r.final_coil_a - r.final_cmd_a).abs() > COIL_CURRENT_TOL * r.final_cmd_a
+        {
+            bad.push(format!(
+                "{} at {} km/h: coil carries {:.3} A for a {:.3} A command",
+                r.case, r.speed_kmh, r.final_coil_a, r.final_cmd_a
+            ));
+        }
         let expect_detect = r.injected && !r.note.contains("not expected to be detected");
         if expect_detect && !r.detected() {
             bad.push(format!("{} at {} km/h: not detected", r.case, r.speed_kmh));
@@ -602,7 +835,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
     std::fs::write(a.out.join("faults.md"), &md)?;
     let bad = check(&rows);
     if bad.is_empty() {
-        println!("every injected fault detected (where expected); shimmy suppressed in every ASMC run with a working actuator; coil faults at 0 A fail-safe");
+        println!("every injected fault detected (where expected); shimmy suppressed in every ASMC run with a working actuator; coil faults at 0 A fail-safe; every mode settled; every steady command carried by the coil");
     } else {
         println!("CHECKS FAILED:");
         for b in &bad {

@@ -22,7 +22,13 @@
 //! | `frame-loss` | `length_samples` of every `period_samples` whole frames lost (command held) | missed-sample counter; `Timing` for gaps > 5 ms |
 //! | `coil-open` | coil carries no current (damper passive-off), shunt reads ~0 | `CoilOpen` (latched) |
 //! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x command | `CoilShort` (latched) |
+//! | `coil-intermittent` | chattering connector: the coil open `length_samples` of every `period_samples` | `CoilOpen` once the accumulated mismatch reaches 50 ms (latched) |
+//! | `coil-hot` | coil resistance x `ratio` (a board drive, `coil_drive`, sees it: open loop the current falls by the ratio) | nothing: the closed current loop holds the command |
+//! | `supply` | supply voltage of the coil drive, V (a board drive sees it) | nothing: the closed current loop holds the command |
+//!
+//! The last three are campaign faults (`shimmy-sim faults`), not scenario-file kinds ([`KINDS`]).
 
+use crate::model::coil_drive::DriveCondition;
 use crate::model::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -118,6 +124,17 @@ pub enum FaultMode {
     CoilOpen,
     /// Coil terminals shorted; the shunt reads `ratio` x the command.
     CoilShort(f64),
+    /// Chattering connector: the coil is open `length` of every `period` samples.
+    CoilIntermittent {
+        /// Pattern period, samples.
+        period: u32,
+        /// Open samples per period.
+        length: u32,
+    },
+    /// Coil resistance x this factor (a hot coil).
+    CoilHot(f64),
+    /// Supply voltage of the coil drive, V.
+    Supply(f64),
 }
 
 /// Distance between two tone-wheel pulses of the board's decoder (48 teeth, 0.35 m rolling
@@ -161,6 +178,9 @@ impl FaultMode {
             FaultMode::FrameLoss { .. } => "frame-loss",
             FaultMode::CoilOpen => "coil-open",
             FaultMode::CoilShort(_) => "coil-short",
+            FaultMode::CoilIntermittent { .. } => "coil-intermittent",
+            FaultMode::CoilHot(_) => "coil-hot",
+            FaultMode::Supply(_) => "supply",
         }
     }
 
@@ -347,10 +367,29 @@ impl FaultInjector for FaultPlan {
             match f.mode {
                 FaultMode::CoilOpen => state = CoilState::Open,
                 FaultMode::CoilShort(ratio) => state = CoilState::Short { ratio },
+                FaultMode::CoilIntermittent { period, length } => {
+                    // Samples since the start (1 kHz grid).
+                    let n = ((t_s - f.start_s) * 1e3).round().max(0.0) as u64;
+                    if n % u64::from(period.max(1)) < u64::from(length) {
+                        state = CoilState::Open;
+                    }
+                }
                 _ => {}
             }
         }
         state
+    }
+
+    fn drive_condition(&self, t_s: f64) -> DriveCondition {
+        let mut c = DriveCondition::default();
+        for f in self.faults.iter().filter(|f| f.active(t_s)) {
+            match f.mode {
+                FaultMode::CoilHot(ratio) => c.r_factor = ratio,
+                FaultMode::Supply(v) => c.supply_v = Some(v),
+                _ => {}
+            }
+        }
+        c
     }
 }
 
@@ -476,5 +515,33 @@ mod tests {
         assert_eq!(p.coil_state(0.3), CoilState::Short { ratio: 5.0 });
         assert_eq!(p.coil_state(0.7), CoilState::Healthy);
         assert_eq!(p.coil_state(1.5), CoilState::Open);
+    }
+
+    #[test]
+    fn chattering_connector_and_drive_condition_follow_their_pattern() {
+        let p = FaultPlan::new(
+            vec![
+                FaultSpec::from(
+                    FaultMode::CoilIntermittent {
+                        period: 50,
+                        length: 30,
+                    },
+                    1.0,
+                ),
+                FaultSpec::from(FaultMode::CoilHot(1.5), 2.0),
+                FaultSpec::from(FaultMode::Supply(14.0), 3.0),
+            ],
+            1,
+        );
+        let open: Vec<bool> = (0..100)
+            .map(|k| p.coil_state(1.0 + k as f64 * 1e-3) == CoilState::Open)
+            .collect();
+        assert!(open[..30].iter().all(|&o| o) && open[30..50].iter().all(|&o| !o));
+        assert_eq!(open.iter().filter(|&&o| o).count(), 60);
+        assert_eq!(p.coil_state(0.5), CoilState::Healthy);
+        assert_eq!(p.drive_condition(1.5), DriveCondition::default());
+        assert_eq!(p.drive_condition(2.5).r_factor, 1.5);
+        let c = p.drive_condition(3.5);
+        assert_eq!((c.r_factor, c.supply_v), (1.5, Some(14.0)));
     }
 }

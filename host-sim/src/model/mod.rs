@@ -4,6 +4,7 @@
 //!
 //! Rule: uses only `shimmy-core` and external crates, never `sim`, `out` or `cmd`.
 
+pub mod coil_drive;
 pub mod damper_equiv;
 pub mod disturbance;
 pub mod faults;

@@ -7,6 +7,7 @@
 //! the closed loop asks for the state of the coil ([`CoilState`]). The fault models implement
 //! that trait in the sibling `faults` module, which depends on this one (not the other way).
 
+use crate::model::coil_drive::DriveCondition;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -220,6 +221,12 @@ pub trait FaultInjector: Send {
     fn coil_state(&self, _t_s: f64) -> CoilState {
         CoilState::Healthy
     }
+
+    /// The true coil resistance and supply at `t_s` (a hot coil, another supply; nominal by
+    /// default). Only a board drive (`coil_drive`) sees them.
+    fn drive_condition(&self, _t_s: f64) -> DriveCondition {
+        DriveCondition::default()
+    }
 }
 
 /// The sensor set of one vehicle.
@@ -285,6 +292,13 @@ impl Sensors {
         self.fault
             .as_ref()
             .map_or(CoilState::Healthy, |f| f.coil_state(t_s))
+    }
+
+    /// The true coil and supply at `t_s` according to the fault injector (nominal without one).
+    pub fn drive_condition(&self, t_s: f64) -> DriveCondition {
+        self.fault
+            .as_ref()
+            .map_or(DriveCondition::default(), |f| f.drive_condition(t_s))
     }
 
     fn normal(&mut self) -> f64 {

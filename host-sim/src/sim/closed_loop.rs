@@ -18,11 +18,13 @@
 //! [`run`] returns a decimated [`TraceRow`] trace, the meter outputs, the full-rate series
 //! needed for metrics and the [`RunMetrics`].
 
+use crate::model::coil_drive::{BoardDrive, CoilDrive};
 use crate::model::disturbance::Scenario;
 use crate::model::faults::{FaultPlan, FaultSpec};
 use crate::model::integrator::IntegrateError;
 use crate::model::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
 use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
+use shimmy_core::control::actuator::CoilParams;
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
 };
@@ -101,6 +103,20 @@ pub struct LoopConfig {
     /// Run the supervised `SafeController` (default). `false`: the bare `Controller` on the
     /// measured angles (no validation) -- only to show what the supervisor prevents.
     pub supervised: bool,
+    /// How the command reaches the coil: ideal (default) or the board's drive.
+    pub coil_drive: CoilDrive,
+    /// The nominal coil and driver the board's drive assumes (the vehicle's).
+    pub coil: CoilParams,
+}
+
+/// The supervisor thresholds `p` for `arm`: unchanged, except that the passive-off reference
+/// arm ("damper at 0 A", the baseline of the studies) gets no coil test pulse, which would put
+/// 0.4 A into it every ~1.1 s.
+fn reference_supervisor(arm: Arm, mut p: SupervisorParams) -> SupervisorParams {
+    if arm == Arm::Mr(ControllerKind::PassiveOff) {
+        p.coil_test_current_a = 0.0;
+    }
+    p
 }
 
 impl LoopConfig {
@@ -122,8 +138,10 @@ impl LoopConfig {
             coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
             x0: [0.0; crate::model::plant::N_STATE],
             faults: Vec::new(),
-            supervisor: vehicle.supervisor_params(),
+            supervisor: reference_supervisor(arm, vehicle.supervisor_params()),
             supervised: true,
+            coil_drive: CoilDrive::Ideal,
+            coil: vehicle.damper.coil,
         }
     }
 
@@ -133,7 +151,7 @@ impl LoopConfig {
     #[must_use]
     pub fn with_model(mut self, model: &Vehicle) -> Self {
         self.control = model.control_params();
-        self.supervisor = model.supervisor_params();
+        self.supervisor = reference_supervisor(self.arm, model.supervisor_params());
         self
     }
 }
@@ -182,7 +200,7 @@ pub struct TraceRow {
     pub speed_mps: f64,
     /// Driver torque, N m.
     pub driver_torque_nm: f64,
-    /// Coil current command, A.
+    /// Coil current command to the coil driver, A (0 while the coil is open or shorted).
     pub current_cmd_a: f64,
     /// Actual coil input (the damper's filtered u, 1 V per A), A.
     pub coil_a: f64,
@@ -229,7 +247,7 @@ pub struct Series {
     pub psi_l_rad: Vec<f64>,
     /// Steering-wheel angle, rad.
     pub theta_sw_rad: Vec<f64>,
-    /// Current command, A.
+    /// Current command to the coil driver, A (0 while the coil is open or shorted).
     pub cmd_a: Vec<f64>,
     /// Actual coil current, A.
     pub coil_a: Vec<f64>,
@@ -503,6 +521,9 @@ pub fn run(
     let i_max = cfg.control.limits.i_max_a;
     // Command applied over the previous period (held across lost frames).
     let mut held = ControlOutput::default();
+    let mut drive = BoardDrive::new(cfg.coil_drive, cfg.coil);
+    // The board drive's plant input of the previous period (held across lost frames).
+    let mut driven_a = 0.0;
     let mut meter = if cfg.estimator {
         MarginEstimator::<f32>::new(EstimatorConfig::default()).ok()
     } else {
@@ -570,14 +591,38 @@ pub fn run(
         if !(out.current_cmd_a.is_finite() && (0.0..=i_max).contains(&out.current_cmd_a)) {
             res.faults.invalid_commands += 1;
         }
-        // Open or shorted coil: no current through the coil, whatever is commanded. A NaN
-        // command (only possible unsupervised) drives nothing either.
-        inputs.current_cmd_a = match coil_state {
-            _ if no_damper => 0.0,
-            CoilState::Open | CoilState::Short { .. } => 0.0,
-            CoilState::Healthy if out.current_cmd_a.is_finite() => f64::from(out.current_cmd_a),
-            CoilState::Healthy => 0.0,
+        // The command to the coil driver: a NaN (only possible unsupervised) drives nothing.
+        let cmd = if out.current_cmd_a.is_finite() {
+            f64::from(out.current_cmd_a)
+        } else {
+            0.0
         };
+        if let (Some(d), false) = (drive.as_mut(), meas.lost) {
+            // The firmware's `drive_coil`: off for a coil found open/shorted, else closed loop
+            // on the trusted measured current.
+            let (available, measured) = match &safe_out {
+                Some(o) => (o.verdict.damper_available, o.validated.coil_current_a),
+                None => (true, meas.coil_current_a),
+            };
+            driven_a = if available {
+                d.plant_input_a(
+                    out.current_cmd_a,
+                    measured,
+                    cfg.dt_s as f32,
+                    sensors.drive_condition(t),
+                )
+            } else {
+                d.off();
+                0.0
+            };
+        }
+        // Open or shorted coil: no current through the coil, whatever is commanded.
+        let (coil_cmd, plant_in) = match coil_state {
+            _ if no_damper => (0.0, 0.0),
+            CoilState::Open | CoilState::Short { .. } => (0.0, 0.0),
+            CoilState::Healthy => (cmd, if drive.is_some() { driven_a } else { cmd }),
+        };
+        inputs.current_cmd_a = plant_in;
         let wheel = WheelOrder::Speed {
             speed_mps: meas.speed_mps,
             radius_m: radius,
@@ -615,7 +660,7 @@ pub fn run(
         let f_d = sim.forces(&inputs).damper_n;
         s.psi_l_rad.push(x[idx::PSI_L]);
         s.theta_sw_rad.push(x[idx::THETA_SW]);
-        s.cmd_a.push(inputs.current_cmd_a);
+        s.cmd_a.push(coil_cmd);
         s.coil_a.push(coil);
         s.force_n.push(f_d);
         if let Some(obs) = observer.as_deref_mut() {
@@ -639,7 +684,7 @@ pub fn run(
                 theta_sw_rad: x[idx::THETA_SW],
                 speed_mps: inputs.speed_mps,
                 driver_torque_nm: inputs.driver_torque_nm,
-                current_cmd_a: inputs.current_cmd_a,
+                current_cmd_a: coil_cmd,
                 coil_a: coil,
                 damper_force_n: f_d,
                 s_radps: f64::from(out.s_radps),
