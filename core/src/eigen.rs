@@ -169,7 +169,9 @@ pub struct Mode {
 impl Mode {
     /// The mode of eigenvalue `s`.
     pub fn from_eigenvalue(s: Complex<f64>) -> Self {
-        let omega_n = libm::hypot(s.re, s.im);
+        // sqrt of the squares, not hypot: eigenvalues are far from overflow (the solvers reject
+        // entries above 1e150) and hypot is ~4 k soft-float instructions on the M4
+        let omega_n = libm::sqrt(s.norm_sqr());
         let zeta = if omega_n > 0.0 { -s.re / omega_n } else { 1.0 };
         Mode {
             re: s.re,
@@ -190,9 +192,11 @@ impl Mode {
 /// (plus a tiny absolute floor): real eigenvalues from the Schur form have Im exactly 0.
 pub const OSCILLATORY_REL_IM: f64 = 1e-7;
 
-/// True when `s` is one of an oscillatory (complex) pair.
+/// True when `s` is one of an oscillatory (complex) pair: |Im| > `OSCILLATORY_REL_IM` |s| +
+/// 1e-12, tested squared (no soft-float `hypot` on the M4).
 pub fn is_oscillatory(s: Complex<f64>) -> bool {
-    libm::fabs(s.im) > OSCILLATORY_REL_IM * libm::hypot(s.re, s.im) + 1e-12
+    let excess = libm::fabs(s.im) - 1e-12;
+    excess > 0.0 && excess * excess > OSCILLATORY_REL_IM * OSCILLATORY_REL_IM * s.norm_sqr()
 }
 
 /// Largest real part over all eigenvalues, 1/s.
@@ -268,11 +272,165 @@ fn inverse_iteration<T: SolveFloat>(
     let scale = a.amax().max(1.0);
     let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
     let v = iterate_shifted::<T>(a, mu, left)?;
-    // Left: conj(w) is a right eigenvector of A^T for the same lambda.
-    let mut v = if left { v.map(|c| c.conj()) } else { v };
-    // Phase normalisation: largest entry real positive.
+    Ok(phase_normalised(v))
+}
+
+/// Right and left eigenvectors of `a` for `lambda` from **one** complex LU of (A - mu I) in
+/// `T` (mu as in [`eigenvector`]): two inverse-iteration steps with its factors for the right
+/// vector and two with their adjoint (P M = L U, so M^H y = x is U^H, L^H and P^-1) for the
+/// left one, which (A - lambda I)^H w = 0 makes a left eigenvector. Two steps, not three: the
+/// shift is within ~1e-6 max|a_ij| of lambda, so each step shrinks the other components by
+/// that over the eigenvalue gap (< 1e-3). Unit 2-norm, phase as the iteration leaves it (what
+/// uses them, the eigenvalue derivative and the mode shape, does not depend on it; rotating
+/// them costs ~13 k soft-float instructions each on the M4); half the LUs of
+/// [`eigenvector_of`] + [`left_eigenvector_of`].
+pub fn eigenvectors_of<T: SolveFloat>(
+    a: &StateMatrix,
+    lambda: Complex<f64>,
+) -> Result<(CVector, CVector), EigenError> {
+    if a.iter().any(|v| !v.is_finite()) || !(lambda.re.is_finite() && lambda.im.is_finite()) {
+        return Err(EigenError::NonFinite);
+    }
+    let scale = a.amax().max(1.0);
+    let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
+    let lu = shifted_lu::<T>(a, mu)?;
+    let t = T::of_f64;
+    let start: [Complex<T>; N_STATES] =
+        core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
+    let (mut v, mut w) = (start, start);
+    for _ in 0..2 {
+        v = unit_array(lu.solve(&v))?;
+        w = unit_array(lu.solve_adjoint(&w))?;
+    }
+    let wide = |x: [Complex<T>; N_STATES]| {
+        CVector::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
+    };
+    Ok((wide(v), wide(w)))
+}
+
+/// `x / |x|` of an array, or [`EigenError::Singular`] when |x| is 0 or not finite.
+fn unit_array<T: SolveFloat, const N: usize>(
+    x: [Complex<T>; N],
+) -> Result<[Complex<T>; N], EigenError> {
+    let n2 = x
+        .iter()
+        .fold(T::zero(), |acc, c| acc + c.re * c.re + c.im * c.im);
+    let n = n2.sqrt();
+    if !(n.to_f64().is_finite() && n > T::zero()) {
+        return Err(EigenError::Singular);
+    }
+    let inv = T::one() / n;
+    Ok(x.map(|c| Complex::new(c.re * inv, c.im * inv)))
+}
+
+/// A complex LU with partial pivoting on plain arrays (P M = L U, L unit lower, both stored in
+/// `m`): with solves for M and for its adjoint M^H from the same factors. Hand-written because
+/// nalgebra's generic LU of a complex matrix costs ~2x on the M4 at opt-level "s"
+/// (`cargo xtask bench`, eigenvector rows), and it has no adjoint solve without copying L and U.
+struct ComplexLu<T, const N: usize> {
+    m: [[Complex<T>; N]; N],
+    /// Row i of the factors is row `perm[i]` of M.
+    perm: [usize; N],
+}
+
+impl<T: SolveFloat, const N: usize> ComplexLu<T, N> {
+    /// Factors `m`; [`EigenError::Singular`] on a zero (or non-finite) pivot.
+    #[inline(never)] // one copy per size, not one per caller (flash)
+    fn factor(mut m: [[Complex<T>; N]; N]) -> Result<Self, EigenError> {
+        let mut perm: [usize; N] = core::array::from_fn(|i| i);
+        let norm1 = |c: Complex<T>| c.re.abs() + c.im.abs();
+        for k in 0..N {
+            let mut p = k;
+            let mut best = norm1(m[k][k]);
+            for (i, row) in m.iter().enumerate().skip(k + 1) {
+                let n = norm1(row[k]);
+                if n > best {
+                    best = n;
+                    p = i;
+                }
+            }
+            if !(best > T::zero() && best.to_f64().is_finite()) {
+                return Err(EigenError::Singular);
+            }
+            m.swap(k, p);
+            perm.swap(k, p);
+            // 1 / pivot, scaled by its 1-norm so that |pivot|^2 cannot overflow
+            let d = m[k][k];
+            let (dr, di) = (d.re / best, d.im / best);
+            let q = best * (dr * dr + di * di);
+            let inv = Complex::new(dr / q, -di / q);
+            let pivot_row = m[k];
+            for row in m.iter_mut().skip(k + 1) {
+                let f = row[k] * inv;
+                row[k] = f;
+                for (x, u) in row.iter_mut().zip(pivot_row.iter()).skip(k + 1) {
+                    *x -= f * *u;
+                }
+            }
+        }
+        Ok(Self { m, perm })
+    }
+
+    /// x with M x = b.
+    #[inline(never)]
+    // one copy per size, not one per caller (flash)
+    // triangular solves: i and j index the factors and the vector alike
+    #[allow(clippy::needless_range_loop)]
+    fn solve(&self, b: &[Complex<T>; N]) -> [Complex<T>; N] {
+        let mut y: [Complex<T>; N] = core::array::from_fn(|i| b[self.perm[i]]);
+        for i in 0..N {
+            let mut acc = y[i];
+            for j in 0..i {
+                acc -= self.m[i][j] * y[j];
+            }
+            y[i] = acc;
+        }
+        for i in (0..N).rev() {
+            let mut acc = y[i];
+            for j in i + 1..N {
+                acc -= self.m[i][j] * y[j];
+            }
+            y[i] = acc / self.m[i][i];
+        }
+        y
+    }
+
+    /// x with M^H x = b: M^H = U^H L^H P, so U^H t = b (forward), L^H z = t (backward), and
+    /// x = P^-1 z.
+    #[inline(never)]
+    // one copy per size, not one per caller (flash)
+    // triangular solves: i and j index the factors and the vector alike
+    #[allow(clippy::needless_range_loop)]
+    fn solve_adjoint(&self, b: &[Complex<T>; N]) -> [Complex<T>; N] {
+        let mut t = *b;
+        for i in 0..N {
+            let mut acc = t[i];
+            for j in 0..i {
+                acc -= self.m[j][i].conj() * t[j];
+            }
+            t[i] = acc / self.m[i][i].conj();
+        }
+        for i in (0..N).rev() {
+            let mut acc = t[i];
+            for j in i + 1..N {
+                acc -= self.m[j][i].conj() * t[j];
+            }
+            t[i] = acc;
+        }
+        let mut x = t;
+        for (i, z) in t.iter().enumerate() {
+            x[self.perm[i]] = *z;
+        }
+        x
+    }
+}
+
+/// Rotates `v` so that its largest entry is real and positive. The largest entry by |c|^2 and
+/// one square root: `hypot` per entry in soft-float f64 cost ~4 k instructions each on the M4
+/// (`cargo xtask bench`, eigenvector rows).
+fn phase_normalised(v: CVector) -> CVector {
     let (imax, _) = v.iter().enumerate().fold((0, -1.0), |(bi, bn), (i, c)| {
-        let n = cabs(*c);
+        let n = c.norm_sqr();
         if n > bn {
             (i, n)
         } else {
@@ -280,46 +438,57 @@ fn inverse_iteration<T: SolveFloat>(
         }
     });
     let pivot = v[imax];
-    let pn = cabs(pivot);
+    let pn = libm::sqrt(pivot.norm_sqr());
     if pn > 0.0 {
         let rot = pivot.conj() / Complex::new(pn, 0.0);
-        v = v.map(|c| c * rot);
+        v.map(|c| c * rot)
+    } else {
+        v
     }
-    Ok(v)
 }
 
-/// Three steps of inverse iteration with (A - mu I) (A^T when `left`) factored in `T`; the
-/// result is widened to f64.
+/// Three steps of inverse iteration with (A - mu I) factored in `T` (its adjoint when `left`:
+/// (A - lambda I)^H w = 0 is the left eigenvector); the result is widened to f64.
 fn iterate_shifted<T: SolveFloat>(
     a: &StateMatrix,
     mu: Complex<f64>,
     left: bool,
 ) -> Result<CVector, EigenError> {
+    let lu = shifted_lu::<T>(a, mu)?;
     let t = T::of_f64;
-    let mut shifted: SMatrix<Complex<T>, N_STATES, N_STATES> =
-        a.map(|v| Complex::new(t(v), T::zero()));
-    if left {
-        shifted.transpose_mut();
-    }
-    let mu_t = Complex::new(t(mu.re), t(mu.im));
-    for i in 0..N_STATES {
-        shifted[(i, i)] -= mu_t;
-    }
-    let lu = shifted.lu();
     // A fixed start vector with varied entries (not orthogonal to any eigenvector in practice).
-    let mut v: SVector<Complex<T>, N_STATES> =
-        SVector::from_fn(|i, _| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
+    let mut v: [Complex<T>; N_STATES] =
+        core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
     for _ in 0..3 {
-        let Some(next) = lu.solve(&v) else {
-            return Err(EigenError::Singular);
-        };
-        let n = next.norm();
-        if !(n.to_f64().is_finite() && n > T::zero()) {
-            return Err(EigenError::Singular);
-        }
-        v = next / Complex::new(n, T::zero());
+        v = unit_array(if left {
+            lu.solve_adjoint(&v)
+        } else {
+            lu.solve(&v)
+        })?;
     }
-    Ok(v.map(|c| Complex::new(c.re.to_f64(), c.im.to_f64())))
+    Ok(CVector::from_fn(|i, _| {
+        Complex::new(v[i].re.to_f64(), v[i].im.to_f64())
+    }))
+}
+
+/// The LU of (A - mu I) in `T`.
+#[inline(never)]
+fn shifted_lu<T: SolveFloat>(
+    a: &StateMatrix,
+    mu: Complex<f64>,
+) -> Result<ComplexLu<T, N_STATES>, EigenError> {
+    let t = T::of_f64;
+    let mu_t = Complex::new(t(mu.re), t(mu.im));
+    ComplexLu::factor(core::array::from_fn(|i| {
+        core::array::from_fn(|j| {
+            let x = Complex::new(t(a[(i, j)]), T::zero());
+            if i == j {
+                x - mu_t
+            } else {
+                x
+            }
+        })
+    }))
 }
 
 /// Size of the bordered Newton system of [`refine_eigenpair`]: the eigenvector and the
@@ -353,7 +522,7 @@ impl Eigenpair {
             .iter()
             .zip(self.right.iter())
             .fold(Complex::new(0.0, 0.0), |acc, (w, v)| acc + w.conj() * v);
-        if cabs(den) == 0.0 {
+        if den.re == 0.0 && den.im == 0.0 {
             return None;
         }
         let d = num / den;
@@ -397,23 +566,25 @@ pub fn refine_eigenpair<T: SolveFloat>(
         // residual in f64
         let r = real_times(a, &v) - v * lambda;
         let rb = (c.adjoint() * v)[(0, 0)] - Complex::new(1.0, 0.0);
-        let mut j = SMatrix::<Complex<T>, NB, NB>::zeros();
-        for row in 0..N_STATES {
-            for col in 0..N_STATES {
-                j[(row, col)] = Complex::new(t(a[(row, col)]), T::zero());
-            }
-            j[(row, row)] -= tc(lambda);
-            j[(row, N_STATES)] = -tc(v[row]);
-            j[(N_STATES, row)] = tc(c[row].conj());
-        }
-        let mut rhs = SVector::<Complex<T>, NB>::zeros();
-        for row in 0..N_STATES {
-            rhs[row] = -tc(r[row]);
-        }
-        rhs[N_STATES] = -tc(rb);
-        let lu = j.lu();
-        let x = lu.solve(&rhs).ok_or(EigenError::Singular)?;
+        let lam = tc(lambda);
+        let lu = ComplexLu::<T, NB>::factor(core::array::from_fn(|row| {
+            core::array::from_fn(|col| match (row < N_STATES, col < N_STATES) {
+                (true, true) if row == col => Complex::new(t(a[(row, col)]), T::zero()) - lam,
+                (true, true) => Complex::new(t(a[(row, col)]), T::zero()),
+                (true, false) => -tc(v[row]),
+                (false, true) => tc(c[col].conj()),
+                (false, false) => Complex::new(T::zero(), T::zero()),
+            })
+        }))?;
+        let rhs: [Complex<T>; NB] =
+            core::array::from_fn(|row| if row < N_STATES { -tc(r[row]) } else { -tc(rb) });
+        let x = lu.solve(&rhs);
         let wide = |z: Complex<T>| Complex::new(z.re.to_f64(), z.im.to_f64());
+        if x.iter()
+            .any(|z| !(z.re.to_f64().is_finite() && z.im.to_f64().is_finite()))
+        {
+            return Err(EigenError::Singular);
+        }
         let dl = wide(x[N_STATES]);
         for row in 0..N_STATES {
             v[row] += wide(x[row]);
@@ -424,15 +595,9 @@ pub fn refine_eigenpair<T: SolveFloat>(
         }
         if cabs(dl) <= 1e-10 * (cabs(lambda) + 1.0) {
             // left eigenvector: J^H y = e_n through the factors of P J = L U
-            let mut e = SVector::<Complex<T>, NB>::zeros();
+            let mut e = [Complex::new(T::zero(), T::zero()); NB];
             e[N_STATES] = Complex::new(T::one(), T::zero());
-            let y = lu
-                .u()
-                .ad_solve_upper_triangular(&e)
-                .and_then(|y| lu.l().ad_solve_lower_triangular(&y))
-                .ok_or(EigenError::Singular)?;
-            let mut y = y;
-            lu.p().inv_permute_rows(&mut y);
+            let y = lu.solve_adjoint(&e);
             let left = CVector::from_fn(|i, _| wide(y[i]));
             if left.iter().any(|c| !(c.re.is_finite() && c.im.is_finite())) {
                 return Err(EigenError::NonFiniteResult);
@@ -529,16 +694,23 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
     } else {
         (0.0, 0.0, 0.0)
     };
-    let wheel_amp = cabs(v[PSI_L]).max(cabs(v[PSI_R]));
-    let disp = wheel_amp.max(cabs(v[PHI])).max(cabs(v[THETA_SW]) / i_s);
-    let tyre = cabs(v[A_L]).max(cabs(v[A_R]));
+    // magnitudes as the square root of the largest |c|^2 (one sqrt, not a hypot per entry)
+    let wheel_amp = libm::sqrt(v[PSI_L].norm_sqr().max(v[PSI_R].norm_sqr()));
+    let disp = libm::sqrt(
+        v[PSI_L]
+            .norm_sqr()
+            .max(v[PSI_R].norm_sqr())
+            .max(v[PHI].norm_sqr())
+            .max(v[THETA_SW].norm_sqr() / (i_s * i_s)),
+    );
+    let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
     let tyre_ratio = if disp > 0.0 {
         tyre / disp
     } else {
         f64::INFINITY
     };
     let steering_wheel_ratio = if wheel_amp > 0.0 {
-        cabs(v[THETA_SW]) / (i_s * wheel_amp)
+        libm::sqrt(v[THETA_SW].norm_sqr()) / (i_s * wheel_amp)
     } else {
         f64::INFINITY
     };
@@ -547,7 +719,7 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
     let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
         ModeShape::TyreLag
     } else if fw >= fp && fw >= fs {
-        if cabs(v[PSI_L] + v[PSI_R]) >= cabs(v[PSI_L] - v[PSI_R]) {
+        if (v[PSI_L] + v[PSI_R]).norm_sqr() >= (v[PSI_L] - v[PSI_R]).norm_sqr() {
             ModeShape::InPhaseWheelYaw
         } else {
             ModeShape::AntiPhaseWheelYaw
@@ -688,6 +860,24 @@ mod tests {
         }
         check::<f64>();
         check::<f32>();
+    }
+
+    /// One LU for both vectors gives the vectors of the two separate inverse iterations (all
+    /// unit-norm: equal up to a phase, |r^H e| = 1).
+    #[test]
+    fn one_lu_gives_the_right_and_the_left_eigenvector() {
+        let p = ParamSet::Nominal.params();
+        let along = |x: &CVector, y: &CVector| (x.adjoint() * y)[(0, 0)].norm();
+        for v_mps in [3.0, 12.0, 30.0] {
+            let a = linearise(&p, v_mps, 0.0);
+            for l in eigenvalues(&a).unwrap() {
+                let (r, w) = eigenvectors_of::<f64>(&a, l).unwrap();
+                let e = eigenvector(&a, l).unwrap();
+                assert!((along(&r, &e) - 1.0).abs() < 1e-8, "V={v_mps} {l}");
+                let e = left_eigenvector(&a, l).unwrap();
+                assert!((along(&w, &e) - 1.0).abs() < 1e-8, "V={v_mps} {l}");
+            }
+        }
     }
 
     #[test]

@@ -277,3 +277,46 @@ fn incremental_update_never_exceeds_one_solve_per_call_and_finishes_in_100_calls
     // 10 Hz: one cycle per 100 ms over 120 s (the first at t = 0)
     assert!((1199..=1201).contains(&cycles), "{cycles}");
 }
+
+#[test]
+fn crossings_follow_a_slowly_changing_damper_by_newton_on_the_hopf_condition() {
+    // The damper coefficient drifts 300 -> 360 N s/m in steps below the 1 % that would force a
+    // scan, at a speed below the window: after the first (scanning) cycle every cycle tracks the
+    // known crossings by Newton (one eigen-solve per cycle), and they must stay on the dense
+    // sweep's crossings of the plant at the current c (which moves them by ~1 km/h here).
+    fn run<T: SolveFloat>() {
+        let p = ParamSet::Nominal.params();
+        let mut tr = ModelMarginTracker::<T>::in_precision(p, ModelMarginConfig::default());
+        let v = kmh_to_mps(20.0);
+        let mut c = 300.0;
+        let mut t0 = 0.0f32;
+        let mut moved = 0.0f64;
+        let first = cycle(&mut tr, t0, v, c).0;
+        assert!(!first.tracked && first.eigen_solves > 10);
+        let onset0 = first.above.unwrap().speed_mps;
+        for k in 1..=24 {
+            c += 2.5;
+            t0 += 1.0;
+            let (pt, _) = cycle(&mut tr, t0, v, c);
+            assert!(pt.tracked, "cycle {k} scanned");
+            assert_eq!(pt.eigen_solves, 1, "cycle {k}");
+            if k % 8 == 0 {
+                // c as the tracker saw it (f32)
+                let dense = dense_crossings(&p, f64::from(c as f32));
+                let ours = mps_to_kmh(pt.above.unwrap().speed_mps);
+                let (x, kind) = dense.iter().find(|(x, _)| *x > 20.0).unwrap();
+                assert_eq!(pt.above.unwrap().kind, *kind);
+                assert!(
+                    (ours - x).abs() < 0.05,
+                    "{} c={c}: {ours} vs dense {x}",
+                    T::NAME
+                );
+                moved = moved.max((pt.above.unwrap().speed_mps - onset0).abs());
+            }
+        }
+        // the check has teeth: the crossing moved by far more than the tolerance
+        assert!(mps_to_kmh(moved) > 0.5, "onset moved only {moved} m/s");
+    }
+    run::<f64>();
+    run::<f32>();
+}

@@ -1,29 +1,38 @@
-//! Model-based eigenvalue margin, computed incrementally so that no control step overruns.
+//! Model-based eigenvalue margin by continuation, computed incrementally so that no control
+//! step overruns.
 //!
 //! One *update cycle* at the speed V latched at its start:
 //!
-//! 1. `Modes`: A(V) (with the damper's equivalent viscous coefficient c), one bounded
-//!    eigen-solve, the shimmy mode ([`ModeSelect::Shimmy`]: least-damped in-phase wheel-yaw
-//!    pair; the lightly damped ~47 Hz anti-phase track-rod mode is *not* the shimmy mode), the
-//!    critical oscillatory mode (largest Re, the one that crosses at a Hopf point) and max Re;
-//! 2. `Slope`: d zeta / dV of the shimmy mode by first-order eigenvalue perturbation
-//!    (right and left eigenvector by inverse iteration, dA/dV exact; no eigen-solve);
-//! 3. `Above`: the first Hopf crossing of g(V) = max Re over the oscillatory eigenvalues above
-//!    V: probes upward (warm start: previous answer +- `hint_probe_mps`, else steps from
-//!    `cold_step_mps` doubling up to `max_step_mps`), then Brent's method, resumable, one g
-//!    evaluation (= one eigen-solve) per call, to `tol_mps`;
-//! 4. `Below`: the same downward;
-//! 5. publish [`ModelPoint`] (and [`ModelMargin`] for the fusion) and idle until `period_s`
-//!    after the cycle start.
+//! 1. `Modes`: A(V) (with the damper's equivalent viscous coefficient c) and one bounded
+//!    eigen-solve (the full Schur solve, every cycle: the check of everything tracked): the
+//!    critical oscillatory mode (largest Re, the one that crosses at a Hopf point), max Re, and
+//!    the start of the shimmy mode: the eigenvalue nearest the one tracked from the last cycle
+//!    (predicted to V with its d lambda/dV), or, cold, [`ModeSelect::Shimmy`] (least-damped
+//!    in-phase wheel-yaw pair by mode shape; the ~47 Hz anti-phase track-rod mode is not it);
+//! 2. `Shimmy`: Newton on the eigenpair ([`eigen::refine_eigenpair`], mixed precision, f64
+//!    accurate) from the inverse-iteration vector; its shape must still be in-phase wheel yaw
+//!    (else the cold selection); d zeta/dV from the left/right eigenvectors and the exact dA/dV;
+//! 3. `Track`: each known Hopf crossing V* by Newton on the Hopf condition Re s(V*) = 0, with
+//!    dRe s/dV from the eigenpair at V* (one call per Newton step), warm-started at the last
+//!    cycle's V* and eigenvalue; a crossing that does not converge, or known crossings whose
+//!    order and kinds contradict the stability at V from the Schur solve, send the cycle to
+//!    4. `Scan` (cold, also after a change of c): probe g(V) = max Re over the oscillatory
+//!    eigenvalues upward from V to [`V_SEARCH_MAX_MPS`] and downward to [`V_SEARCH_MIN_MPS`]
+//!    (steps from `cold_step_mps` doubling up to `max_step_mps`, restarted after each crossing),
+//!    each bracket refined by Brent's method (resumable, one eigen-solve per call) to `tol_mps`:
+//!    every crossing in the range becomes a known crossing, so the crossing above V is known when
+//!    V passes the one below it;
+//! 5. publish [`ModelPoint`] (the first known crossing above and below V; [`ModelMargin`] for
+//!    the fusion) and idle until `period_s` after the cycle start.
 //!
 //! Each call of [`ModelMarginTracker::step`] does at most **one** unit of work (at most one
-//! eigen-solve plus O(n^3) complex LUs); a full cycle takes a bounded number of calls
-//! (<= 2 + 2 `max_evals_per_search`, 2 + 2 x 45 = 92 by default, typically ~20 when warm) so it
-//! completes within 100 calls of the 1 kHz control loop, i.e. within one 100 ms period.
-//! This is the same search as [`crate::stability::critical_speed_near`] (probe outward from the
-//! hint, refine the first bracket with Brent) split into resumable steps and restricted to one
-//! side of V. Two crossings closer together than one probe step can be missed (the cap
-//! `max_step_mps` bounds this; the nominal window is 55 km/h wide).
+//! eigen-solve plus O(n^3) complex LUs); a cycle takes at most `max_calls` calls (99 by
+//! default, so it completes within 100 calls of the 1 kHz loop, i.e. within one 100 ms period;
+//! a scan cut short by it is repeated in the next cycle). A warm cycle is one eigen-solve and a
+//! few LUs. Two crossings closer together than one probe step can be missed (the cap
+//! `max_step_mps` bounds this; the nominal window is 55 km/h wide); the scan sees the plant
+//! once per c, so crossings that appear later without a change of c by more than `c_change_rel`
+//! in one cycle are found only by the parity check.
 //!
 //! No allocation, no panics; errors of a solve end that part of the cycle and are counted.
 
@@ -31,10 +40,18 @@ use core::marker::PhantomData;
 
 use nalgebra::Complex;
 
-use crate::eigen::{self, Mode, SolveFloat};
+use crate::eigen::{self, Eigenpair, Mode, ModeShape, SolveFloat};
 use crate::params::PlantParams;
 use crate::plant::{dlinearise_dv, linearise};
 use crate::stability::{self, CrossingKind, ModeSelect, V_SEARCH_MAX_MPS, V_SEARCH_MIN_MPS};
+
+/// Most Hopf crossings the tracker keeps (the nominal window has two; a scan that finds more
+/// is incomplete and repeated).
+pub const MAX_CROSSINGS: usize = 4;
+/// Newton iterations per eigenpair refinement (warm: 1-2).
+const EIGEN_NEWTON_ITERS: u8 = 4;
+/// Newton steps on the Hopf condition per crossing and cycle (warm at unchanged c: 1).
+const HOPF_NEWTON_ITERS: u8 = 6;
 
 /// Tuning of the incremental model margin.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,14 +60,15 @@ pub struct ModelMarginConfig {
     pub period_s: f32,
     /// Root tolerance of the critical speeds, m/s (1e-4 m/s = 0.00036 km/h).
     pub tol_mps: f64,
-    /// Warm-start probe half-width around the previous crossing, m/s.
-    pub hint_probe_mps: f64,
+    /// Speeds this close to a known crossing skip the parity check (the f32 Schur solve's sign
+    /// of max Re is not trusted there), m/s.
+    pub parity_band_mps: f64,
     /// First probe step of a cold search, m/s.
     pub cold_step_mps: f64,
     /// Largest probe step (steps double up to this), m/s.
     pub max_step_mps: f64,
-    /// Eigen-solves allowed per side (probes + refinement).
-    pub max_evals_per_search: u16,
+    /// Calls a cycle may take (the scan stops there, incomplete, and is repeated).
+    pub max_calls: u16,
     /// Relative change of the damper coefficient that invalidates the warm-start hints.
     pub c_change_rel: f64,
 }
@@ -60,10 +78,10 @@ impl Default for ModelMarginConfig {
         Self {
             period_s: 0.1,
             tol_mps: 1e-4,
-            hint_probe_mps: 0.05,
+            parity_band_mps: 0.05,
             cold_step_mps: 0.25,
             max_step_mps: 2.0,
-            max_evals_per_search: 45,
+            max_calls: 99,
             c_change_rel: 0.01,
         }
     }
@@ -76,7 +94,7 @@ pub struct Crossing {
     pub speed_mps: f64,
     /// Onset (stable below) or offset (unstable below).
     pub kind: CrossingKind,
-    /// Final bracket width, m/s.
+    /// Final bracket width (scan), or the size of the last Newton step (tracked), m/s.
     pub bracket_mps: f64,
     /// Tolerance met within the budget.
     pub converged: bool,
@@ -111,6 +129,10 @@ pub struct ModelPoint {
     pub calls: u16,
     /// Eigen-solves the cycle used.
     pub eigen_solves: u16,
+    /// Newton iterations (complex LUs of the bordered system) the cycle used.
+    pub newton_iterations: u16,
+    /// The crossings came from tracking (no scan in this cycle).
+    pub tracked: bool,
     /// Solve errors in this cycle.
     pub errors: u16,
 }
@@ -284,17 +306,21 @@ impl ResumableBrent {
     pub fn tell(&mut self, fx: f64) {
         self.fb = fx;
     }
+
+    /// The bracket end above (`up`) or below the root, and f there.
+    pub fn end(&self, up: bool) -> (f64, f64) {
+        if (self.b > self.c) == up {
+            (self.b, self.fb)
+        } else {
+            (self.c, self.fc)
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Search {
-    /// Probing away from V: last point and its g, next step, whether the hint pair is pending.
-    Probe {
-        x: f64,
-        gx: f64,
-        step: f64,
-        hint: Option<f64>,
-    },
+    /// Probing away from V: last point and its g, next step.
+    Probe { x: f64, gx: f64, step: f64 },
     /// Refining a bracket; `pending` is the point proposed last (awaiting its g).
     Refine {
         brent: ResumableBrent,
@@ -307,15 +333,42 @@ enum Search {
 enum Phase {
     Idle,
     Modes,
-    Slope,
+    /// Newton on the Hopf condition for known crossing `index`, step `iter`.
+    Track {
+        index: usize,
+        iter: u8,
+    },
     Above(Search),
     Below(Search),
     Publish,
 }
 
+/// A Hopf crossing known from a scan and tracked since: its speed and the crossing eigenvalue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Known {
+    speed_mps: f64,
+    /// The eigenvalue that crosses (Re ~ 0) at `speed_mps`.
+    lambda: Complex<f64>,
+    kind: CrossingKind,
+    /// Final bracket (scan) or last Newton step (tracked), m/s.
+    bracket_mps: f64,
+    converged: bool,
+    /// The damper coefficient it was found or last converged at: the crossings depend on c
+    /// alone, so at the same c they are reused without work.
+    c_nspm: f64,
+}
+
+/// The shimmy eigenvalue of the last cycle and its speed derivative (the predictor).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ShimmyTrack {
+    speed_mps: f64,
+    lambda: Complex<f64>,
+    dl_dv: Complex<f64>,
+}
+
 /// The incremental model-margin state machine. Call [`ModelMarginTracker::step`] every control
 /// tick; it returns `Some` when a cycle completes. `T` is the float type of the eigen-solves and
-/// eigenvectors (f64 by default; the firmware uses f32, f64 being software on the M4): a type
+/// eigenvector LUs (f64 by default; the firmware uses f32, f64 being software on the M4): a type
 /// parameter, so an image links only the precision it runs.
 #[derive(Clone, Debug)]
 pub struct ModelMarginTracker<T: SolveFloat = f64> {
@@ -323,10 +376,19 @@ pub struct ModelMarginTracker<T: SolveFloat = f64> {
     cfg: ModelMarginConfig,
     phase: Phase,
     work: ModelPoint,
-    evals_this_search: u16,
     latest: Option<ModelPoint>,
-    hint_above: Option<f64>,
-    hint_below: Option<f64>,
+    /// The cycle's shimmy start: the eigenvalue chosen from the Schur solve.
+    shimmy_start: Complex<f64>,
+    /// The start came from the track (its shape is checked) rather than the shape selection.
+    shimmy_from_track: bool,
+    shimmy_track: Option<ShimmyTrack>,
+    /// Every crossing in the search range, ascending, when `known_valid`.
+    known: heapless::Vec<Known, MAX_CROSSINGS>,
+    /// The last scan covered the whole range at the current c and found at most
+    /// [`MAX_CROSSINGS`].
+    known_valid: bool,
+    /// The crossing eigenvalue nearest Re = 0 seen while refining the current bracket.
+    refine_best: Option<(f64, Complex<f64>)>,
     last_c: f64,
     cycle_start_s: Option<f32>,
     next_due_s: Option<f32>,
@@ -360,10 +422,13 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             cfg,
             phase: Phase::Idle,
             work: Self::blank(0.0, 0.0, 0.0),
-            evals_this_search: 0,
             latest: None,
-            hint_above: None,
-            hint_below: None,
+            shimmy_start: Complex::new(0.0, 0.0),
+            shimmy_from_track: false,
+            shimmy_track: None,
+            known: heapless::Vec::new(),
+            known_valid: false,
+            refine_best: None,
             last_c: 0.0,
             cycle_start_s: None,
             next_due_s: None,
@@ -390,6 +455,8 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             below: None,
             calls: 0,
             eigen_solves: 0,
+            newton_iterations: 0,
+            tracked: false,
             errors: 0,
         }
     }
@@ -429,26 +496,56 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         self.phase != Phase::Idle
     }
 
-    /// Drop the warm-start hints (e.g. after a parameter change).
+    /// Drop what is tracked (the shimmy pair and the known crossings), e.g. after a parameter
+    /// change: the next cycle starts cold (shape selection and a full scan).
     pub fn forget_hints(&mut self) {
-        self.hint_above = None;
-        self.hint_below = None;
+        self.shimmy_track = None;
+        self.known.clear();
+        self.known_valid = false;
     }
 
-    /// g(V) = largest real part over the oscillatory eigenvalues: one eigen-solve. The only
-    /// place (besides `Modes`) that solves, so the per-call count is exact.
-    fn g(&mut self, v: f64) -> Option<f64> {
+    fn error(&mut self) {
+        self.work.errors = self.work.errors.saturating_add(1);
+    }
+
+    /// One bounded eigen-solve of `a`, counted (the only place that solves, so the per-call
+    /// count is exact).
+    fn solve(&mut self, a: &eigen::StateMatrix) -> Result<eigen::Eigenvalues, eigen::EigenError> {
         self.solves_last_call = self.solves_last_call.saturating_add(1);
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
-        self.evals_this_search = self.evals_this_search.saturating_add(1);
+        eigen::eigenvalues_of::<T>(a)
+    }
+
+    /// The critical oscillatory eigenvalue at `v` (its Re is g(v)): one eigen-solve.
+    fn g(&mut self, v: f64) -> Option<Complex<f64>> {
         let a = linearise(&self.p, v, self.work.c_damper_nspm);
-        match eigen::eigenvalues_of::<T>(&a)
+        match self
+            .solve(&a)
             .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
         {
-            Ok(m) if m.re.is_finite() => Some(m.re),
+            Ok(m) if m.re.is_finite() => Some(m.eigenvalue()),
             _ => {
-                self.work.errors = self.work.errors.saturating_add(1);
+                self.error();
+                None
+            }
+        }
+    }
+
+    /// Newton on the eigenpair of A(v) near `lambda`, from its inverse-iteration vector.
+    fn eigenpair(&mut self, a: &eigen::StateMatrix, lambda: Complex<f64>) -> Option<Eigenpair> {
+        let r = eigen::eigenvector_of::<T>(a, lambda)
+            .and_then(|v0| eigen::refine_eigenpair::<T>(a, lambda, &v0, EIGEN_NEWTON_ITERS));
+        match r {
+            Ok(ep) => {
+                self.work.newton_iterations = self
+                    .work
+                    .newton_iterations
+                    .saturating_add(u16::from(ep.iterations));
+                Some(ep)
+            }
+            Err(_) => {
+                self.error();
                 None
             }
         }
@@ -495,30 +592,27 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 self.modes();
                 None
             }
-            Phase::Slope => {
-                self.slope();
+            Phase::Track { index, iter } => {
+                self.phase = self.track(index, iter);
                 None
             }
             Phase::Above(s) => {
-                let next = self.search(s, true);
-                self.phase = match next {
+                self.phase = match self.search(s, true) {
                     Some(s) => Phase::Above(s),
                     None => self.start_search(false),
                 };
                 None
             }
             Phase::Below(s) => {
-                let next = self.search(s, false);
-                self.phase = match next {
+                self.phase = match self.search(s, false) {
                     Some(s) => Phase::Below(s),
                     None => Phase::Publish,
                 };
                 None
             }
             Phase::Publish => {
+                self.publish_crossings();
                 let w = self.work;
-                self.hint_above = w.above.map(|c| c.speed_mps);
-                self.hint_below = w.below.map(|c| c.speed_mps);
                 self.latest = Some(w);
                 self.cycles = self.cycles.saturating_add(1);
                 if let Some(t0) = self.cycle_start_s {
@@ -532,79 +626,252 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         }
     }
 
+    /// The Schur solve at V: critical mode, max Re, and the shimmy start (tracked or selected),
+    /// then the shimmy step on the same A in the same call (one eigen-solve plus LUs).
     fn modes(&mut self) {
-        self.solves_last_call = self.solves_last_call.saturating_add(1);
-        self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
-        self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
-        let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
-        let ok = eigen::eigenvalues_of::<T>(&a).and_then(|vals| {
-            let crit = eigen::critical_oscillatory_mode(&vals)?;
-            let (shimmy, found) =
-                match stability::select_mode_of::<T>(&self.p, &a, &vals, ModeSelect::Shimmy) {
-                    Ok(m) => (m, true),
-                    Err(_) => (crit, false),
-                };
-            Ok((crit, shimmy, found, eigen::max_real_part(&vals)))
-        });
-        match ok {
-            Ok((crit, shimmy, found, max_re)) => {
-                self.work.critical = crit;
-                self.work.shimmy = shimmy;
-                self.work.shimmy_found = found;
-                self.work.max_re = max_re;
-                self.phase = Phase::Slope;
-            }
+        let v = self.work.speed_mps;
+        let a = linearise(&self.p, v, self.work.c_damper_nspm);
+        let vals = match self.solve(&a) {
+            Ok(vals) => vals,
             Err(_) => {
-                self.work.errors = self.work.errors.saturating_add(1);
+                self.error();
                 self.phase = Phase::Publish;
+                return;
             }
+        };
+        let Ok(crit) = eigen::critical_oscillatory_mode(&vals) else {
+            self.error();
+            self.phase = Phase::Publish;
+            return;
+        };
+        self.work.critical = crit;
+        self.work.max_re = eigen::max_real_part(&vals);
+        // the tracked shimmy eigenvalue, predicted to V: the nearest +Im eigenvalue of the solve
+        let tracked = self.shimmy_track.and_then(|tr| {
+            let pred = tr.lambda + tr.dl_dv * (v - tr.speed_mps);
+            vals.iter()
+                .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
+                .map(|l| ((*l - pred).norm_sqr(), *l))
+                .fold(None::<(f64, Complex<f64>)>, |best, c| match best {
+                    Some(b) if b.0 <= c.0 => Some(b),
+                    _ => Some(c),
+                })
+                // a start farther than 10 % of |lambda| from the prediction is another branch
+                // (squared magnitudes: no soft-float hypot per candidate)
+                .filter(|(d2, _)| *d2 <= 0.01 * pred.norm_sqr())
+                .map(|(_, l)| l)
+        });
+        match tracked {
+            Some(l) => {
+                self.shimmy_start = l;
+                self.shimmy_from_track = true;
+                self.work.shimmy_found = true;
+            }
+            None => self.select_shimmy(&a, &vals),
         }
+        self.shimmy(&a);
     }
 
-    fn slope(&mut self) {
-        let a = linearise(&self.p, self.work.speed_mps, self.work.c_damper_nspm);
-        let lambda = self.work.shimmy.eigenvalue();
-        let r = (|| {
-            let v = eigen::eigenvector_of::<T>(&a, lambda).ok()?;
-            let w = eigen::left_eigenvector_of::<T>(&a, lambda).ok()?;
-            let da = dlinearise_dv(&self.p).map(|x| Complex::new(x, 0.0));
-            let num = (w.adjoint() * da * v)[(0, 0)];
-            let den = (w.adjoint() * v)[(0, 0)];
-            if den.re == 0.0 && den.im == 0.0 {
-                return None;
+    /// Cold: the shimmy mode by mode shape over all oscillatory pairs (one LU each).
+    fn select_shimmy(&mut self, a: &eigen::StateMatrix, vals: &eigen::Eigenvalues) {
+        let (l, found) = match stability::select_mode_of::<T>(&self.p, a, vals, ModeSelect::Shimmy)
+        {
+            Ok(m) => (m.eigenvalue(), true),
+            Err(_) => (self.work.critical.eigenvalue(), false),
+        };
+        self.shimmy_start = l;
+        self.shimmy_from_track = false;
+        self.work.shimmy_found = found;
+    }
+
+    /// The shimmy mode's right and left eigenvectors (one LU), its shape check (tracked start)
+    /// and d zeta/dV.
+    fn shimmy(&mut self, a: &eigen::StateMatrix) {
+        let v = self.work.speed_mps;
+        let lambda = self.shimmy_start;
+        let ep = match eigen::eigenvectors_of::<T>(a, lambda) {
+            Ok((right, left)) => Some(Eigenpair {
+                lambda,
+                right,
+                left,
+                iterations: 0,
+            }),
+            Err(_) => {
+                self.error();
+                None
             }
-            let dl = num / den;
-            let wn = self.work.shimmy.omega_n;
+        };
+        let shape_ok = ep.is_some_and(|ep| {
+            eigen::classify(&ep.right, self.p.i_k, self.p.i_phi, self.p.j_sw, self.p.i_s).shape
+                == ModeShape::InPhaseWheelYaw
+        });
+        if self.shimmy_from_track && !shape_ok {
+            // lost the branch: the next call solves again and selects by shape
+            self.shimmy_track = None;
+            self.phase = Phase::Modes;
+            return;
+        }
+        let slope = ep.and_then(|ep| {
+            let dl = ep.derivative(&dlinearise_dv(&self.p))?;
+            let m = Mode::from_eigenvalue(ep.lambda);
+            let wn = m.omega_n;
             if wn <= 0.0 {
                 return None;
             }
-            let dr = (lambda.re * dl.re + lambda.im * dl.im) / wn;
-            let dz = -(dl.re * wn - lambda.re * dr) / (wn * wn);
-            dz.is_finite().then_some(dz)
-        })();
-        match r {
-            Some(dz) => {
+            let l = m.eigenvalue();
+            // the +Im member: conjugate the derivative if Newton landed on the -Im one
+            let dl = if ep.lambda.im < 0.0 { dl.conj() } else { dl };
+            let dr = (l.re * dl.re + l.im * dl.im) / wn;
+            let dz = -(dl.re * wn - l.re * dr) / (wn * wn);
+            dz.is_finite().then_some((m, dl, dz))
+        });
+        match slope {
+            Some((m, dl, dz)) => {
+                self.work.shimmy = m;
                 self.work.dzeta_dv_per_mps = dz;
                 self.work.slope_valid = true;
+                self.shimmy_track = self.work.shimmy_found.then_some(ShimmyTrack {
+                    speed_mps: v,
+                    lambda: m.eigenvalue(),
+                    dl_dv: dl,
+                });
             }
-            None => self.work.errors = self.work.errors.saturating_add(1),
+            None => {
+                self.error();
+                self.work.shimmy = Mode::from_eigenvalue(self.shimmy_start);
+                self.shimmy_track = None;
+            }
         }
-        self.phase = self.start_search(true);
+        self.phase = if self.known_valid {
+            self.first_track()
+        } else {
+            self.start_scan()
+        };
+    }
+
+    fn first_track(&mut self) -> Phase {
+        self.work.tracked = true;
+        let c = self.work.c_damper_nspm;
+        match self
+            .known
+            .iter()
+            .position(|k| !(k.converged && k.c_nspm == c))
+        {
+            Some(index) => Phase::Track { index, iter: 0 },
+            None => self.check_parity(),
+        }
+    }
+
+    /// One Newton step on Re s(V*) = 0 for known crossing `index`.
+    fn track(&mut self, index: usize, iter: u8) -> Phase {
+        let Some(k) = self.known.get(index).copied() else {
+            return self.check_parity();
+        };
+        if k.converged && k.c_nspm == self.work.c_damper_nspm {
+            // same plant, same crossing: nothing to do
+            return self.next_track(index);
+        }
+        let a = linearise(&self.p, k.speed_mps, self.work.c_damper_nspm);
+        let step = self.eigenpair(&a, k.lambda).and_then(|ep| {
+            let ds = ep.derivative(&dlinearise_dv(&self.p))?;
+            let dv = -ep.lambda.re / ds.re;
+            dv.is_finite().then_some((ep.lambda, ds, dv))
+        });
+        let Some((l, ds, dv)) = step else {
+            return self.start_scan();
+        };
+        // the crossing moves with c only: a long step means another branch or a lost crossing
+        // (min/max, not f64::clamp: its panic message would link float formatting, ~9 KB)
+        let dv = dv.min(self.cfg.max_step_mps).max(-self.cfg.max_step_mps);
+        let x = k.speed_mps + dv;
+        // the kind follows from the sign of dRe s/dV
+        let kind = if ds.re > 0.0 {
+            CrossingKind::Onset
+        } else {
+            CrossingKind::Offset
+        };
+        if !(V_SEARCH_MIN_MPS..=V_SEARCH_MAX_MPS).contains(&x) || kind != k.kind {
+            return self.start_scan();
+        }
+        let converged = libm::fabs(dv) <= self.cfg.tol_mps;
+        if let Some(slot) = self.known.get_mut(index) {
+            *slot = Known {
+                speed_mps: x,
+                lambda: l + ds * dv,
+                kind,
+                bracket_mps: libm::fabs(dv),
+                converged,
+                c_nspm: self.work.c_damper_nspm,
+            };
+        }
+        if converged {
+            self.next_track(index)
+        } else if iter + 1 >= HOPF_NEWTON_ITERS {
+            self.start_scan()
+        } else {
+            Phase::Track {
+                index,
+                iter: iter + 1,
+            }
+        }
+    }
+
+    /// After crossing `index`: the next one (skipping those known at this c), or the check.
+    fn next_track(&mut self, index: usize) -> Phase {
+        let c = self.work.c_damper_nspm;
+        match self
+            .known
+            .iter()
+            .enumerate()
+            .skip(index + 1)
+            .find(|(_, k)| !(k.converged && k.c_nspm == c))
+        {
+            Some((i, _)) => Phase::Track { index: i, iter: 0 },
+            None => self.check_parity(),
+        }
+    }
+
+    /// The known crossings must alternate in kind and agree with the sign of max Re at V from
+    /// this cycle's Schur solve (unless V is within `parity_band_mps` of one); else scan.
+    fn check_parity(&mut self) -> Phase {
+        let v = self.work.speed_mps;
+        let alternate = self
+            .known
+            .windows(2)
+            .all(|w| matches!(w, [a, b] if a.kind != b.kind && a.speed_mps < b.speed_mps));
+        let near = self
+            .known
+            .iter()
+            .any(|k| libm::fabs(k.speed_mps - v) <= self.cfg.parity_band_mps);
+        let below = self.known.iter().rev().find(|k| k.speed_mps < v);
+        let above = self.known.iter().find(|k| k.speed_mps > v);
+        let predicted_unstable = match (below, above) {
+            (Some(b), _) => Some(b.kind == CrossingKind::Onset),
+            (None, Some(a)) => Some(a.kind == CrossingKind::Offset),
+            (None, None) => None,
+        };
+        let consistent =
+            near || predicted_unstable.is_none_or(|u| u == (self.work.critical.re > 0.0));
+        if alternate && consistent {
+            Phase::Publish
+        } else {
+            self.start_scan()
+        }
+    }
+
+    /// Cold: forget the known crossings and scan the whole range.
+    fn start_scan(&mut self) -> Phase {
+        self.work.tracked = false;
+        self.known.clear();
+        self.known_valid = true;
+        self.start_search(true)
     }
 
     fn start_search(&mut self, up: bool) -> Phase {
-        self.evals_this_search = 0;
-        let v = self.work.speed_mps;
-        let hint = if up {
-            self.hint_above.filter(|h| *h > v)
-        } else {
-            self.hint_below.filter(|h| *h < v)
-        };
         let s = Search::Probe {
-            x: v,
+            x: self.work.speed_mps,
             gx: self.work.critical.re,
             step: self.cfg.cold_step_mps,
-            hint,
         };
         if up {
             Phase::Above(s)
@@ -613,44 +880,35 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         }
     }
 
-    /// One evaluation of a one-sided search. `None` when this side is finished (result stored).
+    /// A side of the scan ended before its limit: the known crossings are not the whole range.
+    fn scan_cut(&mut self) -> Option<Search> {
+        self.known_valid = false;
+        None
+    }
+
+    /// One evaluation of a one-sided scan. `None` when this side is finished.
     fn search(&mut self, s: Search, up: bool) -> Option<Search> {
         let (lim, sgn) = if up {
             (V_SEARCH_MAX_MPS, 1.0)
         } else {
             (V_SEARCH_MIN_MPS, -1.0)
         };
-        let out_of_budget = self.evals_this_search >= self.cfg.max_evals_per_search;
+        // keep one call for the publication
+        let out_of_budget = self.work.calls >= self.cfg.max_calls.saturating_sub(1);
         match s {
-            Search::Probe { x, gx, step, hint } => {
-                if out_of_budget || (x - lim) * sgn >= 0.0 {
-                    return self.finish(None, up);
+            Search::Probe { x, gx, step } => {
+                if (x - lim) * sgn >= 0.0 {
+                    return None;
                 }
-                // next probe point
-                let (xn, hint_n, step_n) = match hint {
-                    Some(h) => {
-                        let lo_side = h - sgn * self.cfg.hint_probe_mps;
-                        if (lo_side - x) * sgn > 0.0 {
-                            // first the near side of the hint, then its far side
-                            (lo_side, Some(h), 2.0 * self.cfg.hint_probe_mps)
-                        } else {
-                            (
-                                h + sgn * self.cfg.hint_probe_mps,
-                                None,
-                                2.0 * self.cfg.hint_probe_mps,
-                            )
-                        }
-                    }
-                    None => (
-                        x + sgn * step,
-                        None,
-                        (2.0 * step).min(self.cfg.max_step_mps),
-                    ),
-                };
+                if out_of_budget {
+                    return self.scan_cut();
+                }
+                let xn = x + sgn * step;
                 let xn = if up { xn.min(lim) } else { xn.max(lim) };
-                let Some(gn) = self.g(xn) else {
-                    return self.finish(None, up);
+                let Some(ln) = self.g(xn) else {
+                    return self.scan_cut();
                 };
+                let gn = ln.re;
                 if (gn < 0.0) != (gx < 0.0) {
                     let (a, b, fa, fb) = if up { (x, xn, gx, gn) } else { (xn, x, gn, gx) };
                     let kind = if fa < 0.0 {
@@ -658,14 +916,14 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                     } else {
                         CrossingKind::Offset
                     };
+                    self.refine_best = Some((libm::fabs(gn), ln));
                     let brent = ResumableBrent::new(a, b, fa, fb, self.cfg.tol_mps);
                     return self.refine(brent, kind, up);
                 }
                 Some(Search::Probe {
                     x: xn,
                     gx: gn,
-                    step: step_n,
-                    hint: hint_n,
+                    step: (2.0 * step).min(self.cfg.max_step_mps),
                 })
             }
             Search::Refine {
@@ -674,27 +932,22 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 pending,
             } => {
                 if out_of_budget {
-                    let (r, lo, hi) = brent.best();
-                    return self.finish(
-                        Some(Crossing {
-                            speed_mps: r,
-                            kind,
-                            bracket_mps: hi - lo,
-                            converged: false,
-                        }),
-                        up,
-                    );
+                    return self.scan_cut();
                 }
-                let Some(gp) = self.g(pending) else {
-                    return self.finish(None, up);
+                let Some(lp) = self.g(pending) else {
+                    return self.scan_cut();
                 };
-                brent.tell(gp);
+                if self.refine_best.is_none_or(|(b, _)| libm::fabs(lp.re) < b) {
+                    self.refine_best = Some((libm::fabs(lp.re), lp));
+                }
+                brent.tell(lp.re);
                 self.refine(brent, kind, up)
             }
         }
     }
 
-    /// The next Brent step on a bracketed crossing: finished (stored) or the point to evaluate.
+    /// The next Brent step on a bracketed crossing: the point to evaluate, or (converged) the
+    /// crossing stored and the probing resumed beyond it.
     fn refine(
         &mut self,
         mut brent: ResumableBrent,
@@ -702,15 +955,32 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         up: bool,
     ) -> Option<Search> {
         match brent.propose() {
-            BrentStep::Done(r, lo, hi) => self.finish(
-                Some(Crossing {
+            BrentStep::Done(r, lo, hi) => {
+                let lambda = self.refine_best.map_or(Complex::new(0.0, 0.0), |(_, l)| l);
+                let known = Known {
                     speed_mps: r,
+                    lambda,
                     kind,
                     bracket_mps: hi - lo,
                     converged: true,
-                }),
-                up,
-            ),
+                    c_nspm: self.work.c_damper_nspm,
+                };
+                // kept ascending by insertion (no sort: 4 entries, and no sort code linked)
+                let at = self
+                    .known
+                    .iter()
+                    .position(|k| k.speed_mps > r)
+                    .unwrap_or(self.known.len());
+                if self.known.insert(at, known).is_err() {
+                    return self.scan_cut();
+                }
+                let (x, gx) = brent.end(up);
+                Some(Search::Probe {
+                    x,
+                    gx,
+                    step: self.cfg.cold_step_mps,
+                })
+            }
             BrentStep::Eval(p) => Some(Search::Refine {
                 brent,
                 kind,
@@ -719,13 +989,22 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         }
     }
 
-    fn finish(&mut self, c: Option<Crossing>, up: bool) -> Option<Search> {
-        if up {
-            self.work.above = c;
-        } else {
-            self.work.below = c;
-        }
-        None
+    /// The first known crossing above and below V into the point.
+    fn publish_crossings(&mut self) {
+        let v = self.work.speed_mps;
+        let as_crossing = |k: &Known| Crossing {
+            speed_mps: k.speed_mps,
+            kind: k.kind,
+            bracket_mps: k.bracket_mps,
+            converged: k.converged,
+        };
+        self.work.above = self.known.iter().find(|k| k.speed_mps > v).map(as_crossing);
+        self.work.below = self
+            .known
+            .iter()
+            .rev()
+            .find(|k| k.speed_mps < v)
+            .map(as_crossing);
     }
 }
 
@@ -771,5 +1050,31 @@ mod tests {
         assert!(k < 100, "{k}");
         assert_eq!(r.above.unwrap().kind, CrossingKind::Onset);
         assert!(r.below.is_none());
+    }
+
+    /// The parity check is what catches a wrong list of known crossings: with the onset
+    /// dropped, the list says "unstable below the offset", the Schur solve at 5 m/s says
+    /// stable, so the cycle rescans and publishes the onset again (without the check it would
+    /// publish no onset above, i.e. no speed margin).
+    #[test]
+    fn known_crossings_that_contradict_the_schur_solve_are_rescanned() {
+        let p = ParamSet::Nominal.params();
+        let mut t = ModelMarginTracker::new(p, ModelMarginConfig::default());
+        let run = |t: &mut ModelMarginTracker, t0: f32| {
+            (0..200u16)
+                .find_map(|k| t.step(t0 + f32::from(k) * 1e-3, 5.0, 0.0))
+                .expect("a cycle completes")
+        };
+        let cold = run(&mut t, 0.0);
+        let onset = cold.above.unwrap();
+        assert_eq!(onset.kind, CrossingKind::Onset);
+        let warm = run(&mut t, 1.0);
+        assert!(warm.tracked && warm.eigen_solves == 1);
+        assert_eq!(t.known.len(), 2);
+        t.known.remove(0);
+        let checked = run(&mut t, 2.0);
+        assert!(!checked.tracked, "the contradiction was not noticed");
+        assert_eq!(checked.above, Some(onset));
+        assert_eq!(checked.margin().v_crit_onset_mps, Some(onset.speed_mps));
     }
 }

@@ -32,6 +32,16 @@ mod bench {
     /// `monitoring::MODEL_REFRESH_S` (10 Hz; derivation there).
     const MODEL_REFRESH_BUDGET_MS: u32 =
         (shimmy_firmware::monitoring::MODEL_REFRESH_S * 1000.0) as u32;
+    /// Budget of the worst warm model cycle [instructions] (issue 17: the continuation tracker
+    /// does one eigen-solve and a few Newton LUs per cycle).
+    const MODEL_CYCLE_BUDGET: u32 = 500_000;
+    /// Cycles per instruction assumed for the CPU load row (see `cpu_load_permille`): 1, the
+    /// M4's single-cycle ALU/FPU issue with the flash accelerator hiding wait states on
+    /// straight-line code; [`INSN_PER_S`] keeps 1.5 for the wall-time budgets.
+    const LOAD_CPI: u64 = 1;
+    /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: 5 %
+    /// (issue 17).
+    const CPU_LOAD_BUDGET_PERMILLE: u32 = 50;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
@@ -94,13 +104,38 @@ mod bench {
         },
         Entry {
             name: "model tracker: cycle, max over 24->36 km/h by 1 km/h",
-            budget: Budget::None,
+            budget: Budget::Hard(MODEL_CYCLE_BUDGET),
             run: tracker_cycle,
+        },
+        Entry {
+            name: "eigenvector (f32 inverse iteration, 3 solves)",
+            budget: Budget::None,
+            run: eigenvector_f32,
+        },
+        Entry {
+            name: "right + left eigenvector (f32, one LU)",
+            budget: Budget::None,
+            run: eigenvectors_f32,
+        },
+        Entry {
+            name: "linearise (f64)",
+            budget: Budget::None,
+            run: linearise_only,
+        },
+        Entry {
+            name: "eigenpair Newton step (f32 LU, f64 residual), warm",
+            budget: Budget::None,
+            run: newton_f32,
         },
         Entry {
             name: "model cycle wall time at measured load [ms]",
             budget: Budget::Hard(MODEL_REFRESH_BUDGET_MS),
             run: model_refresh_ms,
+        },
+        Entry {
+            name: "firmware at its rates [per mille of 168 MHz at 1 CPI]",
+            budget: Budget::Hard(CPU_LOAD_BUDGET_PERMILLE),
+            run: cpu_load_permille,
         },
         Entry {
             name: "libm::sinf (f32)",
@@ -346,6 +381,59 @@ mod bench {
         })
     }
 
+    /// The nominal plant's shimmy pair at 8 m/s (f64 Schur + inverse iteration, for the
+    /// eigenvector rows' inputs).
+    fn shimmy_pair() -> (
+        shimmy_core::eigen::StateMatrix,
+        nalgebra::Complex<f64>,
+        shimmy_core::eigen::CVector,
+    ) {
+        use shimmy_core::eigen;
+        use shimmy_core::params::PlantParams;
+        let p = PlantParams::nominal();
+        let a = shimmy_core::plant::linearise(&p, 8.0, 0.0);
+        let l = eigen::eigenvalues_of::<f32>(&a)
+            .and_then(|v| eigen::least_damped_mode(&v))
+            .map_or(nalgebra::Complex::new(-1.0, 40.0), |m| m.eigenvalue());
+        let v = eigen::eigenvector_of::<f32>(&a, l).unwrap_or_else(|_| eigen::CVector::zeros());
+        (a, l, v)
+    }
+
+    fn eigenvector_f32() -> u32 {
+        let (a, l, _) = shimmy_pair();
+        measure(|| {
+            let _ = black_box(shimmy_core::eigen::eigenvector_of::<f32>(black_box(&a), l));
+        })
+    }
+
+    fn eigenvectors_f32() -> u32 {
+        let (a, l, _) = shimmy_pair();
+        measure(|| {
+            let _ = black_box(shimmy_core::eigen::eigenvectors_of::<f32>(black_box(&a), l));
+        })
+    }
+
+    fn linearise_only() -> u32 {
+        let p = shimmy_core::params::PlantParams::nominal();
+        measure(|| {
+            let _ = black_box(shimmy_core::plant::linearise(&p, black_box(8.0), 0.0));
+        })
+    }
+
+    /// One Newton iteration (the warm case: the start is the converged pair, so one iteration
+    /// meets the bound) including the left eigenvector.
+    fn newton_f32() -> u32 {
+        let (a, l, v) = shimmy_pair();
+        let Ok(ep) = shimmy_core::eigen::refine_eigenpair::<f32>(&a, l, &v, 4) else {
+            return u32::MAX;
+        };
+        measure(|| {
+            let r =
+                shimmy_core::eigen::refine_eigenpair::<f32>(black_box(&a), ep.lambda, &ep.right, 1);
+            let _ = black_box(r);
+        })
+    }
+
     /// (max instructions of one call, first (cold) cycle, max warm cycle): the firmware's
     /// tracker on a speed ramp 24 -> 36 km/h that moves 1 km/h per cycle (10x the 0.1 km/h per
     /// cycle of the 1 km/h/s requirement ramp at 10 Hz: the warm start has more to do, so this
@@ -430,6 +518,27 @@ mod bench {
             return u32::MAX;
         }
         u32::try_from(cycle * 1000 / avail).unwrap_or(u32::MAX)
+    }
+
+    /// The whole firmware's CPU load at its rates [per mille]: control step x 1 kHz + meter run
+    /// x 100 Hz + worst warm model cycle x 10 Hz, in cycles at [`LOAD_CPI`] cycles per
+    /// instruction, over 168 MHz.
+    fn cpu_load_permille() -> u32 {
+        let control = u64::from(CONTROL_MAX.load(Ordering::Relaxed)) * 1000;
+        let meter = u64::from(METER_RUN_MAX.load(Ordering::Relaxed)) * 100;
+        let model = u64::from(tracker_counts().2) * 10;
+        let per_s = control + meter + model;
+        defmt::info!(
+            "cpu load: control {=u64} + meter {=u64} + model {=u64} = {=u64} instructions/s, {=u64} cycles/s at {=u64} CPI of 168 MHz",
+            control,
+            meter,
+            model,
+            per_s,
+            per_s * LOAD_CPI,
+            LOAD_CPI
+        );
+        // rounded up: a load just over a per-mille step must not pass as the step below
+        u32::try_from((per_s * LOAD_CPI * 1000).div_ceil(168_000_000)).unwrap_or(u32::MAX)
     }
 
     fn sinf() -> u32 {
