@@ -26,8 +26,9 @@
 //!   driver's steering, for telemetry and the supervisor).
 //!
 //! The filters are designed for the nominal sample rate; the caller runs [`Conditioner::update`]
-//! once per sample. Coefficients are computed once in f64 (libm) at construction; the per-sample
-//! work is a dozen f32 multiply-adds, no transcendental functions.
+//! once per sample. Coefficients are computed once at construction, in f64 arithmetic with f32
+//! transcendentals (libm: the coefficients are stored in f32 anyway, and the firmware then links
+//! no f64 transcendental); the per-sample work is a dozen f32 multiply-adds.
 
 use core::f64::consts::PI;
 
@@ -82,7 +83,7 @@ impl Biquad {
         if !(fc > 0.0 && fs > 0.0 && fc < 0.49 * fs) {
             return Biquad::identity();
         }
-        let k = libm::tan(PI * fc / fs);
+        let k = libm::tanf((PI * fc / fs) as f32) as f64;
         let q = core::f64::consts::FRAC_1_SQRT_2;
         let norm = 1.0 / (1.0 + k / q + k * k);
         let (b0, b1, b2, dc) = match kind {
@@ -179,10 +180,10 @@ impl RateObserver {
         // max/min instead of clamp: no panic on NaN bounds (panic-free check).
         let wb = 2.0 * PI * (bandwidth_hz as f64).max(0.1).min(0.45 * fs);
         let zeta = (damping as f64).clamp(0.1, 0.999);
-        let r = libm::exp(-zeta * wb * t);
+        let r = libm::expf((-zeta * wb * t) as f32) as f64;
         let theta = wb * libm::sqrt(1.0 - zeta * zeta) * t;
         let alpha = 1.0 - r * r;
-        let beta = 2.0 - alpha - 2.0 * r * libm::cos(theta);
+        let beta = 2.0 - alpha - 2.0 * r * libm::cosf(theta as f32) as f64;
         RateObserver {
             alpha: alpha as f32,
             beta_over_t: (beta / t) as f32,
