@@ -59,7 +59,8 @@ pub trait Real:
     fn powf(self, y: Self) -> Self;
     /// Evaluates `f` in this precision and returns the result as f64. Design-time math (filter
     /// coefficients, start values) goes through it so that an f32 estimator, the target's,
-    /// links no f64 transcendental function (~13 KB of flash); the f64 twin computes in f64.
+    /// links no f64 transcendental function (10.3 KB less flash, `cargo xtask size`); the f64
+    /// twin computes in f64 exactly as before.
     #[inline]
     fn eval(x: f64, f: impl FnOnce(Self) -> Self) -> f64 {
         f(Self::from_f64(x)).to_f64()
