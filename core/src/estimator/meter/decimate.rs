@@ -79,7 +79,8 @@ impl<T: Real> AntiAliasFilter<T> {
         let k2 = 2.0 * fs_hz;
         // Transcendentals in the filter's own precision (see `Real::eval`).
         let ws = k2 * T::eval(core::f64::consts::PI * f_stop_hz / fs_hz, T::tan);
-        let eps = 1.0 / libm::sqrt(T::eval(atten_db / 10.0, |x| T::from_f64(10.0).powf(x)) - 1.0);
+        let eps =
+            1.0 / libm::sqrt(T::eval(atten_db / 10.0 * core::f64::consts::LN_10, T::exp) - 1.0);
         let mu = T::eval(1.0 / eps, T::asinh) / n;
         let mut sections = [Biquad::default(); AA_SECTIONS];
         for (i, sec) in sections.iter_mut().enumerate() {

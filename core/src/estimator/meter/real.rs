@@ -55,8 +55,6 @@ pub trait Real:
     fn cosh(self) -> Self;
     /// Inverse hyperbolic sine (libm).
     fn asinh(self) -> Self;
-    /// `self` to the power `y` (libm).
-    fn powf(self, y: Self) -> Self;
     /// Evaluates `f` in this precision and returns the result as f64. Design-time math (filter
     /// coefficients, start values) goes through it so that an f32 estimator, the target's,
     /// links no f64 transcendental function (10.3 KB less flash, `cargo xtask size`); the f64
@@ -139,10 +137,6 @@ impl Real for f32 {
     fn asinh(self) -> Self {
         libm::asinhf(self)
     }
-    #[inline]
-    fn powf(self, y: Self) -> Self {
-        libm::powf(self, y)
-    }
     const ROOT_TOL: Self = 64.0 * f32::EPSILON;
 }
 
@@ -212,10 +206,6 @@ impl Real for f64 {
     #[inline]
     fn asinh(self) -> Self {
         libm::asinh(self)
-    }
-    #[inline]
-    fn powf(self, y: Self) -> Self {
-        libm::pow(self, y)
     }
     const ROOT_TOL: Self = 1e-13;
 }
