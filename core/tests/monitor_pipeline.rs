@@ -39,7 +39,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
         }
         if let Some(o) = est.push(&s) {
             let r = fusion.update(&FusionInput {
-                t_s: t as f32,
+                t_s: t,
                 speed_mps: 20.0,
                 accel_mps2: 0.0,
                 fast: &o.fast,
@@ -47,7 +47,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
                 model: Some(&model),
             });
             let lvl = mon.update(&MonitorInput {
-                t_s: t as f32,
+                t_s: t,
                 amplitude_rad: o.amplitude_rad,
                 report: &r,
             });

@@ -43,7 +43,7 @@ mod app {
         /// Newest model margin (written by the background loop, read by `meter`).
         model: Option<ModelMargin>,
         /// Time (s) and trusted speed (m/s) of the newest meter sample (for the model loop).
-        now: (f32, f32),
+        now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,
     }
