@@ -450,14 +450,14 @@ mod bench {
             let mut m = ModelTask::new(PlantParams::nominal());
             let (mut call, mut cold, mut cycle) = (0u32, 0u32, 0u32);
             for c in 0..13u32 {
-                let t = c as f32 * MODEL_REFRESH_S;
+                let t = c as f64 * f64::from(MODEL_REFRESH_S);
                 let v = kmh_to_mps(24.0 + f64::from(c)) as f32;
                 let mut acc = 0u32;
                 let mut done = false;
                 for k in 0..200u16 {
                     // the clock advances 1 ms per call, as in the firmware's loop (a cycle
                     // starts at the first call at or after its due time)
-                    let tk = t + f32::from(k) * 1e-3;
+                    let tk = t + f64::from(k) * 1e-3;
                     let n = measure_once(|| done = black_box(m.step(tk, v)).is_some());
                     call = call.max(n);
                     acc = acc.saturating_add(n);
