@@ -41,9 +41,8 @@ mod bench {
     const LOAD_CPI: u64 = 1;
     /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: 6 %,
     /// a regression guard, not the goal. Issue 17's goal is 5 %: the continuation tracker met
-    /// it (49.85 per mille at 1 CPI), then the AR(8) slow meter (+7,156 instructions per meter
-    /// run) and the closed coil-current loop (+305 per control step) took the load to 54-55;
-    /// the goal stays open there.
+    /// it with the closed coil-current loop in (49.85 per mille at 1 CPI), then the AR(8) slow
+    /// meter (+7,156 instructions per meter run) took the load to 54-55; the goal stays open.
     const CPU_LOAD_BUDGET_PERMILLE: u32 = 60;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
