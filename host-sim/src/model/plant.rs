@@ -315,9 +315,11 @@ impl Method {
                     None => 1,
                     Some(a) => match a.parse::<u32>() {
                         Ok(n) if (1..=64).contains(&n) => n,
-                        _ => return Err(format!(
+                        _ => {
+                            return Err(format!(
                             "integrator `{name}`: substeps `{a}` must be an integer from 1 to 64"
-                        )),
+                        ))
+                        }
                     },
                 };
                 Ok(Method::ImexFixed { substeps })
