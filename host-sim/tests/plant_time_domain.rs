@@ -132,8 +132,8 @@ fn step_halving_and_second_solver_agree_with_damper_on() {
 /// (1, 2, 4 steps per 1 ms period) shrinks the error by at least 2^2 each time: the method is
 /// 4th order where the right-hand side is smooth, but z's law has kinks (|rel| and |z| at each
 /// stroke reversal) that the steps straddle, and a step over a kink has an O(h^2) local error,
-/// so the global order tends to 2 (measured 3.4 then 2.4). Two steps per period (the closed
-/// loop's `CLOSED_LOOP_METHOD`) meet the 1e-6 rad of the test above. Negative check: an
+/// so the global order tends to 2 (measured 3.4 then 2.4). Two steps per period meet the
+/// 1e-6 rad of the test above. Negative check: an
 /// explicit method at the same cost (RK4 with 3 steps per period, 12 evaluations like 2 IMEX
 /// steps) is unstable or far less accurate on the same run.
 #[test]

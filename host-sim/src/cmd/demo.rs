@@ -32,9 +32,9 @@ pub struct DemoArgs {
     /// Length of the speed ramp 20 -> 120 km/h, s: 1 to 600.
     #[arg(long, default_value_t = RAMP_S_DEFAULT, allow_negative_numbers = true, value_parser = arg_range::f64_in(RAMP_S))]
     pub ramp_s: f64,
-    /// The plant integrator: `imex-fixed[:SUBSTEPS]` (IMEX at SUBSTEPS fixed steps per 1 ms
-    /// period, z implicit), `dopri5[:RTOL]` (adaptive, rtol 1e-7 without RTOL) or `imex:RTOL`
-    /// (adaptive IMEX) [default: imex-fixed:2].
+    /// The plant integrator: `dopri5[:RTOL]` (adaptive, rtol 1e-7 without RTOL),
+    /// `imex-fixed[:SUBSTEPS]` (IMEX at SUBSTEPS fixed steps per 1 ms period, z implicit) or
+    /// `imex:RTOL` (adaptive IMEX) [default: dopri5].
     #[arg(long)]
     pub integrator: Option<String>,
 }

@@ -96,8 +96,8 @@ pub struct ReferenceResult {
     pub max_eig_diff: f64,
     /// Closed loop (the demo's ASMC run): simulated seconds per wall second, Rust.
     pub rust_cl_rate: f64,
-    /// The same closed loop with the plant on Dopri5 (rtol 1e-7) instead of the loop's default.
-    pub rust_cl_dopri5_rate: f64,
+    /// The same closed loop with the plant on `imex-fixed:2` (2 IMEX steps per period).
+    pub rust_cl_imex_rate: f64,
     /// The same drive in SciPy with a simple current law: simulated seconds per wall second.
     pub scipy_cl_rate: f64,
     /// Simulated time of the closed-loop row, s.
@@ -167,13 +167,13 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
     let (_, cl) =
         crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
-    // The same run with the plant on the adaptive Dopri5 (the previous default), side by side.
-    let dopri_case = crate::sim::demo_case::DemoCase {
-        method: Method::default(),
+    // The same run with the plant on the fixed-step IMEX (2 steps per period), side by side.
+    let imex_case = crate::sim::demo_case::DemoCase {
+        method: Method::ImexFixed { substeps: 2 },
         ..demo_case.clone()
     };
-    let (_, cl_dopri) =
-        crate::sim::demo_case::run_arm(&dopri_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
+    let (_, cl_imex) =
+        crate::sim::demo_case::run_arm(&imex_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
     let cl_peak = cl
         .series
         .psi_l_rad
@@ -234,7 +234,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
         max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
         max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
         rust_cl_rate: cl.sim_s / cl.wall_s.max(1e-12),
-        rust_cl_dopri5_rate: cl_dopri.sim_s / cl_dopri.wall_s.max(1e-12),
+        rust_cl_imex_rate: cl_imex.sim_s / cl_imex.wall_s.max(1e-12),
         scipy_cl_rate: ramp_s / num("ramp_wall_s")?,
         cl_duration_s: ramp_s,
         cl_peak_psi_rad: (cl_peak, num("ramp_peak_psi_l_rad")?),
@@ -386,10 +386,10 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
     let _ = writeln!(
         t,
         "  {:<34} {:>14.1} {:>14.2} {:>7.0}x",
-        "  the same, plant on dopri5:1e-7",
-        r.rust_cl_dopri5_rate,
+        "  the same, plant on imex-fixed:2",
+        r.rust_cl_imex_rate,
         r.scipy_cl_rate,
-        r.rust_cl_dopri5_rate / r.scipy_cl_rate
+        r.rust_cl_imex_rate / r.scipy_cl_rate
     );
     let _ = writeln!(
         t,
