@@ -47,6 +47,10 @@ impl PipelineParams {
             agreement_sigmas: 1.0,
             offset_tau_max_s: 30.0,
             offset_speed_window_mps: 1.0,
+            trend_speed_window_mps: 3.0,
+            trend_min_spread_mps: 0.5,
+            trend_max_slope_factor: 2.0,
+            mismatch_hold_speed_mps: 0.25,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()
         }
