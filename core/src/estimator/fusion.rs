@@ -8,10 +8,12 @@
 //!   delta = zeta_hat - zeta_model,window (the model damping averaged with the slow meter's own
 //!   forgetting, so a ramp's data lag is not mistaken for a mismatch) shifts the model's onset by
 //!   delta / |dzeta/dV|: dV = max(V_crit,model - V + delta / |dzeta/dV|, 0), in both directions;
+//!   delta is carried from the speed it describes to the current one by its fitted trend over
+//!   speed b, and the margin scaled by the slope ratio |dzeta/dV| / |dzeta/dV + b|;
 //! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
 //!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
 //! - model consistency: |delta| > k sigma_zeta (k = 3) held for
-//!   `mismatch_hold_s` sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
+//!   `mismatch_hold_s` (or over `mismatch_hold_speed_mps` of speed change) sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
 //!
 //! The model-based quantities are plain inputs ([`ModelMargin`]), computed from the plant model
 //! by [`super::model_margin`].
