@@ -8,8 +8,6 @@
 //!   delta = zeta_hat - zeta_model,window (the model damping averaged with the slow meter's own
 //!   forgetting, so a ramp's data lag is not mistaken for a mismatch) shifts the model's onset by
 //!   delta / |dzeta/dV|: dV = max(V_crit,model - V + delta / |dzeta/dV|, 0), in both directions;
-//!   delta is carried from the speed it describes to the current one by its fitted trend over
-//!   speed b, and the margin scaled by the slope ratio |dzeta/dV| / |dzeta/dV + b|;
 //! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
 //!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
 //! - model consistency: |delta| > k sigma_zeta (k = 3) held for
@@ -35,16 +33,6 @@ pub struct FusionParams {
     pub offset_tau_max_s: f32,
     /// Speed interval the offset is averaged over, m/s.
     pub offset_speed_window_mps: f32,
-    /// Speed interval over which the offset's trend d delta/dV is fitted, m/s (0: no trend).
-    /// The averaged offset describes the plant at the speed averaged the same way, which on a
-    /// ramp lies seconds behind; the trend carries it to the current speed.
-    pub trend_speed_window_mps: f32,
-    /// The trend is fitted only over a speed spread (standard deviation) of at least this,
-    /// m/s: at constant speed it shrinks to zero instead of fitting noise.
-    pub trend_min_spread_mps: f32,
-    /// The plant slope (the model's plus the trend) is trusted up to this factor of the
-    /// model's, steeper or flatter (>= 1; 1: the model's slope).
-    pub trend_max_slope_factor: f32,
     /// Mismatch must persist this long to raise the flag, s.
     pub mismatch_hold_s: f32,
     /// ... or over this much speed change, m/s, whichever comes first (0: time only). The
@@ -84,9 +72,6 @@ impl Default for FusionParams {
             agreement_sigmas: 3.0,
             offset_tau_max_s: 0.0,
             offset_speed_window_mps: 2.0,
-            trend_speed_window_mps: 0.0,
-            trend_min_spread_mps: 0.5,
-            trend_max_slope_factor: 1.0,
             mismatch_hold_s: 3.0,
             mismatch_hold_speed_mps: 0.0,
             mismatch_release_s: 3.0,
@@ -184,17 +169,7 @@ pub struct Fusion {
     window_lambda: Option<f32>,
     model_sum: f32,
     model_weight: f32,
-    /// Speed averaged like the model damping (the speed the slow estimate describes).
-    speed_sum: f32,
     offset: f32,
-    /// Speed averaged like the offset: the speed `offset` describes.
-    offset_speed: f32,
-    /// Exponentially weighted regression of the offset on `offset_speed`: mean speed, mean
-    /// offset, their covariance and the speed variance.
-    trend_v: f32,
-    trend_delta: f32,
-    trend_cov: f32,
-    trend_var: f32,
     /// Time of the last offset update (None before the first).
     offset_t_s: Option<f32>,
 }
@@ -219,13 +194,7 @@ impl Fusion {
             window_lambda: None,
             model_sum: 0.0,
             model_weight: 0.0,
-            speed_sum: 0.0,
             offset: 0.0,
-            offset_speed: 0.0,
-            trend_v: 0.0,
-            trend_delta: 0.0,
-            trend_cov: 0.0,
-            trend_var: 0.0,
             offset_t_s: None,
         }
     }
@@ -275,56 +244,35 @@ impl Fusion {
         r.zeta_model = Some(m.zeta as f32);
         r.freq_model_hz = m.freq_hz.is_finite().then_some(m.freq_hz as f32);
 
-        // the model damping (and the speed) over the data's window, and the offset between them
+        // the model damping over the data's window, and the offset between them
         let zm = m.zeta as f32;
-        let (zm_window, v_window) = match self.window_lambda {
+        let zm_window = match self.window_lambda {
             Some(l) => {
                 self.model_sum = l * self.model_sum + zm;
-                self.speed_sum = l * self.speed_sum + v;
                 self.model_weight = l * self.model_weight + 1.0;
-                (
-                    self.model_sum / self.model_weight,
-                    self.speed_sum / self.model_weight,
-                )
+                self.model_sum / self.model_weight
             }
-            None => (zm, v),
+            None => zm,
         };
         if data_valid {
             let raw = finite_or(r.zeta_data - zm_window, 0.0);
-            let speed_tau =
-                |window: f32| (window / libm::fabsf(a).max(1e-3)).min(self.params.offset_tau_max_s);
-            // backward-Euler first-order averages (no expf in the image); 1 at the first update
-            let dt = self.offset_t_s.map_or(0.0, |t0| (t - t0).clamp(0.0, 1.0));
-            let gain = |tau: f32| {
-                if self.offset_t_s.is_some() && tau > 0.0 {
-                    dt / (tau + dt)
-                } else {
-                    1.0
+            let tau = (self.params.offset_speed_window_mps / libm::fabsf(a).max(1e-3))
+                .min(self.params.offset_tau_max_s);
+            self.offset = match self.offset_t_s {
+                Some(t0) if tau > 0.0 => {
+                    // backward-Euler first-order average (no expf in the image)
+                    let dt = (t - t0).clamp(0.0, 1.0);
+                    self.offset + dt / (tau + dt) * (raw - self.offset)
                 }
+                _ => raw,
             };
-            let g = gain(speed_tau(self.params.offset_speed_window_mps));
-            self.offset += g * (raw - self.offset);
-            self.offset_speed += g * (v_window - self.offset_speed);
-            if self.params.trend_speed_window_mps > 0.0 {
-                let g = gain(speed_tau(self.params.trend_speed_window_mps));
-                let dv = self.offset_speed - self.trend_v;
-                let dd = self.offset - self.trend_delta;
-                self.trend_v += g * dv;
-                self.trend_delta += g * dd;
-                self.trend_cov = (1.0 - g) * (self.trend_cov + g * dv * dd);
-                self.trend_var = (1.0 - g) * (self.trend_var + g * dv * dv);
-            }
             self.offset_t_s = Some(t);
         }
-        // the offset carried from the speed it describes to the current one
-        let min_var = self.params.trend_min_spread_mps * self.params.trend_min_spread_mps;
-        let trend = self.trend_cov / self.trend_var.max(min_var).max(1e-6);
-        let offset = finite_or(self.offset + trend * (v - self.offset_speed), self.offset);
-        r.zeta_offset = offset;
+        r.zeta_offset = self.offset;
         // consistency with hysteresis in time
         if data_valid {
             let sigma = r.sigma_zeta_data.max(1e-6);
-            let dev = libm::fabsf(offset) / sigma;
+            let dev = libm::fabsf(self.offset) / sigma;
             if dev > self.params.mismatch_sigmas {
                 self.agree_since_s = None;
                 let since = *self.mismatch_since_s.get_or_insert(t);
@@ -363,28 +311,15 @@ impl Fusion {
                 DataMarginUse::Always => true,
                 DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
             };
-        let correction = if use_data { offset } else { 0.0 };
+        let correction = if use_data { self.offset } else { 0.0 };
         r.zeta_correction = correction;
         let shift = correction as f64 * inv_slope;
-        // the plant's slope is the model's plus the offset's trend: the corrected margin is
-        // the shifted model margin scaled by |model slope| / |plant slope|, bounded to a
-        // factor of `trend_max_slope_factor` either way (a noisy trend cannot run away)
-        let k = f64::from(self.params.trend_max_slope_factor.max(1.0));
-        let plant_slope = slope + f64::from(trend);
-        let slope_scale = if plant_slope * slope > 0.0 {
-            (libm::fabs(slope) / libm::fabs(plant_slope)).clamp(1.0 / k, k)
-        } else {
-            k
-        };
         let candidate = match model_onset {
-            Some(vc) if use_data => {
-                Some(((vc - v as f64 + shift) * slope_scale, MarginSource::Data))
-            }
+            Some(vc) if use_data => Some((vc - v as f64 + shift, MarginSource::Data)),
             Some(vc) => Some((vc - v as f64, MarginSource::Model)),
-            None if use_data => Some((
-                (m.zeta + correction as f64) * inv_slope * slope_scale,
-                MarginSource::Data,
-            )),
+            None if use_data => {
+                Some(((m.zeta + correction as f64) * inv_slope, MarginSource::Data))
+            }
             None => None,
         };
         let best = candidate
@@ -578,61 +513,42 @@ mod tests {
         assert_eq!(r.margin_source, MarginSource::Data);
     }
 
-    /// On a ramp the slow estimate describes the plant seconds ago (here: the plant damping
-    /// through the meter's own exponential window); a plant whose damping falls faster with
-    /// speed than the model's has an offset that grows along the ramp. The fitted trend carries
-    /// the offset to the current speed; without it the offset lags.
+    /// A steady 5-sigma mismatch on a 1 km/h/s ramp: with the speed hold the flag drops after
+    /// 0.25 m/s of speed change (0.9 s), with the time hold alone after 3 s.
     #[test]
-    fn offset_trend_carries_the_offset_to_the_current_speed() {
-        let lambda = 0.998f32;
-        let run = |trend_window: f32| {
+    fn mismatch_hold_over_speed_shortens_the_hold_on_a_ramp() {
+        let flag_time = |hold_speed: f32| {
             let mut f = Fusion::new(FusionParams {
-                offset_tau_max_s: 30.0,
-                offset_speed_window_mps: 1.0,
-                trend_speed_window_mps: trend_window,
+                mismatch_hold_speed_mps: hold_speed,
                 ..FusionParams::default()
-            })
-            .matched_to(lambda);
-            let accel = 0.278f32;
-            let offset_at = |v: f32| -0.002 * (v - 5.0);
-            let (mut num, mut den) = (0.0f32, 0.0f32);
-            let mut r = MarginReport::default();
-            for k in 0..4000 {
-                let t = k as f32 * 0.01;
-                let v = 5.0 + accel * t;
-                let zm = 0.1 - 0.003 * v;
-                num = lambda * num + zm + offset_at(v);
-                den = lambda * den + 1.0;
-                let e = est(num / den, 0.001);
-                let m = ModelMargin {
-                    zeta: zm as f64,
-                    freq_hz: 8.0,
-                    dzeta_dv_per_mps: -0.003,
-                    v_crit_onset_mps: Some(f64::from(0.1f32 / 0.003)),
-                    valid: true,
-                };
-                r = f.update(&FusionInput {
-                    t_s: t,
-                    speed_mps: v,
-                    accel_mps2: accel,
-                    fast: &e,
-                    slow: &e,
-                    model: Some(&m),
-                });
-            }
-            (r.zeta_offset, offset_at(r.speed_mps))
+            });
+            let m = ModelMargin {
+                zeta: 0.05,
+                freq_hz: 8.0,
+                dzeta_dv_per_mps: -0.004,
+                v_crit_onset_mps: Some(30.0),
+                valid: true,
+            };
+            let e = est(0.0, 0.01);
+            (0..1000)
+                .map(|k| k as f32 * 0.01)
+                .find(|&t| {
+                    !f.update(&FusionInput {
+                        t_s: t,
+                        speed_mps: 5.0 + 0.278 * t,
+                        accel_mps2: 0.278,
+                        fast: &e,
+                        slow: &e,
+                        model: Some(&m),
+                    })
+                    .model_consistent
+                })
+                .unwrap_or(f32::INFINITY)
         };
-        let (with, truth) = run(3.0);
-        let (without, _) = run(0.0);
-        assert!(
-            (with - truth).abs() < 0.1 * truth.abs(),
-            "{with} vs {truth}"
-        );
-        // the measured offset alone describes a speed about 2.4 m/s back
-        assert!(
-            (without - truth).abs() > 0.15 * truth.abs(),
-            "{without} vs {truth}"
-        );
+        let with = flag_time(0.25);
+        let without = flag_time(0.0);
+        assert!((with - 0.25 / 0.278).abs() < 0.02, "{with}");
+        assert!((without - 3.0).abs() < 0.02, "{without}");
     }
 
     #[test]

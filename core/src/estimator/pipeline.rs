@@ -42,18 +42,13 @@ impl PipelineParams {
     /// once held over 0.25 m/s of speed change (0.9 s at 1 km/h/s: the time hold alone cost
     /// 3 km/h of lead, `shimmy-sim mismatch`). The offset is averaged over 1 m/s of speed
     /// change (at most 30 s): at constant speed the meter's 10 s memory then spans three
-    /// independent windows, on the 1 km/h/s ramp 3.6 s of extra lag. Its trend over speed is
-    /// fitted over 3 m/s (about the lag of the averaged offset plus its span on that ramp) and
-    /// may change the model's slope by up to a factor 2.
+    /// independent windows, on the 1 km/h/s ramp 3.6 s of extra lag.
     pub fn tuned_fusion() -> FusionParams {
         FusionParams {
             mismatch_sigmas: 2.5,
             agreement_sigmas: 1.0,
             offset_tau_max_s: 30.0,
             offset_speed_window_mps: 1.0,
-            trend_speed_window_mps: 3.0,
-            trend_min_spread_mps: 0.5,
-            trend_max_slope_factor: 2.0,
             mismatch_hold_speed_mps: 0.25,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()

@@ -37,8 +37,6 @@ pub const MIN_LEAD_KMH: f64 = 3.0;
 pub const DRIVE_S: Range = Range::closed(10.0, 3600.0, "s");
 /// Ramp rate: 0.1 to 10 km/h per s.
 pub const RATE: Range = Range::closed(0.1, 10.0, "km/h/s");
-/// Offset-trend speed window override: 0 to 20 m/s.
-pub const TREND_WINDOW: Range = Range::closed(0.0, 20.0, "m/s");
 /// Settle time at the ramp's start speed, s.
 pub const SETTLE_S: f64 = 30.0;
 /// The ramp starts at this fraction of the true onset (at least 3 km/h).
@@ -66,10 +64,6 @@ pub struct MismatchArgs {
     /// default one).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Override the fusion's offset-trend speed window, m/s, 0 to 20 (0: no trend, the
-    /// offset as measured; default: the vehicle's pipeline setting).
-    #[arg(long, value_parser = arg_range::f64_in(TREND_WINDOW))]
-    pub trend_window_mps: Option<f64>,
     /// Output directory (mismatch.md, mismatch.csv).
     #[arg(long, default_value = "out/mismatch")]
     pub out: PathBuf,
@@ -312,11 +306,7 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
         bail!("--only matches no case; cases: {}", names.join(", "));
     }
     let wall = std::time::Instant::now();
-    let mut pp = vehicle.pipeline_params();
-    if let Some(w) = a.trend_window_mps {
-        TREND_WINDOW.check("--trend-window-mps", w)?;
-        pp.fusion.trend_speed_window_mps = w as f32;
-    }
+    let pp = vehicle.pipeline_params();
     let rows: Vec<CaseResult> = chosen
         .par_iter()
         .map(|c| run_case(c, &a.rates_kmh_per_s, a.drive_s, pp, a.seed))
