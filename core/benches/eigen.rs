@@ -45,7 +45,7 @@ fn bench(c: &mut Criterion) {
     let run_cycle = |tr: &mut ModelMarginTracker, t: &mut f32| -> u16 {
         loop {
             *t += 1e-3;
-            if let Some(pt) = tr.step(*t, black_box(25.0 / 3.6), 0.0) {
+            if let Some(pt) = tr.step(f64::from(*t), black_box(25.0 / 3.6), 0.0) {
                 // idle out the rest of the 100 ms period without timing it
                 return pt.calls;
             }

@@ -999,8 +999,8 @@ pub static FIELDS: &[Field] = &[
         "-",
         1.0,
         10.0,
-        "data and model disagree beyond this many reported sigmas (the data margin then \
-         replaces the model's)",
+        "data and model disagree beyond this many reported sigmas (the model's margin is \
+         then corrected by the measured damping offset)",
         |v| v.fusion.mismatch_sigmas
     ),
 ];

@@ -39,7 +39,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
         }
         if let Some(o) = est.push(&s) {
             let r = fusion.update(&FusionInput {
-                t_s: t as f32,
+                t_s: t,
                 speed_mps: 20.0,
                 accel_mps2: 0.0,
                 fast: &o.fast,
@@ -47,7 +47,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
                 model: Some(&model),
             });
             let lvl = mon.update(&MonitorInput {
-                t_s: t as f32,
+                t_s: t,
                 amplitude_rad: o.amplitude_rad,
                 report: &r,
             });
@@ -86,7 +86,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
         "event frequency {}",
         e.freq_hz
     );
-    assert!(e.start_s as f64 >= t0 && (e.start_s as f64) < t0 + 0.5);
+    assert!(e.start_s >= t0 && e.start_s < t0 + 0.5);
     // burst 3 s; ShimmyPresent ends when the envelope sqrt(2 ms) (ms averaged with tau, so the
     // envelope decays with 2 tau) falls below amp_off, plus the release dwell
     let tau = EstimatorConfig::default().amplitude_tau_s as f64;

@@ -43,7 +43,7 @@ mod app {
         /// Newest model margin (written by the background loop, read by `meter`).
         model: Option<ModelMargin>,
         /// Time (s) and trusted speed (m/s) of the newest meter sample (for the model loop).
-        now: (f32, f32),
+        now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,
     }
@@ -147,7 +147,7 @@ mod app {
                 });
                 if cycles % 10 == 1 {
                     defmt::info!(
-                    "model: t {=f32} s, v {=f64} m/s: shimmy zeta {=f64} at {=f64} Hz, dzeta/dV {=f64} per m/s, onset {=f64} m/s; {=u16} eigen-solves in {=u16} calls, {=u16} errors",
+                    "model: t {=f64} s, v {=f64} m/s: shimmy zeta {=f64} at {=f64} Hz, dzeta/dV {=f64} per m/s, onset {=f64} m/s; {=u16} eigen-solves in {=u16} calls, {=u16} errors",
                     pt.t_s,
                     pt.speed_mps,
                     m.zeta,
@@ -240,7 +240,7 @@ mod app {
             let runs = *cx.local.meter_runs;
             if changed {
                 defmt::warn!(
-                    "warning level {=str} at t = {=f32} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
+                    "warning level {=str} at t = {=f64} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
                     level_name(u.level),
                     u.report.t_s,
                     u.report.speed_mps,
@@ -255,7 +255,7 @@ mod app {
                 let h = cx.shared.health.lock(|h| *h);
                 let r = &u.report;
                 defmt::info!(
-                    "margin: t {=f32} s, v {=f32} m/s, zeta data {=f32} +- {=f32} (valid {=bool}), fast {=f32}, {=f32} Hz, model zeta {=f32}, margin {=f32} m/s, ttc {=f32} s, consistent {=bool}, level {=str}; {}",
+                    "margin: t {=f64} s, v {=f32} m/s, zeta data {=f32} +- {=f32} (valid {=bool}), fast {=f32}, {=f32} Hz, model zeta {=f32}, margin {=f32} m/s, ttc {=f32} s, consistent {=bool}, level {=str}; {}",
                     r.t_s,
                     r.speed_mps,
                     r.zeta_data,

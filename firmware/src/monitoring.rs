@@ -28,12 +28,18 @@ use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::params::PlantParams;
-use shimmy_core::supervisor::frame::MarginStatus;
+use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
 /// Control period, s.
 pub const DT_S: f32 = 1e-3;
+
+/// Time of control step `steps` for the margin path, s: `f64`, so the millisecond stays exact
+/// over any drive (`f32` seconds lose it after 2^24 ms = 4.66 h).
+pub fn step_time_s(steps: u64) -> f64 {
+    steps as f64 * (f64::from(NOMINAL_PERIOD_US) * 1e-6)
+}
 /// Meter samples per meter-task run (1 kHz / 100 Hz).
 pub const METER_DECIMATION: u32 = 10;
 /// Rolling radius used for the wheel-order phase, m (the reference board's tone wheel).
@@ -103,7 +109,12 @@ pub struct DataMargin {
     last_speed_mps: f32,
     speed_filt_mps: f32,
     accel_mps2: f32,
-    last_t_s: Option<f32>,
+    last_t_s: Option<f64>,
+    /// Control steps since the first sample, widened from the samples' wrapping `u32` step
+    /// count so the pipeline's time neither wraps (49.7 days at 1 kHz) nor loses the
+    /// millisecond (an `f32` second count does after 2^24 ms = 4.66 h).
+    steps: u64,
+    last_step: Option<u32>,
     last_level: Level,
     last_valid: bool,
 }
@@ -117,6 +128,8 @@ impl DataMargin {
             speed_filt_mps: 0.0,
             accel_mps2: 0.0,
             last_t_s: None,
+            steps: 0,
+            last_step: None,
             last_level: Level::Normal,
             last_valid: false,
         })
@@ -152,7 +165,11 @@ impl DataMargin {
         if speed_ok {
             self.last_speed_mps = s.speed_mps;
         }
-        let t_s = s.step as f32 * DT_S;
+        self.steps += self.last_step.map_or(u64::from(s.step), |last| {
+            u64::from(s.step.wrapping_sub(last))
+        });
+        self.last_step = Some(s.step);
+        let t_s = step_time_s(self.steps);
         let v = self.last_speed_mps;
         let sample = Sample {
             psi_l_rad: s.psi_l_rad,
@@ -176,13 +193,13 @@ impl DataMargin {
     }
 
     /// Acceleration: the derivative of the first-order filtered speed (tau 0.5 s).
-    fn update_accel(&mut self, t_s: f32, v: f32) {
+    fn update_accel(&mut self, t_s: f64, v: f32) {
         if !v.is_finite() {
             return;
         }
         match self.last_t_s {
             Some(t0) if t_s > t0 => {
-                let dt = t_s - t0;
+                let dt = (t_s - t0) as f32;
                 let a = dt / (0.5 + dt);
                 let prev = self.speed_filt_mps;
                 self.speed_filt_mps += a * (v - self.speed_filt_mps);
@@ -226,7 +243,7 @@ impl ModelTask {
 
     /// One unit of work (at most one eigen-solve) at time `t_s` and speed `speed_mps`; the
     /// point when a cycle completes.
-    pub fn step(&mut self, t_s: f32, speed_mps: f32) -> Option<ModelPoint> {
+    pub fn step(&mut self, t_s: f64, speed_mps: f32) -> Option<ModelPoint> {
         self.tracker.step(t_s, speed_mps, 0.0)
     }
 
@@ -257,11 +274,42 @@ mod tests {
         assert_eq!(n, 10);
     }
 
+    /// The reports' time stamps after 5 h of driving and across the wrap of the `u32` step
+    /// count: every 100 Hz report exactly 10 ms after the previous one. With the old
+    /// `step as f32 * DT_S` the spacing there is not 10 ms: the f32 second count has lost it.
+    #[test]
+    fn report_time_keeps_the_millisecond_over_days_and_across_the_step_wrap() {
+        for start in [5 * 3600 * 1000u32, u32::MAX - 205] {
+            let mut d = DataMargin::new().expect("default config");
+            let mut times = heapless::Vec::<f64, 64>::new();
+            for k in 0..400u32 {
+                let s = MeterSample {
+                    step: start.wrapping_add(k),
+                    psi_l_rad: 0.0,
+                    psi_r_rad: 0.0,
+                    speed_mps: 12.0,
+                    cmd_a: 0.0,
+                };
+                if let Some((u, _)) = d.push(&s, None) {
+                    times.push(u.report.t_s).expect("capacity");
+                }
+            }
+            assert_eq!(times.len(), 40);
+            for w in times.windows(2) {
+                assert!((w[1] - w[0] - 0.010).abs() < 1e-9, "start {start}: {w:?}");
+            }
+            // what the old f32 time did at the same point
+            let old = |step: u32| step as f32 * DT_S;
+            let gap = old(start.wrapping_add(10)) - old(start);
+            assert!((gap - 0.010).abs() > 1e-5, "f32 gap {gap}");
+        }
+    }
+
     #[test]
     fn model_margin_inside_and_below_the_window() {
         use shimmy_core::params::kmh_to_mps;
         let mut m = ModelTask::new(PlantParams::nominal());
-        let mut run = |t: f32, v: f64| {
+        let mut run = |t: f64, v: f64| {
             for _ in 0..200 {
                 if let Some(p) = m.step(t, v as f32) {
                     return p.margin();
@@ -275,7 +323,7 @@ mod tests {
         let vc = r.v_crit_onset_mps.expect("onset above");
         assert!((vc - kmh_to_mps(29.35)).abs() < kmh_to_mps(0.05), "{vc}");
         // Inside the window the shimmy mode is unstable: the margin is zero (onset <= V).
-        let r = run(MODEL_REFRESH_S, kmh_to_mps(50.0));
+        let r = run(f64::from(MODEL_REFRESH_S), kmh_to_mps(50.0));
         assert!(r.valid && r.zeta < 0.0);
         assert!(r.v_crit_onset_mps.is_some_and(|v| v <= kmh_to_mps(50.0)));
     }

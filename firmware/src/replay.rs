@@ -14,7 +14,7 @@
 //! are 0 at raw count [`ZERO_COUNTS`].
 
 use crate::drivers::as5047p::AngleTracker;
-use crate::monitoring::{safe_controller, DataMargin, MeterSample, ModelTask, DT_S};
+use crate::monitoring::{safe_controller, step_time_s, DataMargin, MeterSample, ModelTask};
 use shimmy_core::estimator::model_margin::ModelMargin;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
@@ -258,7 +258,7 @@ pub fn replay(
         // The background model loop: one tracker call per sample here (on the board as many as
         // the CPU leaves; the results are the same per completed cycle, only their timing
         // differs).
-        if let Some(pt) = model_task.step(step as f32 * DT_S, data.speed_mps()) {
+        if let Some(pt) = model_task.step(step_time_s(u64::from(step)), data.speed_mps()) {
             let m = pt.margin();
             d.channels[6].record(
                 |h| {

@@ -3,10 +3,15 @@
 //! calls with a constant 0.5 A current command re-issued every period, starting inside the
 //! Hopf window from a 3 deg wheel-yaw disturbance (the damper sliding hard: the stiff case).
 //! Real-time factor = 1 s / (time per iteration).
+//!
+//! `closed_loop_demo_asmc_30s`: the demo's whole ASMC run (30 s ramp; sensors, the core's
+//! supervised controller and mode meter at 1 kHz) per iteration, once per plant integrator;
+//! simulated s per wall s = 30 s / (time per iteration).
 use criterion::{criterion_group, criterion_main, Criterion};
 use shimmy_core::params::{kmh_to_mps, PlantParams};
 use shimmy_sim::model::disturbance::initial_yaw;
 use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator};
+use shimmy_sim::sim::demo_case::{self, ARMS};
 use std::hint::black_box;
 
 /// The explicit baseline (the previous default).
@@ -57,6 +62,26 @@ fn bench(c: &mut Criterion) {
     g.bench_function("no_damper_dopri5", |b| {
         b.iter(|| one_second(DOPRI5, 0.0, 3.0, false))
     });
+    g.finish();
+    let case = demo_case::demo_case(30.0).expect("demo case");
+    let mut g = c.benchmark_group("closed_loop_demo_asmc_30s");
+    g.sample_size(10);
+    for method in [
+        DOPRI5,
+        Method::ImexFixed { substeps: 2 },
+        Method::ImexFixed { substeps: 1 },
+    ] {
+        let case = demo_case::DemoCase {
+            method,
+            ..case.clone()
+        };
+        g.bench_function(method.name(), |b| {
+            b.iter(|| {
+                let (_, r) = demo_case::run_arm(&case, ARMS[1].1, 30.0, 5).expect("run");
+                black_box(r.sim_s)
+            })
+        });
+    }
     g.finish();
 }
 

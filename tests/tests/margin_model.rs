@@ -64,13 +64,13 @@ fn dense_crossings(p: &PlantParams, c: f64) -> Vec<(f64, CrossingKind)> {
 /// used, asserting <= 1 eigen-solve per call.
 fn cycle<T: SolveFloat>(
     t: &mut ModelMarginTracker<T>,
-    t0: f32,
+    t0: f64,
     v_mps: f64,
     c: f64,
 ) -> (ModelPoint, usize) {
     for k in 0..1000usize {
         let before = t.total_eigen_solves();
-        let r = t.step(t0 + k as f32 * 1e-3, v_mps as f32, c as f32);
+        let r = t.step(t0 + k as f64 * 1e-3, v_mps as f32, c as f32);
         let solves = t.total_eigen_solves() - before;
         assert!(solves <= 1, "{solves} eigen-solves in one call");
         assert_eq!(u64::from(t.solves_last_call()), solves);
@@ -114,7 +114,7 @@ fn tracker_agrees_with_faer<T: SolveFloat>(eig_rel: f64) {
         assert!(!dense.is_empty(), "{}: no window", set.name());
         println!("{} c={c}: dense crossings {dense:?}", set.name());
         let mut tr = ModelMarginTracker::<T>::in_precision(p, cfg);
-        let mut t0 = 0.0f32;
+        let mut t0 = 0.0f64;
         for kmh in [5.0, 20.0, 45.0, 75.0, 100.0, 130.0] {
             let v = kmh_to_mps(kmh);
             // cold (fresh tracker) and warm (this one, hints from the previous speed)
@@ -258,7 +258,7 @@ fn incremental_update_never_exceeds_one_solve_per_call_and_finishes_in_100_calls
             0.0
         };
         let before = tr.total_eigen_solves();
-        let r = tr.step(t as f32, kmh_to_mps(kmh) as f32, c);
+        let r = tr.step(t, kmh_to_mps(kmh) as f32, c);
         assert!(tr.total_eigen_solves() - before <= 1, "t = {t}");
         if let Some(pt) = r {
             cycles += 1;
@@ -289,7 +289,7 @@ fn crossings_follow_a_slowly_changing_damper_by_newton_on_the_hopf_condition() {
         let mut tr = ModelMarginTracker::<T>::in_precision(p, ModelMarginConfig::default());
         let v = kmh_to_mps(20.0);
         let mut c = 300.0;
-        let mut t0 = 0.0f32;
+        let mut t0 = 0.0f64;
         let mut moved = 0.0f64;
         let first = cycle(&mut tr, t0, v, c).0;
         assert!(!first.tracked && first.eigen_solves > 10);

@@ -97,8 +97,8 @@ pub enum MarginSource {
 /// Inputs of one fusion step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FusionInput<'a> {
-    /// Time, s.
-    pub t_s: f32,
+    /// Time, s (`f64`: the millisecond stays exact over days of driving).
+    pub t_s: f64,
     /// Vehicle speed, m/s.
     pub speed_mps: f32,
     /// Vehicle acceleration, m/s^2.
@@ -114,8 +114,8 @@ pub struct FusionInput<'a> {
 /// The fused margin report. No field is ever NaN; absent quantities are `None`.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct MarginReport {
-    /// Time, s.
-    pub t_s: f32,
+    /// Time, s (as in [`FusionInput::t_s`]).
+    pub t_s: f64,
     /// Speed, m/s.
     pub speed_mps: f32,
     /// Data damping (slow instance, for the margin).
@@ -159,8 +159,8 @@ pub struct MarginReport {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fusion {
     params: FusionParams,
-    mismatch_since_s: Option<f32>,
-    agree_since_s: Option<f32>,
+    mismatch_since_s: Option<f64>,
+    agree_since_s: Option<f64>,
     consistent: bool,
     /// Data and model have been compared for a full hold or release time since the start.
     checked: bool,
@@ -171,7 +171,7 @@ pub struct Fusion {
     model_weight: f32,
     offset: f32,
     /// Time of the last offset update (None before the first).
-    offset_t_s: Option<f32>,
+    offset_t_s: Option<f64>,
 }
 
 fn finite_or(v: f32, d: f32) -> f32 {
@@ -215,7 +215,7 @@ impl Fusion {
 
     /// One fusion step (any rate; typically every decimated sample or 10 Hz).
     pub fn update(&mut self, inp: &FusionInput<'_>) -> MarginReport {
-        let t = finite_or(inp.t_s, 0.0);
+        let t = if inp.t_s.is_finite() { inp.t_s } else { 0.0 };
         let v = finite_or(inp.speed_mps, 0.0);
         let a = finite_or(inp.accel_mps2, 0.0);
         let data_valid = inp.slow.valid;
@@ -261,7 +261,7 @@ impl Fusion {
             self.offset = match self.offset_t_s {
                 Some(t0) if tau > 0.0 => {
                     // backward-Euler first-order average (no expf in the image)
-                    let dt = (t - t0).clamp(0.0, 1.0);
+                    let dt = ((t - t0) as f32).clamp(0.0, 1.0);
                     self.offset + dt / (tau + dt) * (raw - self.offset)
                 }
                 _ => raw,
@@ -280,14 +280,14 @@ impl Fusion {
                 if self.params.mismatch_hold_speed_mps > 0.0 {
                     hold = hold.min(self.params.mismatch_hold_speed_mps / libm::fabsf(a).max(1e-3));
                 }
-                if t - since >= hold {
+                if (t - since) as f32 >= hold {
                     self.consistent = false;
                     self.checked = true;
                 }
             } else if dev < self.params.agreement_sigmas {
                 self.mismatch_since_s = None;
                 let since = *self.agree_since_s.get_or_insert(t);
-                if t - since >= self.params.mismatch_release_s {
+                if (t - since) as f32 >= self.params.mismatch_release_s {
                     self.consistent = true;
                     self.checked = true;
                 }
@@ -370,7 +370,7 @@ mod tests {
     }
 
     /// One update at a constant 20 m/s with `e` as both data estimates.
-    fn steady_at_20_mps(f: &mut Fusion, e: &ModeEstimate, t: f32, m: &ModelMargin) -> MarginReport {
+    fn steady_at_20_mps(f: &mut Fusion, e: &ModeEstimate, t: f64, m: &ModelMargin) -> MarginReport {
         f.update(&FusionInput {
             t_s: t,
             speed_mps: 20.0,
@@ -436,8 +436,8 @@ mod tests {
         };
         let bad = est(0.02, 0.01); // 6 sigma off
         let good = est(0.075, 0.01);
-        let mut t = 0.0f32;
-        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| steady_at_20_mps(f, e, t, &m);
+        let mut t = 0.0f64;
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f64| steady_at_20_mps(f, e, t, &m);
         // a 2 s excursion does not trip the 3 s hold
         while t < 2.0 {
             assert!(step(&mut f, &bad, t).model_consistent);
@@ -478,7 +478,7 @@ mod tests {
             valid: true,
         };
         let agree = est(0.01, 0.01);
-        let step = |f: &mut Fusion, e: &ModeEstimate, t: f32| steady_at_20_mps(f, e, t, &m);
+        let step = |f: &mut Fusion, e: &ModeEstimate, t: f64| steady_at_20_mps(f, e, t, &m);
         let r = step(&mut f, &agree, 0.0);
         assert_eq!(r.margin_source, MarginSource::Model);
         assert!((r.speed_margin_mps.unwrap() - 5.0).abs() < 1e-5);
@@ -531,11 +531,11 @@ mod tests {
             };
             let e = est(0.0, 0.01);
             (0..1000)
-                .map(|k| k as f32 * 0.01)
+                .map(|k| f64::from(k) * 0.01)
                 .find(|&t| {
                     !f.update(&FusionInput {
                         t_s: t,
-                        speed_mps: 5.0 + 0.278 * t,
+                        speed_mps: 5.0 + 0.278 * t as f32,
                         accel_mps2: 0.278,
                         fast: &e,
                         slow: &e,
@@ -543,7 +543,7 @@ mod tests {
                     })
                     .model_consistent
                 })
-                .unwrap_or(f32::INFINITY)
+                .unwrap_or(f64::INFINITY)
         };
         let with = flag_time(0.25);
         let without = flag_time(0.0);
@@ -568,15 +568,15 @@ mod tests {
             valid: true,
         };
         let r = f.update(&FusionInput {
-            t_s: f32::NAN,
+            t_s: f64::NAN,
             speed_mps: f32::NAN,
             accel_mps2: f32::INFINITY,
             fast: &e,
             slow: &e,
             model: Some(&m),
         });
+        assert!(r.t_s.is_finite());
         for v in [
-            r.t_s,
             r.speed_mps,
             r.zeta_data,
             r.sigma_zeta_data,

@@ -104,7 +104,7 @@ pub struct Crossing {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ModelPoint {
     /// Time the cycle started (speed latched), s.
-    pub t_s: f32,
+    pub t_s: f64,
     /// Latched speed, m/s.
     pub speed_mps: f64,
     /// Damper equivalent viscous coefficient used, N s/m.
@@ -390,8 +390,8 @@ pub struct ModelMarginTracker<T: SolveFloat = f64> {
     /// The crossing eigenvalue nearest Re = 0 seen while refining the current bracket.
     refine_best: Option<(f64, Complex<f64>)>,
     last_c: f64,
-    cycle_start_s: Option<f32>,
-    next_due_s: Option<f32>,
+    cycle_start_s: Option<f64>,
+    next_due_s: Option<f64>,
     total_eigen_solves: u64,
     solves_last_call: u8,
     cycles: u32,
@@ -440,7 +440,7 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
         }
     }
 
-    fn blank(t_s: f32, v: f64, c: f64) -> ModelPoint {
+    fn blank(t_s: f64, v: f64, c: f64) -> ModelPoint {
         ModelPoint {
             t_s,
             speed_mps: v,
@@ -554,7 +554,7 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
     /// One unit of work. `t_s` time, `speed_mps` the current speed, `c_damper_nspm` the
     /// damper's equivalent viscous coefficient (0 = none). Returns the new point when a cycle
     /// completes on this call.
-    pub fn step(&mut self, t_s: f32, speed_mps: f32, c_damper_nspm: f32) -> Option<ModelPoint> {
+    pub fn step(&mut self, t_s: f64, speed_mps: f32, c_damper_nspm: f32) -> Option<ModelPoint> {
         self.solves_last_call = 0;
         if self.phase != Phase::Idle {
             self.work.calls = self.work.calls.saturating_add(1);
@@ -579,8 +579,10 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                     self.cycle_start_s = Some(t);
                     // 10 Hz on the schedule (no drift from the 1 ms call grid), unless late
                     self.next_due_s = Some(match self.next_due_s {
-                        Some(d) if d + self.cfg.period_s > t => d + self.cfg.period_s,
-                        _ => t + self.cfg.period_s,
+                        Some(d) if d + f64::from(self.cfg.period_s) > t => {
+                            d + f64::from(self.cfg.period_s)
+                        }
+                        _ => t + f64::from(self.cfg.period_s),
                     });
                     self.phase = Phase::Modes;
                     // The first unit of work is done on this same call.
@@ -616,7 +618,7 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 self.latest = Some(w);
                 self.cycles = self.cycles.saturating_add(1);
                 if let Some(t0) = self.cycle_start_s {
-                    if t_s - t0 > self.cfg.period_s {
+                    if (t_s - t0) as f32 > self.cfg.period_s {
                         self.overruns = self.overruns.saturating_add(1);
                     }
                 }
@@ -1039,7 +1041,7 @@ mod tests {
         let mut t = ModelMarginTracker::new(p, ModelMarginConfig::default());
         let mut done = None;
         for k in 0..200 {
-            let r = t.step(k as f32 * 1e-3, 5.0, 0.0);
+            let r = t.step(k as f64 * 1e-3, 5.0, 0.0);
             assert!(t.solves_last_call() <= 1);
             if let Some(r) = r {
                 done = Some((k, r));
@@ -1060,9 +1062,9 @@ mod tests {
     fn known_crossings_that_contradict_the_schur_solve_are_rescanned() {
         let p = ParamSet::Nominal.params();
         let mut t = ModelMarginTracker::new(p, ModelMarginConfig::default());
-        let run = |t: &mut ModelMarginTracker, t0: f32| {
+        let run = |t: &mut ModelMarginTracker, t0: f64| {
             (0..200u16)
-                .find_map(|k| t.step(t0 + f32::from(k) * 1e-3, 5.0, 0.0))
+                .find_map(|k| t.step(t0 + f64::from(k) * 1e-3, 5.0, 0.0))
                 .expect("a cycle completes")
         };
         let cold = run(&mut t, 0.0);

@@ -92,7 +92,7 @@ impl Default for MonitorParams {
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Event {
     /// Start time, s.
-    pub start_s: f32,
+    pub start_s: f64,
     /// Speed at the start, m/s.
     pub speed_mps: f32,
     /// Data frequency at the start (or at the amplitude peak once shimmy is present), Hz.
@@ -112,8 +112,8 @@ pub struct Event {
 /// Monitor inputs of one step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MonitorInput<'a> {
-    /// Time, s.
-    pub t_s: f32,
+    /// Time, s (`f64`, as in `FusionInput::t_s`).
+    pub t_s: f64,
     /// Yaw envelope amplitude (peak), rad.
     pub amplitude_rad: f32,
     /// Fused margin report.
@@ -125,11 +125,11 @@ pub struct MonitorInput<'a> {
 pub struct Monitor<const N: usize> {
     params: MonitorParams,
     level: Level,
-    release_since: Option<f32>,
+    release_since: Option<f64>,
     events: heapless::Deque<Event, N>,
     dropped: u32,
     open: Option<Event>,
-    last_t: f32,
+    last_t: f64,
 }
 
 fn lt(x: Option<f32>, th: f32) -> bool {
@@ -213,7 +213,7 @@ impl<const N: usize> Monitor<N> {
             self.release_since = None;
         } else if hold < self.level {
             let since = *self.release_since.get_or_insert(t);
-            if t - since >= self.params.release_s {
+            if (t - since) as f32 >= self.params.release_s {
                 // drop to the highest level whose hold condition still holds
                 self.level = hold.max(on);
                 self.release_since = None;
@@ -248,9 +248,9 @@ impl<const N: usize> Monitor<N> {
         }
         if let Some(ev) = self.open.as_mut() {
             if prev == Level::ShimmyPresent {
-                ev.shimmy_s += (t - last_t).max(0.0);
+                ev.shimmy_s += ((t - last_t) as f32).max(0.0);
             }
-            ev.duration_s = t - ev.start_s;
+            ev.duration_s = (t - ev.start_s) as f32;
             if self.level > ev.worst {
                 ev.worst = self.level;
             }
@@ -300,7 +300,7 @@ mod tests {
         let mut m = Monitor::<4>::new(MonitorParams::default());
         let mut t = 0.0;
         let mut step = |m: &mut Monitor<4>, r: &MarginReport, amp: f32, dt: f32| {
-            t += dt;
+            t += f64::from(dt);
             m.update(&MonitorInput {
                 t_s: t,
                 amplitude_rad: amp,
@@ -373,7 +373,7 @@ mod tests {
     #[test]
     fn event_log_records_episodes_and_drops_oldest() {
         let mut m = Monitor::<2>::new(MonitorParams::default());
-        let mut t = 0.0f32;
+        let mut t = 0.0f64;
         for ep in 0..3 {
             // 2 s quiet, then 3 s shimmy with a peak of 0.02 + ep * 0.01
             for _ in 0..200 {
@@ -432,14 +432,14 @@ mod tests {
         let r = report(f32::NAN, f32::NAN, Some(f32::NAN));
         for k in 0..100 {
             let lvl = m.update(&MonitorInput {
-                t_s: k as f32 * 0.01,
+                t_s: k as f64 * 0.01,
                 amplitude_rad: f32::NAN,
                 report: &r,
             });
             assert_eq!(lvl, Level::Normal);
         }
         m.update(&MonitorInput {
-            t_s: f32::NAN,
+            t_s: f64::NAN,
             amplitude_rad: 1.0,
             report: &r,
         });

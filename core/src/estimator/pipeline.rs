@@ -148,7 +148,7 @@ impl<const N: usize> DataPipeline<N> {
         sample: &Sample,
         speed_mps: f32,
         accel_mps2: f32,
-        t_s: f32,
+        t_s: f64,
         model: Option<&ModelMargin>,
     ) -> Option<PipelineOutput> {
         let out = self.meter.push(sample)?;
@@ -240,7 +240,7 @@ impl<const N: usize> ShimmyPipeline<N> {
         sample: &Sample,
         speed_mps: f32,
         accel_mps2: f32,
-        t_s: f32,
+        t_s: f64,
     ) -> Option<PipelineOutput> {
         if let Some(pt) = self.model.step(t_s, speed_mps, self.c_damper_nspm) {
             self.model_margin = Some(pt.margin());
@@ -324,11 +324,11 @@ mod tests {
                 },
                 damper_cmd: 0.0,
             };
-            let a = whole.push(&s, v, 0.5, t);
-            if let Some(pt) = tracker.step(t, v, 0.0) {
+            let a = whole.push(&s, v, 0.5, f64::from(t));
+            if let Some(pt) = tracker.step(f64::from(t), v, 0.0) {
                 mm = Some(pt.margin());
             }
-            let b = data.push(&s, v, 0.5, t, mm.as_ref());
+            let b = data.push(&s, v, 0.5, f64::from(t), mm.as_ref());
             // Debug text: bit-exact for finite values and equal for NaN (== would not be).
             assert_eq!(format!("{a:?}"), format!("{b:?}"), "tick {k}");
             outputs += usize::from(a.is_some());

@@ -91,7 +91,7 @@ mod check {
             if let Some(sample) = SafeController::estimator_sample(&o, wheel) {
                 if let Some(m) = est.push(&sample) {
                     let r = fusion.update(&FusionInput {
-                        t_s: o.validated.t_s,
+                        t_s: f64::from(o.validated.t_s),
                         speed_mps: f32::from_bits(word(4)),
                         accel_mps2: f32::from_bits(word(7)),
                         fast: &m.fast,

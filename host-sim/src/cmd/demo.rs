@@ -3,10 +3,11 @@
 //! meter running in the loop, and a self-contained Markdown report with plots and metrics.
 //! `--vehicle` and `--model-vehicle` run it on another vehicle (the ramp stays 20 -> 120 km/h).
 
+use crate::model::plant::Method;
 use crate::out::plot_util;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::arg_range::{self, Range};
-use crate::sim::closed_loop::{LoopResult, RunMetrics};
+use crate::sim::closed_loop::{LoopResult, RunMetrics, CLOSED_LOOP_METHOD};
 use crate::sim::demo_case::{demo_case_for, run_arm, ARMS};
 use crate::sim::standard::POTHOLE_NM;
 use crate::sim::vehicle_file;
@@ -31,6 +32,11 @@ pub struct DemoArgs {
     /// Length of the speed ramp 20 -> 120 km/h, s: 1 to 600.
     #[arg(long, default_value_t = RAMP_S_DEFAULT, allow_negative_numbers = true, value_parser = arg_range::f64_in(RAMP_S))]
     pub ramp_s: f64,
+    /// The plant integrator: `dopri5[:RTOL]` (adaptive, rtol 1e-7 without RTOL),
+    /// `imex-fixed[:SUBSTEPS]` (IMEX at SUBSTEPS fixed steps per 1 ms period, z implicit) or
+    /// `imex:RTOL` (adaptive IMEX) [default: dopri5].
+    #[arg(long)]
+    pub integrator: Option<String>,
 }
 
 /// The demo's ramp length: 1 to 600 s.
@@ -49,6 +55,8 @@ pub struct DemoOptions {
     pub plant: (String, Vehicle),
     /// The vehicle the firmware believes and its name; `None`: the simulated one.
     pub model: Option<(String, Vehicle)>,
+    /// The plant integrator of both arms.
+    pub method: Method,
 }
 
 impl Default for DemoOptions {
@@ -58,6 +66,7 @@ impl Default for DemoOptions {
             ramp_s: RAMP_S_DEFAULT,
             plant: ("nominal".into(), Vehicle::nominal()),
             model: None,
+            method: CLOSED_LOOP_METHOD,
         }
     }
 }
@@ -68,6 +77,12 @@ impl DemoOptions {
     pub fn from_args(a: &DemoArgs) -> Result<Self> {
         let mut o = DemoOptions {
             ramp_s: RAMP_S.check("--ramp-s", a.ramp_s)?,
+            method: match &a.integrator {
+                Some(name) => {
+                    Method::from_name(name).map_err(|e| anyhow::anyhow!("--integrator: {e}"))?
+                }
+                None => CLOSED_LOOP_METHOD,
+            },
             ..DemoOptions::default()
         };
         if let Some(v) = &a.vehicle {
@@ -149,7 +164,8 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let (plant_name, plant) = &o.plant;
     let model = o.model.as_ref().map_or(plant, |(_, m)| m);
-    let case = demo_case_for(plant, model, o.ramp_s)?;
+    let mut case = demo_case_for(plant, model, o.ramp_s)?;
+    case.method = o.method;
     let results: Vec<ReportRun> = ARMS
         .par_iter()
         .map(|&(label, arm)| {

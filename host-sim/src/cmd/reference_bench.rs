@@ -16,7 +16,7 @@
 //! cannot step over it). So the Rust side does strictly more work per
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
-use crate::model::plant::{idx, Inputs, Plant, Simulator, N_STATE};
+use crate::model::plant::{idx, Inputs, Method, Plant, Simulator, N_STATE};
 use crate::sim::arg_range::{self, Range};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -96,6 +96,8 @@ pub struct ReferenceResult {
     pub max_eig_diff: f64,
     /// Closed loop (the demo's ASMC run): simulated seconds per wall second, Rust.
     pub rust_cl_rate: f64,
+    /// The same closed loop with the plant on `imex-fixed:2` (2 IMEX steps per period).
+    pub rust_cl_imex_rate: f64,
     /// The same drive in SciPy with a simple current law: simulated seconds per wall second.
     pub scipy_cl_rate: f64,
     /// Simulated time of the closed-loop row, s.
@@ -165,6 +167,13 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
     let (_, cl) =
         crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
+    // The same run with the plant on the fixed-step IMEX (2 steps per period), side by side.
+    let imex_case = crate::sim::demo_case::DemoCase {
+        method: Method::ImexFixed { substeps: 2 },
+        ..demo_case.clone()
+    };
+    let (_, cl_imex) =
+        crate::sim::demo_case::run_arm(&imex_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
     let cl_peak = cl
         .series
         .psi_l_rad
@@ -225,6 +234,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
         max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
         max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
         rust_cl_rate: cl.sim_s / cl.wall_s.max(1e-12),
+        rust_cl_imex_rate: cl_imex.sim_s / cl_imex.wall_s.max(1e-12),
         scipy_cl_rate: ramp_s / num("ramp_wall_s")?,
         cl_duration_s: ramp_s,
         cl_peak_psi_rad: (cl_peak, num("ramp_peak_psi_l_rad")?),
@@ -372,6 +382,14 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
         r.rust_cl_rate,
         r.scipy_cl_rate,
         r.rust_cl_rate / r.scipy_cl_rate
+    );
+    let _ = writeln!(
+        t,
+        "  {:<34} {:>14.1} {:>14.2} {:>7.0}x",
+        "  the same, plant on imex-fixed:2",
+        r.rust_cl_imex_rate,
+        r.scipy_cl_rate,
+        r.rust_cl_imex_rate / r.scipy_cl_rate
     );
     let _ = writeln!(
         t,

@@ -11,7 +11,9 @@
 //! hold); [`jacobian_fd`] linearises the right-hand side numerically. Open-loop runs of a
 //! scenario live one layer up, in `sim::open_loop`.
 
-use crate::model::integrator::{rk4_step, Ark436, Dopri5, ImexSystem, IntegrateError, StepStats};
+use crate::model::integrator::{
+    rk4_step, Ark436, ArkFixed, Dopri5, ImexSystem, IntegrateError, StepStats,
+};
 use nalgebra::{DMatrix, SMatrix};
 use shimmy_core::mr_damper::{self, SpencerParams, SpencerState};
 use shimmy_core::params::PlantParams;
@@ -272,6 +274,72 @@ pub enum Method {
         /// Relative tolerance.
         rtol: f64,
     },
+    /// The same IMEX pair at a fixed step ([`ArkFixed`]): `substeps` equal steps per `advance`
+    /// call (per control period in the closed loop), no error control. Accurate when the
+    /// period resolves the slow (explicit) dynamics; z's stiff relaxation is taken by the
+    /// L-stable implicit tableau whatever its rate.
+    ImexFixed {
+        /// Steps per call.
+        substeps: u32,
+    },
+}
+
+impl Method {
+    /// The names [`Method::from_name`] accepts, for help texts and errors.
+    pub const NAMES: &'static str =
+        "dopri5, dopri5:RTOL, imex:RTOL, imex-fixed, imex-fixed:SUBSTEPS";
+
+    /// Parses `dopri5[:rtol]` (default rtol 1e-7), `imex:rtol` (the adaptive IMEX) or
+    /// `imex-fixed[:substeps]` (default 1 step per call); rtol in (0, 1e-2], substeps 1 to 64.
+    pub fn from_name(name: &str) -> Result<Self, String> {
+        let (kind, arg) = match name.split_once(':') {
+            Some((k, a)) => (k, Some(a)),
+            None => (name, None),
+        };
+        let rtol = |a: Option<&str>| -> Result<f64, String> {
+            let Some(a) = a else {
+                return Ok(1e-7);
+            };
+            match a.parse::<f64>() {
+                Ok(r) if r > 0.0 && r <= 1e-2 => Ok(r),
+                _ => Err(format!(
+                    "integrator `{name}`: rtol `{a}` must be a number in (0, 1e-2]"
+                )),
+            }
+        };
+        match kind {
+            "dopri5" => Ok(Method::Dopri5 { rtol: rtol(arg)? }),
+            "imex" => Ok(Method::Imex { rtol: rtol(arg)? }),
+            "imex-fixed" => {
+                let substeps = match arg {
+                    None => 1,
+                    Some(a) => match a.parse::<u32>() {
+                        Ok(n) if (1..=64).contains(&n) => n,
+                        _ => {
+                            return Err(format!(
+                            "integrator `{name}`: substeps `{a}` must be an integer from 1 to 64"
+                        ))
+                        }
+                    },
+                };
+                Ok(Method::ImexFixed { substeps })
+            }
+            _ => Err(format!(
+                "integrator `{name}`: unknown, expected one of {}",
+                Self::NAMES
+            )),
+        }
+    }
+
+    /// The name [`Method::from_name`] parses back.
+    pub fn name(&self) -> String {
+        match self {
+            Method::Dopri5 { rtol } => format!("dopri5:{rtol:e}"),
+            Method::Imex { rtol } => format!("imex:{rtol:e}"),
+            Method::ImexFixed { substeps } => format!("imex-fixed:{substeps}"),
+            Method::Rk4 { substeps } => format!("rk4:{substeps}"),
+        }
+    }
 }
 
 impl Default for Method {
@@ -383,6 +451,7 @@ pub struct Simulator {
     method: Method,
     dopri: Dopri5<N_STATE>,
     ark: Ark436<N_STATE>,
+    ark_fixed: ArkFixed<N_STATE>,
     rk4_evals: u64,
     // Inputs of the last successful Dopri5 period, while the state is untouched since: the
     // derivative at the start of the next period is then the last one of this (FSAL).
@@ -399,7 +468,7 @@ impl Simulator {
     pub fn with_method(plant: Plant, x0: State, method: Method) -> Self {
         let rtol = match method {
             Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
-            Method::Rk4 { .. } => 1e-7,
+            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
         };
         Simulator {
             plant,
@@ -408,6 +477,10 @@ impl Simulator {
             method,
             dopri: Dopri5::new(rtol, default_atol(rtol)),
             ark: Ark436::new(rtol, default_atol(rtol)),
+            ark_fixed: ArkFixed::new(match method {
+                Method::ImexFixed { substeps } => substeps,
+                _ => 1,
+            }),
             rk4_evals: 0,
             last_inputs: None,
         }
@@ -434,6 +507,15 @@ impl Simulator {
                     last_increment_m: std::cell::Cell::new(0.0),
                 };
                 self.ark.integrate(&sys, self.t_s, &mut self.x, dt_s)?;
+            }
+            Method::ImexFixed { .. } => {
+                let sys = HeldInputs {
+                    plant: &plant,
+                    inputs,
+                    last_increment_m: std::cell::Cell::new(0.0),
+                };
+                self.ark_fixed
+                    .integrate(&sys, self.t_s, &mut self.x, dt_s)?;
             }
             Method::Rk4 { substeps } => {
                 let n = substeps.max(1);
@@ -480,9 +562,12 @@ impl Simulator {
     /// Integrator statistics (right-hand-side evaluations so far, steps).
     pub fn stats(&self) -> StepStats {
         let mut s = self.dopri.stats;
-        s.accepted += self.ark.stats.accepted;
-        s.rejected += self.ark.stats.rejected;
-        s.evaluations += self.ark.stats.evaluations + self.rk4_evals;
+        for o in [self.ark.stats, self.ark_fixed.stats] {
+            s.accepted += o.accepted;
+            s.rejected += o.rejected;
+            s.evaluations += o.evaluations;
+        }
+        s.evaluations += self.rk4_evals;
         s
     }
 }
@@ -616,6 +701,32 @@ mod tests {
         assert!(dl < 0.0 && (dl - dr).abs() < 1e-12);
         let want = -0.5 * plant.params.l_t * f.damper_n / plant.params.i_k;
         assert!((dl - want).abs() < 1e-9 * want.abs());
+    }
+
+    /// Integrator names round-trip; bad ones are refused naming the part and its range.
+    #[test]
+    fn integrator_names_parse_and_bad_ones_are_refused() {
+        for m in [
+            Method::Dopri5 { rtol: 1e-7 },
+            Method::Imex { rtol: 3e-6 },
+            Method::ImexFixed { substeps: 2 },
+        ] {
+            assert_eq!(Method::from_name(&m.name()), Ok(m));
+        }
+        assert_eq!(Method::from_name("dopri5"), Ok(Method::default()));
+        assert_eq!(
+            Method::from_name("imex-fixed"),
+            Ok(Method::ImexFixed { substeps: 1 })
+        );
+        for (bad, says) in [
+            ("imex-fixed:0", "1 to 64"),
+            ("imex-fixed:x", "1 to 64"),
+            ("dopri5:0.5", "(0, 1e-2]"),
+            ("euler", "unknown"),
+        ] {
+            let e = Method::from_name(bad).unwrap_err();
+            assert!(e.contains(says) && e.contains(bad), "{bad}: {e}");
+        }
     }
 
     /// Reusing the last derivative across periods (same held input) gives bit-identical states

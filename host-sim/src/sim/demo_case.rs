@@ -4,6 +4,7 @@
 //! benchmark and the golden test.
 
 use crate::model::disturbance::{Scenario, SpeedProfile};
+use crate::model::plant::Method;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
@@ -29,6 +30,8 @@ pub struct DemoCase {
     pub v_fastest_mps: f64,
     /// Time of the pothole, s.
     pub t_pothole_s: f64,
+    /// The plant integrator of both arms ([`closed_loop::CLOSED_LOOP_METHOD`] unless changed).
+    pub method: Method,
 }
 
 /// The demo's two arms with their report labels: damper off (0 A) and ASMC.
@@ -80,6 +83,7 @@ pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<De
         window_kmh,
         v_fastest_mps: v_fg,
         t_pothole_s: t_hit,
+        method: closed_loop::CLOSED_LOOP_METHOD,
     })
 }
 
@@ -92,6 +96,7 @@ pub fn run_arm(
 ) -> Result<(LoopConfig, LoopResult)> {
     let mut cfg = LoopConfig::new(&case.plant, arm, ramp_s).with_model(&case.model);
     cfg.record_every = record_every;
+    cfg.method = case.method;
     let mut s = case.scenario.clone();
     let r = closed_loop::run(&cfg, &mut s, None)
         .with_context(|| format!("{}: integration failed", arm.name()))?;

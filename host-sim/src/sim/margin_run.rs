@@ -199,7 +199,7 @@ impl Pipe {
         })
     }
 
-    fn push(&mut self, s: &Sample, v: f32, a: f32, t: f32) -> Option<PipelineOutput> {
+    fn push(&mut self, s: &Sample, v: f32, a: f32, t: f64) -> Option<PipelineOutput> {
         match self {
             Pipe::Full(p) => p.push(s, v, a, t),
             Pipe::DataOnly(p) => p.push(s, v, a, t, None),
@@ -263,7 +263,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
             },
             damper_cmd: 0.0,
         };
-        let out = pipe.push(&sample, v as f32, accel as f32, t1 as f32);
+        let out = pipe.push(&sample, v as f32, accel as f32, t1);
         max_solves = max_solves.max(pipe.solves_last_call());
         let Some(o) = out else { continue };
         if o.level > Level::Normal && first_warning.is_none() {
