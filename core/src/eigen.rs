@@ -715,7 +715,13 @@ pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeS
         f64::INFINITY
     };
     let rel = v[PSI_R] * v[PSI_L].conj();
-    let wheel_phase_rad = libm::atan2(rel.im, rel.re);
+    // In f32 (scaled into its range): ample for a phase, and the firmware links no f64 atan.
+    let m = libm::fabs(rel.re).max(libm::fabs(rel.im));
+    let wheel_phase_rad = if m > 0.0 {
+        libm::atan2f((rel.im / m) as f32, (rel.re / m) as f32) as f64
+    } else {
+        0.0
+    };
     let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
         ModeShape::TyreLag
     } else if fw >= fp && fw >= fs {

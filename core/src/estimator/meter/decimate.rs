@@ -1,8 +1,9 @@
 //! Anti-alias filtering and decimation (1 kHz -> 100 Hz by default).
 //!
 //! The anti-alias filter is an 8th-order inverse-Chebyshev (Chebyshev II) low-pass made of four
-//! biquads (bilinear transform pre-warped at the stop-band edge; coefficients computed in f64 at
-//! construction, never typed in). Only what would fold INTO the shimmy band must be removed:
+//! biquads (bilinear transform pre-warped at the stop-band edge; coefficients computed at
+//! construction in f64 arithmetic with the transcendentals in the filter's precision, never
+//! typed in). Only what would fold INTO the shimmy band must be removed:
 //! after decimation to f_out, input content at f folds to |f - m f_out|, so the stop band starts
 //! at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB attenuation there
 //! and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band. The pass band is
@@ -76,22 +77,24 @@ impl<T: Real> AntiAliasFilter<T> {
         }
         let n = (2 * AA_SECTIONS) as f64;
         let k2 = 2.0 * fs_hz;
-        let ws = k2 * libm::tan(core::f64::consts::PI * f_stop_hz / fs_hz);
-        let eps = 1.0 / libm::sqrt(libm::pow(10.0, atten_db / 10.0) - 1.0);
-        let mu = libm::asinh(1.0 / eps) / n;
+        // Transcendentals in the filter's own precision (see `Real::eval`).
+        let ws = k2 * T::eval(core::f64::consts::PI * f_stop_hz / fs_hz, T::tan);
+        let eps =
+            1.0 / libm::sqrt(T::eval(atten_db / 10.0 * core::f64::consts::LN_10, T::exp) - 1.0);
+        let mu = T::eval(1.0 / eps, T::asinh) / n;
         let mut sections = [Biquad::default(); AA_SECTIONS];
         for (i, sec) in sections.iter_mut().enumerate() {
             let th = core::f64::consts::PI * (2 * i + 1) as f64 / (2.0 * n);
             // Chebyshev-I pole, its reciprocal (scaled to ws) is the Chebyshev-II pole.
             let (pr, pi) = (
-                -libm::sinh(mu) * libm::sin(th),
-                libm::cosh(mu) * libm::cos(th),
+                -T::eval(mu, T::sinh) * T::eval(th, T::sin),
+                T::eval(mu, T::cosh) * T::eval(th, T::cos),
             );
             let m2 = pr * pr + pi * pi;
             let (qr, qi) = (ws * pr / m2, -ws * pi / m2);
             let a1 = -2.0 * qr; // s^2 + a1 s + a0
             let a0 = qr * qr + qi * qi;
-            let wz = ws / libm::cos(th); // zeros at +-j wz
+            let wz = ws / T::eval(th, T::cos); // zeros at +-j wz
             let wz2 = wz * wz;
             let g = a0 / wz2; // unit DC gain
             let d0 = k2 * k2 + a1 * k2 + a0;
@@ -260,6 +263,19 @@ mod tests {
         assert!(worst_stop <= -60.0 + 1e-6, "stop band: {worst_stop}");
         // the -3 dB point sits just above the output Nyquist (50 Hz)
         assert!(f.gain_db(50.0) > -3.0 && f.gain_db(60.0) < -3.0);
+    }
+
+    #[test]
+    fn f32_design_keeps_the_stated_response() {
+        // The target's filter is designed with f32 transcendentals and stores f32 coefficients:
+        // its implemented response must still be the closed form's to well under the margins.
+        let f = AntiAliasFilter::<f32>::design(80.0, 60.0, 1000.0).unwrap();
+        for &fr in &[1.0, 10.0, 20.0, 40.0, 50.0, 60.0, 80.0, 95.0, 200.0, 450.0] {
+            let g = f.gain_db(fr);
+            let c = closed_form_db(fr, 80.0, 60.0, 1000.0, 8);
+            assert!((g - c).abs() < 0.01, "f={fr}: {g} vs {c}");
+        }
+        assert!(f.gain_db(20.0).abs() < 0.001);
     }
 
     #[test]

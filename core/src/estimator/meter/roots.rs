@@ -131,13 +131,15 @@ fn distinct<T: Real>(r: &[Cx<T>]) -> bool {
 fn cold_start<T: Real>(c: &[T], roots: &mut [Cx<T>; MAX_ORDER]) {
     let p = c.len();
     // Radius: geometric mean of the root magnitudes |c_p|^(1/p), kept away from 0. Computed
-    // in f64 once per cold start (rare: reset or lost track).
-    let r0 = libm::pow(libm::fabs(c[p - 1].to_f64()), 1.0 / p as f64).max(0.5);
+    // once per cold start (rare: reset or lost track), transcendentals in T (`Real::eval`).
+    // as exp(ln|c_p| / p): no pow function linked for it (1.4 KB of flash)
+    let ln_c = T::eval(libm::fabs(c[p - 1].to_f64()), T::ln);
+    let r0 = T::eval(ln_c / p as f64, T::exp).max(0.5);
     for (k, r) in roots.iter_mut().take(p).enumerate() {
         let a = 0.4 + 2.0 * core::f64::consts::PI * k as f64 / p as f64;
         *r = Cx::new(
-            T::from_f64(r0 * libm::cos(a)),
-            T::from_f64(r0 * libm::sin(a)),
+            T::from_f64(r0 * T::eval(a, T::cos)),
+            T::from_f64(r0 * T::eval(a, T::sin)),
         );
     }
 }
