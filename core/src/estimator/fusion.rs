@@ -11,7 +11,7 @@
 //! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
 //!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
 //! - model consistency: |delta| > k sigma_zeta (k = 3) held for
-//!   `mismatch_hold_s` sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
+//!   `mismatch_hold_s` (or over `mismatch_hold_speed_mps` of speed change) sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
 //!
 //! The model-based quantities are plain inputs ([`ModelMargin`]), computed from the plant model
 //! by [`super::model_margin`].
@@ -35,6 +35,9 @@ pub struct FusionParams {
     pub offset_speed_window_mps: f32,
     /// Mismatch must persist this long to raise the flag, s.
     pub mismatch_hold_s: f32,
+    /// ... or over this much speed change, m/s, whichever comes first (0: time only). The
+    /// offset is a function of speed: on a ramp each second of holding costs lead in km/h.
+    pub mismatch_hold_speed_mps: f32,
     /// Agreement must persist this long to clear the flag, s.
     pub mismatch_release_s: f32,
     /// Slopes smaller than this (|dzeta/dV|) give no data-based margin, 1/(m/s).
@@ -70,6 +73,7 @@ impl Default for FusionParams {
             offset_tau_max_s: 0.0,
             offset_speed_window_mps: 2.0,
             mismatch_hold_s: 3.0,
+            mismatch_hold_speed_mps: 0.0,
             mismatch_release_s: 3.0,
             min_slope_per_mps: 1.0e-5,
             min_accel_mps2: 0.05,
@@ -272,7 +276,11 @@ impl Fusion {
             if dev > self.params.mismatch_sigmas {
                 self.agree_since_s = None;
                 let since = *self.mismatch_since_s.get_or_insert(t);
-                if (t - since) as f32 >= self.params.mismatch_hold_s {
+                let mut hold = self.params.mismatch_hold_s;
+                if self.params.mismatch_hold_speed_mps > 0.0 {
+                    hold = hold.min(self.params.mismatch_hold_speed_mps / libm::fabsf(a).max(1e-3));
+                }
+                if (t - since) as f32 >= hold {
                     self.consistent = false;
                     self.checked = true;
                 }
@@ -503,6 +511,44 @@ mod tests {
         let mut g = Fusion::new(FusionParams::default());
         let r = step(&mut g, &agree, 0.0);
         assert_eq!(r.margin_source, MarginSource::Data);
+    }
+
+    /// A steady 5-sigma mismatch on a 1 km/h/s ramp: with the speed hold the flag drops after
+    /// 0.25 m/s of speed change (0.9 s), with the time hold alone after 3 s.
+    #[test]
+    fn mismatch_hold_over_speed_shortens_the_hold_on_a_ramp() {
+        let flag_time = |hold_speed: f32| {
+            let mut f = Fusion::new(FusionParams {
+                mismatch_hold_speed_mps: hold_speed,
+                ..FusionParams::default()
+            });
+            let m = ModelMargin {
+                zeta: 0.05,
+                freq_hz: 8.0,
+                dzeta_dv_per_mps: -0.004,
+                v_crit_onset_mps: Some(30.0),
+                valid: true,
+            };
+            let e = est(0.0, 0.01);
+            (0..1000)
+                .map(|k| f64::from(k) * 0.01)
+                .find(|&t| {
+                    !f.update(&FusionInput {
+                        t_s: t,
+                        speed_mps: 5.0 + 0.278 * t as f32,
+                        accel_mps2: 0.278,
+                        fast: &e,
+                        slow: &e,
+                        model: Some(&m),
+                    })
+                    .model_consistent
+                })
+                .unwrap_or(f64::INFINITY)
+        };
+        let with = flag_time(0.25);
+        let without = flag_time(0.0);
+        assert!((with - 0.25 / 0.278).abs() < 0.02, "{with}");
+        assert!((without - 3.0).abs() < 0.02, "{without}");
     }
 
     #[test]

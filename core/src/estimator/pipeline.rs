@@ -38,15 +38,18 @@ impl PipelineParams {
     /// model corrected by the measured damping offset when they do not. The offset is judged
     /// against the meter's reported sigma, which is the fit's covariance (one-sigma coverage
     /// 60-77 % on the plant where it is unbiased, `shimmy-sim meter-accuracy`): mismatch above
-    /// 2.5 sigma, agreement below 1 sigma (hysteresis), each held 3 s. The offset is averaged
-    /// over 1 m/s of speed change (at most 30 s): at constant speed the meter's 10 s memory
-    /// then spans three independent windows, on the 1 km/h/s ramp 3.6 s of extra lag.
+    /// 2.5 sigma, agreement below 1 sigma (hysteresis), each held 3 s; a mismatch also counts
+    /// once held over 0.25 m/s of speed change (0.9 s at 1 km/h/s: the time hold alone cost
+    /// 3 km/h of lead, `shimmy-sim mismatch`). The offset is averaged over 1 m/s of speed
+    /// change (at most 30 s): at constant speed the meter's 10 s memory then spans three
+    /// independent windows, on the 1 km/h/s ramp 3.6 s of extra lag.
     pub fn tuned_fusion() -> FusionParams {
         FusionParams {
             mismatch_sigmas: 2.5,
             agreement_sigmas: 1.0,
             offset_tau_max_s: 30.0,
             offset_speed_window_mps: 1.0,
+            mismatch_hold_speed_mps: 0.25,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()
         }

@@ -60,6 +60,10 @@ pub struct MismatchArgs {
     /// Only the cases whose name contains this text (e.g. `C_a`).
     #[arg(long)]
     pub only: Option<String>,
+    /// Road-noise seed of every run (another seed: a check that nothing is tuned to the
+    /// default one).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
     /// Output directory (mismatch.md, mismatch.csv).
     #[arg(long, default_value = "out/mismatch")]
     pub out: PathBuf,
@@ -206,15 +210,20 @@ pub fn run_case(
     rates: &[f64],
     drive_s: f64,
     pp: PipelineParams,
+    seed: u64,
 ) -> Result<CaseResult> {
     let plant_on = onset_kmh(&case.plant);
     let model_on = onset_kmh(&case.model);
     let reference = plant_on
         .or(model_on)
         .context("neither plant nor model has an onset")?;
+    let seeded = |mut sc: MarginScenario| {
+        sc.seed = seed;
+        sc
+    };
     let mut ramps = Vec::new();
     for &rate in rates {
-        let r = run(&ramp_scenario(case, rate, false, reference), pp, 0)?;
+        let r = run(&seeded(ramp_scenario(case, rate, false, reference)), pp, 0)?;
         let (lead_kmh, lead_s) = ramp_lead(&r);
         ramps.push(RampResult {
             rate_kmh_per_s: rate,
@@ -224,10 +233,18 @@ pub fn run_case(
         });
     }
     let rate0 = rates.first().copied().unwrap_or(1.0);
-    let d = run(&ramp_scenario(case, rate0, true, reference), pp, 0)?;
+    let d = run(&seeded(ramp_scenario(case, rate0, true, reference)), pp, 0)?;
     let per_h = |r: &MarginRun| f64::from(r.warnings) * 3600.0 / drive_s;
-    let full = run(&drive_scenario(case, false, reference, drive_s), pp, 0)?;
-    let data = run(&drive_scenario(case, true, reference, drive_s), pp, 0)?;
+    let full = run(
+        &seeded(drive_scenario(case, false, reference, drive_s)),
+        pp,
+        0,
+    )?;
+    let data = run(
+        &seeded(drive_scenario(case, true, reference, drive_s)),
+        pp,
+        0,
+    )?;
     Ok(CaseResult {
         case: case.clone(),
         plant_onset_kmh: plant_on,
@@ -292,12 +309,13 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     let pp = vehicle.pipeline_params();
     let rows: Vec<CaseResult> = chosen
         .par_iter()
-        .map(|c| run_case(c, &a.rates_kmh_per_s, a.drive_s, pp))
+        .map(|c| run_case(c, &a.rates_kmh_per_s, a.drive_s, pp, a.seed))
         .collect::<Result<_>>()?;
     let md = markdown(&rows, &a.rates_kmh_per_s);
     println!(
-        "plant vs model mismatch (model `{}`; open loop, damper off, 5 N m road noise, 2 N m imbalance; drive {:.0} s at 70 % of the true onset), {:.0} s wall",
+        "plant vs model mismatch (model `{}`; open loop, damper off, 5 N m road noise (seed {}), 2 N m imbalance; drive {:.0} s at 70 % of the true onset), {:.0} s wall",
         a.vehicle,
+        a.seed,
         a.drive_s,
         wall.elapsed().as_secs_f64()
     );
