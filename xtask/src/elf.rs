@@ -5,8 +5,8 @@ use std::fmt;
 use std::path::Path;
 
 /// Budgets of the release application image (issue 6): what the firmware may use of the
-/// STM32F405RG, leaving room for a bootloader. Flash: today's image, 86.9 KB (97.9 KB before
-/// the design-time math moved to the estimator's precision, issue 17), plus 3.2 KB (4 %)
+/// STM32F405RG, leaving room for a bootloader. Flash: today's image, 87.2 KB (97.9 KB before
+/// the design-time math moved to the estimator's precision, issue 17), plus 2.9 KB (3 %)
 /// headroom; raise it deliberately, with the measured size, when a feature needs more.
 pub const FLASH_BUDGET: u64 = 88 * 1024;
 pub const RAM_BUDGET: u64 = 24 * 1024;
