@@ -5,30 +5,15 @@
 //! file takes well under a second.
 
 use std::path::PathBuf;
-use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::process::Output;
 
-/// A fresh, empty working directory under the system's temp folder.
+mod common;
+
+use common::run_in;
+
+/// A fresh, empty working directory for one test.
 fn temp_dir() -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "shimmy-cli-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-/// Runs `shimmy-sim args` with `dir` as the working directory.
-fn run_in(dir: &PathBuf, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run shimmy-sim")
+    common::temp_dir("cli")
 }
 
 fn stderr(o: &Output) -> String {

@@ -4,29 +4,14 @@
 //! vehicle and with the changed file differ). The runs are kept tiny (one speed, a few seconds).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// A fresh, empty working directory under the system's temp folder.
+mod common;
+
+use common::run_in;
+
+/// A fresh, empty working directory for one test.
 fn temp_dir() -> PathBuf {
-    static N: AtomicUsize = AtomicUsize::new(0);
-    let d = std::env::temp_dir().join(format!(
-        "shimmy-vehicle-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
-    ));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-fn run_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run shimmy-sim")
+    common::temp_dir("vehicle")
 }
 
 fn text(b: &[u8]) -> String {
