@@ -152,14 +152,7 @@ pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
         .symbols()
         .filter(|s| matches!(s.kind(), SymbolKind::Text | SymbolKind::Data))
         .filter(|s| within(s.address() & !1, FLASH) && s.size() > 0)
-        .map(|s| {
-            let name = s.name().unwrap_or("?");
-            (
-                s.address() & !1,
-                s.size(),
-                format!("{:#}", rustc_demangle::demangle(name)),
-            )
-        })
+        .map(|s| located_symbol(&s))
         .collect();
     // Aliases (several names for one address) count once.
     located.sort();
@@ -186,6 +179,16 @@ pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
     Ok(out)
 }
 
+/// (address with the Thumb bit cleared, size, demangled name) of an ELF symbol.
+fn located_symbol<'d, S: object::ObjectSymbol<'d>>(s: &S) -> (u64, u64, String) {
+    let name = s.name().unwrap_or("?");
+    (
+        s.address() & !1,
+        s.size(),
+        format!("{:#}", rustc_demangle::demangle(name)),
+    )
+}
+
 /// Where the flash bytes go that the symbol table does not size: per flash section, the bytes
 /// covered by sized symbols (union of their address ranges, so aliases count once), alignment
 /// padding (gaps of at most 3 B) and the rest, each span of the rest named by the symbol that
@@ -198,14 +201,7 @@ pub fn attribution(path: &Path, n_spans: usize) -> Result<String, String> {
     let mut syms: Vec<(u64, u64, String)> = file
         .symbols()
         .filter(|s| s.address() != 0)
-        .map(|s| {
-            let name = s.name().unwrap_or("?");
-            (
-                s.address() & !1,
-                s.size(),
-                format!("{:#}", rustc_demangle::demangle(name)),
-            )
-        })
+        .map(|s| located_symbol(&s))
         .collect();
     syms.sort();
     let mut out = String::from(
