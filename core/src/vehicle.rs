@@ -1005,6 +1005,122 @@ pub static FIELDS: &[Field] = &[
     ),
 ];
 
+/// Bytes before the values in an encoded vehicle record: the schema id (u32) and the number of
+/// values (u16), little-endian.
+pub const RECORD_HEADER_BYTES: usize = 6;
+/// The most values a record may carry (the field table has fewer; a test checks it).
+pub const RECORD_MAX_FIELDS: usize = 96;
+/// The largest encoded record, bytes: what a flash store or a link frame must make room for.
+pub const RECORD_MAX_BYTES: usize = RECORD_HEADER_BYTES + 8 * RECORD_MAX_FIELDS;
+
+/// The schema id of [`FIELDS`]: FNV-1a over every field's section, name and unit, in table
+/// order. A record written under another table (a field added, removed, renamed, moved or
+/// given another unit) carries another id and is refused instead of misread.
+pub fn record_schema() -> u32 {
+    let mut hash: u32 = 0x811c_9dc5;
+    for field in FIELDS {
+        for part in [field.section, field.name, field.unit] {
+            // A separator after each part, so "ab"+"c" and "a"+"bc" differ.
+            for byte in part.bytes().chain(core::iter::once(0)) {
+                hash = (hash ^ u32::from(byte)).wrapping_mul(0x0100_0193);
+            }
+        }
+    }
+    hash
+}
+
+/// Why a vehicle record could not be written or read.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum RecordError {
+    /// The output buffer is shorter than the record.
+    #[error("buffer of {have} bytes is too small for a {need}-byte vehicle record")]
+    BufferTooSmall {
+        /// Bytes the record needs.
+        need: usize,
+        /// Bytes the buffer has.
+        have: usize,
+    },
+    /// The record's length does not match its header.
+    #[error("vehicle record is {have} bytes, its header says {need}")]
+    Length {
+        /// Bytes the header announces.
+        need: usize,
+        /// Bytes present.
+        have: usize,
+    },
+    /// Written under another field table.
+    #[error("vehicle record schema {found:#010x} is not this firmware's {expected:#010x}")]
+    Schema {
+        /// The record's schema id.
+        found: u32,
+        /// [`record_schema`].
+        expected: u32,
+    },
+    /// A value fails its field's range or a rule between fields.
+    #[error("vehicle record rejected: {0}")]
+    Invalid(VehicleError),
+}
+
+impl Vehicle {
+    /// Writes the vehicle as a record (header, then every field of [`FIELDS`] as a
+    /// little-endian f64) into `out`; returns the number of bytes written. The record is the
+    /// form a flash store keeps and a host link carries; [`Vehicle::decode_record`] reads it.
+    pub fn encode_record(&self, out: &mut [u8]) -> Result<usize, RecordError> {
+        let need = RECORD_HEADER_BYTES + 8 * FIELDS.len();
+        let have = out.len();
+        let Some(record) = out.get_mut(..need) else {
+            return Err(RecordError::BufferTooSmall { need, have });
+        };
+        let (header, values) = record.split_at_mut(RECORD_HEADER_BYTES);
+        let (schema, count) = header.split_at_mut(4);
+        schema.copy_from_slice(&record_schema().to_le_bytes());
+        // FIELDS.len() <= RECORD_MAX_FIELDS (a test), so the count fits a u16.
+        count.copy_from_slice(&(FIELDS.len() as u16).to_le_bytes());
+        for (chunk, field) in values.as_chunks_mut::<8>().0.iter_mut().zip(FIELDS) {
+            chunk.copy_from_slice(&self.get(field).to_le_bytes());
+        }
+        Ok(need)
+    }
+
+    /// Reads a record written by [`Vehicle::encode_record`]: the schema must be this table's,
+    /// the length must match, and the vehicle must pass [`Vehicle::validate`]. Nothing is
+    /// half-applied: an error returns no vehicle at all.
+    pub fn decode_record(bytes: &[u8]) -> Result<Vehicle, RecordError> {
+        let have = bytes.len();
+        let header_error = RecordError::Length {
+            need: RECORD_HEADER_BYTES,
+            have,
+        };
+        let (Some(schema), Some(count)) = (bytes.get(..4), bytes.get(4..RECORD_HEADER_BYTES))
+        else {
+            return Err(header_error);
+        };
+        let (Ok(schema), Ok(count)) = (<[u8; 4]>::try_from(schema), <[u8; 2]>::try_from(count))
+        else {
+            return Err(header_error);
+        };
+        let found = u32::from_le_bytes(schema);
+        let expected = record_schema();
+        if found != expected {
+            return Err(RecordError::Schema { found, expected });
+        }
+        let count = usize::from(u16::from_le_bytes(count));
+        let need = RECORD_HEADER_BYTES + 8 * count;
+        if count != FIELDS.len() || have != need {
+            return Err(RecordError::Length { need, have });
+        }
+        let mut vehicle = Vehicle::nominal();
+        let values = bytes.get(RECORD_HEADER_BYTES..).unwrap_or_default();
+        for (chunk, field) in values.as_chunks::<8>().0.iter().zip(FIELDS) {
+            let value = f64::from_le_bytes(*chunk);
+            field.check(value).map_err(RecordError::Invalid)?;
+            (field.set)(&mut vehicle, value);
+        }
+        vehicle.validate().map_err(RecordError::Invalid)?;
+        Ok(vehicle)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1132,5 +1248,80 @@ mod tests {
             k.validate().unwrap_err().path(),
             ("controller", "k_init_radps2")
         );
+    }
+
+    #[test]
+    fn a_record_round_trips_every_field_and_fits_its_bound() {
+        assert!(FIELDS.len() <= RECORD_MAX_FIELDS);
+        let mut original = Vehicle::from_set(ParamSet::Hard);
+        original.set("controller", "slew_a_per_s", 123.0).unwrap();
+        let mut buf = [0u8; RECORD_MAX_BYTES];
+        let n = original.encode_record(&mut buf).unwrap();
+        assert_eq!(n, RECORD_HEADER_BYTES + 8 * FIELDS.len());
+        let back = Vehicle::decode_record(&buf[..n]).unwrap();
+        for field in FIELDS {
+            assert_eq!(
+                back.get(field).to_bits(),
+                original.get(field).to_bits(),
+                "{}.{}",
+                field.section,
+                field.name
+            );
+        }
+        assert_ne!(back, Vehicle::nominal());
+    }
+
+    #[test]
+    fn a_bad_record_is_refused_whole_and_names_what_is_wrong() {
+        let mut buf = [0u8; RECORD_MAX_BYTES];
+        let n = Vehicle::nominal().encode_record(&mut buf).unwrap();
+        assert!(matches!(
+            Vehicle::nominal().encode_record(&mut buf[..n - 1]),
+            Err(RecordError::BufferTooSmall { .. })
+        ));
+        assert!(matches!(
+            Vehicle::decode_record(&buf[..n - 1]),
+            Err(RecordError::Length { .. })
+        ));
+        assert!(matches!(
+            Vehicle::decode_record(&buf[..3]),
+            Err(RecordError::Length { .. })
+        ));
+        let mut other_schema = buf;
+        other_schema[0] ^= 1;
+        assert!(matches!(
+            Vehicle::decode_record(&other_schema[..n]),
+            Err(RecordError::Schema { .. })
+        ));
+        // The first field (plant.i_k) set far out of its range: refused, naming the field.
+        let mut out_of_range = buf;
+        out_of_range[RECORD_HEADER_BYTES..RECORD_HEADER_BYTES + 8]
+            .copy_from_slice(&1.0e9f64.to_le_bytes());
+        match Vehicle::decode_record(&out_of_range[..n]) {
+            Err(RecordError::Invalid(e)) => {
+                assert_eq!(e.path(), (FIELDS[0].section, FIELDS[0].name))
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_schema_id_changes_with_the_table() {
+        // Same hash as record_schema, over a table with the first two fields swapped.
+        let hash = |fields: &[&Field]| {
+            let mut hash: u32 = 0x811c_9dc5;
+            for field in fields {
+                for part in [field.section, field.name, field.unit] {
+                    for byte in part.bytes().chain(core::iter::once(0)) {
+                        hash = (hash ^ u32::from(byte)).wrapping_mul(0x0100_0193);
+                    }
+                }
+            }
+            hash
+        };
+        let mut table: Vec<&Field> = FIELDS.iter().collect();
+        assert_eq!(hash(&table), record_schema());
+        table.swap(0, 1);
+        assert_ne!(hash(&table), record_schema());
     }
 }
