@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::temp_dir;
+use common::{run_in, temp_dir};
 use shimmy_sim::sim::analyze::{analyze, Analysis, AnalyzeOptions};
 use shimmy_sim::sim::closed_loop::{LoopConfig, LoopResult};
 use shimmy_sim::sim::log_file::{self, LogMapping, MappingChanges};
@@ -249,5 +249,117 @@ fn a_log_at_another_rate_with_jitter_and_gaps_gives_the_same_damping() {
         println!("at the wrong rate: {f_bad:.3} Hz");
         assert!((f_bad - f_loop).abs() > 3.0, "{f_bad} vs {f_loop}");
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The command from the outside: `run` writes the log, `analyze` reads it and writes the CSV,
+/// plot, Markdown, self-contained HTML and JSON with provenance; a bad log or option exits
+/// non-zero with the line and column (or the option) named, and writes nothing.
+#[test]
+fn the_command_writes_its_report_and_rejects_bad_logs() {
+    let dir = temp_dir("analyze-cli");
+    std::fs::write(
+        dir.join("s.toml"),
+        SCENARIO.replace("duration_s = 24.0", "duration_s = 8.0"),
+    )
+    .unwrap();
+    let ok = |args: &[&str]| {
+        let o = run_in(&dir, args);
+        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        assert!(
+            o.status.success(),
+            "{args:?}: {text}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        text
+    };
+    ok(&["run", "s.toml", "--out", "sim"]);
+    let stdout = ok(&["analyze", "sim/trace.csv", "--out", "a", "--data-only"]);
+    assert!(
+        stdout.contains("8000 samples at 1 kHz (8000 as logged"),
+        "{stdout}"
+    );
+    let a = dir.join("a");
+    let csv = std::fs::read_to_string(a.join("analysis.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 800);
+    let md = std::fs::read_to_string(a.join("report.md")).unwrap();
+    shimmy_sim::out::html::check_tables(&md).unwrap();
+    let html = std::fs::read_to_string(a.join("report.html")).unwrap();
+    assert!(
+        html.contains("<img src=\"data:image/png;base64,"),
+        "plot not embedded"
+    );
+    assert!(!html.contains("src=\"analysis.png\""));
+    shimmy_sim::out::plot_util::assert_real_plot(&a.join("analysis.png"), 8).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("summary.json")).unwrap()).unwrap();
+    let prov = &json["provenance"];
+    assert_eq!(prov["git"], shimmy_sim::out::provenance::GIT);
+    assert!(prov["command_line"]
+        .as_str()
+        .unwrap()
+        .ends_with("analyze sim/trace.csv --out a --data-only"));
+    let log_hash =
+        shimmy_sim::out::provenance::sha256_hex(&std::fs::read(dir.join("sim/trace.csv")).unwrap());
+    assert_eq!(prov["inputs"][0]["sha256"], log_hash.as_str());
+    assert_eq!(json["metrics"]["resampling"]["exact"], 8000);
+    assert_eq!(json["metrics"]["model"], false);
+
+    // A corrupted cell, a missing column, a bad option: non-zero exit, named, nothing written.
+    let trace = std::fs::read_to_string(dir.join("sim/trace.csv")).unwrap();
+    let mut lines: Vec<String> = trace.lines().map(String::from).collect();
+    let cells: Vec<&str> = lines[41].split(',').collect();
+    let mut bad: Vec<String> = cells.iter().map(|c| c.to_string()).collect();
+    bad[15] = "0.0o1".into();
+    lines[41] = bad.join(",");
+    std::fs::write(dir.join("bad.csv"), lines.join("\n")).unwrap();
+    for (args, want) in [
+        (
+            vec!["analyze", "bad.csv", "--out", "x"],
+            "line 42, column 16 `psi_r_meas_rad`: `0.0o1` is not a number",
+        ),
+        (
+            vec![
+                "analyze",
+                "sim/trace.csv",
+                "--speed-column",
+                "v",
+                "--out",
+                "x",
+            ],
+            "speed column `v` is not in the header",
+        ),
+        (
+            vec![
+                "analyze",
+                "sim/trace.csv",
+                "--yaw-unit",
+                "grad",
+                "--out",
+                "x",
+            ],
+            "yaw.unit `grad`: allowed: rad, mrad, deg",
+        ),
+        (
+            vec![
+                "analyze",
+                "sim/trace.csv",
+                "--max-gap-ms",
+                "0",
+                "--out",
+                "x",
+            ],
+            "--max-gap-ms",
+        ),
+    ] {
+        let o = run_in(&dir, &args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert!(
+        !dir.join("x").exists(),
+        "nothing may be written for a bad log"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

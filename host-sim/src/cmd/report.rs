@@ -2,9 +2,11 @@
 //! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
 //! report (see [`report`]). Every file is parsed and validated before anything runs.
 
+use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
 use crate::sim::scenario_file;
+use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -144,6 +146,21 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     for (i, r) in runs {
         sections[i].runs.push(r);
     }
+    let mut provenance = Provenance::of_this_process();
+    for (file, specs) in &plan {
+        provenance = provenance.file("scenario file", file)?;
+        if let Some(s) = specs.first() {
+            provenance = provenance.seed(
+                &format!("{} (road and sensor noise)", s.name),
+                s.sensors.seed,
+            );
+        }
+    }
+    for (role, spec) in [("vehicle", &a.vehicle), ("model vehicle", &a.model_vehicle)] {
+        if let Some(v) = spec {
+            provenance = provenance.vehicle(role, v, &vehicle_file::load(v)?)?;
+        }
+    }
     Ok(Report {
         title: "shimmy-sim scenario report".into(),
         intro: format!(
@@ -156,6 +173,7 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
             }
         ),
         sections,
+        provenance: Some(provenance),
     })
 }
 
