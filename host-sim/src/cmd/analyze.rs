@@ -7,9 +7,10 @@
 
 use crate::out::analysis;
 use crate::out::file_name::sanitize;
+use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::write_pages;
-use crate::sim::analyze::{analyze, level_name, AnalyzeOptions, MAX_GAP_RANGE_S};
+use crate::sim::analyze::{analyze_with_progress, level_name, AnalyzeOptions, MAX_GAP_RANGE_S};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::log_file::{self, MappingChanges};
 use crate::sim::vehicle_file;
@@ -122,8 +123,13 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         model: !a.data_only,
         max_gap_s: a.max_gap_ms * 1e-3,
     };
-    let result =
-        analyze(&log.samples, &opts).with_context(|| format!("analysing {}", a.log.display()))?;
+    let bar = progress::bar(0, "samples at 1 kHz");
+    let result = analyze_with_progress(&log.samples, &opts, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })
+    .with_context(|| format!("analysing {}", a.log.display()))?;
+    bar.finish_and_clear();
     let mut provenance = Provenance::of_this_process().file("log", &a.log)?.vehicle(
         "vehicle",
         &a.vehicle,

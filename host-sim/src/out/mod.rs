@@ -9,6 +9,7 @@ pub mod file_name;
 pub mod html;
 pub mod plot_util;
 pub mod plots;
+pub mod progress;
 pub mod provenance;
 pub mod report;
 pub mod table;

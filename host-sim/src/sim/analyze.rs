@@ -281,6 +281,16 @@ impl Pipe {
 
 /// Runs the board's margin path on `log` (module docs).
 pub fn analyze(log: &[LogSample], o: &AnalyzeOptions) -> Result<Analysis> {
+    analyze_with_progress(log, o, &mut |_, _| {})
+}
+
+/// [`analyze`], telling `progress(done, total)` grid points every 10,000 (a long log takes
+/// seconds).
+pub fn analyze_with_progress(
+    log: &[LogSample],
+    o: &AnalyzeOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Analysis> {
     let (grid, resampling) = resample(log, o.max_gap_s)?;
     let params = o.vehicle.pipeline_params();
     let mut pipe = if o.model {
@@ -296,7 +306,10 @@ pub fn analyze(log: &[LogSample], o: &AnalyzeOptions) -> Result<Analysis> {
     let mut accel = AccelEstimator::new();
     let mut speed_mps = f32::NAN;
     let mut rows = Vec::with_capacity(grid.len() / 10 + 1);
-    for g in &grid {
+    for (k, g) in grid.iter().enumerate() {
+        if k % 10_000 == 0 {
+            progress(k, grid.len());
+        }
         if let Some(v) = g.speed_mps {
             speed_mps = v;
         }
@@ -318,6 +331,7 @@ pub fn analyze(log: &[LogSample], o: &AnalyzeOptions) -> Result<Analysis> {
             rows.push(AnalysisRow::new(g.t_s, &out));
         }
     }
+    progress(grid.len(), grid.len());
     let data = pipe.data();
     Ok(Analysis {
         rows,
