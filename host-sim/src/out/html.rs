@@ -10,7 +10,7 @@ use std::path::Path;
 const STYLE: &str =
     "body{font-family:sans-serif;max-width:1150px;margin:2em auto;padding:0 1em;color:#222}\
 table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #bbb;padding:3px 8px}\
-th{background:#eee}td{text-align:right}img{max-width:100%}code{background:#f3f3f3}";
+th{background:#eee}td{text-align:right}td:first-child{text-align:left}img{max-width:100%}code{background:#f3f3f3}";
 
 /// Standard base64 (RFC 4648, with padding) of `bytes`.
 pub fn base64(bytes: &[u8]) -> String {
@@ -93,9 +93,9 @@ fn cells(line: &str) -> usize {
     n
 }
 
-/// Fails unless every table in `md` is valid: each block of lines starting with `|` parses
-/// as a table (header, delimiter row), and every row has as many cells as the header. The
-/// error names the line.
+/// Fails unless every table in `md` is valid: each block of lines `| ... |` parses as a table
+/// (header, delimiter row), and every row has as many cells as the header. The error names
+/// the line.
 pub fn check_tables(md: &str) -> Result<()> {
     let mut tables = Vec::new(); // byte ranges of the parsed tables
     let mut start = None;
@@ -119,7 +119,9 @@ pub fn check_tables(md: &str) -> Result<()> {
         if line.trim_start().starts_with("```") {
             in_code = !in_code;
         }
-        let is_row = !in_code && line.trim_start().starts_with('|');
+        // A row as this project writes them: `| a | b |` (a paragraph line may start with
+        // `|x|`, an absolute value, without being one).
+        let is_row = !in_code && line.trim().starts_with('|') && line.trim().ends_with('|');
         if !is_row {
             header = None;
             continue;
@@ -173,8 +175,9 @@ mod tests {
             .contains("line 3: 1 cells, the table's header has 2"));
         let no_delim = "| a | b |\n| 1 | 2 |\n";
         assert!(format!("{:#}", check_tables(no_delim).unwrap_err()).contains("line 1"));
-        // A `|` line inside a code block is not a table.
-        check_tables("```text\n| not a table\n```\n").unwrap();
+        // A `|` line inside a code block, or a paragraph line starting with `|x|`, is no table.
+        check_tables("```text\n| not a table |\n```\n").unwrap();
+        check_tables("text\n|c| is its modulus\n").unwrap();
     }
 
     #[test]

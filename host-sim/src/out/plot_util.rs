@@ -92,7 +92,7 @@ pub fn white_to_red(t: f64) -> RGBColor {
 }
 
 /// Width of a heat map's colour bar, px (split off the right of the picture).
-pub const COLOUR_BAR_PX: u32 = 120;
+pub const COLOUR_BAR_PX: u32 = 130;
 
 /// Draws a vertical colour bar into `area`: the values `lo..hi` (axis with ticks, described by
 /// `label`) in the colours `colour(value)` the heat map uses. `top_px` aligns it below the
@@ -110,13 +110,16 @@ pub fn colour_bar(
         .margin_top(top_px)
         .margin_bottom(40)
         .margin_right(10)
-        .y_label_area_size(70)
+        .y_label_area_size(80)
         .build_cartesian_2d(0.0..1.0, lo..hi)?;
     chart
         .configure_mesh()
         .disable_x_mesh()
         .disable_y_mesh()
         .x_labels(0)
+        .y_labels(9)
+        .y_label_style(("sans-serif", 12).into_font())
+        .axis_desc_style(("sans-serif", 13).into_font())
         .y_desc(label)
         .draw()?;
     const STEPS: usize = 200;
