@@ -27,7 +27,7 @@ pub struct AnalyzeArgs {
     /// The log (CSV with a header line; `#` lines are comments). Default columns: those of a
     /// `shimmy-sim run` trace (t_s, psi_l_meas_rad, psi_r_meas_rad, speed_meas_mps).
     pub log: PathBuf,
-    /// Mapping file (TOML: delimiter, [time], [yaw], [speed]; see `sim::log_file`); the
+    /// Mapping file (TOML: `delimiter`, `[time]`, `[yaw]`, `[speed]`; see `sim::log_file`); the
     /// options below override it.
     #[arg(long)]
     pub mapping: Option<PathBuf>,
@@ -75,7 +75,7 @@ pub struct AnalyzeArgs {
     /// missing, as on the board), ms: 1 to 10000.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(MAX_GAP_MS))]
     pub max_gap_ms: f64,
-    /// Output folder (default: out/analyze/<log file name>).
+    /// Output folder (default: `out/analyze/<log file name>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
