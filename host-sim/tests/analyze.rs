@@ -305,6 +305,50 @@ fn the_command_writes_its_report_and_rejects_bad_logs() {
     assert_eq!(json["metrics"]["resampling"]["exact"], 8000);
     assert_eq!(json["metrics"]["model"], false);
 
+    // A mapping file (one yaw signal for both wheels; the true speed column, said to be in
+    // km/h) is read, hashed into the provenance, and overridden by an option (m/s).
+    std::fs::write(
+        dir.join("m.toml"),
+        "[yaw]\ncolumn = \"psi_l_meas_rad\"\n[speed]\ncolumn = \"speed_mps\"\nunit = \"km/h\"\n",
+    )
+    .unwrap();
+    ok(&[
+        "analyze",
+        "sim/trace.csv",
+        "--mapping",
+        "m.toml",
+        "--speed-unit",
+        "m/s",
+        "--out",
+        "m",
+    ]);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("m/summary.json")).unwrap())
+            .unwrap();
+    let roles: Vec<&str> = json["provenance"]["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| i["role"].as_str().unwrap())
+        .collect();
+    assert_eq!(roles, ["log", "vehicle record", "mapping file"]);
+    assert_eq!(json["metrics"]["model"], true);
+    let rows = std::fs::read_to_string(dir.join("m/analysis.csv")).unwrap();
+    let kmh: f64 = rows
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        (kmh - 25.0).abs() < 1e-6,
+        "{kmh} km/h: the option's m/s must win"
+    );
+    std::fs::write(dir.join("bad.toml"), "[yaw]\ncolum = \"a\"\n").unwrap();
+
     // A corrupted cell, a missing column, a bad option: non-zero exit, named, nothing written.
     let trace = std::fs::read_to_string(dir.join("sim/trace.csv")).unwrap();
     let mut lines: Vec<String> = trace.lines().map(String::from).collect();
@@ -350,6 +394,17 @@ fn the_command_writes_its_report_and_rejects_bad_logs() {
                 "x",
             ],
             "--max-gap-ms",
+        ),
+        (
+            vec![
+                "analyze",
+                "sim/trace.csv",
+                "--mapping",
+                "bad.toml",
+                "--out",
+                "x",
+            ],
+            "unknown field `colum`",
         ),
     ] {
         let o = run_in(&dir, &args);
