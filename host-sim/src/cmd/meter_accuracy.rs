@@ -74,7 +74,7 @@ pub struct MeterAccuracyArgs {
     pub record_s: f64,
     /// AR order of the meter's slow instance, 2 to 8 (default: the meter's own, 8; 6 shows
     /// the previous meter).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=8))]
+    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=10))]
     pub slow_ar_order: Option<u8>,
     /// Output directory (meter_accuracy.md, meter_accuracy.csv).
     #[arg(long, default_value = "out/meter-accuracy")]

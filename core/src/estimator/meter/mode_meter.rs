@@ -69,8 +69,11 @@ pub struct EstimatorConfig {
     pub warmup_time_constants: f32,
     /// Root-finder iteration bound (sweeps).
     pub root_max_iter: u32,
-    /// Extract the slow RLS roots on every n-th decimated sample (CPU saving).
-    pub slow_roots_every: u16,
+    /// Solve one instance's AR polynomial per decimated step, the fast and the slow one in
+    /// turn (each at half the decimated rate): a meter run then holds one root solve, not two.
+    /// Both RLS instances still update on every step; only the read-out of their roots is
+    /// spread. `false` roots both on every step.
+    pub interleave_roots: bool,
     /// Consecutive rejected input samples that force a covariance reset.
     pub max_rejected_run: u16,
 }
@@ -82,7 +85,7 @@ impl Default for EstimatorConfig {
             decimation: 10,
             aa_stop_hz: 80.0,
             aa_atten_db: 60.0,
-            ar_order: 8,
+            ar_order: 10,
             ar_order_fast: 6,
             wheel_order_regressors: true,
             bias_regressor: true,
@@ -105,7 +108,7 @@ impl Default for EstimatorConfig {
             track_zeta_tol: 0.02,
             warmup_time_constants: 1.0,
             root_max_iter: 60,
-            slow_roots_every: 1,
+            interleave_roots: true,
             max_rejected_run: 20,
         }
     }
@@ -115,8 +118,8 @@ impl Default for EstimatorConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ConfigError {
-    /// ar_order or ar_order_fast outside 2..=8.
-    #[error("estimator ar_order or ar_order_fast outside 2..=8")]
+    /// ar_order or ar_order_fast outside 2..=10.
+    #[error("estimator ar_order or ar_order_fast outside 2..=10")]
     ArOrder,
     /// A forgetting factor outside (0, 1).
     #[error("estimator forgetting factor outside (0, 1)")]
@@ -579,17 +582,20 @@ impl<T: Real> MarginEstimator<T> {
                     }
                 }
             }
-            let every = self.cfg.slow_roots_every.max(1) as u32;
-            Self::extract(
-                &self.cfg,
-                self.fs_dec_hz,
-                (self.extra, p_fast),
-                &self.fast,
-                &mut self.tr_fast,
-                frozen,
-                &mut self.counters,
-            );
-            if self.step_count.is_multiple_of(every) {
+            // interleaved: fast roots on odd steps, slow roots on even ones
+            let odd = !self.step_count.is_multiple_of(2);
+            if odd || !self.cfg.interleave_roots {
+                Self::extract(
+                    &self.cfg,
+                    self.fs_dec_hz,
+                    (self.extra, p_fast),
+                    &self.fast,
+                    &mut self.tr_fast,
+                    frozen,
+                    &mut self.counters,
+                );
+            }
+            if !odd || !self.cfg.interleave_roots {
                 Self::extract(
                     &self.cfg,
                     self.fs_dec_hz,
@@ -733,7 +739,7 @@ mod tests {
             Some(ConfigError::ArOrder)
         );
         assert_eq!(
-            bad(EstimatorConfig { ar_order: 9, ..ok }),
+            bad(EstimatorConfig { ar_order: 11, ..ok }),
             Some(ConfigError::ArOrder)
         );
         assert_eq!(
