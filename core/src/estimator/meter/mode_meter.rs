@@ -775,4 +775,62 @@ mod tests {
         let bytes = core::mem::size_of::<MarginEstimator<f32>>();
         assert!(bytes < 4096, "MarginEstimator<f32> is {bytes} bytes");
     }
+
+    /// With `interleave_roots` each instance's estimate is refreshed on every other decimated
+    /// step and never both on the same one (the CPU bound of one root solve per meter run);
+    /// without it both change on (nearly) every step.
+    #[test]
+    fn interleaved_roots_refresh_each_instance_every_other_step() {
+        // a 6 Hz resonance (zeta 0.03) at 1 kHz driven by a deterministic pseudo-random input
+        let (dt, w, zeta) = (1e-3_f64, 2.0 * core::f64::consts::PI * 6.0, 0.03);
+        let r = libm::exp(-zeta * w * dt);
+        let (a1, a2) = (2.0 * r * libm::cos(w * dt), -r * r);
+        let changes = |interleave: bool| {
+            let cfg = EstimatorConfig {
+                interleave_roots: interleave,
+                ..EstimatorConfig::default()
+            };
+            let mut m = MarginEstimator::<f32>::new(cfg).unwrap();
+            let (mut y1, mut y2, mut seed) = (0.0_f64, 0.0_f64, 12345_u32);
+            let (mut fast, mut slow, mut both, mut steps) = (0, 0, 0, 0);
+            let mut last: Option<MeterOutput> = None;
+            for k in 0..20_000 {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let e = (f64::from(seed >> 8) / f64::from(1u32 << 24) - 0.5) * 1e-4;
+                let y = a1 * y1 + a2 * y2 + e;
+                (y2, y1) = (y1, y);
+                let s = Sample {
+                    psi_l_rad: y as f32,
+                    psi_r_rad: y as f32,
+                    wheel: WheelOrder::None,
+                    damper_cmd: 0.0,
+                };
+                if let Some(o) = m.push(&s) {
+                    if let (Some(p), true) = (last, k >= 10_000) {
+                        let f = o.fast.zeta != p.fast.zeta;
+                        let sl = o.slow.zeta != p.slow.zeta;
+                        fast += usize::from(f);
+                        slow += usize::from(sl);
+                        both += usize::from(f && sl);
+                        steps += 1;
+                    }
+                    last = Some(o);
+                }
+            }
+            (fast, slow, both, steps)
+        };
+        let (fast, slow, both, steps) = changes(true);
+        assert_eq!(both, 0, "both refreshed on one step");
+        assert!(fast <= steps / 2 + 1 && slow <= steps / 2 + 1);
+        assert!(
+            fast >= steps / 2 - 1 && slow >= steps / 2 - 1,
+            "{fast} {slow} of {steps}"
+        );
+        let (fast, slow, both, steps) = changes(false);
+        assert!(
+            both >= steps * 9 / 10,
+            "{both} of {steps} without interleaving"
+        );
+        assert!(fast >= steps * 9 / 10 && slow >= steps * 9 / 10);
+    }
 }
