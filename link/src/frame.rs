@@ -20,7 +20,7 @@ pub const MAX_FRAME: usize = MAX_PAYLOAD + CRC_BYTES + (MAX_PAYLOAD + CRC_BYTES)
 /// The frame delimiter.
 pub const DELIMITER: u8 = 0;
 
-const CRC32: crc::Crc<u32, crc::NoTable> =
+static CRC32: crc::Crc<u32, crc::NoTable> =
     crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Why a frame could not be written or read.
@@ -55,29 +55,58 @@ impl FrameError {
 }
 
 /// Encodes `header` and `body` as one frame into `out` (delimiter included); returns its length.
+/// The bytes stream through the CRC and the COBS encoder straight into `out` (no payload copy
+/// on the stack).
 pub fn encode<T: Serialize>(header: Header, body: &T, out: &mut [u8]) -> Result<usize, FrameError> {
-    let mut payload = [0u8; MAX_PAYLOAD + CRC_BYTES];
+    // One byte of `out` stays free for the delimiter.
+    let room = out.len().saturating_sub(1);
     let n = {
-        let Some(room) = payload.get_mut(..MAX_PAYLOAD) else {
+        let Some(room) = out.get_mut(..room) else {
             return Err(FrameError::PayloadTooLong);
         };
-        let used = postcard::to_slice(&(header, body), room)
+        let framer = Framer {
+            cobs: cobs::CobsEncoder::new(room),
+            crc: CRC32.digest(),
+            len: 0,
+        };
+        postcard::serialize_with_flavor(&(header, body), framer)
             .map_err(|_| FrameError::PayloadTooLong)?
-            .len();
-        used
     };
-    let crc = CRC32.checksum(payload.get(..n).unwrap_or_default());
-    let Some(tail) = payload.get_mut(n..n + CRC_BYTES) else {
-        return Err(FrameError::PayloadTooLong);
-    };
-    tail.copy_from_slice(&crc.to_le_bytes());
-    let framed = payload.get(..n + CRC_BYTES).unwrap_or_default();
-    let len = cobs::try_encode(framed, out).map_err(|_| FrameError::PayloadTooLong)?;
-    let Some(end) = out.get_mut(len) else {
+    let Some(end) = out.get_mut(n) else {
         return Err(FrameError::PayloadTooLong);
     };
     *end = DELIMITER;
-    Ok(len + 1)
+    Ok(n + 1)
+}
+
+/// A postcard flavor: payload bytes into the CRC and the COBS encoder; at the end the CRC.
+struct Framer<'a> {
+    cobs: cobs::CobsEncoder<'a>,
+    crc: crc::Digest<'static, u32, crc::NoTable>,
+    len: usize,
+}
+
+impl postcard::ser_flavors::Flavor for Framer<'_> {
+    type Output = usize;
+
+    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+        self.len += 1;
+        if self.len > MAX_PAYLOAD {
+            return Err(postcard::Error::SerializeBufferFull);
+        }
+        self.crc.update(&[byte]);
+        self.cobs
+            .push(&[byte])
+            .map_err(|_| postcard::Error::SerializeBufferFull)
+    }
+
+    fn finalize(mut self) -> postcard::Result<usize> {
+        let crc = self.crc.finalize();
+        self.cobs
+            .push(&crc.to_le_bytes())
+            .map_err(|_| postcard::Error::SerializeBufferFull)?;
+        Ok(self.cobs.finalize())
+    }
 }
 
 /// Decodes one frame (its COBS bytes without the delimiter, decoded in place) and checks its
