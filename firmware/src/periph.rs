@@ -120,7 +120,7 @@ pub struct LinkPort {
 /// Link speed, baud: a 0.8 KiB reply (a vehicle record) takes 9 ms, so the polled transmit in
 /// the priority-1 link task holds the background model loop for at most that (its period is
 /// 100 ms).
-pub const LINK_BAUD: u32 = 921_600;
+pub use shimmy_link::LINK_BAUD;
 
 impl LinkPort {
     /// Clocks and enables USART1 (transmitter, receiver, RXNE interrupt) for [`LINK_BAUD`] from
