@@ -9,6 +9,7 @@ use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
+use shimmy_core::vehicle::FIELDS;
 use shimmy_link::wire::{fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -139,8 +140,22 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         } => {
             let v = vehicle_file::load(file)?;
             let now = c.set_config(&v)?;
+            // Read back: the device must hold exactly what was sent.
+            let (back, _) = c.config()?;
+            let differ: Vec<String> = FIELDS
+                .iter()
+                .filter(|f| back.get(f).to_bits() != v.get(f).to_bits())
+                .map(|f| format!("{}.{}", f.section, f.name))
+                .collect();
+            if !differ.is_empty() {
+                bail!(
+                    "the device reads back another configuration (fields {})",
+                    differ.join(", ")
+                );
+            }
             println!(
-                "configuration stored; {}",
+                "configuration stored and read back identical ({} fields); {}",
+                FIELDS.len(),
                 if now {
                     "in effect (vehicle at standstill)"
                 } else {
