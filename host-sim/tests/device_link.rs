@@ -247,3 +247,38 @@ fn a_link_unplugged_mid_transfer_is_reported_and_changes_nothing() {
     let n = c.events().unwrap().entries.len();
     assert!(n > 0);
 }
+
+/// The command line: a vehicle file out of range is refused by the tool before anything is
+/// sent (non-zero exit, the field and its allowed range named), and a device command without a
+/// place says which places there are.
+#[test]
+fn the_tool_refuses_a_bad_vehicle_file_and_a_missing_device() {
+    let dir = std::env::temp_dir().join(format!("shimmy-device-link-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[plant]\nk_d = 1e12\n").unwrap();
+    let tool = env!("CARGO_BIN_EXE_shimmy-sim");
+    let o = std::process::Command::new(tool)
+        .args(["device", "--sim", "config", "set"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("plant.k_d") && err.contains("allowed"),
+        "{err}"
+    );
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("stored"));
+    let o = std::process::Command::new(tool)
+        .args(["device", "info"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("--serial PORT, --tcp HOST:PORT or --sim"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,4 +1,4 @@
-//! The device side: [`Device::on_bytes`] turns received bytes into response frames over a
+//! The device side: [`Device::on_byte`] turns received bytes into response frames over a
 //! [`Backend`] that owns the state (configuration, event log, fault record, telemetry). It is
 //! transport-independent: the firmware feeds it from a USART, the simulator's in-process device
 //! from a byte queue, a test from a slice.

@@ -27,7 +27,10 @@ use shimmy_link::log::{RamLog, Recorder};
 use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry};
 use shimmy_link::PROTOCOL_VERSION;
 use std::collections::VecDeque;
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+/// The period of the telemetry stream, as on the board (10 Hz).
+const REPORT_PERIOD: Duration = Duration::from_millis(100);
 
 /// Capacity of the simulated device's log.
 pub const SIM_LOG_CAPACITY: usize = 64;
@@ -222,6 +225,8 @@ pub struct SimDevice {
     backend: SimBackend,
     out: VecDeque<u8>,
     reply: Box<[u8; REPLY_BYTES]>,
+    /// When the stream last sent a report (the drive's reports go out at their 10 Hz).
+    last_report: Option<Instant>,
 }
 
 impl SimDevice {
@@ -233,6 +238,7 @@ impl SimDevice {
             backend,
             out: VecDeque::new(),
             reply: Box::new([0; REPLY_BYTES]),
+            last_report: None,
         };
         let n = Device::ready(&d.backend, &mut d.reply);
         d.out.extend(&d.reply[..n]);
@@ -268,7 +274,16 @@ impl Port for SimDevice {
 
     fn receive(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize> {
         if self.out.is_empty() {
-            if let Some(n) = self.device.poll_stream(&mut self.backend, &mut self.reply) {
+            let due = self
+                .last_report
+                .is_none_or(|t| t.elapsed() >= REPORT_PERIOD);
+            let report = if due {
+                self.device.poll_stream(&mut self.backend, &mut self.reply)
+            } else {
+                None
+            };
+            if let Some(n) = report {
+                self.last_report = Some(Instant::now());
                 self.out.extend(&self.reply[..n]);
             } else {
                 // Nothing will come: what a quiet serial line does until the timeout.
