@@ -15,7 +15,8 @@
 //! Virtual time: `-icount shift=3,sleep=on`, deterministic instruction timing with idle time
 //! paced by the host's clock, so the guest does not race through its scenario before the tool
 //! has written the configuration (the QEMU app's other runs skip idle time, `qemu::APP_ICOUNT`).
-//! Measured: the 4 s scenario spans about 20 s of the session, the step ~25 s.
+//! Measured: the 4 s scenario spans about 20 s of the session; the step takes 25 s alone, 45 s
+//! inside a full `cargo xtask test` on a loaded machine.
 
 use crate::qemu;
 use std::io::Read;
