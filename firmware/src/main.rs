@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
+//! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
 //! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
@@ -27,13 +28,17 @@ mod app {
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
+    use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
         safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
-    use shimmy_firmware::periph::PERIOD_TICKS;
+    use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
+    use shimmy_link::device::{Device, REPLY_BYTES};
 
     /// Telemetry every this many meter runs (1 Hz).
     const TELEMETRY_DIVIDER: u32 = 100;
+    /// The link's telemetry stream every this many meter runs (10 Hz).
+    const LINK_STREAM_DIVIDER: u32 = 10;
     /// SPSC capacity is one less than this: 3 meter periods of samples.
     const QUEUE_N: usize = 32;
 
@@ -46,6 +51,8 @@ mod app {
         now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,
+        /// What the host link serves (written by `meter`, read and configured by `link`).
+        link: LinkState,
     }
 
     #[local]
@@ -62,6 +69,9 @@ mod app {
         data: DataMargin,
         meter_runs: u32,
         model_task: ModelTask,
+        port: LinkPort,
+        /// The ready frame has been sent.
+        announced: bool,
     }
 
     #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
@@ -96,13 +106,16 @@ mod app {
         );
         let mut ctrl = safe_controller();
         ctrl.supervisor_mut().restore_latched(latched);
-        let board = board::init(cx.device, coil_dead);
+        let (board, port) = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
         let Ok(data) = DataMargin::new() else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
+        let link = LinkState::new(&record);
+        // The link task's first run sends the ready frame (the port listens from now on).
+        rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
         // The watchdog runs since the board's first line; init ends here.
         board.watchdog.feed();
         (
@@ -111,6 +124,7 @@ mod app {
                 model: None,
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
+                link,
             },
             Local {
                 board,
@@ -123,6 +137,8 @@ mod app {
                 data,
                 meter_runs: 0,
                 model_task: ModelTask::new(PlantParams::nominal()),
+                port,
+                announced: false,
             },
         )
     }
@@ -225,19 +241,28 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin])]
+    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin, link])]
     async fn meter(mut cx: meter::Context) {
         let model = cx.shared.model.lock(|m| *m);
         while let Some(s) = cx.local.rx.dequeue() {
+            cx.shared.link.lock(|l| l.on_sample(s.cmd_a));
             let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
+            let health = cx.shared.health.lock(|h| *h);
+            let data = &*cx.local.data;
+            cx.shared
+                .link
+                .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
             let now = (u.report.t_s, cx.local.data.speed_mps());
             cx.shared.now.lock(|n| *n = now);
             let status = cx.local.data.margin_status();
             cx.shared.margin.lock(|m| *m = status);
             *cx.local.meter_runs += 1;
             let runs = *cx.local.meter_runs;
+            if runs.is_multiple_of(LINK_STREAM_DIVIDER) {
+                rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
+            }
             if changed {
                 defmt::warn!(
                     "warning level {=str} at t = {=f64} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
@@ -271,6 +296,28 @@ mod app {
                     h
                 );
             }
+        }
+    }
+
+    /// The host link, below `meter` and `control`: every received byte goes to the protocol
+    /// handler, each complete request frame gets its reply (polled transmit, at most ~9 ms at
+    /// 921,600 baud); while the stream is on, the newest margin report goes out when `meter`
+    /// pends this task (10 Hz). `link` is locked only to run the handler, never while sending.
+    #[task(binds = USART1, priority = 1, local = [port, announced, device: Device = Device::new(), reply: [u8; REPLY_BYTES] = [0; REPLY_BYTES]], shared = [link])]
+    fn link(mut cx: link::Context) {
+        let (port, device, reply) = (cx.local.port, cx.local.device, cx.local.reply);
+        if !*cx.local.announced {
+            *cx.local.announced = true;
+            let n = cx.shared.link.lock(|l| Device::ready(l, reply));
+            port.write(reply.get(..n).unwrap_or_default());
+        }
+        while let Some(byte) = port.read() {
+            if let Some(n) = cx.shared.link.lock(|l| device.on_byte(byte, l, reply)) {
+                port.write(reply.get(..n).unwrap_or_default());
+            }
+        }
+        if let Some(n) = cx.shared.link.lock(|l| device.poll_stream(l, reply)) {
+            port.write(reply.get(..n).unwrap_or_default());
         }
     }
 

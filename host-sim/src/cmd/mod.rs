@@ -7,6 +7,7 @@ pub mod analyze;
 pub mod bifurcation;
 pub mod compare;
 pub mod demo;
+pub mod device;
 pub mod faults;
 pub mod margin;
 pub mod meter_accuracy;
