@@ -11,6 +11,7 @@ pub mod control;
 pub mod drivers;
 pub mod fault_memory;
 pub mod monitoring;
+pub mod pil;
 pub mod replay;
 pub mod sensors;
 pub mod sim;

@@ -112,7 +112,10 @@ impl core::fmt::Display for FrameError {
 }
 
 /// Encodes `msg` with its header into `buf`; the frame is the returned prefix of `buf`.
-pub fn encode<'b, T: Serialize>(msg: &T, buf: &'b mut [u8; MAX_FRAME]) -> Result<&'b [u8], FrameError> {
+pub fn encode<'b, T: Serialize>(
+    msg: &T,
+    buf: &'b mut [u8; MAX_FRAME],
+) -> Result<&'b [u8], FrameError> {
     let (head, body) = buf.split_at_mut(HEADER_BYTES);
     let n = postcard::to_slice(msg, body)
         .map_err(|_| FrameError::TooLong)?
@@ -207,9 +210,14 @@ mod tests {
         assert_eq!(body_len([0xff, 0xff]), Err(FrameError::BadLength(65535)));
         assert_eq!(decode::<TargetFrame>(&[0x7f]), Err(FrameError::Malformed));
         let mut buf = [0u8; MAX_FRAME];
-        let frame = encode(&SensorFrame { raw: RawFrame::ok(1, 0.0, 0.0, 1.0) }, &mut buf)
-            .expect("fits")
-            .to_vec();
+        let frame = encode(
+            &SensorFrame {
+                raw: RawFrame::ok(1, 0.0, 0.0, 1.0),
+            },
+            &mut buf,
+        )
+        .expect("fits")
+        .to_vec();
         // A trailing byte is not silently ignored.
         let mut long = frame[HEADER_BYTES..].to_vec();
         long.push(0);
