@@ -1,7 +1,7 @@
 //! Processor-in-the-loop (PIL) frames: the firmware image under QEMU closes the loop with the
 //! host's plant in lockstep (`shimmy-sim pil`, README "Processor in the loop").
 //!
-//! Each 1 kHz control step the host sends one [`SensorFrame`] (the raw sensor frame of the
+//! Each 1 kHz control step the host sends one [`HostFrame::Sensors`] (the raw sensor frame of the
 //! simulator's sensor models, faults applied) and the firmware answers, on one pipe and in this
 //! order, with the [`TargetFrame`]s of that period: the [`StepReport`] of its control task, then
 //! what its lower-priority tasks produced before the next step (the meter task's
@@ -28,9 +28,11 @@ pub const MAX_FRAME: usize = 256;
 
 /// Host -> firmware, once per control step.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SensorFrame {
+pub enum HostFrame {
     /// The raw sensor frame of the step (time stamp from the host's clock).
-    pub raw: RawFrame,
+    Sensors(RawFrame),
+    /// The run is over: the image logs its counters and exits through semihosting.
+    Finish,
 }
 
 /// The control task's report at the end of each step.
@@ -158,29 +160,29 @@ mod tests {
     /// Floats travel as their bits: a NaN with a payload and a negative zero come back
     /// unchanged (the PIL/SIL comparison is bit for bit).
     #[test]
-    fn sensor_frame_keeps_every_bit() {
+    fn sensor_frames_keep_every_bit() {
         let nan = f32::from_bits(0x7fc0_1234);
-        let msg = SensorFrame {
-            raw: RawFrame {
-                t_us: u32::MAX,
-                left: EncoderReading {
-                    angle_rad: nan,
-                    read_ok: true,
-                    parity_ok: false,
-                    error_flag: true,
-                },
-                right: EncoderReading::ok(-0.0),
-                speed_mps: 12.5,
-                speed_valid: false,
-                coil_current_a: None,
+        let msg = HostFrame::Sensors(RawFrame {
+            t_us: u32::MAX,
+            left: EncoderReading {
+                angle_rad: nan,
+                read_ok: true,
+                parity_ok: false,
+                error_flag: true,
             },
+            right: EncoderReading::ok(-0.0),
+            speed_mps: 12.5,
+            speed_valid: false,
+            coil_current_a: None,
+        });
+        let HostFrame::Sensors(back) = roundtrip(&msg) else {
+            panic!("variant changed");
         };
-        let back = roundtrip(&msg);
-        assert_eq!(back.raw.left.angle_rad.to_bits(), nan.to_bits());
-        assert_eq!(back.raw.right.angle_rad.to_bits(), (-0.0f32).to_bits());
-        assert_eq!(back.raw.t_us, u32::MAX);
-        assert!(!back.raw.left.parity_ok && back.raw.left.error_flag && !back.raw.speed_valid);
-        assert_eq!(back.raw.coil_current_a, None);
+        assert_eq!(back.left.angle_rad.to_bits(), nan.to_bits());
+        assert_eq!(back.right.angle_rad.to_bits(), (-0.0f32).to_bits());
+        assert_eq!(back.t_us, u32::MAX);
+        assert!(!back.left.parity_ok && back.left.error_flag && !back.speed_valid);
+        assert_eq!(back.coil_current_a, None);
     }
 
     /// The largest frame, a step report with every optional field present, fits.
@@ -211,9 +213,7 @@ mod tests {
         assert_eq!(decode::<TargetFrame>(&[0x7f]), Err(FrameError::Malformed));
         let mut buf = [0u8; MAX_FRAME];
         let frame = encode(
-            &SensorFrame {
-                raw: RawFrame::ok(1, 0.0, 0.0, 1.0),
-            },
+            &HostFrame::Sensors(RawFrame::ok(1, 0.0, 0.0, 1.0)),
             &mut buf,
         )
         .expect("fits")
@@ -221,6 +221,6 @@ mod tests {
         // A trailing byte is not silently ignored.
         let mut long = frame[HEADER_BYTES..].to_vec();
         long.push(0);
-        assert_eq!(decode::<SensorFrame>(&long), Err(FrameError::Malformed));
+        assert_eq!(decode::<HostFrame>(&long), Err(FrameError::Malformed));
     }
 }
