@@ -12,7 +12,10 @@
 //! Encoding: a 2-byte little-endian body length, then the postcard body (floats as their IEEE
 //! bits, so a NaN payload and the sign of a zero survive and the host can compare bit for bit).
 
-#![no_std]
+#![cfg_attr(not(feature = "host"), no_std)]
+
+#[cfg(feature = "host")]
+pub mod defmt_log;
 
 use serde::{Deserialize, Serialize};
 use shimmy_core::estimator::fusion::MarginReport;
