@@ -3,13 +3,15 @@
 //! loop configuration and run), the standard scenario set, the demo case and the allowed ranges
 //! of the commands' numeric options.
 //!
-//! Rule: uses only `model` (and `shimmy-core`), never `out` or `cmd`.
+//! Rule: uses only `model` (and `shimmy-core`; `pil` also the firmware's host-compilable
+//! application and the PIL frames), never `out` or `cmd`.
 
 pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
 pub mod margin_run;
 pub mod open_loop;
+pub mod pil;
 pub mod reference;
 pub mod scenario;
 pub mod scenario_file;
