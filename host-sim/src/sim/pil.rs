@@ -4,8 +4,8 @@
 //! `shimmy_pil`'s, the image is built with the firmware's `pil` feature (`board/pil.rs`).
 //!
 //! - [`Qemu`]: the QEMU process with its two named pipes in a fresh directory (QEMU's working
-//!   directory, where the image opens them by name), its defmt log (semihosting stdout) and
-//!   stderr collected on threads. It is killed when dropped, and with `PR_SET_PDEATHSIG` also
+//!   directory, where the image opens them by name; read here with `poll`, so a silent image
+//!   is noticed), its defmt log (semihosting stdout) and stderr collected on threads. It is killed when dropped, and with `PR_SET_PDEATHSIG` also
 //!   when this process dies without unwinding: never an orphan QEMU.
 //! - [`PilFirmware`]: one [`FirmwareStep`] per control period over that link: sends the sensor
 //!   frame, collects the image's frames up to its step report ([`Period`]); a missing answer
@@ -26,7 +26,6 @@ use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -56,10 +55,9 @@ pub struct Qemu {
     child: Child,
     dir: PathBuf,
     to_image: File,
-    /// A write end of `pil.out`, to wake the reader thread at the end.
-    wake_reader: File,
-    frames: Receiver<Result<TargetFrame, String>>,
-    reader: Option<JoinHandle<()>>,
+    from_image: File,
+    /// Bytes read from `pil.out` and not yet taken as frames.
+    pending: Vec<u8>,
     stdout: Arc<Mutex<Vec<u8>>>,
     stderr: Arc<Mutex<String>>,
     elf: Vec<u8>,
@@ -91,13 +89,41 @@ fn open_fifo(path: &Path) -> Result<File, String> {
         .map_err(|e| format!("open {}: {e}", path.display()))
 }
 
-fn read_frame(r: &mut impl Read) -> Result<TargetFrame, String> {
-    let mut head = [0u8; HEADER_BYTES];
-    r.read_exact(&mut head).map_err(|e| e.to_string())?;
-    let n = body_len(head).map_err(|e| e.to_string())?;
-    let mut body = vec![0u8; n];
-    r.read_exact(&mut body).map_err(|e| e.to_string())?;
-    decode(&body).map_err(|e| format!("image frame: {e}"))
+/// Takes the first complete frame off `pending`, if there is one.
+fn take_frame(pending: &mut Vec<u8>) -> Result<Option<TargetFrame>, String> {
+    let [a, b, ..] = pending[..] else {
+        return Ok(None);
+    };
+    let n = body_len([a, b]).map_err(|e| format!("image frame: {e}"))?;
+    if pending.len() < HEADER_BYTES + n {
+        return Ok(None);
+    }
+    let f =
+        decode(&pending[HEADER_BYTES..HEADER_BYTES + n]).map_err(|e| format!("image frame: {e}"));
+    pending.drain(..HEADER_BYTES + n);
+    f.map(Some)
+}
+
+/// Waits up to `ms` for `f` to be readable.
+fn readable(f: &File, ms: i32) -> Result<bool, String> {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: f.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd.
+    match unsafe { libc::poll(&mut p, 1, ms) } {
+        n if n < 0 => {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                Ok(false)
+            } else {
+                Err(format!("poll pil.out: {e}"))
+            }
+        }
+        n => Ok(n > 0 && p.revents & libc::POLLIN != 0),
+    }
 }
 
 fn drain<R: Read + Send + 'static>(mut r: R) -> JoinHandle<Vec<u8>> {
@@ -126,10 +152,7 @@ impl Qemu {
         mkfifo(&fifo_in)?;
         mkfifo(&fifo_out)?;
         let to_image = open_fifo(&fifo_in)?;
-        let mut from_image = open_fifo(&fifo_out)?;
-        let wake_reader = from_image
-            .try_clone()
-            .map_err(|e| format!("pil.out: {e}"))?;
+        let from_image = open_fifo(&fifo_out)?;
         let elf_abs = std::fs::canonicalize(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
         let mut cmd = Command::new(qemu);
         cmd.args(["-machine", "netduinoplus2", "-cpu", "cortex-m4"])
@@ -182,21 +205,12 @@ impl Qemu {
                 }
             });
         }
-        let (tx, frames) = mpsc::channel();
-        let reader = std::thread::spawn(move || loop {
-            let f = read_frame(&mut from_image);
-            let stop = f.is_err();
-            if tx.send(f).is_err() || stop {
-                break;
-            }
-        });
         Ok(Qemu {
             child,
             dir,
             to_image,
-            wake_reader,
-            frames,
-            reader: Some(reader),
+            from_image,
+            pending: Vec::new(),
             stdout,
             stderr,
             elf: elf_bytes,
@@ -211,14 +225,29 @@ impl Qemu {
             .map_err(|e| format!("writing to the image: {e}"))
     }
 
+    /// Reads what `pil.out` holds now (after waiting up to `ms` for it); false if nothing.
+    fn fill(&mut self, ms: i32) -> Result<bool, String> {
+        if !readable(&self.from_image, ms)? {
+            return Ok(false);
+        }
+        let mut buf = [0u8; 4096];
+        let n = self
+            .from_image
+            .read(&mut buf)
+            .map_err(|e| format!("reading pil.out: {e}"))?;
+        self.pending.extend_from_slice(&buf[..n]);
+        Ok(n > 0)
+    }
+
     /// The next frame of the image, or why none came.
     fn next(&mut self) -> Result<TargetFrame, String> {
         let deadline = Instant::now() + FRAME_TIMEOUT;
         loop {
-            match self.frames.recv_timeout(Duration::from_millis(50)) {
-                Ok(f) => return f,
-                Err(RecvTimeoutError::Disconnected) => return Err("link closed".into()),
-                Err(RecvTimeoutError::Timeout) => {}
+            if let Some(f) = take_frame(&mut self.pending)? {
+                return Ok(f);
+            }
+            if self.fill(50)? {
+                continue;
             }
             if let Ok(Some(status)) = self.child.try_wait() {
                 return Err(format!("QEMU exited ({status}) in the middle of the run"));
@@ -263,11 +292,6 @@ impl Drop for Qemu {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
-        // A zero-length header ends the reader thread.
-        let _ = self.wake_reader.write_all(&[0, 0]);
-        if let Some(r) = self.reader.take() {
-            let _ = r.join();
-        }
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
@@ -353,10 +377,17 @@ impl PilFirmware {
             .send(&HostFrame::Finish)
             .map_err(|e| self.failure(&e))?;
         let status = self.qemu.wait_exit().map_err(|e| self.failure(&e))?;
-        // Wake the reader after what the image wrote before it exited.
-        let _ = self.qemu.wake_reader.write_all(&[0, 0]);
-        while let Ok(Ok(f)) = self.qemu.frames.recv_timeout(FRAME_TIMEOUT) {
-            self.file(f);
+        // What the image wrote before it exited is in the pipe now.
+        loop {
+            match take_frame(&mut self.qemu.pending) {
+                Ok(Some(f)) => self.file(f),
+                Ok(None) => match self.qemu.fill(0) {
+                    Ok(true) => {}
+                    Ok(false) => break,
+                    Err(e) => return Err(self.failure(&e)),
+                },
+                Err(e) => return Err(self.failure(&e)),
+            }
         }
         if !status.success() {
             return Err(self.failure(&format!("the image exited with {status}")));
