@@ -191,8 +191,10 @@ mod tests {
     /// The largest frame, a step report with every optional field present, fits.
     #[test]
     fn the_largest_frame_fits() {
-        let mut out = SafeOutput::default();
-        out.control = Some(Default::default());
+        let mut out = SafeOutput {
+            control: Some(Default::default()),
+            ..SafeOutput::default()
+        };
         out.validated.angles_rad = Some((1.0, 2.0));
         out.validated.speed_mps = Some(3.0);
         out.validated.coil_current_a = Some(1.0);

@@ -187,7 +187,7 @@ fn rustdoc() -> Step {
 }
 
 fn clippy_firmware() -> Step {
-    for features in ["", "qemu,deliberate-failure"] {
+    for features in ["", "qemu,deliberate-failure", "pil"] {
         let mut args = vec!["clippy", "-p", FIRMWARE, "--target", TARGET, "--bins"];
         if !features.is_empty() {
             args.extend(["--features", features]);

@@ -695,8 +695,10 @@ mod tests {
     }
 
     fn period(step: u32, cmd: f32) -> Period {
-        let mut out = SafeOutput::default();
-        out.current_cmd_a = cmd;
+        let out = SafeOutput {
+            current_cmd_a: cmd,
+            ..SafeOutput::default()
+        };
         Period {
             step: StepReport {
                 step,
