@@ -307,7 +307,7 @@ fn host_reference_bench() -> Result<(), String> {
 
 /// The scenario of the PIL check: 12 s through the Hopf window onset with a pothole and an
 /// injected encoder fault.
-const PIL_SCENARIO: &str = "host-sim/scenarios/pil.toml";
+const PIL_SCENARIO: &str = "host-sim/scenarios/pil/demo.toml";
 
 /// Processor in the loop: the application image built with the `pil` feature closes the loop
 /// with the simulator's plant under QEMU (`shimmy-sim pil`, release build, the same one the

@@ -7,14 +7,12 @@
 
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
-use crate::sim::closed_loop::{self, Arm};
-use crate::sim::pil::{compare, costs, PilFirmware, SilFirmware, TaskCost};
-use crate::sim::scenario::{self, ScenarioSpec};
+use crate::sim::closed_loop;
+use crate::sim::pil::{check_firmware_matches, compare, costs, PilFirmware, SilFirmware, TaskCost};
+use crate::sim::scenario;
 use crate::sim::scenario_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::supervisor::params::SupervisorParams;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -30,31 +28,13 @@ pub struct PilArgs {
     /// The firmware image built with the `pil` feature (`cargo xtask pil` builds it there).
     #[arg(long, default_value = "target/xtask/shimmy-firmware.pil.elf")]
     pub elf: PathBuf,
-    /// Output folder (overrides the file's `output.dir`; default `out/<name>-pil`).
+    /// Output folder (overrides the file's `output.dir`; default `out/pil/<name>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Also run the firmware's application natively (SIL) and fail unless the coil commands,
     /// supervisor outputs, margin reports, warning levels and model margins agree bit for bit.
     #[arg(long)]
     pub check_sil: bool,
-}
-
-/// The image runs the firmware's own parameters: a scenario whose firmware believes anything
-/// else cannot be compared with it.
-fn check_firmware_matches(spec: &ScenarioSpec, cfg: &closed_loop::LoopConfig) -> Result<()> {
-    if cfg.arm != Arm::Mr(ControllerKind::Asmc) {
-        bail!(
-            "controller `{}`: the PIL image runs asmc (field `controller.kind`)",
-            spec.controller
-        );
-    }
-    if cfg.control != ControlParams::default() || cfg.supervisor != SupervisorParams::default() {
-        bail!(
-            "the firmware's vehicle (field `[model]`, else `[plant]`) must be the default \
-             (nominal) one the image is built with: its controller or supervisor parameters differ"
-        );
-    }
-    Ok(())
 }
 
 fn cost_table(name: &str, t: &TaskCost, sim_s: f64) -> String {
@@ -75,13 +55,14 @@ pub fn command(a: &PilArgs) -> Result<()> {
         .arm()
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let cfg = scenario::loop_config(&spec, arm);
-    check_firmware_matches(&spec, &cfg)
+    check_firmware_matches(&cfg, spec.model())
+        .map_err(anyhow::Error::msg)
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let out = a
         .out
         .clone()
         .or_else(|| spec.out_dir.clone())
-        .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-pil", sanitize(&spec.name))));
+        .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     if !a.elf.exists() {
         bail!(

@@ -13,10 +13,13 @@
 //! - [`SilFirmware`]: the same application's tasks natively (`shimmy_firmware::pil::HostApp`),
 //!   the software-in-the-loop side; [`compare`] checks the two runs bit for bit.
 
-use crate::sim::closed_loop::FirmwareStep;
+use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
+use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
+use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
+use shimmy_core::vehicle::Vehicle;
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
     body_len, decode, encode, HostFrame, StepReport, TargetFrame, HEADER_BYTES, MAX_FRAME,
@@ -39,6 +42,29 @@ pub const FRAME_TIMEOUT: Duration = Duration::from_secs(10);
 const LAST_FRAMES: usize = 12;
 /// Decoded log lines shown with a hang or crash.
 const LAST_LOG_LINES: usize = 40;
+
+/// The image runs the firmware's own controller and parameters (ASMC, the nominal vehicle:
+/// its controller, supervisor and model-margin plant): a loop whose firmware believes anything
+/// else (`believed`) cannot be closed by it.
+pub fn check_firmware_matches(cfg: &LoopConfig, believed: &Vehicle) -> Result<(), String> {
+    if cfg.arm != Arm::Mr(ControllerKind::Asmc) {
+        return Err(format!(
+            "field `controller.kind`: `{}`, but the PIL image runs `asmc`",
+            cfg.arm.name()
+        ));
+    }
+    if *believed != Vehicle::nominal()
+        || cfg.control != ControlParams::default()
+        || cfg.supervisor != SupervisorParams::default()
+    {
+        return Err(
+            "fields `[model]` (else `[plant]`): the firmware must believe the default \
+             (nominal) vehicle the image is built with"
+                .into(),
+        );
+    }
+    Ok(())
+}
 
 /// What the image sent in one control period: its step report, then the frames of its
 /// lower-priority tasks before the next step.
@@ -719,6 +745,27 @@ mod tests {
         b[3].step.out.current_cmd_a = f32::from_bits(0.5f32.to_bits() + 1);
         let e = compare(&a, &b).expect_err("one ulp differs");
         assert!(e.contains("period 3"), "{e}");
+    }
+
+    /// The PIL demo is valid and fits the image; another controller or vehicle is refused,
+    /// naming the field.
+    #[test]
+    fn the_demo_fits_the_image_and_other_firmware_beliefs_do_not() {
+        use crate::sim::{scenario, scenario_file};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
+        let mut spec = scenario_file::load(&path).expect("valid demo");
+        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+        assert_eq!(check_firmware_matches(&cfg, spec.model()), Ok(()));
+        assert!(!spec.faults.is_empty() && spec.duration_s >= 10.0);
+        spec.controller = "smc".into();
+        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+        let e = check_firmware_matches(&cfg, spec.model()).expect_err("smc");
+        assert!(e.contains("controller.kind"), "{e}");
+        spec.controller = "asmc".into();
+        spec.model_vehicle = Some(crate::sim::vehicle_file::load("hard").expect("named set"));
+        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+        let e = check_firmware_matches(&cfg, spec.model()).expect_err("hard");
+        assert!(e.contains("[model]"), "{e}");
     }
 
     #[test]
