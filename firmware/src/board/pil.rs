@@ -47,16 +47,17 @@ static SEEN: AtomicU32 = AtomicU32::new(0);
 
 /// The host's sensor frames as the sensor layer.
 pub struct BoardSensors {
-    _private: (),
+    /// Bytes read from `pil.in` (one semihosting read takes what the pipe holds, usually
+    /// exactly one frame).
+    buf: [u8; MAX_FRAME],
+    len: usize,
 }
 
 impl BoardSensors {
     /// Waits for the host's next frame (no virtual time passes) and returns it as the drivers'
     /// results; a `Finish` frame ends the run.
     pub fn sample(&mut self, _dt_ticks: u32) -> SampleSet {
-        let mut buf = [0u8; MAX_FRAME];
-        let frame = read_frame(&mut buf).and_then(decode::<HostFrame>);
-        match frame {
+        match self.next_frame() {
             Ok(HostFrame::Sensors(raw)) => crate::pil::sample_set(&raw),
             Ok(HostFrame::Finish) => {
                 defmt::info!("pil: the host ended the run");
@@ -137,7 +138,10 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> Board {
     };
     defmt::info!("pil: link open, waiting for the host's frames");
     Board {
-        sensors: BoardSensors { _private: () },
+        sensors: BoardSensors {
+            buf: [0; MAX_FRAME],
+            len: 0,
+        },
         coil,
         timer: ControlTimer::start(dp.TIM2, TIMER_CLOCK_HZ),
         watchdog: Watchdog::start(dp.IWDG),
@@ -150,32 +154,43 @@ pub fn instructions() -> u32 {
     unsafe { (*pac::TIM5::ptr()).cnt().read().bits() }
 }
 
-fn read_exact(buf: &mut [u8]) -> Result<(), shimmy_pil::FrameError> {
-    let h = HANDLE_IN.load(Ordering::Relaxed) as usize;
-    let mut done = 0;
-    while let Some(rest) = buf.get_mut(done..).filter(|r| !r.is_empty()) {
-        // SAFETY: `rest` is valid for writes of its length (semihosting SYS_READ returns the
-        // count *not* read).
-        let left = unsafe { syscall!(READ, h, rest.as_mut_ptr(), rest.len()) };
-        let got = rest.len().saturating_sub(left);
-        if got == 0 {
-            // End of file or an error: the host is gone.
-            return Err(shimmy_pil::FrameError::BadLength(0));
+impl BoardSensors {
+    /// The length of the first complete frame in the buffer, header included.
+    fn complete(&self) -> Result<Option<usize>, shimmy_pil::FrameError> {
+        if self.len < HEADER_BYTES {
+            return Ok(None);
         }
-        done += got;
+        let (Some(&a), Some(&b)) = (self.buf.first(), self.buf.get(1)) else {
+            return Ok(None);
+        };
+        let n = HEADER_BYTES + body_len([a, b])?;
+        Ok((self.len >= n).then_some(n))
     }
-    Ok(())
-}
 
-fn read_frame(buf: &mut [u8; MAX_FRAME]) -> Result<&[u8], shimmy_pil::FrameError> {
-    let mut head = [0u8; HEADER_BYTES];
-    read_exact(&mut head)?;
-    let n = body_len(head)?;
-    let body = buf
-        .get_mut(..n)
-        .ok_or(shimmy_pil::FrameError::BadLength(n))?;
-    read_exact(body)?;
-    Ok(body)
+    /// The next frame from the host, read with as few semihosting calls as the pipe allows.
+    fn next_frame(&mut self) -> Result<HostFrame, shimmy_pil::FrameError> {
+        let h = HANDLE_IN.load(Ordering::Relaxed) as usize;
+        loop {
+            if let Some(n) = self.complete()? {
+                let f = decode::<HostFrame>(self.buf.get(HEADER_BYTES..n).unwrap_or_default());
+                self.buf.copy_within(n..self.len, 0);
+                self.len -= n;
+                return f;
+            }
+            let Some(rest) = self.buf.get_mut(self.len..).filter(|r| !r.is_empty()) else {
+                return Err(shimmy_pil::FrameError::TooLong);
+            };
+            // SAFETY: `rest` is valid for writes of its length (semihosting SYS_READ returns
+            // the count *not* read; on a pipe it returns what the pipe holds).
+            let left = unsafe { syscall!(READ, h, rest.as_mut_ptr(), rest.len()) };
+            let got = rest.len().saturating_sub(left);
+            if got == 0 {
+                // End of file or an error: the host is gone.
+                return Err(shimmy_pil::FrameError::BadLength(0));
+            }
+            self.len += got;
+        }
+    }
 }
 
 /// Sends one frame (one semihosting write, so frames of different tasks never interleave).
