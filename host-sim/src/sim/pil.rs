@@ -747,6 +747,57 @@ mod tests {
         assert!(e.contains("period 3"), "{e}");
     }
 
+    /// A margin report, a warning level or a model margin one bit off is a disagreement too; a
+    /// model cycle the target has not finished yet at the end is not.
+    #[test]
+    fn compare_checks_margin_updates_and_model_cycles() {
+        use shimmy_core::estimator::monitor::Level;
+        use shimmy_pil::{MarginFrame, ModelFrame};
+        let margin = TargetFrame::Margin(MarginFrame {
+            step: 9,
+            report: Default::default(),
+            level: Level::Normal,
+            model_cycles: 0,
+        });
+        let model = |cycle| {
+            TargetFrame::Model(ModelFrame {
+                cycle,
+                margin: Default::default(),
+                instructions: 5,
+            })
+        };
+        let mut a: Vec<_> = (0..3).map(|k| period(k, 0.0)).collect();
+        a[1].after = vec![margin, model(1)];
+        let mut b = a.clone();
+        b[2].after.push(model(2));
+        assert_eq!(
+            compare(&a, &b).map(|x| (x.margin_updates, x.model_cycles)),
+            Ok((1, 1))
+        );
+        let mut c = a.clone();
+        if let TargetFrame::Margin(m) = &mut c[1].after[0] {
+            m.report.zeta_data = f32::from_bits(1);
+        }
+        let e = compare(&a, &c).expect_err("report differs");
+        assert!(e.contains("meter task"), "{e}");
+        let mut d = a.clone();
+        if let TargetFrame::Margin(m) = &mut d[1].after[0] {
+            m.level = Level::MarginLow;
+        }
+        assert!(compare(&a, &d).is_err());
+        let mut m = a.clone();
+        m[1].after[1] = TargetFrame::Model(ModelFrame {
+            cycle: 1,
+            margin: shimmy_core::estimator::model_margin::ModelMargin {
+                zeta: f64::from_bits(1),
+                ..Default::default()
+            },
+            instructions: 5,
+        });
+        let e = compare(&a, &m).expect_err("model differs");
+        assert!(e.contains("model cycle 1"), "{e}");
+    }
+
     /// The PIL demo is valid and fits the image; another controller or vehicle is refused,
     /// naming the field.
     #[test]
