@@ -6,9 +6,11 @@
 //! Rule: uses only `model` (and `shimmy-core`; `pil` also the firmware's host-compilable
 //! application and the PIL frames), never `out` or `cmd`.
 
+pub mod analyze;
 pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
+pub mod log_file;
 pub mod margin_run;
 pub mod open_loop;
 pub mod pil;
