@@ -12,6 +12,7 @@ pub mod drivers;
 pub mod fault_memory;
 pub mod link;
 pub mod monitoring;
+pub mod pil;
 pub mod replay;
 pub mod sensors;
 pub mod sim;

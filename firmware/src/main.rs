@@ -12,7 +12,8 @@
 //!
 //! The `qemu` build runs the same application on simulated sensors with injected faults and
 //! exits after `board::QEMU_STEPS` steps with the counters, failing if they are not what the
-//! simulation injected.
+//! simulation injected. The `pil` build runs it on the host's plant in lockstep
+//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines only report to the host.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -152,9 +153,18 @@ mod app {
         loop {
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
-            if let Some(pt) = task.step(t_s, speed_mps) {
+            #[cfg(feature = "pil")]
+            let call = board::pil::ModelCall::start();
+            let done = task.step(t_s, speed_mps);
+            #[cfg(feature = "pil")]
+            call.end(done.as_ref());
+            if let Some(pt) = done {
                 let m = pt.margin();
-                cx.shared.model.lock(|x| *x = Some(m));
+                cx.shared.model.lock(|x| {
+                    *x = Some(m);
+                    #[cfg(feature = "pil")]
+                    board::pil::model_published();
+                });
                 let late = task.tracker().overruns();
                 let cycles = cx.shared.health.lock(|h| {
                     h.model_cycles = h.model_cycles.saturating_add(1);
@@ -186,6 +196,8 @@ mod app {
     #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
+        #[cfg(feature = "pil")]
+        let entry_instructions = board::pil::instructions();
         let entry = b.timer.now_ticks();
         b.timer.clear_update();
         if *cx.local.hold_safe {
@@ -205,7 +217,7 @@ mod app {
         let step = *cx.local.step;
         let mut health = cx.shared.health;
         let mut margin = cx.shared.margin;
-        #[cfg(feature = "qemu")]
+        #[cfg(all(feature = "qemu", not(feature = "pil")))]
         board::WORLD.set_step(step);
 
         let samples = b.sensors.sample(PERIOD_TICKS);
@@ -234,8 +246,10 @@ mod app {
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
         *cx.local.step = step.wrapping_add(1);
+        #[cfg(feature = "pil")]
+        board::pil::report_step(step, &out, entry_instructions);
 
-        #[cfg(feature = "qemu")]
+        #[cfg(all(feature = "qemu", not(feature = "pil")))]
         if step + 1 == board::QEMU_STEPS {
             qemu_finish(health.lock(|h| *h));
         }
@@ -243,12 +257,26 @@ mod app {
 
     #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin, link])]
     async fn meter(mut cx: meter::Context) {
-        let model = cx.shared.model.lock(|m| *m);
+        #[cfg(feature = "pil")]
+        let entry_instructions = board::pil::instructions();
+        let model = cx.shared.model.lock(|m| {
+            #[cfg(feature = "pil")]
+            board::pil::meter_took_model();
+            *m
+        });
+        #[cfg(feature = "pil")]
+        let mut spawned_by = None;
         while let Some(s) = cx.local.rx.dequeue() {
             cx.shared.link.lock(|l| l.on_sample(s.cmd_a));
+            #[cfg(feature = "pil")]
+            {
+                spawned_by = Some(s.step);
+            }
             let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
+            #[cfg(feature = "pil")]
+            board::pil::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
             let data = &*cx.local.data;
             cx.shared
@@ -296,6 +324,10 @@ mod app {
                     h
                 );
             }
+        }
+        #[cfg(feature = "pil")]
+        if let Some(step) = spawned_by {
+            board::pil::report_meter_run(step, entry_instructions);
         }
     }
 
@@ -369,7 +401,7 @@ mod app {
     /// End of a `qemu` run: the counters must be exactly what the simulation injected (driver
     /// faults once each, the supervisor's FailSafe time, every fault recovered), with no
     /// overrun, no late start, no busy meter and at least one completed model cycle, none late.
-    #[cfg(feature = "qemu")]
+    #[cfg(all(feature = "qemu", not(feature = "pil")))]
     fn qemu_finish(h: Health) -> ! {
         use shimmy_firmware::runtime::{finish, Outcome};
         use shimmy_firmware::sim::{

@@ -46,6 +46,9 @@ enum Command {
     Compare(cmd::compare::CompareArgs),
     /// Run one scenario file (TOML, see host-sim/scenarios/): metrics, trace CSV, plots.
     Run(cmd::run::RunArgs),
+    /// Processor in the loop: a scenario with the firmware image under QEMU in lockstep
+    /// (trace, plots, instruction counts per task; --check-sil: bit-exact against SIL).
+    Pil(cmd::pil::PilArgs),
     /// Open-loop eigenvalue-margin run (damper off, speed ramp or constant drive, road noise,
     /// imbalance): the shimmy pipeline's report next to the true eigenvalues, warning lead time.
     Margin(cmd::margin::MarginArgs),
@@ -82,6 +85,7 @@ fn main() -> Result<()> {
         Some(Command::Sweep(a)) => cmd::sweep::time_domain::command(&a).map(|_| ()),
         Some(Command::Compare(a)) => cmd::compare::command(&a),
         Some(Command::Run(a)) => cmd::run::command(&a),
+        Some(Command::Pil(a)) => cmd::pil::command(&a),
         Some(Command::Margin(a)) => cmd::margin::command(&a),
         Some(Command::MeterAccuracy(a)) => cmd::meter_accuracy::command(&a),
         Some(Command::Mismatch(a)) => cmd::mismatch::command(&a),

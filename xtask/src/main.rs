@@ -56,10 +56,11 @@ fn main() -> ExitCode {
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("link") => link_e2e::step().map(|s| println!("{s}")),
+        Some("pil") => pil().map(|s| println!("xtask: {s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | pil | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -154,6 +155,7 @@ fn test() -> Result<(), String> {
             "host link under QEMU (shimmy-sim device over TCP)",
             link_e2e::step,
         ),
+        ("processor in the loop, PIL = SIL bit for bit (QEMU)", pil),
     ];
 
     let mut results = Vec::new();
@@ -196,7 +198,7 @@ fn rustdoc() -> Step {
 }
 
 fn clippy_firmware() -> Step {
-    for features in ["", "qemu,deliberate-failure"] {
+    for features in ["", "qemu,deliberate-failure", "pil"] {
         let mut args = vec!["clippy", "-p", FIRMWARE, "--target", TARGET, "--bins"];
         if !features.is_empty() {
             args.extend(["--features", features]);
@@ -312,6 +314,37 @@ fn host_reference_bench() -> Result<(), String> {
         "--",
         "reference-bench",
     ])
+}
+
+/// The scenario of the PIL check: 12 s through the Hopf window onset with a pothole and an
+/// injected encoder fault.
+const PIL_SCENARIO: &str = "host-sim/scenarios/pil/demo.toml";
+
+/// Processor in the loop: the application image built with the `pil` feature closes the loop
+/// with the simulator's plant under QEMU (`shimmy-sim pil`, release build, the same one the
+/// reference bench uses), and the run must agree bit for bit with the firmware's application
+/// run natively (`--check-sil`); `shimmy-sim` exits non-zero otherwise.
+fn pil() -> Step {
+    ensure_thumb_target()?;
+    qemu::ensure_installed()?;
+    let elf = build_firmware(FIRMWARE, &["pil"])?;
+    let elf = elf.to_str().ok_or("non-UTF-8 path of the PIL image")?;
+    cargo(&[
+        "run",
+        "--release",
+        "--quiet",
+        "-p",
+        "shimmy-sim",
+        "--",
+        "pil",
+        PIL_SCENARIO,
+        "--elf",
+        elf,
+        "--check-sil",
+        "--out",
+        "target/xtask/pil",
+    ])?;
+    Ok(format!("{PIL_SCENARIO}: PIL = SIL bit for bit"))
 }
 
 fn run_bench(features: &[&str]) -> Step {

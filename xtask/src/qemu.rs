@@ -130,34 +130,10 @@ pub fn run_with(elf: &Path, extra: &[&str]) -> Result<Run, String> {
     })
 }
 
-/// Decodes a defmt byte stream with the table of the ELF that produced it.
+/// Decodes a defmt byte stream with the table of the ELF that produced it (the one decoder,
+/// shared with `shimmy-sim pil`).
 pub fn decode_defmt(elf: &[u8], stream: &[u8]) -> Result<Vec<String>, String> {
-    let table = defmt_decoder::Table::parse(elf)
-        .map_err(|e| format!("defmt table: {e}"))?
-        .ok_or("the ELF has no defmt table")?;
-    let mut decoder = table.new_stream_decoder();
-    decoder.received(stream);
-    let mut lines = Vec::new();
-    loop {
-        match decoder.decode() {
-            Ok(frame) => {
-                let level = frame
-                    .level()
-                    .map(|l| l.as_str().to_uppercase())
-                    .unwrap_or_default();
-                lines.push(format!("{level} {}", frame.display_message()));
-            }
-            Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
-            Err(defmt_decoder::DecodeError::Malformed) => {
-                if table.encoding().can_recover() {
-                    lines.push("(malformed defmt frame skipped)".into());
-                } else {
-                    return Err("malformed defmt frame".into());
-                }
-            }
-        }
-    }
-    Ok(lines)
+    shimmy_pil::defmt_log::decode(elf, stream)
 }
 
 /// Checks the supervisor's story in the application's decoded log: the mode changes it logged

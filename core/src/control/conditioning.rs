@@ -238,6 +238,7 @@ impl RateObserver {
 
 /// Outputs of the conditioning chain for one sample.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Conditioned {
     /// In-phase wheel yaw (psi_L + psi_R)/2 in rad, unfiltered.
     pub psi_rad: f32,

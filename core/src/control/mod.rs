@@ -159,6 +159,7 @@ pub struct ControlInput {
 
 /// Status flags of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ControlFlags {
     /// The semi-active constraint removed the request (F_des v_d <= 0).
     pub clipped: bool,
@@ -176,6 +177,7 @@ pub struct ControlFlags {
 
 /// Outputs of one control step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ControlOutput {
     /// Coil-current command in A, always in [i_min, i_max] and finite.
     pub current_cmd_a: f32,

@@ -84,6 +84,7 @@ impl Default for FusionParams {
 
 /// Which estimate limits the speed margin.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum MarginSource {
     /// No margin available.
     #[default]
@@ -113,6 +114,7 @@ pub struct FusionInput<'a> {
 
 /// The fused margin report. No field is ever NaN; absent quantities are `None`.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct MarginReport {
     /// Time, s (as in [`FusionInput::t_s`]).
     pub t_s: f64,

@@ -172,6 +172,7 @@ impl ModelPoint {
 /// Model-based quantities at the current operating point (f64: the model path): the fusion's
 /// model input, from [`ModelPoint::margin`].
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ModelMargin {
     /// Damping ratio of the model's least-damped shimmy mode.
     pub zeta: f64,

@@ -20,6 +20,7 @@ use super::fusion::MarginReport;
 
 /// Warning level.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Level {
     /// No warning.
     #[default]

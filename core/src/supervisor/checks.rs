@@ -695,6 +695,7 @@ impl Supervisor {
 
 /// Inputs after validation.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Validated {
     /// Time, s (wraps with the us counter; for logs).
     pub t_s: f32,

@@ -137,6 +137,7 @@ impl FaultKind {
 
 /// A set of faults (bit set over [`FaultKind`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct FaultSet(pub(super) u32);
 
 const LEFT_MASK: u32 = 0b11_1111;

@@ -9,6 +9,7 @@ pub const NOMINAL_PERIOD_US: u32 = 1000;
 
 /// One wheel-yaw encoder reading.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EncoderReading {
     /// Wheel yaw about the kingpin, rad (already converted from counts).
     pub angle_rad: f32,
@@ -34,6 +35,7 @@ impl EncoderReading {
 
 /// One raw sensor frame, as delivered every 1 ms.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct RawFrame {
     /// Free-running time stamp, us (wraps).
     pub t_us: u32,

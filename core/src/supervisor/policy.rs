@@ -35,6 +35,7 @@ use super::params::SupervisorParams;
 
 /// Operating mode.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Mode {
     /// All inputs trusted: the controller's command is used.
     #[default]
@@ -58,6 +59,7 @@ impl Mode {
 
 /// The supervisor's decision for one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SupervisorVerdict {
     /// Mode.
     pub mode: Mode,

@@ -11,6 +11,7 @@ use crate::estimator::meter::mode_meter::{Sample, WheelOrder};
 
 /// Output of one [`SafeController::step`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SafeOutput {
     /// Coil-current command, A: finite, in [i_min, i_max] of the controller's limits.
     pub current_cmd_a: f32,

@@ -6,7 +6,9 @@
 //!   wheel-speed input capture on TIM5, coil current on ADC1, coil PWM on TIM4;
 //! - `qemu` build (`qemu.rs`): QEMU has no RCC/GPIO model, so no clock setup (timers run at
 //!   QEMU's 1 GHz), and the sensors are the simulated devices of [`crate::sim`]; the run ends
-//!   after [`QEMU_STEPS`] control steps.
+//!   after [`QEMU_STEPS`] control steps;
+//! - `pil` build (`pil.rs`, QEMU too): the sensors and the coil are the host's plant in
+//!   lockstep (processor in the loop, `shimmy-sim pil`).
 
 pub mod parts;
 
@@ -15,7 +17,12 @@ mod stm32f405;
 #[cfg(not(feature = "qemu"))]
 pub use stm32f405::{init, Board, BoardSensors, Pwm};
 
-#[cfg(feature = "qemu")]
+#[cfg(all(feature = "qemu", not(feature = "pil")))]
 mod qemu;
-#[cfg(feature = "qemu")]
+#[cfg(all(feature = "qemu", not(feature = "pil")))]
 pub use qemu::{init, Board, BoardSensors, Pwm, QEMU_STEPS, WORLD};
+
+#[cfg(feature = "pil")]
+pub mod pil;
+#[cfg(feature = "pil")]
+pub use pil::{init, Board, BoardSensors, Pwm};

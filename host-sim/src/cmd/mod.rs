@@ -13,6 +13,7 @@ pub mod margin;
 pub mod meter_accuracy;
 pub mod mismatch;
 pub mod params;
+pub mod pil;
 pub mod reference_bench;
 pub mod report;
 pub mod run;

@@ -33,9 +33,9 @@ use shimmy_core::estimator::meter::mode_meter::{
 };
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
-use shimmy_core::supervisor::checks::SupervisorEvent;
+use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
 use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
-use shimmy_core::supervisor::frame::MarginStatus;
+use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
@@ -515,13 +515,90 @@ fn flag_bits(o: &ControlOutput) -> u8 {
         | (u8::from(f.adapting) << 5)
 }
 
+/// Where the supervised 1 kHz step runs. [`run`] calls the core's `SafeController` in this
+/// process; [`run_on`] hands each raw frame to another implementation: the firmware's tasks on
+/// the host or the firmware image under QEMU (processor in the loop, `sim::pil`).
+pub trait FirmwareStep {
+    /// Why a step failed (e.g. the image under QEMU hung or crashed).
+    type Error;
+    /// One control period on `frame`: the supervised step's output.
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error>;
+    /// The supervisor, when it runs in this process (the fault log's counters and events).
+    fn supervisor(&mut self) -> Option<&mut Supervisor>;
+}
+
+/// The core's `SafeController` in this process (no margin estimator in the loop).
+struct InProcess(SafeController);
+
+impl FirmwareStep for InProcess {
+    type Error = std::convert::Infallible;
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
+        Ok(self.0.step(frame, MarginStatus::NotUsed))
+    }
+    fn supervisor(&mut self) -> Option<&mut Supervisor> {
+        Some(self.0.supervisor_mut())
+    }
+}
+
+/// Why [`run_on`] stopped.
+#[derive(Debug)]
+pub enum LoopError<E> {
+    /// The plant's integrator failed.
+    Integrate(IntegrateError),
+    /// The firmware step failed.
+    Firmware(E),
+}
+
+impl<E: std::fmt::Display> std::fmt::Display for LoopError<E> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoopError::Integrate(e) => write!(f, "plant integration: {e}"),
+            LoopError::Firmware(e) => write!(f, "firmware: {e}"),
+        }
+    }
+}
+
+impl<E: std::fmt::Display + std::fmt::Debug> std::error::Error for LoopError<E> {}
+
 /// Runs the closed loop over `scenario` (its `current_a` is ignored: the controller sets the
 /// current). `observer` sees every sample.
 pub fn run(
     cfg: &LoopConfig,
     scenario: &mut Scenario,
-    mut observer: Option<&mut dyn LoopObserver>,
+    observer: Option<&mut dyn LoopObserver>,
 ) -> Result<LoopResult, IntegrateError> {
+    let kind = match cfg.arm {
+        Arm::NoDamper => ControllerKind::PassiveOff,
+        Arm::Mr(k) => k,
+    };
+    let mut fw = InProcess(SafeController::new(kind, cfg.control, cfg.supervisor));
+    run_loop(cfg, scenario, observer, &mut fw).map_err(|e| match e {
+        LoopError::Integrate(e) => e,
+        LoopError::Firmware(never) => match never {},
+    })
+}
+
+/// [`run`] with the supervised step in `fw` (the controller, gains and supervisor thresholds
+/// are then `fw`'s own, and `cfg.supervised` is taken as true).
+pub fn run_on<F: FirmwareStep>(
+    cfg: &LoopConfig,
+    scenario: &mut Scenario,
+    observer: Option<&mut dyn LoopObserver>,
+    fw: &mut F,
+) -> Result<LoopResult, LoopError<F::Error>> {
+    let cfg = LoopConfig {
+        supervised: true,
+        ..cfg.clone()
+    };
+    run_loop(&cfg, scenario, observer, fw)
+}
+
+fn run_loop<F: FirmwareStep>(
+    cfg: &LoopConfig,
+    scenario: &mut Scenario,
+    mut observer: Option<&mut dyn LoopObserver>,
+    safe: &mut F,
+) -> Result<LoopResult, LoopError<F::Error>> {
     let wall = std::time::Instant::now();
     let (damper, kind) = match cfg.arm {
         Arm::NoDamper => (Damper::None, ControllerKind::PassiveOff),
@@ -530,7 +607,7 @@ pub fn run(
     let plant = Plant::new(cfg.plant, damper);
     let mut sim = Simulator::with_method(plant, cfg.x0, cfg.method);
     let mut ctl = Controller::new(kind, cfg.control);
-    let mut safe = SafeController::new(kind, cfg.control, cfg.supervisor);
+    let mut last_verdict = None;
     let mut sensors = Sensors::new(cfg.sensors);
     if !cfg.faults.is_empty() {
         sensors.fault = Some(Box::new(FaultPlan::new(
@@ -592,8 +669,11 @@ pub fn run(
             held
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
-            let o = safe.step(&meas.raw_frame(t_us), MarginStatus::NotUsed);
-            log_verdict(&mut res.faults, &mut safe, &o, t);
+            let o = safe
+                .step(&meas.raw_frame(t_us))
+                .map_err(LoopError::Firmware)?;
+            log_verdict(&mut res.faults, safe.supervisor(), &o, t);
+            last_verdict = Some(o.verdict);
             safe_out = Some(o);
             let mut c = o.control.unwrap_or_default();
             c.current_cmd_a = o.current_cmd_a;
@@ -725,12 +805,16 @@ pub fn run(
                 speed_meas_mps: meter_in.2,
             });
         }
-        sim.advance(cfg.dt_s, &inputs)?;
+        sim.advance(cfg.dt_s, &inputs)
+            .map_err(LoopError::Integrate)?;
     }
     res.sim_s = n as f64 * cfg.dt_s;
     res.wall_s = wall.elapsed().as_secs_f64();
-    if cfg.supervised {
-        let sup = safe.supervisor();
+    if let Some(v) = last_verdict {
+        res.faults.final_mode = v.mode;
+        res.faults.final_faults = v.faults;
+    }
+    if let Some(sup) = safe.supervisor().filter(|_| cfg.supervised) {
         res.faults.final_mode = sup.mode();
         res.faults.final_faults = sup.faults();
         res.faults.missed_samples = sup.missed_samples();
@@ -751,8 +835,9 @@ fn mode_rank(m: Mode) -> u8 {
     }
 }
 
-/// Books one supervised step into the fault log.
-fn log_verdict(log: &mut FaultLog, safe: &mut SafeController, o: &SafeOutput, t_s: f64) {
+/// Books one supervised step into the fault log (missed samples and events only when the
+/// supervisor runs in this process).
+fn log_verdict(log: &mut FaultLog, sup: Option<&mut Supervisor>, o: &SafeOutput, t_s: f64) {
     let v = &o.verdict;
     if !v.detected.is_empty() {
         log.first_detect_s.get_or_insert(t_s);
@@ -760,7 +845,8 @@ fn log_verdict(log: &mut FaultLog, safe: &mut SafeController, o: &SafeOutput, t_
             log.detected.insert(k);
         }
     }
-    if safe.supervisor().missed_samples() > 0 {
+    let missed = sup.as_ref().is_some_and(|s| s.missed_samples() > 0);
+    if missed {
         log.first_missed_s.get_or_insert(t_s);
     }
     match v.mode {
@@ -775,6 +861,7 @@ fn log_verdict(log: &mut FaultLog, safe: &mut SafeController, o: &SafeOutput, t_
     if mode_rank(v.mode) > mode_rank(log.worst_mode) {
         log.worst_mode = v.mode;
     }
-    log.events
-        .extend(safe.supervisor_mut().drain_events().map(|e| (t_s, e)));
+    if let Some(sup) = sup {
+        log.events.extend(sup.drain_events().map(|e| (t_s, e)));
+    }
 }

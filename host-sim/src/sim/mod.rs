@@ -3,7 +3,8 @@
 //! loop configuration and run), the standard scenario set, the demo case, the host link to a device (a board, QEMU or the in-process simulated device) and the allowed ranges
 //! of the commands' numeric options.
 //!
-//! Rule: uses only `model` (and `shimmy-core`), never `out` or `cmd`.
+//! Rule: uses only `model` (and `shimmy-core`; `pil` also the firmware's host-compilable
+//! application and the PIL frames), never `out` or `cmd`.
 
 pub mod analyze;
 pub mod arg_range;
@@ -13,6 +14,7 @@ pub mod log_file;
 pub mod device_link;
 pub mod margin_run;
 pub mod open_loop;
+pub mod pil;
 pub mod reference;
 pub mod scenario;
 pub mod scenario_file;

@@ -1,0 +1,231 @@
+//! Processor in the loop: the seam between the PIL link and the application, host-compilable.
+//!
+//! - [`sample_set`]: the host's raw sensor frame as the sensor layer's [`SampleSet`], so the
+//!   PIL board (`board/pil.rs`) feeds the control task through the same
+//!   [`crate::control::raw_frame`] glue (and its driver-fault counters) as the board's drivers:
+//!   a bus, parity or error-flag reading carries no angle, a missing coil-current reading is an
+//!   ADC fault.
+//! - [`HostApp`] (host only): the application's three tasks in the order the RTIC app runs them
+//!   in one control period (control, the meter run every 10th step, the background loop until
+//!   it has nothing due), on the host. It is the software-in-the-loop side of the PIL/SIL
+//!   comparison (`shimmy-sim pil --check-sil`): the same code as the image, run natively.
+
+use crate::drivers::wheel_speed::{SpeedReading, SpeedStatus};
+use crate::sensors::{SampleSet, SensorFault};
+use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
+
+fn encoder(e: &EncoderReading) -> Result<f32, SensorFault> {
+    if !e.read_ok {
+        Err(SensorFault::Bus)
+    } else if !e.parity_ok {
+        Err(SensorFault::Parity)
+    } else if e.error_flag {
+        // The host's encoder model has no ERRFL contents.
+        Err(SensorFault::ErrorFlag(0))
+    } else {
+        Ok(e.angle_rad)
+    }
+}
+
+/// The sensor layer's view of a raw frame from the host: what the board's drivers would have
+/// returned for it.
+pub fn sample_set(raw: &RawFrame) -> SampleSet {
+    SampleSet {
+        t_us: raw.t_us,
+        psi_l_rad: encoder(&raw.left),
+        psi_r_rad: encoder(&raw.right),
+        speed: SpeedReading {
+            speed_mps: raw.speed_mps,
+            status: if raw.speed_valid {
+                SpeedStatus::Valid
+            } else {
+                SpeedStatus::Starting
+            },
+        },
+        coil_current_a: raw.coil_current_a.ok_or(SensorFault::Bus),
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+pub use host::HostApp;
+
+#[cfg(not(target_os = "none"))]
+mod host {
+    use super::sample_set;
+    use crate::control::{supervised_step, Health};
+    use crate::monitoring::{
+        safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+    };
+    use heapless::Deque;
+    use shimmy_core::estimator::meter::mode_meter::ConfigError;
+    use shimmy_core::estimator::model_margin::ModelMargin;
+    use shimmy_core::params::PlantParams;
+    use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
+    use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_pil::{MarginFrame, ModelFrame, StepReport, TargetFrame};
+
+    /// The application's tasks on the host, one control period per [`HostApp::period`], with the
+    /// state the RTIC app shares between them (`main.rs`: `Shared`, `Local`).
+    pub struct HostApp {
+        ctrl: SafeController,
+        health: Health,
+        step: u32,
+        /// The SPSC queue of the app (capacity 31).
+        queue: Deque<MeterSample, 31>,
+        data: DataMargin,
+        model_task: ModelTask,
+        /// Every model margin published so far, in order (cycle n at index n - 1).
+        published: Vec<ModelMargin>,
+        now: (f64, f32),
+        margin: MarginStatus,
+    }
+
+    impl HostApp {
+        /// The application as `init` leaves it after a power-on (no latched fault).
+        pub fn new() -> Result<Self, ConfigError> {
+            Ok(HostApp {
+                ctrl: safe_controller(),
+                health: Health::default(),
+                step: 0,
+                queue: Deque::new(),
+                data: DataMargin::new()?,
+                model_task: ModelTask::new(PlantParams::nominal()),
+                published: Vec::new(),
+                now: (0.0, f32::NAN),
+                margin: MarginStatus::Invalid,
+            })
+        }
+
+        /// The health counters.
+        pub fn health(&self) -> &Health {
+            &self.health
+        }
+
+        /// One control period on `raw`; `emit` gets the frames the image would send, in the
+        /// same order. `model_cycles`: for a meter run, how many model cycles it sees
+        /// published (on the target this depends on how far the background loop got in
+        /// instructions, which only the target knows; `None`: every cycle completed so far).
+        pub fn period(
+            &mut self,
+            raw: &RawFrame,
+            model_cycles: Option<u32>,
+            emit: &mut dyn FnMut(TargetFrame),
+        ) {
+            // control task
+            let step = self.step;
+            let out = supervised_step(
+                &mut self.ctrl,
+                &sample_set(raw),
+                self.margin,
+                &mut self.health,
+            );
+            let dropped = self.queue.push_back(MeterSample::of(step, &out)).is_err();
+            self.health.meter_dropped += u32::from(dropped);
+            self.health.steps += 1;
+            self.step = step.wrapping_add(1);
+            emit(TargetFrame::Step(StepReport {
+                step,
+                out,
+                instructions: 0,
+            }));
+            // meter task, spawned every 10th step
+            if step.is_multiple_of(METER_DECIMATION) {
+                let seen = model_cycles.map_or(self.published.len(), |n| n as usize);
+                let model = seen
+                    .checked_sub(1)
+                    .and_then(|i| self.published.get(i))
+                    .copied();
+                while let Some(s) = self.queue.pop_front() {
+                    let Some((u, _)) = self.data.push(&s, model.as_ref()) else {
+                        continue;
+                    };
+                    self.now = (u.report.t_s, self.data.speed_mps());
+                    self.margin = self.data.margin_status();
+                    emit(TargetFrame::Margin(MarginFrame {
+                        step: s.step,
+                        report: u.report,
+                        level: u.level,
+                        model_cycles: seen as u32,
+                    }));
+                }
+                emit(TargetFrame::MeterRun {
+                    step,
+                    instructions: 0,
+                });
+            }
+            // background loop: runs until nothing is due
+            loop {
+                let (t_s, speed_mps) = self.now;
+                if let Some(pt) = self.model_task.step(t_s, speed_mps) {
+                    let margin = pt.margin();
+                    self.published.push(margin);
+                    self.health.model_cycles += 1;
+                    self.health.model_late = self.model_task.tracker().overruns();
+                    emit(TargetFrame::Model(ModelFrame {
+                        cycle: self.published.len() as u32,
+                        margin,
+                        instructions: 0,
+                    }));
+                }
+                if !self.model_task.tracker().busy() {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::raw_frame;
+    use crate::control::Health;
+
+    /// A healthy frame goes through the sensor layer and the firmware's frame glue unchanged,
+    /// bit for bit; a parity error loses the angle (as the board's driver does) and is counted.
+    #[test]
+    fn host_frames_reach_the_supervisor_as_the_drivers_would_deliver_them() {
+        let mut f = RawFrame::ok(7000, 0.0123, -0.0, 13.5);
+        f.coil_current_a = Some(0.75);
+        let mut h = Health::default();
+        let back = raw_frame(&sample_set(&f), &mut h);
+        assert_eq!(back.left.angle_rad.to_bits(), f.left.angle_rad.to_bits());
+        assert_eq!(back.right.angle_rad.to_bits(), f.right.angle_rad.to_bits());
+        assert_eq!(
+            (back.t_us, back.speed_mps, back.coil_current_a),
+            (7000, 13.5, Some(0.75))
+        );
+        assert_eq!(h, Health::default());
+        f.left.parity_ok = false;
+        f.speed_valid = false;
+        f.coil_current_a = None;
+        let back = raw_frame(&sample_set(&f), &mut h);
+        assert!(!back.left.parity_ok && back.left.angle_rad.is_nan());
+        assert!(!back.speed_valid);
+        assert!(back.coil_current_a.is_some_and(f32::is_nan));
+        // The ADC error is counted as a bus error, as `coil_current::Error::Adc` is on the board.
+        assert_eq!((h.enc_parity, h.enc_bus), (1, 1));
+    }
+
+    /// The host app answers like the image: one step report per period, a meter run every
+    /// 10th step with one margin update from the second run on, model cycles once the meter
+    /// has published a speed.
+    #[test]
+    fn host_app_emits_the_frames_of_each_period_in_order() {
+        use shimmy_pil::TargetFrame;
+        let mut app = HostApp::new().expect("default configuration");
+        let mut frames = Vec::new();
+        for k in 0..300u32 {
+            let mut f = RawFrame::ok(k * 1000, 0.0, 0.0, 12.0);
+            f.coil_current_a = Some(0.0);
+            app.period(&f, None, &mut |t| frames.push(t));
+        }
+        let count = |p: fn(&TargetFrame) -> bool| frames.iter().filter(|f| p(f)).count();
+        assert_eq!(count(|f| matches!(f, TargetFrame::Step(_))), 300);
+        assert_eq!(count(|f| matches!(f, TargetFrame::MeterRun { .. })), 30);
+        assert_eq!(count(|f| matches!(f, TargetFrame::Margin(_))), 29);
+        assert!(count(|f| matches!(f, TargetFrame::Model(_))) >= 2);
+        assert!(matches!(frames[0], TargetFrame::Step(s) if s.step == 0));
+        assert_eq!(app.health().steps, 300);
+    }
+}

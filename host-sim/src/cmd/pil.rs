@@ -1,0 +1,158 @@
+//! `shimmy-sim pil SCENARIO.toml`: processor in the loop. The scenario's plant, sensors and
+//! faults exactly as in `run` (the same `closed_loop` code), with the firmware image under QEMU
+//! in place of the in-process controller (`sim::pil`); the same trace CSV and plots as `run`,
+//! plus the instruction counts of the image's three tasks under closed-loop data and their CPU
+//! share at 168 MHz. `--check-sil` runs the scenario again with the firmware's application
+//! natively and fails unless both runs agree bit for bit.
+
+use crate::out::file_name::sanitize;
+use crate::out::plots::{plot_margin, plot_runs};
+use crate::sim::closed_loop;
+use crate::sim::pil::{check_firmware_matches, compare, costs, PilFirmware, SilFirmware, TaskCost};
+use crate::sim::scenario;
+use crate::sim::scenario_file;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// The core clock of the board's STM32F405, Hz.
+const CPU_HZ: f64 = 168e6;
+
+/// Options of `shimmy-sim pil`.
+#[derive(Args, Debug)]
+pub struct PilArgs {
+    /// Scenario file (TOML, as for `run`); the image is built for the default vehicle with
+    /// the ASMC controller, so the scenario must believe that vehicle.
+    pub scenario: PathBuf,
+    /// The firmware image built with the `pil` feature (`cargo xtask pil` builds it there).
+    #[arg(long, default_value = "target/xtask/shimmy-firmware.pil.elf")]
+    pub elf: PathBuf,
+    /// Output folder (overrides the file's `output.dir`; default `out/pil/<name>`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also run the firmware's application natively (SIL) and fail unless the coil commands,
+    /// supervisor outputs, margin reports, warning levels and model margins agree bit for bit.
+    #[arg(long)]
+    pub check_sil: bool,
+}
+
+fn cost_table(name: &str, t: &TaskCost, sim_s: f64) -> String {
+    format!(
+        "| {name} | {} | {} | {} | {} | {:.2} % |\n",
+        t.counts.len(),
+        t.total().checked_div(t.counts.len() as u64).unwrap_or(0),
+        t.quantile(0.99),
+        t.max(),
+        100.0 * t.cpu_share(sim_s, CPU_HZ)
+    )
+}
+
+/// The command.
+pub fn command(a: &PilArgs) -> Result<()> {
+    let spec = scenario_file::load(&a.scenario)?;
+    let arm = spec
+        .arm()
+        .with_context(|| format!("scenario file {}", a.scenario.display()))?;
+    let cfg = scenario::loop_config(&spec, arm);
+    check_firmware_matches(&cfg, spec.model())
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("scenario file {}", a.scenario.display()))?;
+    let out = a
+        .out
+        .clone()
+        .or_else(|| spec.out_dir.clone())
+        .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    if !a.elf.exists() {
+        bail!(
+            "PIL image {} not found: build it with `cargo xtask pil` (or `cargo build --release \
+             -p shimmy-firmware --target thumbv7em-none-eabihf --features pil`) and pass --elf",
+            a.elf.display()
+        );
+    }
+
+    let wall = Instant::now();
+    let mut fw = PilFirmware::start(&a.elf).map_err(anyhow::Error::msg)?;
+    let r = closed_loop::run_on(&cfg, &mut spec.scenario.clone(), None, &mut fw)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let run = fw.finish().map_err(anyhow::Error::msg)?;
+    let wall_s = wall.elapsed().as_secs_f64();
+
+    let trace = out.join("trace.csv");
+    r.write_trace_csv(&trace)?;
+    let label = "asmc (PIL)";
+    let time_png = out.join("time.png");
+    plot_runs(&time_png, &spec.name, &[(label, &r)])?;
+    let margin_png = out.join("margin.png");
+    plot_margin(&margin_png, &spec.name, &[(label, &cfg, &r)])?;
+    let m = r.metrics(&cfg, spec.t_dist_s);
+    println!(
+        "scenario `{}` processor in the loop: {} simulated s in {:.2} wall s ({:.0}x real time, QEMU start and exit included)",
+        spec.name,
+        r.sim_s,
+        wall_s,
+        r.sim_s / wall_s
+    );
+    println!(
+        "  peak wheel yaw {:.3} deg, RMS current {:.3} A, shimmy at the end: {}",
+        m.peak_yaw_rad.to_degrees(),
+        m.rms_current_a,
+        if m.shimmies() { "YES" } else { "no" }
+    );
+    println!(
+        "  supervisor: worst mode {}, final mode {}, lost frames {}",
+        r.faults.worst_mode.name(),
+        r.faults.final_mode.name(),
+        r.faults.lost_frames
+    );
+
+    let c = costs(&run.periods);
+    let mut table = String::from(
+        "| task | runs | mean | p99 | max | CPU at 168 MHz, 1 cycle/instruction |\n|---|---:|---:|---:|---:|---:|\n",
+    );
+    table += &cost_table("control (1 kHz), per step", &c.control, r.sim_s);
+    table += &cost_table("meter (100 Hz), per run", &c.meter, r.sim_s);
+    table += &cost_table("model loop, per cycle", &c.model, r.sim_s);
+    let mut hist = String::from("control step instructions | steps\n---|---:\n");
+    for (lo, hi, n) in c.control.histogram(10) {
+        hist += &format!("{lo}..{hi} | {n}\n");
+    }
+    println!("\ninstructions per task (QEMU -icount shift=0, closed-loop data):\n{table}");
+    println!("histogram of the control step:\n{hist}");
+    let report = out.join("instructions.md");
+    std::fs::write(
+        &report,
+        format!("# Instructions per task: {}\n\n{table}\n{hist}", spec.name),
+    )
+    .with_context(|| format!("writing {}", report.display()))?;
+    println!(
+        "  wrote {}, {}, {}, {}",
+        trace.display(),
+        time_png.display(),
+        margin_png.display(),
+        report.display()
+    );
+
+    if a.check_sil {
+        let mut sil = SilFirmware::new(Some(&run.periods)).map_err(anyhow::Error::msg)?;
+        let rs = closed_loop::run_on(&cfg, &mut spec.scenario.clone(), None, &mut sil)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let agreement = compare(&run.periods, &sil.periods())
+            .map_err(|e| anyhow::anyhow!("PIL and SIL disagree (scenario `{}`): {e}", spec.name))?;
+        let same_plant = r.series.psi_l_rad.len() == rs.series.psi_l_rad.len()
+            && r.series
+                .psi_l_rad
+                .iter()
+                .zip(&rs.series.psi_l_rad)
+                .all(|(x, y)| x.to_bits() == y.to_bits());
+        if !same_plant {
+            bail!("PIL and SIL agree on the firmware's outputs but the plant trajectories differ");
+        }
+        println!(
+            "PIL = SIL bit for bit: {} steps (coil command, verdict, validated inputs, controller output), {} margin updates (report, level), {} model cycles, identical plant trajectory",
+            agreement.steps, agreement.margin_updates, agreement.model_cycles
+        );
+    }
+    Ok(())
+}
