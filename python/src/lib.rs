@@ -208,7 +208,13 @@ fn hopf_window<'py>(
                 v_max_kmh > v_min_kmh,
                 "v_min_kmh {v_min_kmh} must be below v_max_kmh {v_max_kmh}"
             );
-            let c = damper_c(&v, damper_current_a, ref_amplitude_deg, v_min_kmh, v_max_kmh)?;
+            let c = damper_c(
+                &v,
+                damper_current_a,
+                ref_amplitude_deg,
+                v_min_kmh,
+                v_max_kmh,
+            )?;
             let found = stability::hopf_crossings(
                 &v.plant,
                 c,
@@ -251,13 +257,22 @@ fn eigen_sweep<'py>(
     let v = vehicle.inner;
     let columns = py
         .detach(|| -> anyhow::Result<BTreeMap<&'static str, Vec<f64>>> {
-            anyhow::ensure!(!speeds_kmh.is_empty(), "speeds_kmh: give at least one speed");
+            anyhow::ensure!(
+                !speeds_kmh.is_empty(),
+                "speeds_kmh: give at least one speed"
+            );
             for &s in &speeds_kmh {
                 SPEED_KMH.check("speeds_kmh", s)?;
             }
             let lo = speeds_kmh.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = speeds_kmh.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let c = damper_c(&v, damper_current_a, ref_amplitude_deg, lo, hi.max(lo + 1.0))?;
+            let c = damper_c(
+                &v,
+                damper_current_a,
+                ref_amplitude_deg,
+                lo,
+                hi.max(lo + 1.0),
+            )?;
             let mut cols: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
             for &s in &speeds_kmh {
                 let v_mps = kmh_to_mps(s);

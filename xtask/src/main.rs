@@ -14,6 +14,8 @@
 //! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
 //!                                instrumentation on the pinned stable toolchain and run them for
 //!                                N s (default 60); a crash fails and prints the reproducer
+//! cargo xtask python             build the `shimmy` Python wheel (maturin, dev profile) into a
+//!                                venv in target/py-venv and run its pytest suite (python/tests)
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
 //!                                stack high-water mark; then the host simulator next to the
@@ -28,6 +30,7 @@
 mod conformance;
 mod elf;
 mod fuzz;
+mod python;
 mod qemu;
 
 use std::path::{Path, PathBuf};
@@ -49,10 +52,11 @@ fn main() -> ExitCode {
             host_reference_bench()
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
+        Some("python") => python::package_tests().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | python | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -96,6 +100,10 @@ fn test() -> Result<(), String> {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
         ("fuzz safe_step (libFuzzer, stable, 60 s)", fuzz::step),
+        (
+            "python package (maturin wheel, pytest)",
+            python::package_tests,
+        ),
         ("firmware release build + size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
