@@ -22,6 +22,7 @@ use pyo3::types::PyDict;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, ModeSelect, DEFAULT_TOL_MPS};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
+use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
 use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
@@ -104,6 +105,12 @@ impl Vehicle {
             .into_iter()
             .map(|q| (q.name(), self.inner.plant.get(q)))
             .collect()
+    }
+
+    /// The MR damper (Spencer model, scaled to the steering damper) by the names of the
+    /// reference's `[damper]` section (`host-sim/reference/plant_scipy.py`).
+    fn damper(&self) -> BTreeMap<&'static str, f64> {
+        spencer_fields(&self.inner.damper.spencer).into_iter().collect()
     }
 
     /// The coil rating (largest allowed current), A.
@@ -303,28 +310,37 @@ fn eigen_sweep<'py>(
 }
 
 /// Runs the scenario file at `path` (`host-sim/scenarios/*.toml`, as `shimmy-sim run`); see
-/// [`run_result`] for what it returns.
+/// [`run_result`] for what it returns. `sensor_noise = False` runs the sensor models without
+/// their random noise (quantisation and delays stay): a run an outside co-simulation can
+/// reproduce sample for sample.
 #[pyfunction]
-fn run_scenario<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyDict>> {
+#[pyo3(signature = (path, sensor_noise = true))]
+fn run_scenario<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    sensor_noise: bool,
+) -> PyResult<Bound<'py, PyDict>> {
     let run = py
-        .detach(|| scenario_file::load(&path).and_then(|spec| run_spec(&spec)))
+        .detach(|| scenario_file::load(&path).and_then(|spec| run_spec(spec, sensor_noise)))
         .map_err(value_error)?;
     run_result(py, &run)
 }
 
 /// Runs a scenario given as TOML text (relative vehicle paths are taken relative to
-/// `base_dir`); returns what [`run_scenario`] does.
+/// `base_dir`); the rest as [`run_scenario`].
 #[pyfunction]
-#[pyo3(signature = (text, name = "scenario", base_dir = "."))]
+#[pyo3(signature = (text, name = "scenario", base_dir = ".", sensor_noise = true))]
 fn run_scenario_toml<'py>(
     py: Python<'py>,
     text: &str,
     name: &str,
     base_dir: &str,
+    sensor_noise: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let run = py
         .detach(|| {
-            scenario_file::parse_in(text, name, Path::new(base_dir)).and_then(|s| run_spec(&s))
+            scenario_file::parse_in(text, name, Path::new(base_dir))
+                .and_then(|s| run_spec(s, sensor_noise))
         })
         .map_err(value_error)?;
     run_result(py, &run)
@@ -337,8 +353,13 @@ struct Run {
     trace_dt_s: f64,
 }
 
-fn run_spec(spec: &ScenarioSpec) -> anyhow::Result<Run> {
-    let (cfg, result) = scenario::run(spec)?;
+fn run_spec(mut spec: ScenarioSpec, sensor_noise: bool) -> anyhow::Result<Run> {
+    if !sensor_noise {
+        spec.sensors.encoder_noise_rad = 0.0;
+        spec.sensors.speed_noise_mps = 0.0;
+        spec.sensors.current_noise_a = 0.0;
+    }
+    let (cfg, result) = scenario::run(&spec)?;
     let metrics = result.metrics(&cfg, spec.t_dist_s);
     Ok(Run {
         result,
