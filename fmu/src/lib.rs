@@ -73,40 +73,40 @@ pub struct ShimmyController {
     pub accel_mps2: f64,
 
     /// Coil-current command to the coil driver, A
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub current_cmd_a: f64,
     /// Supervisor mode: 0 normal, 1 degraded, 2 fail-safe
-    #[variable(causality = Output, variability = Discrete, start = 0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0)]
     pub supervisor_mode: i32,
     /// The damper can be used (coil not found open or shorted)
-    #[variable(causality = Output, variability = Discrete, start = true)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = true)]
     pub damper_available: bool,
     /// Warning level: 0 normal, 1 margin low, 2 approaching critical, 3 shimmy present
-    #[variable(causality = Output, variability = Discrete, start = 0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0)]
     pub warning_level: i32,
     /// The margin report is valid
-    #[variable(causality = Output, variability = Discrete, start = false)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = false)]
     pub margin_valid: bool,
     /// Data (mode meter) damping ratio of the shimmy mode, slow estimate
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub zeta_data: f64,
     /// One-sigma uncertainty of zeta_data
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub sigma_zeta_data: f64,
     /// Fast (warning) damping estimate
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub zeta_fast: f64,
     /// Frequency of the shimmy mode, Hz
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub freq_hz: f64,
     /// Model damping ratio at the current speed (NaN: none yet)
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub zeta_model: f64,
     /// Speed margin to the nearest Hopf crossing, m/s (NaN: none)
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub speed_margin_mps: f64,
     /// Time to the critical speed at the current acceleration, s (NaN: not approaching)
-    #[variable(causality = Output, variability = Discrete, start = 0.0)]
+    #[variable(causality = Output, variability = Discrete, initial = Exact, start = 0.0)]
     pub time_to_critical_s: f64,
 
     #[variable(skip = true)]
