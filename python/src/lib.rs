@@ -110,7 +110,9 @@ impl Vehicle {
     /// The MR damper (Spencer model, scaled to the steering damper) by the names of the
     /// reference's `[damper]` section (`host-sim/reference/plant_scipy.py`).
     fn damper(&self) -> BTreeMap<&'static str, f64> {
-        spencer_fields(&self.inner.damper.spencer).into_iter().collect()
+        spencer_fields(&self.inner.damper.spencer)
+            .into_iter()
+            .collect()
     }
 
     /// The coil rating (largest allowed current), A.

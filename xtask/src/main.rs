@@ -16,6 +16,9 @@
 //!                                N s (default 60); a crash fails and prints the reproducer
 //! cargo xtask python             build the `shimmy` Python wheel (maturin, dev profile) into a
 //!                                venv in target/py-venv and run its pytest suite (python/tests)
+//! cargo xtask fmu                build the FMI 3.0 co-simulation FMU (fmu/) into
+//!                                target/fmu/shimmy_fmu.fmu, validate it with fmpy and
+//!                                co-simulate it with the SciPy reference plant (fmu/tests/)
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
 //!                                stack high-water mark; then the host simulator next to the
@@ -29,6 +32,7 @@
 
 mod conformance;
 mod elf;
+mod fmu;
 mod fuzz;
 mod python;
 mod qemu;
@@ -53,10 +57,11 @@ fn main() -> ExitCode {
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("python") => python::package_tests().map(|s| println!("{s}")),
+        Some("fmu") => fmu::tests().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | python | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | python | fmu | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -79,6 +84,7 @@ fn test() -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     ensure_scipy()?;
+    fmu::ensure_libclang()?;
     let steps: Vec<(&str, StepFn)> = vec![
         ("cargo fmt --check", || {
             cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
@@ -103,6 +109,10 @@ fn test() -> Result<(), String> {
         (
             "python package (maturin wheel, pytest)",
             python::package_tests,
+        ),
+        (
+            "FMU (fmi-export, fmpy validation, co-simulation)",
+            fmu::tests,
         ),
         ("firmware release build + size", || {
             let elf = build_firmware(FIRMWARE, &[])?;

@@ -94,8 +94,14 @@ pub fn package_tests() -> Step {
 
 /// Runs pytest on `dir` and returns its summary line.
 pub fn pytest(python: &PathBuf, dir: &str) -> Step {
+    pytest_with(python, dir, &[])
+}
+
+/// [`pytest`] with extra environment variables.
+pub fn pytest_with(python: &PathBuf, dir: &str, env: &[(&str, &std::ffi::OsStr)]) -> Step {
     let out = Command::new(python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider", dir])
+        .envs(env.iter().copied())
         .current_dir(root())
         .output()
         .map_err(|e| format!("cannot run pytest: {e}"))?;
