@@ -1,6 +1,6 @@
 //! `shimmy` for Python (PyO3): the simulator's library functions with NumPy arrays in and out.
 //!
-//! - [`Vehicle`]: load and validate a vehicle (a named set or a vehicle file, the same loader
+//! - `Vehicle`: load and validate a vehicle (a named set or a vehicle file, the same loader
 //!   as `shimmy-sim --vehicle`), read and set fields by `section.name` through the core's one
 //!   validation, the plant parameters as a dict (the names of `host-sim/reference/plant_scipy.py`).
 //! - `hopf_window`: the Hopf crossings of the linearised plant (`shimmy-sim stability`).
