@@ -7,6 +7,8 @@
 //! - `eigen_sweep`: least-damped / critical mode at given speeds, as arrays.
 //! - `run_scenario` / `run_scenario_toml`: one closed-loop scenario run (`shimmy-sim run`), its
 //!   trace and mode-meter rows as arrays and its metrics.
+//! - `analyze`: the mode meter, fusion and monitor on a measured log (`shimmy-sim analyze`,
+//!   `shimmy_sim::sim::analyze`), its rows as arrays, events and summary.
 //!
 //! Every error of the Rust side (a bad field, a value out of range, a failed run) is a
 //! `ValueError` carrying the full message, which names the field and the allowed range. Long
@@ -15,18 +17,22 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use anyhow::Context as _;
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use shimmy_core::estimator::monitor::Level;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, ModeSelect, DEFAULT_TOL_MPS};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
 use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
+use shimmy_sim::sim::analyze::{self as sim_analyze, Analysis, AnalysisRow, AnalyzeOptions};
 use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
 use shimmy_sim::sim::closed_loop::{LoopResult, RunMetrics};
+use shimmy_sim::sim::log_file::{self, MappingChanges};
 use shimmy_sim::sim::scenario::ScenarioSpec;
 use shimmy_sim::sim::{scenario, scenario_file, vehicle_file};
 
@@ -437,6 +443,137 @@ fn run_result<'py>(py: Python<'py>, run: &Run) -> PyResult<Bound<'py, PyDict>> {
     Ok(out)
 }
 
+/// Runs `shimmy-sim analyze` on the log file `log` (CSV): the mapping file `mapping` (TOML, as
+/// `--mapping`) with the keyword options on top (the command's `--time-column`, `--rate-hz`,
+/// `--yaw-column`, `--yaw-left`/`--yaw-right`, `--yaw-unit`, `--yaw-gain`, `--speed-column`,
+/// `--speed-unit`, `--time-unit`, `--delimiter`), `model = False` for `--data-only`. Returns
+/// `rows` (dict of arrays at 100 Hz: t_s, speed_mps, zeta_slow, sigma_zeta_slow, freq_slow_hz,
+/// slow_valid, zeta_fast, sigma_zeta_fast, freq_fast_hz, fast_valid, amplitude_rad, zeta_model,
+/// speed_margin_mps, time_to_critical_s, model_consistent, level 0..3), `events` (list of
+/// dicts), `summary` (dict) and `rejected_samples`.
+#[pyfunction]
+#[pyo3(signature = (log, vehicle = None, mapping = None, model = true, max_gap_ms = 20.0,
+    delimiter = None, time_column = None, time_unit = None, rate_hz = None, yaw_column = None,
+    yaw_left = None, yaw_right = None, yaw_unit = None, yaw_gain = None, speed_column = None,
+    speed_unit = None))]
+#[allow(clippy::too_many_arguments)]
+fn analyze<'py>(
+    py: Python<'py>,
+    log: PathBuf,
+    vehicle: Option<&Vehicle>,
+    mapping: Option<PathBuf>,
+    model: bool,
+    max_gap_ms: f64,
+    delimiter: Option<String>,
+    time_column: Option<String>,
+    time_unit: Option<String>,
+    rate_hz: Option<f64>,
+    yaw_column: Option<String>,
+    yaw_left: Option<String>,
+    yaw_right: Option<String>,
+    yaw_unit: Option<String>,
+    yaw_gain: Option<f64>,
+    speed_column: Option<String>,
+    speed_unit: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let vehicle = vehicle.map_or_else(core_vehicle::Vehicle::nominal, |v| v.inner);
+    let changes = MappingChanges {
+        delimiter,
+        time_column,
+        time_unit,
+        rate_hz,
+        yaw_column,
+        yaw_left,
+        yaw_right,
+        yaw_unit,
+        yaw_gain,
+        speed_column,
+        speed_unit,
+    };
+    let result = py
+        .detach(|| -> anyhow::Result<Analysis> {
+            let file = match &mapping {
+                Some(p) => MappingChanges::load(p)?,
+                None => MappingChanges::default(),
+            };
+            let map = file.then(&changes).mapping()?;
+            let samples = log_file::load(&log, &map)?;
+            let opts = AnalyzeOptions {
+                vehicle,
+                model,
+                max_gap_s: max_gap_ms * 1e-3,
+            };
+            sim_analyze::analyze(&samples.samples, &opts)
+                .with_context(|| format!("analysing {}", log.display()))
+        })
+        .map_err(value_error)?;
+    let level = |l: Level| match l {
+        Level::Normal => 0_i32,
+        Level::MarginLow => 1,
+        Level::ApproachingCritical => 2,
+        Level::ShimmyPresent => 3,
+    };
+    fn column<'py, T: numpy::Element>(
+        py: Python<'py>,
+        rows: &[AnalysisRow],
+        f: impl Fn(&AnalysisRow) -> T,
+    ) -> Bound<'py, PyArray1<T>> {
+        rows.iter().map(f).collect::<Vec<T>>().into_pyarray(py)
+    }
+    let r = &result.rows;
+    let rows = PyDict::new(py);
+    rows.set_item("t_s", column(py, r, |x| x.t_s))?;
+    rows.set_item("speed_mps", column(py, r, |x| x.speed_mps))?;
+    rows.set_item("zeta_slow", column(py, r, |x| x.zeta_slow))?;
+    rows.set_item("sigma_zeta_slow", column(py, r, |x| x.sigma_zeta_slow))?;
+    rows.set_item("freq_slow_hz", column(py, r, |x| x.freq_slow_hz))?;
+    rows.set_item("slow_valid", column(py, r, |x| x.slow_valid))?;
+    rows.set_item("zeta_fast", column(py, r, |x| x.zeta_fast))?;
+    rows.set_item("sigma_zeta_fast", column(py, r, |x| x.sigma_zeta_fast))?;
+    rows.set_item("freq_fast_hz", column(py, r, |x| x.freq_fast_hz))?;
+    rows.set_item("fast_valid", column(py, r, |x| x.fast_valid))?;
+    rows.set_item("amplitude_rad", column(py, r, |x| x.amplitude_rad))?;
+    rows.set_item("zeta_model", column(py, r, |x| x.zeta_model))?;
+    rows.set_item("speed_margin_mps", column(py, r, |x| x.speed_margin_mps))?;
+    rows.set_item(
+        "time_to_critical_s",
+        column(py, r, |x| x.time_to_critical_s),
+    )?;
+    rows.set_item("model_consistent", column(py, r, |x| x.model_consistent))?;
+    rows.set_item("level", column(py, r, |x| level(x.level)))?;
+    let events = result
+        .events
+        .iter()
+        .map(|e| {
+            let d = PyDict::new(py);
+            d.set_item("start_s", e.start_s)?;
+            d.set_item("speed_mps", e.speed_mps)?;
+            d.set_item("freq_hz", e.freq_hz)?;
+            d.set_item("peak_amplitude_rad", e.peak_amplitude_rad)?;
+            d.set_item("worst_level", level(e.worst))?;
+            d.set_item("duration_s", e.duration_s)?;
+            d.set_item("open", e.open)?;
+            Ok(d)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let s = result.summary();
+    let summary = PyDict::new(py);
+    summary.set_item("duration_s", s.duration_s)?;
+    summary.set_item("valid_fraction", s.valid_fraction)?;
+    summary.set_item("zeta_slow_min", s.zeta_slow_min)?;
+    summary.set_item("zeta_slow_median", s.zeta_slow_median)?;
+    summary.set_item("sigma_slow_median", s.sigma_slow_median)?;
+    summary.set_item("freq_slow_median_hz", s.freq_slow_median_hz)?;
+    summary.set_item("max_level", level(s.max_level))?;
+    summary.set_item("episodes", s.episodes)?;
+    let out = PyDict::new(py);
+    out.set_item("rows", rows)?;
+    out.set_item("events", events)?;
+    out.set_item("summary", summary)?;
+    out.set_item("rejected_samples", result.rejected_samples)?;
+    Ok(out)
+}
+
 /// The Python module `shimmy`.
 #[pymodule]
 fn shimmy(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -447,5 +584,6 @@ fn shimmy(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eigen_sweep, m)?)?;
     m.add_function(wrap_pyfunction!(run_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(run_scenario_toml, m)?)?;
+    m.add_function(wrap_pyfunction!(analyze, m)?)?;
     Ok(())
 }

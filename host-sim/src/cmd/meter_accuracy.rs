@@ -33,6 +33,7 @@ use shimmy_core::vehicle::Vehicle;
 use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::out::progress;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::vehicle_file;
 
@@ -289,10 +290,16 @@ pub fn study(
     let jobs: Vec<(usize, u64)> = (0..cases.len())
         .flat_map(|c| (1..=u64::from(seeds)).map(move |s| (c, s)))
         .collect();
+    let bar = progress::bar(jobs.len(), "meter runs");
     let runs: Vec<(usize, CaseRun)> = jobs
         .par_iter()
-        .map(|&(c, s)| run_case(vehicle, cfg, cases[c], s, record_s).map(|r| (c, r)))
+        .map(|&(c, s)| {
+            let r = run_case(vehicle, cfg, cases[c], s, record_s).map(|r| (c, r));
+            bar.inc(1);
+            r
+        })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
     cases
         .iter()
         .enumerate()
