@@ -73,9 +73,9 @@ pub struct MeterAccuracyArgs {
     /// Recorded time per run after the warm-up (30 s + 2 slow time constants), s: 10 to 3600.
     #[arg(long, default_value_t = 60.0, value_parser = arg_range::f64_in(RECORD_S))]
     pub record_s: f64,
-    /// AR order of the meter's slow instance, 2 to 8 (default: the meter's own, 8; 6 shows
-    /// the previous meter).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=8))]
+    /// AR order of the meter's slow instance, 2 to 10 (default: the meter's own, 10; 8 and 6
+    /// show the previous meters).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=10))]
     pub slow_ar_order: Option<u8>,
     /// Output directory (meter_accuracy.md, meter_accuracy.csv).
     #[arg(long, default_value = "out/meter-accuracy")]

@@ -33,6 +33,10 @@ pub const SNAP_TOLERANCE_S: f64 = 1e-9;
 /// Warning episodes kept (the monitor's event log; older ones are counted as dropped).
 pub const EVENT_LOG: usize = 256;
 
+/// Longest log analysed at once, s (6 h: 21.6 M grid points; a longer span is usually a time
+/// column in the wrong unit).
+pub const MAX_SPAN_S: f64 = 6.0 * 3600.0;
+
 /// Allowed range of [`AnalyzeOptions::max_gap_s`], s.
 pub const MAX_GAP_RANGE_S: (f64, f64) = (1e-3, 10.0);
 
@@ -119,6 +123,12 @@ pub fn resample(log: &[LogSample], max_gap_s: f64) -> Result<(Vec<GridSample>, R
         ..ResampleStats::default()
     };
     let t0 = first.t_s;
+    let span = last.t_s - t0;
+    if span > MAX_SPAN_S {
+        bail!(
+            "the log spans {span:.0} s, more than the {MAX_SPAN_S:.0} s analysed at once (is the time unit right?)"
+        );
+    }
     let n = ((last.t_s - t0) / GRID_DT_S + SNAP_TOLERANCE_S / GRID_DT_S).floor() as usize + 1;
     let mut grid = Vec::with_capacity(n);
     let mut i = 0; // log[i].t_s <= t < log[i + 1].t_s (or t at log[i])
@@ -457,5 +467,13 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("max_gap_s = 0"));
+        // Milliseconds read as seconds: an hour becomes 41 days, refused before any memory
+        // is taken.
+        let long = [row(0.0, 0.0, 3.0), row(3.6e6, 0.0, 3.0)];
+        let e = resample(&long, 0.02).unwrap_err().to_string();
+        assert!(
+            e.contains("spans 3600000 s") && e.contains("time unit"),
+            "{e}"
+        );
     }
 }
