@@ -18,6 +18,11 @@
 //! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
 //!                                instrumentation on the pinned stable toolchain and run them for
 //!                                N s (default 60); a crash fails and prints the reproducer
+//! cargo xtask python             build the `shimmy` Python wheel (maturin, dev profile) into a
+//!                                venv in target/py-venv and run its pytest suite (python/tests)
+//! cargo xtask fmu                build the FMI 3.0 co-simulation FMU (fmu/) into
+//!                                target/fmu/shimmy_fmu.fmu, validate it with fmpy and
+//!                                co-simulate it with the SciPy reference plant (fmu/tests/)
 //! cargo xtask bench              on-target benchmark under QEMU -icount shift=0: instructions
 //!                                per call of each entry, checked against its budget, and the
 //!                                stack high-water mark; then the host simulator next to the
@@ -31,8 +36,10 @@
 
 mod conformance;
 mod elf;
+mod fmu;
 mod fuzz;
 mod link_e2e;
+mod python;
 mod qemu;
 
 use std::path::{Path, PathBuf};
@@ -57,10 +64,12 @@ fn main() -> ExitCode {
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("link") => link_e2e::step().map(|s| println!("{s}")),
         Some("pil") => pil().map(|s| println!("xtask: {s}")),
+        Some("python") => python::package_tests().map(|s| println!("{s}")),
+        Some("fmu") => fmu::tests().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | pil | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | pil | python | fmu | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -83,6 +92,7 @@ fn test() -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     ensure_scipy()?;
+    fmu::ensure_libclang()?;
     let steps: Vec<(&str, StepFn)> = vec![
         ("cargo fmt --check", || {
             cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
@@ -104,6 +114,14 @@ fn test() -> Result<(), String> {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
         ("fuzz safe_step (libFuzzer, stable, 60 s)", fuzz::step),
+        (
+            "python package (maturin wheel, pytest)",
+            python::package_tests,
+        ),
+        (
+            "FMU (fmi-export, fmpy validation, co-simulation)",
+            fmu::tests,
+        ),
         ("firmware release build + size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;

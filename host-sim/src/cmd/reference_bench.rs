@@ -293,20 +293,10 @@ fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> 
     Ok(s)
 }
 
-fn case_toml(
-    p: &PlantParams,
-    d: &SpencerParams,
-    a: &ReferenceBenchArgs,
-    v_mps: f64,
-    sample_times: &[f64],
-    sweep: &[f64],
-) -> String {
-    let mut s = String::from("[plant]\n");
-    for q in Param::ALL {
-        let _ = writeln!(s, "{} = {:e}", q.name(), p.get(q));
-    }
-    s.push_str("\n[damper]\n");
-    for (k, v) in [
+/// The Spencer damper's parameters by their names in the reference's `[damper]` section
+/// (`host-sim/reference/plant_scipy.py`), already scaled to the steering damper.
+pub fn spencer_fields(d: &SpencerParams) -> [(&'static str, f64); 15] {
+    [
         ("c0a", d.c0a),
         ("c0b", d.c0b),
         ("k0", d.k0),
@@ -322,7 +312,23 @@ fn case_toml(
         ("n", d.n),
         ("eta", d.eta),
         ("u_max", d.u_max),
-    ] {
+    ]
+}
+
+fn case_toml(
+    p: &PlantParams,
+    d: &SpencerParams,
+    a: &ReferenceBenchArgs,
+    v_mps: f64,
+    sample_times: &[f64],
+    sweep: &[f64],
+) -> String {
+    let mut s = String::from("[plant]\n");
+    for q in Param::ALL {
+        let _ = writeln!(s, "{} = {:e}", q.name(), p.get(q));
+    }
+    s.push_str("\n[damper]\n");
+    for (k, v) in spencer_fields(d) {
         let _ = writeln!(s, "{k} = {v:e}");
     }
     let list = |xs: &[f64]| {

@@ -1,0 +1,77 @@
+"""shimmy.analyze: the simulator's `analyze` (mode meter, fusion, monitor on a measured log)
+on logs written from simulator runs, with the column names, units and separator of the file."""
+import numpy as np
+import pytest
+
+import shimmy
+
+RUN = """duration_s = {duration}
+[controller]
+kind = "{kind}"
+[speed]
+constant_kmh = 45.0
+[initial]
+yaw_deg = {yaw}
+[output]
+trace_every = 1
+"""
+
+
+def trace(kind, yaw, duration):
+    return shimmy.run_scenario_toml(RUN.format(kind=kind, yaw=yaw, duration=duration))["trace"]
+
+
+def write_si(path, t):
+    """The default columns of the mapping (a `shimmy-sim run` trace), SI units."""
+    np.savetxt(path, np.c_[t["t_s"], t["psi_l_rad"], t["psi_r_rad"], t["speed_mps"]],
+               delimiter=",", header="t_s,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps",
+               comments="")
+
+
+@pytest.fixture(scope="module")
+def limit_cycle():
+    return trace("no-damper", 0.1, 15.0)
+
+
+def test_shimmy_without_a_damper_is_found(tmp_path, limit_cycle):
+    log = tmp_path / "cycle.csv"
+    write_si(log, limit_cycle)
+    a = shimmy.analyze(log)
+    assert a["summary"]["max_level"] == 3  # shimmy present
+    assert len(a["events"]) == 1 and a["events"][0]["open"]
+    linear_hz = shimmy.eigen_sweep(shimmy.Vehicle(), [45.0])["shimmy_freq_hz"][0]
+    # The limit cycle runs near the linear shimmy mode's frequency.
+    assert a["events"][0]["freq_hz"] == pytest.approx(linear_hz, rel=0.1)
+    assert len(a["rows"]["t_s"]) == pytest.approx(100 * 15.0, abs=2)  # 100 Hz
+
+
+def test_units_columns_and_separator_do_not_change_the_result(tmp_path, limit_cycle):
+    si, other = tmp_path / "si.csv", tmp_path / "deg.csv"
+    write_si(si, limit_cycle)
+    t = limit_cycle
+    np.savetxt(other, np.c_[t["t_s"] * 1e3, np.degrees(t["psi_l_rad"]),
+                            np.degrees(t["psi_r_rad"]), t["speed_mps"] * 3.6],
+               delimiter=";", header="time_ms;L;R;v", comments="")
+    a = shimmy.analyze(si)
+    b = shimmy.analyze(other, delimiter=";", time_column="time_ms", time_unit="ms",
+                       yaw_left="L", yaw_right="R", yaw_unit="deg", speed_column="v",
+                       speed_unit="km/h")
+    assert a["events"][0]["start_s"] == pytest.approx(b["events"][0]["start_s"], abs=1e-9)
+    np.testing.assert_allclose(a["rows"]["amplitude_rad"], b["rows"]["amplitude_rad"],
+                               rtol=1e-5, atol=1e-9)
+    np.testing.assert_array_equal(a["rows"]["level"], b["rows"]["level"])
+
+
+def test_a_damped_kick_is_not_shimmy(tmp_path):
+    log = tmp_path / "asmc.csv"
+    write_si(log, trace("asmc", 0.5, 6.0))
+    assert shimmy.analyze(log)["summary"]["max_level"] < 3
+
+
+def test_bad_logs_name_the_column(tmp_path, limit_cycle):
+    log = tmp_path / "cycle.csv"
+    write_si(log, limit_cycle)
+    with pytest.raises(ValueError, match="wheel_yaw"):
+        shimmy.analyze(log, yaw_column="wheel_yaw")
+    with pytest.raises(ValueError, match="no-such.csv"):
+        shimmy.analyze(tmp_path / "no-such.csv")
