@@ -109,7 +109,8 @@ pub struct DataMargin {
     last_speed_mps: f32,
     speed_filt_mps: f32,
     accel_mps2: f32,
-    last_t_s: Option<f64>,
+    /// The step count of the last acceleration update (`None` before the first trusted speed).
+    accel_steps: Option<u64>,
     /// Control steps since the first sample, widened from the samples' wrapping `u32` step
     /// count so the pipeline's time neither wraps (49.7 days at 1 kHz) nor loses the
     /// millisecond (an `f32` second count does after 2^24 ms = 4.66 h).
@@ -127,7 +128,7 @@ impl DataMargin {
             last_speed_mps: f32::NAN,
             speed_filt_mps: 0.0,
             accel_mps2: 0.0,
-            last_t_s: None,
+            accel_steps: None,
             steps: 0,
             last_step: None,
             last_level: Level::Normal,
@@ -169,7 +170,6 @@ impl DataMargin {
             u64::from(s.step.wrapping_sub(last))
         });
         self.last_step = Some(s.step);
-        let t_s = step_time_s(self.steps);
         let v = self.last_speed_mps;
         let sample = Sample {
             psi_l_rad: s.psi_l_rad,
@@ -184,22 +184,29 @@ impl DataMargin {
             },
             damper_cmd: s.cmd_a,
         };
-        self.update_accel(t_s, v);
-        let out = self.pipe.push(&sample, v, self.accel_mps2, t_s, model)?;
+        self.update_accel(v);
+        // the f64 time (soft-float here) only for the tenth sample that reports
+        let steps = self.steps;
+        let out = self
+            .pipe
+            .push_timed(&sample, v, self.accel_mps2, || step_time_s(steps), model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_valid = out.report.valid;
         Some((out, changed))
     }
 
-    /// Acceleration: the derivative of the first-order filtered speed (tau 0.5 s).
-    fn update_accel(&mut self, t_s: f64, v: f32) {
+    /// Acceleration: the derivative of the first-order filtered speed (tau 0.5 s). Its time
+    /// step comes from the step count, in f32: no f64 on the 1 kHz path, and exact at any age
+    /// (one step is `DT_S` whether the drive is 1 s or 40 days old).
+    fn update_accel(&mut self, v: f32) {
         if !v.is_finite() {
             return;
         }
-        match self.last_t_s {
-            Some(t0) if t_s > t0 => {
-                let dt = (t_s - t0) as f32;
+        match self.accel_steps {
+            Some(last) if self.steps > last => {
+                let steps = u32::try_from(self.steps - last).unwrap_or(u32::MAX);
+                let dt = steps as f32 * DT_S;
                 let a = dt / (0.5 + dt);
                 let prev = self.speed_filt_mps;
                 self.speed_filt_mps += a * (v - self.speed_filt_mps);
@@ -207,7 +214,7 @@ impl DataMargin {
             }
             _ => self.speed_filt_mps = v,
         }
-        self.last_t_s = Some(t_s);
+        self.accel_steps = Some(self.steps);
     }
 }
 

@@ -151,7 +151,22 @@ impl<const N: usize> DataPipeline<N> {
         t_s: f64,
         model: Option<&ModelMargin>,
     ) -> Option<PipelineOutput> {
+        self.push_timed(sample, speed_mps, accel_mps2, || t_s, model)
+    }
+
+    /// [`Self::push`] with the time asked for only on the decimated steps that answer: `t_s`
+    /// is called once per report (100 Hz), not per sample. The firmware's time is `f64`
+    /// seconds, soft-float on the M4, so it pays for it at a tenth of the rate.
+    pub fn push_timed(
+        &mut self,
+        sample: &Sample,
+        speed_mps: f32,
+        accel_mps2: f32,
+        t_s: impl FnOnce() -> f64,
+        model: Option<&ModelMargin>,
+    ) -> Option<PipelineOutput> {
         let out = self.meter.push(sample)?;
+        let t_s = t_s();
         let report = self.fusion.update(&FusionInput {
             t_s,
             speed_mps,
