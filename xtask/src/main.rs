@@ -19,7 +19,8 @@
 //!                                stack high-water mark; then the host simulator next to the
 //!                                NumPy/SciPy reference (`shimmy-sim reference-bench`, release:
 //!                                time domain, closed loop, eigenvalue sweep), skipped with a
-//!                                message when python3 with numpy and scipy is missing
+//!                                message when python3 with numpy and scipy is missing;
+//!                                `--target-only` stops after the on-target part
 //! ```
 //!
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm, g++) or
@@ -46,13 +47,16 @@ fn main() -> ExitCode {
         Some("size") => size(),
         Some("bench") => bench().and_then(|s| {
             println!("on-target benchmark: {s}");
+            if args.get(1).is_some_and(|a| a == "--target-only") {
+                return Ok(());
+            }
             host_reference_bench()
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench [--target-only] | conformance | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
