@@ -2,11 +2,13 @@
 //!
 //! nalgebra's `eigenvalues()` / `complex_eigenvalues()` iterate without a bound and can hang
 //! (nalgebra issues #611, #764, #1528). Here the matrix is checked for NaN/Inf, balanced
-//! (Parlett-Reinsch, powers of two, exact similarity) and reduced with
-//! `Schur::try_new(m, eps, max_niter)`; a failure to converge is an error, never a hang or a
-//! panic. Everything is fixed-size (stack only) and `no_std`.
+//! (Parlett-Reinsch, powers of two, exact similarity) and solved by the eigenvalue-only
+//! Hessenberg QR iteration of `hessenberg_qr` with a bound on its sweeps; a failure to converge
+//! is an error, never a hang or a panic. Everything is fixed-size (stack only) and `no_std`.
 
 use nalgebra::{Complex, SMatrix, SVector};
+
+mod hessenberg_qr;
 
 use crate::plant::{
     A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, N_STATES, PHI, PSI_L, PSI_R, THETA_SW,
@@ -113,7 +115,7 @@ pub fn eigenvalues_of<T: SolveFloat>(a: &StateMatrix) -> Result<Eigenvalues, Eig
     eigenvalues_bounded::<T>(a, T::EPS, DEFAULT_MAX_NITER)
 }
 
-/// Eigenvalues of `a` in `T`: finiteness check, balancing, bounded real Schur decomposition.
+/// Eigenvalues of `a` in `T`: finiteness check, balancing, bounded Hessenberg QR iteration.
 ///
 /// Work is bounded: balancing converges in a bounded number of sweeps for finite entries below
 /// `T::MAX_ABS_ENTRY` (each accepted rescaling shrinks the row+column norm sum by >= 5 %), and
@@ -137,9 +139,11 @@ pub fn eigenvalues_bounded<T: SolveFloat>(
     let mut m = a.map(T::of_f64);
     // Power-of-two diagonal similarity: exact in any float type.
     let _scaling = nalgebra::linalg::balancing::balance_parlett_reinsch(&mut m);
-    let schur =
-        nalgebra::linalg::Schur::try_new(m, eps, max_niter).ok_or(EigenError::NotConverged)?;
-    let vals = schur.complex_eigenvalues();
+    let vals = hessenberg_qr::eigenvalues::<T, N_STATES>(
+        core::array::from_fn(|i| core::array::from_fn(|j| m[(i, j)])),
+        eps,
+        max_niter,
+    )?;
     let mut out = [Complex::new(0.0, 0.0); N_STATES];
     for (o, v) in out.iter_mut().zip(vals.iter()) {
         let (re, im) = (v.re.to_f64(), v.im.to_f64());
