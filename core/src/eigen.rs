@@ -143,7 +143,8 @@ pub fn eigenvalues_bounded<T: SolveFloat>(
         core::array::from_fn(|i| core::array::from_fn(|j| m[(i, j)])),
         eps,
         max_niter,
-    )?;
+    )
+    .ok_or(EigenError::NotConverged)?;
     let mut out = [Complex::new(0.0, 0.0); N_STATES];
     for (o, v) in out.iter_mut().zip(vals.iter()) {
         let (re, im) = (v.re.to_f64(), v.im.to_f64());

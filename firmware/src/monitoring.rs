@@ -18,7 +18,7 @@
 //! updates and root extractions, far beyond the 5,000-instruction control budget (numbers:
 //! `cargo xtask bench`). The queue keeps the control task constant-time and lets the meter work
 //! be preempted. Why the tracker is not called per tick as in the simulator's
-//! `ShimmyPipeline`: one call can be an eigen-solve plus the cold shape selection (up to ~0.53 M
+//! `ShimmyPipeline`: one call can be an eigen-solve plus the cold shape selection (up to ~0.44 M
 //! instructions, `cargo xtask bench`), far beyond the control budget.
 
 use shimmy_core::control::{ControlParams, ControllerKind};
@@ -53,9 +53,9 @@ pub const EVENT_LOG: usize = 8;
 /// (`PipelineParams::tuned_monitor`) fires `MarginLow` 7.9 km/h ahead of the Hopf onset and
 /// needs at least 5 km/h; a model at most one period plus one cycle old (0.2 s) is at most
 /// 0.2 km/h stale at the 1 km/h/s of the requirement ramp. What it costs: the worst warm cycle
-/// (continuation: one f32 Schur solve and one LU) is 0.27 M instructions, 2.5 ms of the
-/// background loop at the measured load, ~1.6 % of the CPU at 1 cycle per instruction; the cold
-/// first cycle (the full scan) ~88 ms (`cargo xtask bench`).
+/// (continuation: one f32 eigenvalue solve and one LU) is 0.19 M instructions, 1.8 ms of the
+/// background loop at the measured load, ~1.1 % of the CPU at 1 cycle per instruction; the cold
+/// first cycle (the full scan) ~53 ms (`cargo xtask bench`).
 pub const MODEL_REFRESH_S: f32 = 0.1;
 
 /// The core's supervised controller as the firmware runs it: the adaptive sliding-mode
@@ -187,9 +187,9 @@ impl DataMargin {
         self.update_accel(v);
         // the f64 time (soft-float here) only for the tenth sample that reports
         let steps = self.steps;
-        let out = self
-            .pipe
-            .push_timed(&sample, v, self.accel_mps2, || step_time_s(steps), model)?;
+        let out =
+            self.pipe
+                .push_timed(&sample, v, self.accel_mps2, || step_time_s(steps), model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_valid = out.report.valid;

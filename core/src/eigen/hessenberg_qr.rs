@@ -7,32 +7,32 @@
 //! solve of the 10x10 state matrix takes less than half the instructions (`cargo xtask bench`,
 //! eigen update row) and less code. On fixed arrays, no heap, bounded work.
 
-use nalgebra::Complex;
-
-use super::{EigenError, SolveFloat};
+use nalgebra::{Complex, RealField};
 
 /// Sweeps without a deflation after which one exceptional shift breaks a possible cycle of
 /// the standard shifts (the usual choice: every 10th).
 const EXCEPTIONAL_EVERY: usize = 10;
 
 /// The eigenvalues of `h` (any real matrix; overwritten), in the order of the diagonal blocks
-/// they come from, a complex pair as two adjacent entries with +Im first. At most `max_niter`
-/// QR sweeps ([`EigenError::NotConverged`] beyond). `eps` is the relative deflation threshold.
-pub(super) fn eigenvalues<T: SolveFloat, const N: usize>(
+/// they come from, a complex pair as two adjacent entries with +Im first; `None` when
+/// `max_niter` QR sweeps did not converge. `eps` is the relative deflation threshold.
+/// (Generic over nalgebra's `RealField`, not the solver's `SolveFloat`: this file imports
+/// nothing from the module that uses it.)
+pub fn eigenvalues<T: RealField + Copy, const N: usize>(
     mut h: [[T; N]; N],
     eps: T,
     max_niter: usize,
-) -> Result<[Complex<T>; N], EigenError> {
+) -> Option<[Complex<T>; N]> {
     let zero = Complex::new(T::zero(), T::zero());
     let amax = h.iter().flatten().fold(T::zero(), |m, x| m.max(x.abs()));
     if amax == T::zero() {
-        return Ok([zero; N]);
+        return Some([zero; N]);
     }
     // Scale by a power of two (exact) to max |h_ij| in [0.5, 1): the shift polynomial squares
     // entries, which must not overflow for entries near the type's range.
-    let (_, e) = libm::frexp(amax.to_f64());
-    let down = T::of_f64(libm::ldexp(1.0, -e));
-    let up = T::of_f64(libm::ldexp(1.0, e));
+    let (_, e) = libm::frexp(amax.to_subset().unwrap_or(1.0));
+    let down: T = nalgebra::convert(libm::ldexp(1.0, -e));
+    let up: T = nalgebra::convert(libm::ldexp(1.0, e));
     for x in h.iter_mut().flatten() {
         *x *= down;
     }
@@ -66,20 +66,20 @@ pub(super) fn eigenvalues<T: SolveFloat, const N: usize>(
             since_deflation = 0;
         } else {
             if niter == max_niter {
-                return Err(EigenError::NotConverged);
+                return None;
             }
             niter += 1;
             since_deflation += 1;
             francis_sweep(&mut h, lo, n, since_deflation % EXCEPTIONAL_EVERY == 0);
         }
     }
-    Ok(out)
+    Some(out)
 }
 
 /// A Householder reflector P = I - beta u u^T with P x = alpha e1 for x = (x0, x1, x2), as
 /// (u, beta, alpha); `None` when x = 0. u0 = x0 - alpha with alpha of the opposite sign of x0
 /// (no cancellation), and beta = 2 / |u|^2 = -1 / (alpha u0).
-fn reflector<T: SolveFloat>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)> {
+fn reflector<T: RealField + Copy>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)> {
     let norm = (x0 * x0 + x1 * x1 + x2 * x2).sqrt();
     if norm == T::zero() {
         return None;
@@ -92,7 +92,7 @@ fn reflector<T: SolveFloat>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)> {
 /// Reduces `h` to upper Hessenberg form by a similarity with Householder reflectors (n - 2 of
 /// them, each zeroing one column below the subdiagonal).
 #[allow(clippy::needless_range_loop)] // i and j index rows, columns and the reflector alike
-fn reduce_to_hessenberg<T: SolveFloat, const N: usize>(h: &mut [[T; N]; N]) {
+fn reduce_to_hessenberg<T: RealField + Copy, const N: usize>(h: &mut [[T; N]; N]) {
     for k in 0..N.saturating_sub(2) {
         let tail2 = (k + 2..N).fold(T::zero(), |s, i| s + h[i][k] * h[i][k]);
         if tail2 == T::zero() {
@@ -131,7 +131,7 @@ fn reduce_to_hessenberg<T: SolveFloat, const N: usize>(h: &mut [[T; N]; N]) {
 /// One implicit double-shift QR sweep on the unreduced Hessenberg block lo..=n (n - lo >= 2):
 /// the shifts are the eigenvalues of its trailing 2x2 (or an exceptional pair), the bulge is
 /// chased down with 3-element reflectors, and only the block itself is updated.
-fn francis_sweep<T: SolveFloat, const N: usize>(
+fn francis_sweep<T: RealField + Copy, const N: usize>(
     h: &mut [[T; N]; N],
     lo: usize,
     n: usize,
@@ -141,8 +141,8 @@ fn francis_sweep<T: SolveFloat, const N: usize>(
     // shift polynomial s^2 - trace s + det
     let (trace, det) = if exceptional {
         let s = h[n][m].abs() + h[m][m - 1].abs();
-        let h11 = T::of_f64(0.75) * s + h[n][n];
-        let h12 = T::of_f64(-0.4375) * s;
+        let h11 = nalgebra::convert::<f64, T>(0.75) * s + h[n][n];
+        let h12 = nalgebra::convert::<f64, T>(-0.4375) * s;
         (h11 + h11, h11 * h11 - h12 * s)
     } else {
         (h[m][m] + h[n][n], h[m][m] * h[n][n] - h[m][n] * h[n][m])
@@ -210,8 +210,8 @@ fn francis_sweep<T: SolveFloat, const N: usize>(
 
 /// The eigenvalues of [[a, b], [c, d]]: a real pair without cancellation, or a complex pair
 /// with +Im first.
-fn two_by_two<T: SolveFloat>(a: T, b: T, c: T, d: T) -> (Complex<T>, Complex<T>) {
-    let half = T::of_f64(0.5);
+fn two_by_two<T: RealField + Copy>(a: T, b: T, c: T, d: T) -> (Complex<T>, Complex<T>) {
+    let half: T = nalgebra::convert(0.5);
     let p = half * (a - d);
     let disc = p * p + b * c;
     if disc >= T::zero() {
@@ -231,9 +231,10 @@ fn two_by_two<T: SolveFloat>(a: T, b: T, c: T, d: T) -> (Complex<T>, Complex<T>)
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eigen::StateMatrix;
     use crate::params::PlantParams;
     use crate::plant::{linearise, N_STATES};
+
+    type StateMatrix = nalgebra::SMatrix<f64, N_STATES, N_STATES>;
 
     fn arrays(a: &StateMatrix) -> [[f64; N_STATES]; N_STATES] {
         core::array::from_fn(|i| core::array::from_fn(|j| a[(i, j)]))
@@ -350,7 +351,7 @@ mod tests {
         let a = linearise(&PlantParams::nominal(), 8.0, 0.0);
         assert_eq!(
             eigenvalues::<f64, N_STATES>(arrays(&a), f64::EPSILON, 1),
-            Err(EigenError::NotConverged)
+            None
         );
     }
 }
