@@ -28,11 +28,14 @@ pub fn eigenvalues<T: RealField + Copy, const N: usize>(
     if amax == T::zero() {
         return Some([zero; N]);
     }
-    // Scale by a power of two (exact) to max |h_ij| in [0.5, 1): the shift polynomial squares
-    // entries, which must not overflow for entries near the type's range.
-    let (_, e) = libm::frexp(amax.to_subset().unwrap_or(1.0));
-    let down: T = nalgebra::convert(libm::ldexp(1.0, -e));
-    let up: T = nalgebra::convert(libm::ldexp(1.0, e));
+    // Scale by a power of two (exact) to max |h_ij| near 1: the shift polynomial squares
+    // entries, which must not overflow for entries near the type's range. The exponent from
+    // the f64 bits (no libm frexp/ldexp linked), within +-100 so 2^e exists in f32 too.
+    let bits = amax.to_subset().unwrap_or(1.0f64).to_bits();
+    let e = (((bits >> 52) & 0x7ff) as i64 - 1022).clamp(-100, 100);
+    let pow2 = |k: i64| f64::from_bits(((k + 1023) as u64) << 52);
+    let down: T = nalgebra::convert(pow2(-e));
+    let up: T = nalgebra::convert(pow2(e));
     for x in h.iter_mut().flatten() {
         *x *= down;
     }
