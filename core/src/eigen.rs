@@ -131,8 +131,8 @@ pub fn eigenvalues_bounded<T: SolveFloat>(
     if !(eps.to_f64().is_finite() && eps > T::zero()) {
         return Err(EigenError::NonFinite);
     }
-    // (NaN fails the comparison)
-    if !(abs_max(a) <= T::MAX_ABS_ENTRY) {
+    let amax = abs_max(a);
+    if amax.is_nan() || amax > T::MAX_ABS_ENTRY {
         return Err(EigenError::NonFinite);
     }
     let mut m = a.map(T::of_f64);
@@ -561,7 +561,9 @@ pub fn refine_eigenpair<T: SolveFloat>(
     v0: &CVector,
     max_iter: u8,
 ) -> Result<Eigenpair, EigenError> {
-    if !(abs_max(a) <= T::MAX_ABS_ENTRY)
+    let amax = abs_max(a);
+    if amax.is_nan()
+        || amax > T::MAX_ABS_ENTRY
         || !(lambda0.re.is_finite() && lambda0.im.is_finite())
         || v0.iter().any(|c| !(c.re.is_finite() && c.im.is_finite()))
     {

@@ -134,6 +134,7 @@ fn reduce_to_hessenberg<T: RealField + Copy, const N: usize>(h: &mut [[T; N]; N]
 /// One implicit double-shift QR sweep on the unreduced Hessenberg block lo..=n (n - lo >= 2):
 /// the shifts are the eigenvalues of its trailing 2x2 (or an exceptional pair), the bulge is
 /// chased down with 3-element reflectors, and only the block itself is updated.
+#[allow(clippy::needless_range_loop)] // j indexes the same column of two or three rows
 fn francis_sweep<T: RealField + Copy, const N: usize>(
     h: &mut [[T; N]; N],
     lo: usize,
