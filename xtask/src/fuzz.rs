@@ -78,9 +78,10 @@ pub fn command(args: &[String]) -> Result<(), String> {
 
 /// The step of `cargo xtask test`, in two parts: every target is built now (a build error
 /// fails the step at once), then the fuzzing itself, [`CI_SECONDS`] in total, runs on a thread
-/// of its own. libFuzzer keeps one core busy for a fixed time; on CI's two cores that time
-/// overlaps the steps after it (firmware links, single-core QEMU runs) instead of adding to
-/// the run. `cargo xtask test` joins the thread after its last step.
+/// of its own. libFuzzer keeps one core busy for a fixed time; `cargo xtask test` starts it
+/// after the firmware builds, so on CI's two cores it shares the machine with the single-core
+/// QEMU steps (a free core, so about the executions of a run alone) instead of adding its time
+/// to the run, and joins the thread after its last step.
 pub fn start_in_background() -> Result<std::thread::JoinHandle<Result<String, String>>, String> {
     let built = TARGETS
         .iter()

@@ -125,14 +125,6 @@ fn test() -> Result<(), String> {
         ("host tests (cargo test --workspace)", || {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
-        ("fuzz safe_step: build, then 60 s in the background", || {
-            let run = fuzz::start_in_background()?;
-            *FUZZ_RUN.lock().map_err(|_| "fuzz handle lock poisoned")? = Some(run);
-            Ok(format!(
-                "fuzzing {} s alongside the next steps",
-                fuzz::CI_SECONDS
-            ))
-        }),
         (
             "firmware release builds (one cargo call per feature set)",
             || {
@@ -148,6 +140,14 @@ fn test() -> Result<(), String> {
                 ))
             },
         ),
+        ("fuzz safe_step: build, then 60 s in the background", || {
+            let run = fuzz::start_in_background()?;
+            *FUZZ_RUN.lock().map_err(|_| "fuzz handle lock poisoned")? = Some(run);
+            Ok(format!(
+                "fuzzing {} s alongside the next steps",
+                fuzz::CI_SECONDS
+            ))
+        }),
         ("firmware size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
