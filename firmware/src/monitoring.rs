@@ -312,6 +312,39 @@ mod tests {
         }
     }
 
+    /// The acceleration's time step comes from the step count, so a speed ramp gives the same
+    /// acceleration, bit for bit, at the start and 49.7 days in (across the `u32` wrap). The
+    /// time difference of two f64 second stamps, as before, is not one step there.
+    #[test]
+    fn acceleration_is_the_same_at_any_age() {
+        let accel_trace = |start: u32| {
+            let mut d = DataMargin::new().expect("default config");
+            (0..400u32)
+                .map(|k| {
+                    let s = MeterSample {
+                        step: start.wrapping_add(k),
+                        psi_l_rad: 0.0,
+                        psi_r_rad: 0.0,
+                        speed_mps: 12.0 + 0.001 * k as f32,
+                        cmd_a: 0.0,
+                    };
+                    let _ = d.push(&s, None);
+                    d.accel_mps2.to_bits()
+                })
+                .collect::<Vec<_>>()
+        };
+        let young = accel_trace(0);
+        assert_eq!(young, accel_trace(u32::MAX - 205));
+        assert!(
+            f32::from_bits(young[399]) > 0.5,
+            "the ramp's acceleration shows"
+        );
+        // what the f64 stamps' difference gives 49.7 days in
+        let n = u64::from(u32::MAX) - 100;
+        let dt_old = (step_time_s(n + 1) - step_time_s(n)) as f32;
+        assert_ne!(dt_old, DT_S, "old dt {dt_old}");
+    }
+
     #[test]
     fn model_margin_inside_and_below_the_window() {
         use shimmy_core::params::kmh_to_mps;
