@@ -25,7 +25,7 @@ use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
@@ -103,14 +103,11 @@ pub type MarginUpdate = PipelineOutput;
 
 /// The data path at 100 Hz: the core's [`DataPipeline`] (mode meter -> fusion with the
 /// newest model margin -> monitor, thresholds from `PipelineParams::default()`), plus the
-/// vehicle acceleration the fusion needs (from the sampled speed).
+/// vehicle acceleration the fusion needs (the core's `AccelEstimator` on the sampled speed).
 pub struct DataMargin {
     pipe: DataPipeline<EVENT_LOG>,
     last_speed_mps: f32,
-    speed_filt_mps: f32,
-    accel_mps2: f32,
-    /// The step count of the last acceleration update (`None` before the first trusted speed).
-    accel_steps: Option<u64>,
+    accel: AccelEstimator,
     /// Control steps since the first sample, widened from the samples' wrapping `u32` step
     /// count so the pipeline's time neither wraps (49.7 days at 1 kHz) nor loses the
     /// millisecond (an `f32` second count does after 2^24 ms = 4.66 h).
@@ -126,9 +123,7 @@ impl DataMargin {
         Ok(DataMargin {
             pipe: DataPipeline::new(&PipelineParams::default())?,
             last_speed_mps: f32::NAN,
-            speed_filt_mps: 0.0,
-            accel_mps2: 0.0,
-            accel_steps: None,
+            accel: AccelEstimator::new(),
             steps: 0,
             last_step: None,
             last_level: Level::Normal,
@@ -166,9 +161,8 @@ impl DataMargin {
         if speed_ok {
             self.last_speed_mps = s.speed_mps;
         }
-        self.steps += self.last_step.map_or(u64::from(s.step), |last| {
-            u64::from(s.step.wrapping_sub(last))
-        });
+        let since_last = self.last_step.map(|last| s.step.wrapping_sub(last));
+        self.steps += since_last.map_or(u64::from(s.step), u64::from);
         self.last_step = Some(s.step);
         let v = self.last_speed_mps;
         let sample = Sample {
@@ -184,37 +178,25 @@ impl DataMargin {
             },
             damper_cmd: s.cmd_a,
         };
-        self.update_accel(v);
+        let accel_mps2 = self.update_accel(since_last, v);
         // the f64 time (soft-float here) only for the tenth sample that reports
         let steps = self.steps;
-        let out =
-            self.pipe
-                .push_timed(&sample, v, self.accel_mps2, || step_time_s(steps), model)?;
+        let out = self
+            .pipe
+            .push_timed(&sample, v, accel_mps2, || step_time_s(steps), model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_valid = out.report.valid;
         Some((out, changed))
     }
 
-    /// Acceleration: the derivative of the first-order filtered speed (tau 0.5 s). Its time
-    /// step comes from the step count, in f32: no f64 on the 1 kHz path, and exact at any age
-    /// (one step is `DT_S` whether the drive is 1 s or 40 days old).
-    fn update_accel(&mut self, v: f32) {
-        if !v.is_finite() {
-            return;
-        }
-        match self.accel_steps {
-            Some(last) if self.steps > last => {
-                let steps = u32::try_from(self.steps - last).unwrap_or(u32::MAX);
-                let dt = steps as f32 * DT_S;
-                let a = dt / (0.5 + dt);
-                let prev = self.speed_filt_mps;
-                self.speed_filt_mps += a * (v - self.speed_filt_mps);
-                self.accel_mps2 = (self.speed_filt_mps - prev) / dt;
-            }
-            _ => self.speed_filt_mps = v,
-        }
-        self.accel_steps = Some(self.steps);
+    /// The core's `AccelEstimator` with its time step from the step count, in f32: no f64 on
+    /// the 1 kHz path, and exact at any age (one step is `DT_S` whether the drive is 1 s or 40
+    /// days old). `v` is the newest trusted speed, finite on every sample after the first
+    /// trusted one, so the step since the last update is the step since the last sample.
+    fn update_accel(&mut self, steps_since_last: Option<u32>, v: f32) -> f32 {
+        let dt_s = steps_since_last.filter(|n| *n > 0).map(|n| n as f32 * DT_S);
+        self.accel.update_dt(dt_s, v)
     }
 }
 
@@ -329,7 +311,7 @@ mod tests {
                         cmd_a: 0.0,
                     };
                     let _ = d.push(&s, None);
-                    d.accel_mps2.to_bits()
+                    d.accel.accel_mps2().to_bits()
                 })
                 .collect::<Vec<_>>()
         };
