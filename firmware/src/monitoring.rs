@@ -18,7 +18,7 @@
 //! updates and root extractions, far beyond the 5,000-instruction control budget (numbers:
 //! `cargo xtask bench`). The queue keeps the control task constant-time and lets the meter work
 //! be preempted. Why the tracker is not called per tick as in the simulator's
-//! `ShimmyPipeline`: one call can be an eigen-solve plus the cold shape selection (up to ~0.53 M
+//! `ShimmyPipeline`: one call can be an eigen-solve plus the cold shape selection (up to ~0.44 M
 //! instructions, `cargo xtask bench`), far beyond the control budget.
 
 use shimmy_core::control::{ControlParams, ControllerKind};
@@ -53,9 +53,9 @@ pub const EVENT_LOG: usize = 8;
 /// (`PipelineParams::tuned_monitor`) fires `MarginLow` 7.9 km/h ahead of the Hopf onset and
 /// needs at least 5 km/h; a model at most one period plus one cycle old (0.2 s) is at most
 /// 0.2 km/h stale at the 1 km/h/s of the requirement ramp. What it costs: the worst warm cycle
-/// (continuation: one f32 Schur solve and one LU) is 0.27 M instructions, 2.5 ms of the
-/// background loop at the measured load, ~1.6 % of the CPU at 1 cycle per instruction; the cold
-/// first cycle (the full scan) ~88 ms (`cargo xtask bench`).
+/// (continuation: one f32 eigenvalue solve and one LU) is 0.19 M instructions, 1.8 ms of the
+/// background loop at the measured load, ~1.1 % of the CPU at 1 cycle per instruction; the cold
+/// first cycle (the full scan) ~53 ms (`cargo xtask bench`).
 pub const MODEL_REFRESH_S: f32 = 0.1;
 
 /// The core's supervised controller as the firmware runs it: the adaptive sliding-mode
@@ -161,11 +161,9 @@ impl DataMargin {
         if speed_ok {
             self.last_speed_mps = s.speed_mps;
         }
-        self.steps += self.last_step.map_or(u64::from(s.step), |last| {
-            u64::from(s.step.wrapping_sub(last))
-        });
+        let since_last = self.last_step.map(|last| s.step.wrapping_sub(last));
+        self.steps += since_last.map_or(u64::from(s.step), u64::from);
         self.last_step = Some(s.step);
-        let t_s = step_time_s(self.steps);
         let v = self.last_speed_mps;
         let sample = Sample {
             psi_l_rad: s.psi_l_rad,
@@ -180,12 +178,25 @@ impl DataMargin {
             },
             damper_cmd: s.cmd_a,
         };
-        let accel_mps2 = self.accel.update(t_s, v);
-        let out = self.pipe.push(&sample, v, accel_mps2, t_s, model)?;
+        let accel_mps2 = self.update_accel(since_last, v);
+        // the f64 time (soft-float here) only for the tenth sample that reports
+        let steps = self.steps;
+        let out = self
+            .pipe
+            .push_timed(&sample, v, accel_mps2, || step_time_s(steps), model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_valid = out.report.valid;
         Some((out, changed))
+    }
+
+    /// The core's `AccelEstimator` with its time step from the step count, in f32: no f64 on
+    /// the 1 kHz path, and exact at any age (one step is `DT_S` whether the drive is 1 s or 40
+    /// days old). `v` is the newest trusted speed, finite on every sample after the first
+    /// trusted one, so the step since the last update is the step since the last sample.
+    fn update_accel(&mut self, steps_since_last: Option<u32>, v: f32) -> f32 {
+        let dt_s = steps_since_last.filter(|n| *n > 0).map(|n| n as f32 * DT_S);
+        self.accel.update_dt(dt_s, v)
     }
 }
 
@@ -281,6 +292,39 @@ mod tests {
             let gap = old(start.wrapping_add(10)) - old(start);
             assert!((gap - 0.010).abs() > 1e-5, "f32 gap {gap}");
         }
+    }
+
+    /// The acceleration's time step comes from the step count, so a speed ramp gives the same
+    /// acceleration, bit for bit, at the start and 49.7 days in (across the `u32` wrap). The
+    /// time difference of two f64 second stamps, as before, is not one step there.
+    #[test]
+    fn acceleration_is_the_same_at_any_age() {
+        let accel_trace = |start: u32| {
+            let mut d = DataMargin::new().expect("default config");
+            (0..400u32)
+                .map(|k| {
+                    let s = MeterSample {
+                        step: start.wrapping_add(k),
+                        psi_l_rad: 0.0,
+                        psi_r_rad: 0.0,
+                        speed_mps: 12.0 + 0.001 * k as f32,
+                        cmd_a: 0.0,
+                    };
+                    let _ = d.push(&s, None);
+                    d.accel.accel_mps2().to_bits()
+                })
+                .collect::<Vec<_>>()
+        };
+        let young = accel_trace(0);
+        assert_eq!(young, accel_trace(u32::MAX - 205));
+        assert!(
+            f32::from_bits(young[399]) > 0.5,
+            "the ramp's acceleration shows"
+        );
+        // what the f64 stamps' difference gives 49.7 days in
+        let n = u64::from(u32::MAX) - 100;
+        let dt_old = (step_time_s(n + 1) - step_time_s(n)) as f32;
+        assert_ne!(dt_old, DT_S, "old dt {dt_old}");
     }
 
     #[test]

@@ -76,14 +76,25 @@ pub fn command(args: &[String]) -> Result<(), String> {
     Ok(())
 }
 
-/// The step of `cargo xtask test`: every target for [`CI_SECONDS`] in total.
-pub fn step() -> Result<String, String> {
+/// The step of `cargo xtask test`, in two parts: every target is built now (a build error
+/// fails the step at once), then the fuzzing itself, [`CI_SECONDS`] in total, runs on a thread
+/// of its own. libFuzzer keeps one core busy for a fixed time; `cargo xtask test` starts it
+/// after the firmware builds, so on CI's two cores it shares the machine with the single-core
+/// QEMU steps (a free core, so about the executions of a run alone) instead of adding its time
+/// to the run, and joins the thread after its last step.
+pub fn start_in_background() -> Result<std::thread::JoinHandle<Result<String, String>>, String> {
+    let built = TARGETS
+        .iter()
+        .map(|t| build(t).map(|bin| (*t, bin)))
+        .collect::<Result<Vec<_>, _>>()?;
     let per = (CI_SECONDS / TARGETS.len() as u64).max(1);
-    let mut out = Vec::new();
-    for t in TARGETS {
-        out.push(format!("{t}: {}", run(t, per)?));
-    }
-    Ok(out.join("; "))
+    Ok(std::thread::spawn(move || {
+        let mut out = Vec::new();
+        for (t, bin) in &built {
+            out.push(format!("{t}: {}", run_built(t, bin, per)?));
+        }
+        Ok(out.join("; "))
+    }))
 }
 
 fn host_triple() -> Result<String, String> {
@@ -156,6 +167,11 @@ pub fn build(target: &str) -> Result<PathBuf, String> {
 /// Builds and runs `target` for `seconds`; returns a one-line summary (runs, coverage).
 pub fn run(target: &str, seconds: u64) -> Result<String, String> {
     let bin = build(target)?;
+    run_built(target, &bin, seconds)
+}
+
+/// Runs the built fuzz binary `bin` of `target` for `seconds`.
+fn run_built(target: &str, bin: &Path, seconds: u64) -> Result<String, String> {
     let base = crate::root().join("target").join("fuzz");
     let corpus = base.join("corpus").join(target);
     let artifacts = base.join("artifacts").join(target);
@@ -167,7 +183,7 @@ pub fn run(target: &str, seconds: u64) -> Result<String, String> {
         "xtask: fuzzing {target} for {seconds} s (corpus {})",
         corpus.display()
     );
-    let out = Command::new(&bin)
+    let out = Command::new(bin)
         .arg(&corpus)
         .arg(format!("-max_total_time={seconds}"))
         .arg(format!("-artifact_prefix={}/", artifacts.display()))

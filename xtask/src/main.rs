@@ -6,8 +6,7 @@
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
-//!                                against the budgets (flash <= 88 KiB + the host link's
-//!                                23,640 B, static RAM <= 24 KiB),
+//!                                against the budgets (flash <= FLASH_BUDGET, static RAM <= 24 KiB),
 //!                                flash by crate, largest symbols, and where the bytes go
 //!                                that no sized symbol covers
 //! cargo xtask link               the host link end to end: the QEMU app with its USART on a
@@ -28,7 +27,8 @@
 //!                                stack high-water mark; then the host simulator next to the
 //!                                NumPy/SciPy reference (`shimmy-sim reference-bench`, release:
 //!                                time domain, closed loop, eigenvalue sweep), skipped with a
-//!                                message when python3 with numpy and scipy is missing
+//!                                message when python3 with numpy and scipy is missing;
+//!                                `--target-only` stops after the on-target part
 //! ```
 //!
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm, g++) or
@@ -44,6 +44,8 @@ mod qemu;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
+use std::sync::Mutex;
+use std::thread::JoinHandle;
 use std::time::Instant;
 
 /// The firmware's target triple (Cortex-M4F with hardware floating point).
@@ -59,6 +61,9 @@ fn main() -> ExitCode {
         Some("size") => size(),
         Some("bench") => bench().and_then(|s| {
             println!("on-target benchmark: {s}");
+            if args.get(1).is_some_and(|a| a == "--target-only") {
+                return Ok(());
+            }
             host_reference_bench()
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
@@ -69,7 +74,7 @@ fn main() -> ExitCode {
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | pil | python | fmu | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench [--target-only] | conformance | link | pil | python | fmu | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -85,6 +90,32 @@ fn main() -> ExitCode {
 
 type Step = Result<String, String>;
 type StepFn = fn() -> Step;
+
+/// The fuzz run that the fuzz step leaves in the background; `test` joins it at the end.
+static FUZZ_RUN: Mutex<Option<JoinHandle<Step>>> = Mutex::new(None);
+
+/// Every firmware image the steps build, by feature set (`[]` is the board build).
+const FIRMWARE_IMAGES: &[(&[&str], &[&str])] = &[
+    (&[], &[FIRMWARE, "panic-free-check"]),
+    (&["panic-check"], &["panic-free-glue"]),
+    (
+        &["qemu"],
+        &[
+            FIRMWARE,
+            "target-tests",
+            "target-bench",
+            "conformance",
+            "reset-memory",
+        ],
+    ),
+    (
+        &["qemu", "deliberate-failure"],
+        &["target-tests", "target-bench"],
+    ),
+    (&["qemu", "stack-guard-test"], &["stack-guard"]),
+    (&["qemu", "link-e2e"], &[FIRMWARE]),
+    (&["pil"], &[FIRMWARE]),
+];
 
 /// Runs every check, keeps going after a failure so the summary shows all of them, and fails
 /// if any failed.
@@ -113,7 +144,29 @@ fn test() -> Result<(), String> {
         ("host tests (cargo test --workspace)", || {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
-        ("fuzz safe_step (libFuzzer, stable, 60 s)", fuzz::step),
+        (
+            "firmware release builds (one cargo call per feature set)",
+            || {
+                // Later steps find their image built: the library compiles once per feature set
+                // and the images of a set link in parallel.
+                for (features, bins) in FIRMWARE_IMAGES {
+                    build_firmware_images(bins, features)?;
+                }
+                let n: usize = FIRMWARE_IMAGES.iter().map(|(_, b)| b.len()).sum();
+                Ok(format!(
+                    "{n} images in {} feature sets",
+                    FIRMWARE_IMAGES.len()
+                ))
+            },
+        ),
+        ("fuzz safe_step: build, then 60 s in the background", || {
+            let run = fuzz::start_in_background()?;
+            *FUZZ_RUN.lock().map_err(|_| "fuzz handle lock poisoned")? = Some(run);
+            Ok(format!(
+                "fuzzing {} s alongside the next steps",
+                fuzz::CI_SECONDS
+            ))
+        }),
         (
             "python package (maturin wheel, pytest)",
             python::package_tests,
@@ -122,7 +175,7 @@ fn test() -> Result<(), String> {
             "FMU (fmi-export, fmpy validation, co-simulation)",
             fmu::tests,
         ),
-        ("firmware release build + size", || {
+        ("firmware size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
             println!("{report}");
@@ -177,15 +230,27 @@ fn test() -> Result<(), String> {
     ];
 
     let mut results = Vec::new();
-    for (name, step) in steps {
-        println!("\n==> {name}");
-        let start = Instant::now();
-        let outcome = step();
-        let secs = start.elapsed().as_secs_f64();
+    let mut record = |name, outcome: Step, secs| {
         if let Err(e) = &outcome {
             eprintln!("FAILED: {name}: {e}");
         }
         results.push((name, outcome, secs));
+    };
+    for (name, step) in steps {
+        println!("\n==> {name}");
+        let start = Instant::now();
+        let outcome = step();
+        record(name, outcome, start.elapsed().as_secs_f64());
+    }
+    let fuzz_run = FUZZ_RUN.lock().ok().and_then(|mut h| h.take());
+    if let Some(run) = fuzz_run {
+        let name = "fuzz safe_step run (time waited for it here)";
+        println!("\n==> {name}");
+        let start = Instant::now();
+        let outcome = run
+            .join()
+            .unwrap_or_else(|_| Err("the fuzz thread panicked".into()));
+        record(name, outcome, start.elapsed().as_secs_f64());
     }
 
     println!("\n==> summary");
@@ -435,22 +500,21 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
 /// Builds a firmware binary in release mode for the target and copies the ELF to a name that
 /// records its features, so builds with different features never overwrite each other.
 pub fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
+    let mut copies = build_firmware_images(&[bin], features)?;
+    copies.pop().ok_or_else(|| format!("{bin}: nothing built"))
+}
+
+/// [`build_firmware`] for several binaries with the same features in one cargo call.
+fn build_firmware_images(bins: &[&str], features: &[&str]) -> Result<Vec<PathBuf>, String> {
     let features = features.join(",");
-    let mut args = vec![
-        "build",
-        "--release",
-        "-p",
-        FIRMWARE,
-        "--target",
-        TARGET,
-        "--bin",
-        bin,
-    ];
+    let mut args = vec!["build", "--release", "-p", FIRMWARE, "--target", TARGET];
+    for bin in bins {
+        args.extend(["--bin", bin]);
+    }
     if !features.is_empty() {
         args.extend(["--features", &features]);
     }
     cargo(&args)?;
-    let built = root().join("target").join(TARGET).join("release").join(bin);
     let dir = root().join("target").join("xtask");
     std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
     let tag = if features.is_empty() {
@@ -458,9 +522,14 @@ pub fn build_firmware(bin: &str, features: &[&str]) -> Result<PathBuf, String> {
     } else {
         features.replace(',', "+")
     };
-    let copy = dir.join(format!("{bin}.{tag}.elf"));
-    std::fs::copy(&built, &copy).map_err(|e| format!("copy {}: {e}", built.display()))?;
-    Ok(copy)
+    bins.iter()
+        .map(|bin| {
+            let built = root().join("target").join(TARGET).join("release").join(bin);
+            let copy = dir.join(format!("{bin}.{tag}.elf"));
+            std::fs::copy(&built, &copy).map_err(|e| format!("copy {}: {e}", built.display()))?;
+            Ok(copy)
+        })
+        .collect()
 }
 
 /// Runs the cargo that runs xtask (same toolchain) with `args` in the workspace root.

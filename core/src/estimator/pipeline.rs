@@ -134,17 +134,32 @@ impl AccelEstimator {
         if !v.is_finite() {
             return self.accel_mps2;
         }
-        match self.last_t_s {
-            Some(t0) if t_s > t0 => {
-                let dt = (t_s - t0) as f32;
+        let dt_s = self
+            .last_t_s
+            .filter(|t0| t_s > *t0)
+            .map(|t0| (t_s - t0) as f32);
+        self.last_t_s = Some(t_s);
+        self.update_dt(dt_s, v)
+    }
+
+    /// [`Self::update`] given the time step itself: `dt_s` since the last accepted speed, `None`
+    /// for the first one or when time did not advance (re-seeds the filter). The firmware's
+    /// form: its dt comes from the step count in f32, so no f64 arithmetic (soft-float on the
+    /// M4) runs per 1 kHz sample.
+    #[inline]
+    pub fn update_dt(&mut self, dt_s: Option<f32>, v: f32) -> f32 {
+        if !v.is_finite() {
+            return self.accel_mps2;
+        }
+        match dt_s {
+            Some(dt) => {
                 let a = dt / (Self::TAU_S + dt);
                 let prev = self.speed_filt_mps;
                 self.speed_filt_mps += a * (v - self.speed_filt_mps);
                 self.accel_mps2 = (self.speed_filt_mps - prev) / dt;
             }
-            _ => self.speed_filt_mps = v,
+            None => self.speed_filt_mps = v,
         }
-        self.last_t_s = Some(t_s);
         self.accel_mps2
     }
 
@@ -201,7 +216,22 @@ impl<const N: usize> DataPipeline<N> {
         t_s: f64,
         model: Option<&ModelMargin>,
     ) -> Option<PipelineOutput> {
+        self.push_timed(sample, speed_mps, accel_mps2, || t_s, model)
+    }
+
+    /// [`Self::push`] with the time asked for only on the decimated steps that answer: `t_s`
+    /// is called once per report (100 Hz), not per sample. The firmware's time is `f64`
+    /// seconds, soft-float on the M4, so it pays for it at a tenth of the rate.
+    pub fn push_timed(
+        &mut self,
+        sample: &Sample,
+        speed_mps: f32,
+        accel_mps2: f32,
+        t_s: impl FnOnce() -> f64,
+        model: Option<&ModelMargin>,
+    ) -> Option<PipelineOutput> {
         let out = self.meter.push(sample)?;
+        let t_s = t_s();
         let report = self.fusion.update(&FusionInput {
             t_s,
             speed_mps,

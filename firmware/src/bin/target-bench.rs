@@ -39,12 +39,13 @@ mod bench {
     /// M4's single-cycle ALU/FPU issue with the flash accelerator hiding wait states on
     /// straight-line code; [`INSN_PER_S`] keeps 1.5 for the wall-time budgets.
     const LOAD_CPI: u64 = 1;
-    /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: 6 %,
-    /// a regression guard, not the goal. Issue 17's goal is 5 %: the continuation tracker met
-    /// it with the closed coil-current loop in (49.85 per mille at 1 CPI), then the AR(8) slow
-    /// meter (+7,156 instructions per meter run) and the margin path's f64 time stamps (+312 per
-    /// plain meter sample) took the load to 56; the goal stays open.
-    const CPU_LOAD_BUDGET_PERMILLE: u32 = 60;
+    /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: a
+    /// regression guard just above the measured 50.3. The eigenvalue-only Hessenberg QR and
+    /// integer entry checks (worst warm model cycle 264 k -> 177 k instructions) and the margin
+    /// path's f64 time only on the reporting sample (plain meter push 562 -> 263) took the
+    /// firmware to 49.1, inside issue 17's 5 %; the AR(10) slow meter merged since (+2,121 per
+    /// meter run) took it to 50.3, so the 5 % goal is missed by 0.03 % and stays open.
+    const CPU_LOAD_BUDGET_PERMILLE: u32 = 51;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
