@@ -14,6 +14,7 @@ pub mod monitoring;
 pub mod replay;
 pub mod sensors;
 pub mod sim;
+pub mod store;
 
 #[cfg(target_os = "none")]
 pub mod board;

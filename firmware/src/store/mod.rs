@@ -1,0 +1,472 @@
+//! The board's memory in flash: the vehicle configuration and the event log, safe against power
+//! cuts (issue 23).
+//!
+//! - Configuration: the core's vehicle record ([`Vehicle::encode_record`]: schema id over the
+//!   field table, every field as an f64, validated whole by [`Vehicle::decode_record`]) under
+//!   key [`KEY_VEHICLE`] of a `sequential-storage` map, and the persistent boot count under
+//!   [`KEY_BOOTS`]. A map item is written whole with a CRC and the newest valid one wins, so
+//!   after a power cut at any byte of a write the board reads the old or the new record.
+//!   [`Store::load_config`] never fails: a missing, unreadable or invalid record gives the
+//!   compiled-in [`Vehicle::nominal`] and says why ([`ConfigSource`]), so the caller can report
+//!   it as a fault; nothing is half-applied.
+//! - Event log: [`LogEntry`]s (shimmy episodes, latched faults, boots) in a `sequential-storage`
+//!   queue, oldest first; when it is full the oldest go first.
+//! - Erase and compaction only at standstill: all flash access goes through [`Gated`], whose
+//!   erase is refused unless a [`Standstill`] token opened it for one of [`Store::maintain`],
+//!   [`Store::save_config`] or [`Store::clear_log`]. An append that would need an erase (the
+//!   queue moving onto a used page) is kept in RAM ([`PENDING`] entries) and written by the
+//!   next [`Store::maintain`]: those few entries are the only ones a power cut before the next
+//!   standstill can lose.
+//! - The one other place the gate opens is [`Store::boot`], before the control loop and the
+//!   watchdog start (the coil is off until then): a power cut during a standstill write can
+//!   leave a compaction half done, and `sequential-storage` finishes it (an erase) before it
+//!   reads again. Boot is also where the board learns its configuration, so the repair has to
+//!   happen there for "old or new, never a mix" to hold.
+//!
+//! `sequential-storage` is async; the flashes here complete every operation at once, so
+//! [`block_on`] polls each future to completion without an executor. The store runs in the
+//! firmware's background loop, which every task preempts.
+
+mod flash;
+mod log;
+mod standstill;
+
+#[cfg(target_os = "none")]
+pub use flash::board;
+pub use flash::{FlashError, Gated, RamFlash};
+pub use log::{
+    BootEntry, EpisodeRecorder, FaultEntry, LogEntry, ShimmyEntry, Unreadable, ENTRY_MAX_BYTES,
+};
+pub use standstill::{
+    Standstill, StandstillWatch, IDLE_CURRENT_A, STANDSTILL_HOLD_S, STANDSTILL_SPEED_MPS,
+};
+
+use crate::fault_memory::ResetCause;
+use core::future::Future;
+use core::ops::Range;
+use core::pin::pin;
+use core::task::{Context, Poll, Waker};
+use embedded_storage_async::nor_flash::NorFlash;
+use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::map::{MapConfig, MapStorage};
+use sequential_storage::queue::{QueueConfig, QueueStorage};
+use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
+
+/// Map key of the vehicle record.
+pub const KEY_VEHICLE: u8 = 0;
+/// Map key of the boot count (u32).
+pub const KEY_BOOTS: u8 = 1;
+/// Log entries kept in RAM while an append waits for a standstill erase.
+pub const PENDING: usize = 16;
+/// The map's work buffer: the largest vehicle record and its key, with room for alignment.
+const BUF_BYTES: usize = RECORD_MAX_BYTES + 8;
+
+/// The store keeps no cache: every operation scans its pages (entries are rare, and a cache
+/// would have to follow every power cut).
+type NoCache<K> = Cache<Uncached, Uncached, Uncached, K>;
+
+/// Runs a future of the store to completion. The flashes here never return `Pending`, so this
+/// loop polls once per future; it needs no executor and no waker.
+pub fn block_on<T>(fut: impl Future<Output = T>) -> T {
+    let mut fut = pin!(fut);
+    let mut cx = Context::from_waker(Waker::noop());
+    loop {
+        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+}
+
+/// Where the configuration map and the event log lie in the flash (offsets, whole erase
+/// units; the map needs at least two).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Layout {
+    /// The configuration map.
+    pub config: Range<u32>,
+    /// The event-log queue.
+    pub log: Range<u32>,
+}
+
+impl Layout {
+    /// The first `config_pages` erase units of `page` bytes for the map, the next `log_pages`
+    /// for the log.
+    pub const fn split(page: u32, config_pages: u32, log_pages: u32) -> Layout {
+        Layout {
+            config: 0..config_pages * page,
+            log: config_pages * page..(config_pages + log_pages) * page,
+        }
+    }
+}
+
+/// Why a store operation failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StoreError {
+    /// The flash failed (a power cut, an erase outside standstill, the device).
+    Flash(FlashError),
+    /// No room, even after dropping what may be dropped.
+    Full,
+    /// The store found its flash corrupted beyond its own repair.
+    Corrupted,
+    /// The layout does not fit the flash's geometry (or two ranges overlap).
+    Layout,
+    /// The vehicle could not be written as a record (it fails its validation).
+    Record(RecordError),
+    /// Any other error of the store library (a bug there: reported, not hidden).
+    Library,
+}
+
+impl From<sequential_storage::Error<FlashError>> for StoreError {
+    fn from(e: sequential_storage::Error<FlashError>) -> Self {
+        use sequential_storage::Error as E;
+        match e {
+            E::Storage { value, .. } => StoreError::Flash(value),
+            E::FullStorage => StoreError::Full,
+            E::Corrupted { .. } => StoreError::Corrupted,
+            _ => StoreError::Library,
+        }
+    }
+}
+
+/// Where the configuration in use came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConfigSource {
+    /// The stored record.
+    Stored,
+    /// No record stored: the compiled-in defaults.
+    Missing,
+    /// The flash could not be read: the defaults.
+    Unreadable(StoreError),
+    /// A record is stored but refused (another schema, wrong length, a value out of range):
+    /// the defaults.
+    Rejected(RecordError),
+}
+
+/// The configuration to run with, and where it came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConfigLoad {
+    /// The vehicle (the stored one, or [`Vehicle::nominal`]).
+    pub vehicle: Vehicle,
+    /// Why this one.
+    pub source: ConfigSource,
+}
+
+impl ConfigLoad {
+    /// The defaults are in use although the board should have a configuration (a fault to
+    /// report: the stored record was unreadable or refused). A board never configured is not
+    /// a fault.
+    pub fn is_fault(&self) -> bool {
+        matches!(
+            self.source,
+            ConfigSource::Unreadable(_) | ConfigSource::Rejected(_)
+        )
+    }
+}
+
+/// What became of an appended entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Appended {
+    /// In flash.
+    Written,
+    /// Kept in RAM until the next standstill (the log needs an erase first).
+    Pending,
+}
+
+/// What one standstill maintenance did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Maintenance {
+    /// Pending entries written.
+    pub written: u32,
+    /// The boot count was written.
+    pub boots_saved: bool,
+}
+
+/// What [`Store::boot`] found and did.
+pub struct Boot<F> {
+    /// The store, ready for the running firmware.
+    pub store: Store<F>,
+    /// The configuration to run with.
+    pub config: ConfigLoad,
+    /// This boot, as logged.
+    pub entry: BootEntry,
+    /// Entries in the log before this boot's (0 if it could not be read).
+    pub log_entries: usize,
+}
+
+/// The configuration map and the event log on one flash (see the module documentation).
+pub struct Store<F> {
+    flash: Gated<F>,
+    layout: Layout,
+    buf: [u8; BUF_BYTES],
+    pending: heapless::Deque<LogEntry, PENDING>,
+    lost: u32,
+    boots_unsaved: Option<u32>,
+}
+
+impl<F: NorFlash<Error = FlashError>> Store<F> {
+    /// The store on `flash` with `layout`; refused when the layout does not fit the flash.
+    fn new(flash: F, layout: Layout) -> Result<Self, StoreError> {
+        let fits = |r: &Range<u32>| r.end as usize <= flash.capacity();
+        let apart = layout.config.end <= layout.log.start || layout.log.end <= layout.config.start;
+        if !(fits(&layout.config) && fits(&layout.log) && apart)
+            || MapConfig::<Gated<F>>::try_new(layout.config.clone()).is_err()
+            || QueueConfig::<Gated<F>>::try_new(layout.log.clone()).is_err()
+        {
+            return Err(StoreError::Layout);
+        }
+        Ok(Store {
+            flash: Gated::new(flash),
+            layout,
+            buf: [0; BUF_BYTES],
+            pending: heapless::Deque::new(),
+            lost: 0,
+            boots_unsaved: None,
+        })
+    }
+
+    /// The flash (tests arm power cuts with it).
+    pub fn flash_mut(&mut self) -> &mut F {
+        self.flash.inner_mut()
+    }
+
+    /// The flash.
+    pub fn flash(&self) -> &F {
+        self.flash.inner()
+    }
+
+    /// Gives the flash back.
+    pub fn into_flash(self) -> F {
+        self.flash.into_inner()
+    }
+
+    /// Entries lost because more than [`PENDING`] waited for a standstill.
+    pub fn lost_entries(&self) -> u32 {
+        self.lost
+    }
+
+    /// Entries waiting in RAM for a standstill.
+    pub fn pending_entries(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Opens the store at boot, before the control loop and the watchdog start: repairs what a
+    /// power cut interrupted (the only erase outside standstill, see the module
+    /// documentation), loads the configuration, counts the boot and logs it (`cause` and
+    /// `resets_since_power_on` from the fault memory). Refused only when the layout does not
+    /// fit the flash; a flash it cannot read gives the defaults ([`ConfigLoad`]).
+    pub fn boot(
+        flash: F,
+        layout: Layout,
+        cause: ResetCause,
+        resets_since_power_on: u32,
+    ) -> Result<Boot<F>, StoreError> {
+        let mut store = Store::new(flash, layout)?;
+        store.flash.erase_open = true;
+        let config = store.load_config();
+        // Reading the whole log finishes an interrupted page turn of the queue.
+        let log_entries = store.read_log(|_| ()).unwrap_or(0);
+        let entry = store.record_boot(cause, resets_since_power_on);
+        store.flash.close();
+        Ok(Boot {
+            store,
+            config,
+            entry,
+            log_entries,
+        })
+    }
+
+    /// The vehicle to run with (never fails; see [`ConfigLoad`]).
+    pub fn load_config(&mut self) -> ConfigLoad {
+        let nominal = |source| ConfigLoad {
+            vehicle: Vehicle::nominal(),
+            source,
+        };
+        let config = match MapConfig::try_new(self.layout.config.clone()) {
+            Ok(c) => c,
+            Err(_) => return nominal(ConfigSource::Unreadable(StoreError::Layout)),
+        };
+        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        match block_on(map.fetch_item::<&[u8]>(&mut self.buf, &KEY_VEHICLE)) {
+            Ok(Some(bytes)) => match Vehicle::decode_record(bytes) {
+                Ok(vehicle) => ConfigLoad {
+                    vehicle,
+                    source: ConfigSource::Stored,
+                },
+                Err(e) => nominal(ConfigSource::Rejected(e)),
+            },
+            Ok(None) => nominal(ConfigSource::Missing),
+            Err(e) => nominal(ConfigSource::Unreadable(e.into())),
+        }
+    }
+
+    /// Writes `vehicle` as the configuration (validated first: an invalid vehicle is refused
+    /// and nothing is written). Atomic: after a power cut the board has the old or the new one.
+    pub fn save_config(
+        &mut self,
+        vehicle: &Vehicle,
+        token: &Standstill<'_>,
+    ) -> Result<(), StoreError> {
+        let mut record = [0u8; RECORD_MAX_BYTES];
+        vehicle
+            .validate()
+            .map_err(|e| StoreError::Record(RecordError::Invalid(e)))?;
+        let n = vehicle
+            .encode_record(&mut record)
+            .map_err(StoreError::Record)?;
+        let bytes = record.get(..n).ok_or(StoreError::Library)?;
+        self.flash.open(token);
+        let result = self.store_item(&KEY_VEHICLE, &bytes);
+        self.flash.close();
+        result
+    }
+
+    fn store_item<'d, V: sequential_storage::map::Value<'d>>(
+        &mut self,
+        key: &u8,
+        value: &V,
+    ) -> Result<(), StoreError> {
+        let config =
+            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
+        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        block_on(map.store_item(&mut self.buf, key, value)).map_err(StoreError::from)
+    }
+
+    /// Counts this boot (the persistent count) and logs it with the reset cause and the fault
+    /// memory's reset count; what cannot be written now is written at the next standstill.
+    fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
+        let stored = {
+            let config = MapConfig::try_new(self.layout.config.clone());
+            match config {
+                Ok(config) => {
+                    let mut map =
+                        MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+                    block_on(map.fetch_item::<u32>(&mut self.buf, &KEY_BOOTS))
+                        .ok()
+                        .flatten()
+                        .unwrap_or(0)
+                }
+                Err(_) => 0,
+            }
+        };
+        let boot_count = stored.saturating_add(1);
+        if self.store_item(&KEY_BOOTS, &boot_count).is_err() {
+            self.boots_unsaved = Some(boot_count);
+        }
+        let entry = BootEntry {
+            cause,
+            resets_since_power_on,
+            boot_count,
+        };
+        self.append(&LogEntry::Boot(entry));
+        entry
+    }
+
+    fn queue(&mut self) -> Result<QueueStorage<&mut Gated<F>, NoCache<()>>, StoreError> {
+        let config =
+            QueueConfig::try_new(self.layout.log.clone()).map_err(|_| StoreError::Layout)?;
+        Ok(QueueStorage::new(
+            &mut self.flash,
+            config,
+            Cache::new_uncached(),
+        ))
+    }
+
+    fn push(&mut self, entry: &LogEntry, drop_oldest: bool) -> Result<(), StoreError> {
+        let mut bytes = [0u8; ENTRY_MAX_BYTES];
+        let n = entry.encode(&mut bytes);
+        let data = bytes.get(..n).ok_or(StoreError::Library)?;
+        let mut queue = self.queue()?;
+        block_on(queue.push(data, drop_oldest)).map_err(StoreError::from)
+    }
+
+    /// Appends `entry` to the log without erasing: in flash when there is erased room, else in
+    /// RAM until the next [`Self::maintain`] (the oldest pending entry is lost, and counted,
+    /// when more than [`PENDING`] wait). Order is kept: while entries wait, new ones queue
+    /// behind them.
+    pub fn append(&mut self, entry: &LogEntry) -> Appended {
+        if self.pending.is_empty() && self.push(entry, false).is_ok() {
+            return Appended::Written;
+        }
+        if self.pending.is_full() {
+            let _ = self.pending.pop_front();
+            self.lost = self.lost.saturating_add(1);
+        }
+        let _ = self.pending.push_back(*entry);
+        Appended::Pending
+    }
+
+    /// At standstill: writes the pending entries (dropping the oldest of the log where it is
+    /// full) and the unsaved boot count. Stops at the first failure (a power cut); what was not
+    /// written stays pending.
+    pub fn maintain(&mut self, token: &Standstill<'_>) -> Result<Maintenance, StoreError> {
+        self.flash.open(token);
+        let result = self.maintain_open();
+        self.flash.close();
+        result
+    }
+
+    fn maintain_open(&mut self) -> Result<Maintenance, StoreError> {
+        let mut done = Maintenance::default();
+        while let Some(entry) = self.pending.front().copied() {
+            self.push(&entry, true)?;
+            let _ = self.pending.pop_front();
+            done.written += 1;
+        }
+        if let Some(count) = self.boots_unsaved {
+            self.store_item(&KEY_BOOTS, &count)?;
+            self.boots_unsaved = None;
+            done.boots_saved = true;
+        }
+        Ok(done)
+    }
+
+    /// Calls `each` with every entry of the log, oldest first (entries still pending in RAM
+    /// last); returns how many. Reads only.
+    pub fn read_log(
+        &mut self,
+        mut each: impl FnMut(Result<LogEntry, Unreadable>),
+    ) -> Result<usize, StoreError> {
+        let mut count = 0;
+        let config =
+            QueueConfig::try_new(self.layout.log.clone()).map_err(|_| StoreError::Layout)?;
+        let mut queue = QueueStorage::new(&mut self.flash, config, Cache::new_uncached());
+        let mut iter = block_on(queue.iter())?;
+        let mut buf = [0u8; ENTRY_MAX_BYTES + 8];
+        while let Some(item) = block_on(iter.next(&mut buf))? {
+            each(LogEntry::decode(&item));
+            count += 1;
+        }
+        for e in &self.pending {
+            each(Ok(*e));
+            count += 1;
+        }
+        Ok(count)
+    }
+
+    /// Calls `each` with every latched fault in the log, oldest first; returns how many.
+    pub fn read_faults(&mut self, mut each: impl FnMut(&FaultEntry)) -> Result<usize, StoreError> {
+        let mut count = 0;
+        self.read_log(|e| {
+            if let Ok(LogEntry::Fault(f)) = e {
+                each(&f);
+                count += 1;
+            }
+        })?;
+        Ok(count)
+    }
+
+    /// Empties the log (flash and pending entries). The configuration stays.
+    pub fn clear_log(&mut self, token: &Standstill<'_>) -> Result<(), StoreError> {
+        self.flash.open(token);
+        let result = self
+            .queue()
+            .and_then(|mut q| block_on(q.erase_all()).map_err(StoreError::from));
+        self.flash.close();
+        if result.is_ok() {
+            self.pending.clear();
+        }
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,324 @@
+//! Power cuts at every byte of a configuration write and of an event append, on the RAM flash
+//! (the store's own NOR model: write-once bytes, page erase, a cut stops an operation part-way).
+
+use super::*;
+use shimmy_core::estimator::monitor::{Event, Level};
+use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
+use shimmy_core::vehicle::FIELDS;
+
+/// Small pages so a handful of writes fill one and force the map's compaction and the queue's
+/// page turn (each with an erase) under the cut.
+const PAGE: usize = 2048;
+type Flash = RamFlash<{ 4 * PAGE }, PAGE>;
+const LAYOUT: Layout = Layout::split(PAGE as u32, 2, 2);
+
+fn store(flash: Flash) -> Store<Flash> {
+    Store::new(flash, LAYOUT).unwrap()
+}
+
+/// Power back on after a cut: the boot repairs what the cut interrupted.
+fn reboot(mut flash: Flash) -> Boot<Flash> {
+    flash.cut_power_after(None);
+    Store::boot(flash, LAYOUT, ResetCause::PowerOn, 0).unwrap()
+}
+
+/// A watch that has seen the vehicle stand since t = 0 (its token is granted at t >= 2 s).
+fn standing() -> StandstillWatch {
+    let mut w = StandstillWatch::new();
+    w.observe(0.0, 0.0, 0.0);
+    w
+}
+
+/// The k-th test vehicle: the nominal one with the first field (I_k) moved through its range.
+fn vehicle(k: u32) -> Vehicle {
+    let f = &FIELDS[0];
+    let mut v = Vehicle::nominal();
+    let frac = 0.1 + 0.8 * f64::from(k % 17) / 17.0;
+    v.set(f.section, f.name, f.lo + (f.hi - f.lo) * frac)
+        .unwrap();
+    v
+}
+
+fn shimmy(k: u32) -> LogEntry {
+    LogEntry::Shimmy(ShimmyEntry {
+        event: Event {
+            start_s: 10.0 * f64::from(k),
+            speed_mps: 20.0 + k as f32,
+            freq_hz: 8.0,
+            peak_amplitude_rad: 0.01 * k as f32,
+            worst: Level::ShimmyPresent,
+            duration_s: 2.5,
+            shimmy_s: 1.5,
+            open: false,
+        },
+        cmd_peak_a: 2.0,
+        cmd_mean_a: 1.25,
+    })
+}
+
+fn log_of(s: &mut Store<Flash>) -> Vec<LogEntry> {
+    let mut v = Vec::new();
+    s.read_log(|e| v.push(e.expect("every stored entry reads back whole")))
+        .unwrap();
+    v
+}
+
+#[test]
+fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
+    let mut s = store(Flash::new());
+    let l = s.load_config();
+    assert_eq!(l.source, ConfigSource::Missing);
+    assert_eq!(l.vehicle, Vehicle::nominal());
+    assert!(!l.is_fault(), "a board never configured is not a fault");
+
+    // A record of another schema (as a firmware with another field table wrote it).
+    let mut bytes = [0u8; RECORD_MAX_BYTES];
+    let n = vehicle(3).encode_record(&mut bytes).unwrap();
+    bytes[0] ^= 1;
+    s.store_item(&KEY_VEHICLE, &&bytes[..n]).unwrap();
+    let l = s.load_config();
+    assert!(matches!(
+        l.source,
+        ConfigSource::Rejected(RecordError::Schema { .. })
+    ));
+    assert!(l.is_fault());
+    assert_eq!(l.vehicle, Vehicle::nominal(), "nothing half-applied");
+
+    // A value out of its range: refused whole.
+    let mut bytes = [0u8; RECORD_MAX_BYTES];
+    let n = vehicle(3).encode_record(&mut bytes).unwrap();
+    bytes[6..14].copy_from_slice(&(-1.0f64).to_le_bytes());
+    s.store_item(&KEY_VEHICLE, &&bytes[..n]).unwrap();
+    let l = s.load_config();
+    assert!(matches!(
+        l.source,
+        ConfigSource::Rejected(RecordError::Invalid(_))
+    ));
+    assert_eq!(l.vehicle, Vehicle::nominal());
+
+    // Flash that is not a store at all (zeros, as QEMU's RAM after a power-on): the defaults,
+    // no panic.
+    let mut zeros = Flash::new();
+    block_on(zeros.write(0, &[0; 4 * PAGE])).unwrap();
+    let l = store(zeros).load_config();
+    assert_ne!(l.source, ConfigSource::Stored);
+    assert_eq!(l.vehicle, Vehicle::nominal());
+    // A flash that cannot be read: unreadable, the defaults.
+    let mut s = store(Flash::new());
+    s.flash_mut().cut_power_after(Some(0));
+    assert_eq!(
+        s.load_config().source,
+        ConfigSource::Unreadable(StoreError::Flash(FlashError::PowerCut))
+    );
+}
+
+#[test]
+fn an_invalid_vehicle_is_not_saved() {
+    let mut s = store(Flash::new());
+    let mut w = standing();
+    let t = w.check(2.0).unwrap();
+    s.save_config(&vehicle(1), &t).unwrap();
+    let mut bad = vehicle(2);
+    bad.thresholds.zeta_low_off = bad.thresholds.zeta_low_on - 0.01;
+    assert!(matches!(
+        s.save_config(&bad, &t),
+        Err(StoreError::Record(RecordError::Invalid(_)))
+    ));
+    assert_eq!(s.load_config().vehicle, vehicle(1));
+}
+
+/// The test: a power cut at every byte of each of a run of configuration writes
+/// (several fill a page, so the map's compaction and its erases are cut too). After every cut
+/// the board boots with the old or the new vehicle, never a mix, and the next write works.
+#[test]
+fn a_power_cut_at_any_byte_of_a_config_write_leaves_the_old_or_the_new_one() {
+    let mut w = standing();
+    let t = w.check(2.0).unwrap();
+    let mut flash = Flash::new();
+    let (mut saw_old, mut saw_new, mut cuts) = (0, 0, 0);
+    for k in 0..8u32 {
+        let old = (k > 0).then(|| vehicle(k));
+        let new = vehicle(k + 1);
+        for cut in 0.. {
+            let mut s = store(flash.clone());
+            s.flash_mut().cut_power_after(Some(cut));
+            let done = s.save_config(&new, &t);
+            if done.is_ok() {
+                break;
+            }
+            assert_eq!(done, Err(StoreError::Flash(FlashError::PowerCut)));
+            cuts += 1;
+            // Reboot on what the cut left.
+            let Boot {
+                store: mut s,
+                config: l,
+                ..
+            } = reboot(s.into_flash());
+            match (l.source, old) {
+                (ConfigSource::Stored, Some(o)) if l.vehicle == o => saw_old += 1,
+                (ConfigSource::Missing, None) => saw_old += 1,
+                (ConfigSource::Stored, _) if l.vehicle == new => saw_new += 1,
+                other => panic!("write {k}, cut at byte {cut}: {other:?}"),
+            }
+            // The store still works after the cut.
+            s.save_config(&vehicle(k + 2), &t).unwrap();
+            assert_eq!(s.load_config().vehicle, vehicle(k + 2));
+        }
+        let mut s = store(flash);
+        s.save_config(&new, &t).unwrap();
+        flash = s.into_flash();
+    }
+    // An item becomes valid with its last byte, so every cut before the end of a write left the
+    // old vehicle (the new one is what the completed write gives, checked above).
+    assert_eq!((saw_old, saw_new), (cuts, 0));
+    assert!(cuts > 8 * MIN_CUTS_PER_WRITE, "{cuts} cuts");
+}
+
+/// At least this many bytes are cut into per write (a record is 590 bytes).
+const MIN_CUTS_PER_WRITE: u32 = 500;
+
+/// A power cut at every byte of an append (writes only) and of a standstill flush that turns the
+/// log onto its oldest page (an erase: the oldest entries go first). After every cut the log
+/// reads back whole entries: the old ones, possibly without the oldest page's, plus or minus
+/// the one being written; nothing else is lost or mixed.
+#[test]
+fn a_power_cut_at_any_byte_of_an_append_loses_at_most_the_entry_being_written() {
+    let mut w = standing();
+    let t = w.check(2.0).unwrap();
+    let mut flash = Flash::new();
+    let mut old: Vec<LogEntry> = Vec::new();
+    let mut dropped_seen = false;
+    for k in 0..120u32 {
+        let new = shimmy(k);
+        // What the append (or, when it must wait, the flush) does without a cut.
+        let mut clean = store(flash.clone());
+        let pending = clean.append(&new) == Appended::Pending;
+        if pending {
+            clean.maintain(&t).unwrap();
+        }
+        let full = log_of(&mut clean);
+        let drop_full = old.len() + 1 - full.len();
+        assert_eq!(full[..], [&old[drop_full..], &[new][..]].concat()[..]);
+        dropped_seen |= drop_full > 0;
+        for cut in 0.. {
+            let mut s = store(flash.clone());
+            s.flash_mut().cut_power_after(Some(cut));
+            let a = s.append(&new);
+            let finished = if pending {
+                assert_eq!(a, Appended::Pending);
+                s.maintain(&t).is_ok()
+            } else {
+                a == Appended::Written
+            };
+            if finished {
+                break;
+            }
+            let mut s = reboot(s.into_flash()).store;
+            let got: Vec<LogEntry> = log_of(&mut s)
+                .into_iter()
+                .filter(|e| !matches!(e, LogEntry::Boot(_)))
+                .collect();
+            let ok = (0..=drop_full).any(|d| {
+                let kept = &old[d.min(old.len())..];
+                got[..] == *kept || got[..] == [kept, &[new][..]].concat()[..]
+            });
+            assert!(ok, "entry {k}, cut at byte {cut}: {} read back", got.len());
+            // The log still takes entries.
+            let mut s2 = store(s.into_flash());
+            if s2.append(&shimmy(999)) == Appended::Pending {
+                s2.maintain(&t).unwrap();
+            }
+            assert_eq!(log_of(&mut s2).last(), Some(&shimmy(999)));
+        }
+        flash = clean.into_flash();
+        old = full;
+    }
+    assert!(
+        dropped_seen,
+        "the log filled and dropped its oldest entries"
+    );
+}
+
+/// While the vehicle moves, an append that needs an erase waits in RAM (the flash is never
+/// erased without the token) and order is kept; the standstill flush writes it.
+#[test]
+fn without_the_token_nothing_is_erased() {
+    let mut s = store(Flash::new());
+    let mut k = 0;
+    while s.append(&shimmy(k)) == Appended::Written {
+        k += 1;
+    }
+    // Both pages of the log are full: the next entry needs the oldest page erased.
+    assert!(k > 20, "{k} entries fit the log");
+    let erased_before = s.flash().bytes().to_vec();
+    let mut latched = FaultSet::EMPTY;
+    latched.insert(FaultKind::CoilShort);
+    let fault = LogEntry::Fault(FaultEntry {
+        t_s: 5.0,
+        fault: FaultKind::CoilShort,
+        latched,
+    });
+    assert_eq!(s.append(&fault), Appended::Pending);
+    assert_eq!(s.pending_entries(), 2);
+    let mut faults = Vec::new();
+    assert_eq!(s.read_faults(|f| faults.push(*f)).unwrap(), 1);
+    assert_eq!(s.flash().bytes(), &erased_before[..], "no byte changed");
+    // A config write needs the token by its signature; the flush too.
+    let mut w = standing();
+    let t = w.check(2.0).unwrap();
+    let done = s.maintain(&t).unwrap();
+    assert_eq!(done.written, 2);
+    // The flush dropped the oldest page (half the entries) for them, nothing else.
+    let log = log_of(&mut s);
+    assert_eq!(log.len(), k as usize / 2 + 2);
+    assert_eq!(log[0], shimmy(k / 2));
+    assert_eq!(log.last(), Some(&fault));
+    // Clearing the log keeps the configuration.
+    s.save_config(&vehicle(5), &t).unwrap();
+    s.clear_log(&t).unwrap();
+    assert!(log_of(&mut s).is_empty());
+    assert_eq!(s.load_config().vehicle, vehicle(5));
+}
+
+#[test]
+fn boots_are_counted_across_power_offs_and_logged_with_their_cause() {
+    let mut flash = Flash::new();
+    for boot in 1..=3u32 {
+        let b = Store::boot(flash, LAYOUT, ResetCause::Watchdog, boot - 1).unwrap();
+        assert_eq!(b.entry.boot_count, boot);
+        assert_eq!(b.log_entries, boot as usize - 1);
+        flash = b.store.into_flash();
+    }
+    let mut s = store(flash);
+    let log = log_of(&mut s);
+    assert_eq!(log.len(), 3);
+    assert_eq!(
+        log[2],
+        LogEntry::Boot(BootEntry {
+            cause: ResetCause::Watchdog,
+            resets_since_power_on: 2,
+            boot_count: 3
+        })
+    );
+}
+
+#[test]
+fn a_layout_that_does_not_fit_is_refused() {
+    for bad in [
+        Layout::split(PAGE as u32, 1, 3),
+        Layout::split(PAGE as u32, 3, 2),
+        Layout {
+            config: 0..2 * PAGE as u32,
+            log: PAGE as u32..3 * PAGE as u32,
+        },
+        Layout {
+            config: 100..2 * PAGE as u32 + 100,
+            log: 3 * PAGE as u32..4 * PAGE as u32,
+        },
+    ] {
+        assert!(matches!(
+            Store::new(Flash::new(), bad),
+            Err(StoreError::Layout)
+        ));
+    }
+}
