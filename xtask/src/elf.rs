@@ -11,8 +11,9 @@ use std::path::Path;
 pub const FLASH_BUDGET: u64 = 88 * 1024;
 pub const RAM_BUDGET: u64 = 24 * 1024;
 
-/// STM32F405RG memory map (must match `memory.x`).
-const FLASH: (u64, u64) = (0x0800_0000, 1024 * 1024);
+/// STM32F405RG memory map (must match `memory.x`): code in flash sectors 0-7 (the store owns
+/// sectors 8-11).
+const FLASH: (u64, u64) = (0x0800_0000, 512 * 1024);
 const RAM: (u64, u64) = (0x2000_0000, 128 * 1024);
 
 pub struct MemoryReport {

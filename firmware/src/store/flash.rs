@@ -248,7 +248,7 @@ impl<F: NorFlash<Error = FlashError>> NorFlash for Gated<F> {
 #[cfg(target_os = "none")]
 pub mod board {
     use super::FlashError;
-    use embedded_storage::nor_flash::{NorFlash as _, ReadNorFlash as _};
+    use embedded_storage::nor_flash as blocking;
     use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
     use stm32f4xx_hal::flash::{FlashExt, LockedFlash};
 
@@ -272,8 +272,8 @@ pub mod board {
         /// The store's sectors of `flash` (offset of `__shimmy_store_start` from the flash base).
         pub fn new(flash: stm32f4xx_hal::pac::FLASH) -> Self {
             let flash = LockedFlash::new(flash);
-            // SAFETY: only the address of the linker symbol is taken, never its content.
-            let start = unsafe { core::ptr::addr_of!(__shimmy_store_start) } as usize;
+            // Only the address of the linker symbol is taken, never its content.
+            let start = core::ptr::addr_of!(__shimmy_store_start) as usize;
             let base = start.wrapping_sub(flash.address()) as u32;
             BoardFlash { flash, base }
         }
@@ -295,7 +295,7 @@ pub mod board {
 
         async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
             let at = self.at(offset, bytes.len())?;
-            self.flash.read(at, bytes).map_err(|_| FlashError::Device)
+            blocking::ReadNorFlash::read(&mut self.flash, at, bytes).map_err(|_| FlashError::Device)
         }
 
         fn capacity(&self) -> usize {
@@ -311,15 +311,13 @@ pub mod board {
             let from_at = self.at(from, 0)?;
             let to_at = self.at(to, 0)?;
             let mut unlocked = self.flash.unlocked();
-            unlocked
-                .erase(from_at, to_at)
-                .map_err(|_| FlashError::Device)
+            blocking::NorFlash::erase(&mut unlocked, from_at, to_at).map_err(|_| FlashError::Device)
         }
 
         async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
             let at = self.at(offset, bytes.len())?;
             let mut unlocked = self.flash.unlocked();
-            unlocked.write(at, bytes).map_err(|_| FlashError::Device)
+            blocking::NorFlash::write(&mut unlocked, at, bytes).map_err(|_| FlashError::Device)
         }
     }
 }

@@ -27,9 +27,11 @@
 //! [`block_on`] polls each future to completion without an executor. The store runs in the
 //! firmware's background loop, which every task preempts.
 
+pub mod drive;
 mod flash;
 mod log;
 mod standstill;
+mod task;
 
 #[cfg(target_os = "none")]
 pub use flash::board;
@@ -40,6 +42,7 @@ pub use log::{
 pub use standstill::{
     Standstill, StandstillWatch, IDLE_CURRENT_A, STANDSTILL_HOLD_S, STANDSTILL_SPEED_MPS,
 };
+pub use task::{Motion, Pass, StoreTask, RETRY_S};
 
 use crate::fault_memory::ResetCause;
 use core::future::Future;
@@ -241,6 +244,11 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// Entries lost because more than [`PENDING`] waited for a standstill.
     pub fn lost_entries(&self) -> u32 {
         self.lost
+    }
+
+    /// Something waits for a standstill (pending entries, the boot count).
+    pub fn needs_maintenance(&self) -> bool {
+        !self.pending.is_empty() || self.boots_unsaved.is_some()
     }
 
     /// Entries waiting in RAM for a standstill.

@@ -322,3 +322,71 @@ fn a_layout_that_does_not_fit_is_refused() {
         ));
     }
 }
+
+/// The firmware chain on a scripted drive (`drive`): a shimmy episode and a coil short while
+/// moving are logged with what the monitor and the supervisor saw; with a full log they wait in
+/// RAM and the standstill at the end writes them.
+#[test]
+fn a_drive_logs_the_shimmy_episode_and_the_latched_fault() {
+    for prefill in [0u32, 88] {
+        let mut flash = Flash::new();
+        if prefill > 0 {
+            let mut s = store(flash);
+            for k in 0..prefill {
+                assert_eq!(s.append(&shimmy(k)), Appended::Written);
+            }
+            flash = s.into_flash();
+        }
+        let b = Store::boot(flash, LAYOUT, ResetCause::PowerOn, 0).unwrap();
+        let boot_entry = b.entry;
+        let mut task = StoreTask::new(b.store, FaultSet::EMPTY);
+        let d = drive::run(&mut task);
+        assert_eq!(d.appended, 2, "{d:?}");
+        assert_eq!(d.maintenance_errors, 0);
+        assert_eq!(d.final_cmd_a, 0.0, "standing with the coil off");
+        let log = log_of(task.store());
+        // The newest prefilled entries, this boot, then the drive's two: the short is latched
+        // before the episode closes (the yaw envelope falls below its release threshold ~3 s
+        // after the shimmy ends).
+        let kept = log.len() - 3;
+        assert!(log[..kept].iter().eq((prefill - kept as u32..prefill)
+            .map(shimmy)
+            .collect::<Vec<_>>()
+            .iter()));
+        let [LogEntry::Boot(boot), LogEntry::Fault(f), LogEntry::Shimmy(s)] = log[kept..] else {
+            panic!("{log:?}");
+        };
+        assert_eq!(boot, boot_entry);
+        let e = &s.event;
+        assert_eq!(e.worst, Level::ShimmyPresent);
+        assert!((e.freq_hz - drive::SHIMMY_HZ).abs() < 0.5, "{e:?}");
+        assert!((e.speed_mps - drive::CRUISE_MPS).abs() < 0.5, "{e:?}");
+        assert!(
+            (e.peak_amplitude_rad / drive::SHIMMY_RAD - 1.0).abs() < 0.25,
+            "{e:?}"
+        );
+        assert!(
+            e.start_s < 1.0 && e.duration_s > 4.0 && e.shimmy_s > 2.0,
+            "{e:?}"
+        );
+        assert!(
+            s.cmd_peak_a > 0.0 && s.cmd_mean_a > 0.0,
+            "the controller acted: {s:?}"
+        );
+        assert_eq!(f.fault, FaultKind::CoilShort);
+        assert!((6.0..7.5).contains(&f.t_s), "{f:?}");
+        // With the log full (the short boot entry still fits its last page), both of the
+        // drive's entries waited for the standstill, which dropped the oldest page (half the
+        // log) for them.
+        let (written, kept_expected) = if prefill > 0 {
+            (2, prefill as usize / 2)
+        } else {
+            (0, 0)
+        };
+        assert_eq!(
+            (d.written_at_standstill, kept),
+            (written, kept_expected),
+            "{d:?}"
+        );
+    }
+}
