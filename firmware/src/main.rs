@@ -4,7 +4,7 @@
 //! |---|---|---|---|
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -20,7 +20,6 @@ mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
     use shimmy_core::estimator::model_margin::ModelMargin;
-    use shimmy_core::params::PlantParams;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
@@ -28,14 +27,18 @@ mod app {
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::monitoring::{
-        safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
     use shimmy_firmware::periph::PERIOD_TICKS;
+    use shimmy_firmware::store::target::{self as store_target, TargetFlash};
+    use shimmy_firmware::store::{ConfigSource, EpisodeRecorder, LogEntry, Motion, StoreTask};
 
     /// Telemetry every this many meter runs (1 Hz).
     const TELEMETRY_DIVIDER: u32 = 100;
     /// SPSC capacity is one less than this: 3 meter periods of samples.
     const QUEUE_N: usize = 32;
+    /// Log entries from `meter` to the store in the background loop (capacity one less).
+    const LOG_QUEUE_N: usize = 8;
 
     #[shared]
     struct Shared {
@@ -46,6 +49,11 @@ mod app {
         now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,
+        /// Time, trusted speed and peak coil command of the newest meter run (for the store's
+        /// standstill watch).
+        motion: Motion,
+        /// The supervisor's latched faults (written by `control`, logged by the store).
+        latched: FaultSet,
     }
 
     #[local]
@@ -62,9 +70,16 @@ mod app {
         data: DataMargin,
         meter_runs: u32,
         model_task: ModelTask,
+        store_task: StoreTask<TargetFlash>,
+        log_tx: Producer<'static, LogEntry>,
+        log_rx: Consumer<'static, LogEntry>,
+        episodes: EpisodeRecorder,
     }
 
-    #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
+    #[init(local = [
+        queue: Queue<MeterSample, QUEUE_N> = Queue::new(),
+        log_queue: Queue<LogEntry, LOG_QUEUE_N> = Queue::new(),
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         shimmy_firmware::stack::paint();
         // An overflow into the statics faults instead (MemManage: coil off, reported, reset).
@@ -77,9 +92,21 @@ mod app {
             FAILSAFE_CURRENT_A
         );
         let cause = reset_cause(&cx.device.RCC);
-        let (record, policy) = ResetRecord::on_boot(&persist::load(), cause);
+        let stored = persist::load();
+        let (record, policy) = ResetRecord::on_boot(&stored, cause);
         persist::store(&record);
         let latched = FaultSet::from_bits(record.latched_faults);
+        // The store opens before board::init starts the watchdog: a boot after a power cut in a
+        // standstill write may finish the compaction the cut interrupted (an erase).
+        let Ok((store_task, boot)) =
+            store_target::boot(!stored.is_valid(), cause, record.resets, latched)
+        else {
+            // Only a second call or a layout that does not fit could fail (the layout is a
+            // constant); the damper still gets the fail-safe current out of reset.
+            panic!("store layout rejected");
+        };
+        report_config(&boot);
+        let vehicle = boot.config.vehicle;
         let coil_dead =
             latched.contains(FaultKind::CoilOpen) || latched.contains(FaultKind::CoilShort);
         let hold_safe = policy == BootPolicy::HoldSafe;
@@ -94,11 +121,12 @@ mod app {
                 ""
             }
         );
-        let mut ctrl = safe_controller();
+        let mut ctrl = safe_controller_for(&vehicle);
         ctrl.supervisor_mut().restore_latched(latched);
         let board = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
-        let Ok(data) = DataMargin::new() else {
+        let (log_tx, log_rx) = cx.local.log_queue.split();
+        let Ok(data) = DataMargin::with_params(&vehicle.pipeline_params()) else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
@@ -111,6 +139,8 @@ mod app {
                 model: None,
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
+                motion: Motion::UNKNOWN,
+                latched,
             },
             Local {
                 board,
@@ -122,7 +152,11 @@ mod app {
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelTask::new(PlantParams::nominal()),
+                model_task: ModelTask::new(vehicle.plant),
+                store_task,
+                log_tx,
+                log_rx,
+                episodes: EpisodeRecorder::new(),
             },
         )
     }
@@ -131,9 +165,15 @@ mod app {
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged.
-    #[idle(local = [model_task], shared = [model, now, health])]
+    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
+            store_pass(
+                cx.local.store_task,
+                cx.local.log_rx,
+                cx.shared.motion.lock(|m| *m),
+                cx.shared.latched.lock(|l| *l),
+            );
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
             if let Some(pt) = task.step(t_s, speed_mps) {
@@ -167,7 +207,7 @@ mod app {
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         let entry = b.timer.now_ticks();
@@ -214,6 +254,8 @@ mod app {
         let latched = cx.local.ctrl.supervisor().latched().bits();
         if cx.local.record.update(uptime_ms, latched) {
             persist::store(cx.local.record);
+            let mut shared_latched = cx.shared.latched;
+            shared_latched.lock(|l| *l = FaultSet::from_bits(latched));
         }
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
@@ -225,13 +267,30 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin])]
+    #[task(priority = 2, local = [rx, data, meter_runs, episodes, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion])]
     async fn meter(mut cx: meter::Context) {
         let model = cx.shared.model.lock(|m| *m);
         while let Some(s) = cx.local.rx.dequeue() {
+            cx.local.episodes.sample(s.cmd_a);
+            *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
             let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
+            // The store: a closed shimmy episode, and the motion for its standstill watch.
+            if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
+                if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
+                    defmt::error!(
+                        "store queue full: shimmy episode at t = {=f64} s not logged",
+                        e.event.start_s
+                    );
+                }
+            }
+            let motion = Motion {
+                t_s: u.report.t_s,
+                speed_mps: cx.local.data.speed_mps(),
+                cmd_peak_a: core::mem::take(cx.local.cmd_peak_a),
+            };
+            cx.shared.motion.lock(|m| *m = motion);
             let now = (u.report.t_s, cx.local.data.speed_mps());
             cx.shared.now.lock(|n| *n = now);
             let status = cx.local.data.margin_status();
@@ -271,6 +330,55 @@ mod app {
                     h
                 );
             }
+        }
+    }
+
+    /// Logs where the configuration came from; anything but a stored record is a fault.
+    fn report_config(boot: &shimmy_firmware::store::BootReport) {
+        let source = match boot.config.source {
+            ConfigSource::Stored => "stored vehicle record",
+            ConfigSource::Missing => "no record stored",
+            ConfigSource::Unreadable(_) => "store unreadable",
+            ConfigSource::Rejected(_) => "record rejected (schema, length or a value out of range)",
+        };
+        if boot.config.is_fault() {
+            defmt::error!(
+                "config fault: {=str}; running the compiled-in defaults",
+                source
+            );
+        } else {
+            defmt::info!("config: {=str} loaded", source);
+        }
+        defmt::info!(
+            "store: boot {=u32}, {=usize} log entries",
+            boot.entry.boot_count,
+            boot.log_entries
+        );
+    }
+
+    /// One pass of the store in the background loop; reports what it did.
+    fn store_pass(
+        task: &mut StoreTask<TargetFlash>,
+        rx: &mut Consumer<'static, LogEntry>,
+        motion: Motion,
+        latched: FaultSet,
+    ) {
+        let pass = task.step(motion, latched, core::iter::from_fn(|| rx.dequeue()));
+        if pass.appended > 0 {
+            defmt::info!(
+                "store: {=u32} log entries appended at t = {=f64} s ({=usize} waiting for a standstill)",
+                pass.appended,
+                motion.t_s,
+                task.store().pending_entries()
+            );
+        }
+        match pass.maintained {
+            Some(Ok(m)) => defmt::info!(
+                "store: standstill, {=u32} waiting entries written",
+                m.written
+            ),
+            Some(Err(_)) => defmt::error!("store: standstill maintenance failed, retried later"),
+            None => {}
         }
     }
 

@@ -40,11 +40,19 @@ impl NorFlashError for FlashError {
 /// erased bytes. A power cut can be armed to stop any write or erase after a given number of
 /// bytes: the bytes before it are done, the rest untouched (an interrupted erase leaves the page
 /// part old, part erased).
+///
+/// Integers only (`repr(C)`): every bit pattern is a `RamFlash`, so QEMU can keep one in RAM
+/// that start-up leaves alone (`.uninit`) and find it again after a reset.
 #[derive(Clone)]
+#[repr(C)]
 pub struct RamFlash<const BYTES: usize, const PAGE: usize> {
     data: [u8; BYTES],
-    cut_after: Option<u32>,
+    /// Bytes until the power cut; [`NEVER`] when none is armed.
+    cut_after: u32,
 }
+
+/// No power cut armed.
+const NEVER: u32 = u32::MAX;
 
 impl<const BYTES: usize, const PAGE: usize> RamFlash<BYTES, PAGE> {
     /// Compile-time check of the geometry (whole pages).
@@ -55,7 +63,7 @@ impl<const BYTES: usize, const PAGE: usize> RamFlash<BYTES, PAGE> {
         let () = Self::GEOMETRY;
         RamFlash {
             data: [0xFF; BYTES],
-            cut_after: None,
+            cut_after: NEVER,
         }
     }
 
@@ -67,17 +75,17 @@ impl<const BYTES: usize, const PAGE: usize> RamFlash<BYTES, PAGE> {
     /// Erases everything (a new chip): what QEMU's boot does with the garbage RAM of a power-on.
     pub fn format(&mut self) {
         self.data.fill(0xFF);
-        self.cut_after = None;
+        self.cut_after = NEVER;
     }
 
     /// The power goes after `bytes` more bytes have been written or erased (`None`: never).
     pub fn cut_power_after(&mut self, bytes: Option<u32>) {
-        self.cut_after = bytes;
+        self.cut_after = bytes.map_or(NEVER, |b| b.min(NEVER - 1));
     }
 
     /// Whether an armed power cut has happened (then every operation fails until re-armed).
     pub fn power_is_cut(&self) -> bool {
-        self.cut_after == Some(0)
+        self.cut_after == 0
     }
 
     fn range(offset: u32, len: usize, align: usize) -> Result<core::ops::Range<usize>, FlashError> {
@@ -94,13 +102,13 @@ impl<const BYTES: usize, const PAGE: usize> RamFlash<BYTES, PAGE> {
 
     /// One byte of work against the power budget.
     fn spend(&mut self) -> Result<(), FlashError> {
-        match self.cut_after.as_mut() {
-            Some(0) => Err(FlashError::PowerCut),
-            Some(n) => {
-                *n -= 1;
+        match self.cut_after {
+            0 => Err(FlashError::PowerCut),
+            NEVER => Ok(()),
+            _ => {
+                self.cut_after -= 1;
                 Ok(())
             }
-            None => Ok(()),
         }
     }
 }

@@ -31,6 +31,8 @@ pub mod drive;
 mod flash;
 mod log;
 mod standstill;
+#[cfg(target_os = "none")]
+pub mod target;
 mod task;
 
 #[cfg(target_os = "none")]
@@ -154,14 +156,10 @@ pub struct ConfigLoad {
 }
 
 impl ConfigLoad {
-    /// The defaults are in use although the board should have a configuration (a fault to
-    /// report: the stored record was unreadable or refused). A board never configured is not
-    /// a fault.
+    /// The defaults are in use instead of a stored configuration: a fault to report (the issue:
+    /// a missing, corrupt or invalid record means the compiled-in defaults plus a fault).
     pub fn is_fault(&self) -> bool {
-        matches!(
-            self.source,
-            ConfigSource::Unreadable(_) | ConfigSource::Rejected(_)
-        )
+        self.source != ConfigSource::Stored
     }
 }
 
@@ -184,15 +182,22 @@ pub struct Maintenance {
 }
 
 /// What [`Store::boot`] found and did.
-pub struct Boot<F> {
-    /// The store, ready for the running firmware.
-    pub store: Store<F>,
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BootReport {
     /// The configuration to run with.
     pub config: ConfigLoad,
     /// This boot, as logged.
     pub entry: BootEntry,
     /// Entries in the log before this boot's (0 if it could not be read).
     pub log_entries: usize,
+}
+
+/// The store after [`Store::boot`], and what the boot found.
+pub struct Boot<F> {
+    /// The store, ready for the running firmware.
+    pub store: Store<F>,
+    /// What the boot found and did.
+    pub report: BootReport,
 }
 
 /// The configuration map and the event log on one flash (see the module documentation).
@@ -276,9 +281,11 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         store.flash.close();
         Ok(Boot {
             store,
-            config,
-            entry,
-            log_entries,
+            report: BootReport {
+                config,
+                entry,
+                log_entries,
+            },
         })
     }
 

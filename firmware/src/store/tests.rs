@@ -69,7 +69,7 @@ fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let l = s.load_config();
     assert_eq!(l.source, ConfigSource::Missing);
     assert_eq!(l.vehicle, Vehicle::nominal());
-    assert!(!l.is_fault(), "a board never configured is not a fault");
+    assert!(l.is_fault(), "running the defaults is reported");
 
     // A record of another schema (as a firmware with another field table wrote it).
     let mut bytes = [0u8; RECORD_MAX_BYTES];
@@ -151,9 +151,9 @@ fn a_power_cut_at_any_byte_of_a_config_write_leaves_the_old_or_the_new_one() {
             // Reboot on what the cut left.
             let Boot {
                 store: mut s,
-                config: l,
-                ..
+                report,
             } = reboot(s.into_flash());
+            let l = report.config;
             match (l.source, old) {
                 (ConfigSource::Stored, Some(o)) if l.vehicle == o => saw_old += 1,
                 (ConfigSource::Missing, None) => saw_old += 1,
@@ -285,8 +285,8 @@ fn boots_are_counted_across_power_offs_and_logged_with_their_cause() {
     let mut flash = Flash::new();
     for boot in 1..=3u32 {
         let b = Store::boot(flash, LAYOUT, ResetCause::Watchdog, boot - 1).unwrap();
-        assert_eq!(b.entry.boot_count, boot);
-        assert_eq!(b.log_entries, boot as usize - 1);
+        assert_eq!(b.report.entry.boot_count, boot);
+        assert_eq!(b.report.log_entries, boot as usize - 1);
         flash = b.store.into_flash();
     }
     let mut s = store(flash);
@@ -338,7 +338,7 @@ fn a_drive_logs_the_shimmy_episode_and_the_latched_fault() {
             flash = s.into_flash();
         }
         let b = Store::boot(flash, LAYOUT, ResetCause::PowerOn, 0).unwrap();
-        let boot_entry = b.entry;
+        let boot_entry = b.report.entry;
         let mut task = StoreTask::new(b.store, FaultSet::EMPTY);
         let d = drive::run(&mut task);
         assert_eq!(d.appended, 2, "{d:?}");
