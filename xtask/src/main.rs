@@ -95,7 +95,10 @@ fn test() -> Result<(), String> {
         ("host tests (cargo test --workspace)", || {
             cargo(&["test", "--workspace"]).map(|_| String::new())
         }),
-        ("fuzz safe_step (libFuzzer, stable, 60 s)", fuzz::step),
+        (
+            "fuzz safe_step and store_ops (libFuzzer, stable, 60 s in all)",
+            fuzz::step,
+        ),
         ("firmware release build + size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
