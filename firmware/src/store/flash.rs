@@ -318,8 +318,12 @@ pub mod board {
         async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
             let from_at = self.at(from, 0)?;
             let to_at = self.at(to, 0)?;
-            let mut unlocked = self.flash.unlocked();
-            blocking::NorFlash::erase(&mut unlocked, from_at, to_at).map_err(|_| FlashError::Device)
+            let flash = &mut self.flash;
+            crate::periph::with_watchdog_stretched(|| {
+                let mut unlocked = flash.unlocked();
+                blocking::NorFlash::erase(&mut unlocked, from_at, to_at)
+            })
+            .map_err(|_| FlashError::Device)
         }
 
         async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {

@@ -59,7 +59,7 @@ use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
 
 /// Map key of the vehicle record.
 pub const KEY_VEHICLE: u8 = 0;
-/// Map key of the boot count (u32).
+/// Map key of the boot count (u32, little-endian).
 pub const KEY_BOOTS: u8 = 1;
 /// Log entries kept in RAM while an append waits for a standstill erase.
 pub const PENDING: usize = 16;
@@ -295,12 +295,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             vehicle: Vehicle::nominal(),
             source,
         };
-        let config = match MapConfig::try_new(self.layout.config.clone()) {
-            Ok(c) => c,
-            Err(_) => return nominal(ConfigSource::Unreadable(StoreError::Layout)),
-        };
-        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
-        match block_on(map.fetch_item::<&[u8]>(&mut self.buf, &KEY_VEHICLE)) {
+        match self.fetch(KEY_VEHICLE) {
             Ok(Some(bytes)) => match Vehicle::decode_record(bytes) {
                 Ok(vehicle) => ConfigLoad {
                     vehicle,
@@ -309,8 +304,17 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
                 Err(e) => nominal(ConfigSource::Rejected(e)),
             },
             Ok(None) => nominal(ConfigSource::Missing),
-            Err(e) => nominal(ConfigSource::Unreadable(e.into())),
+            Err(e) => nominal(ConfigSource::Unreadable(e)),
         }
+    }
+
+    /// The newest value of `key` in the map. Every value is bytes: one instance of the map's
+    /// code in the image.
+    fn fetch(&mut self, key: u8) -> Result<Option<&[u8]>, StoreError> {
+        let config =
+            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
+        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        block_on(map.fetch_item::<&[u8]>(&mut self.buf, &key)).map_err(StoreError::from)
     }
 
     /// Writes `vehicle` as the configuration (validated first: an invalid vehicle is refused
@@ -329,41 +333,30 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             .map_err(StoreError::Record)?;
         let bytes = record.get(..n).ok_or(StoreError::Library)?;
         self.flash.open(token);
-        let result = self.store_item(&KEY_VEHICLE, &bytes);
+        let result = self.store_item(KEY_VEHICLE, bytes);
         self.flash.close();
         result
     }
 
-    fn store_item<'d, V: sequential_storage::map::Value<'d>>(
-        &mut self,
-        key: &u8,
-        value: &V,
-    ) -> Result<(), StoreError> {
+    fn store_item(&mut self, key: u8, value: &[u8]) -> Result<(), StoreError> {
         let config =
             MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
         let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
-        block_on(map.store_item(&mut self.buf, key, value)).map_err(StoreError::from)
+        block_on(map.store_item(&mut self.buf, &key, &value)).map_err(StoreError::from)
     }
 
     /// Counts this boot (the persistent count) and logs it with the reset cause and the fault
     /// memory's reset count; what cannot be written now is written at the next standstill.
     fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
-        let stored = {
-            let config = MapConfig::try_new(self.layout.config.clone());
-            match config {
-                Ok(config) => {
-                    let mut map =
-                        MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
-                    block_on(map.fetch_item::<u32>(&mut self.buf, &KEY_BOOTS))
-                        .ok()
-                        .flatten()
-                        .unwrap_or(0)
-                }
-                Err(_) => 0,
-            }
+        let stored = match self.fetch(KEY_BOOTS) {
+            Ok(Some(&[a, b, c, d])) => u32::from_le_bytes([a, b, c, d]),
+            _ => 0,
         };
         let boot_count = stored.saturating_add(1);
-        if self.store_item(&KEY_BOOTS, &boot_count).is_err() {
+        if self
+            .store_item(KEY_BOOTS, &boot_count.to_le_bytes())
+            .is_err()
+        {
             self.boots_unsaved = Some(boot_count);
         }
         let entry = BootEntry {
@@ -427,7 +420,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             done.written += 1;
         }
         if let Some(count) = self.boots_unsaved {
-            self.store_item(&KEY_BOOTS, &count)?;
+            self.store_item(KEY_BOOTS, &count.to_le_bytes())?;
             self.boots_unsaved = None;
             done.boots_saved = true;
         }

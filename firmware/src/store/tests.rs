@@ -75,7 +75,7 @@ fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let mut bytes = [0u8; RECORD_MAX_BYTES];
     let n = vehicle(3).encode_record(&mut bytes).unwrap();
     bytes[0] ^= 1;
-    s.store_item(&KEY_VEHICLE, &&bytes[..n]).unwrap();
+    s.store_item(KEY_VEHICLE, &bytes[..n]).unwrap();
     let l = s.load_config();
     assert!(matches!(
         l.source,
@@ -88,7 +88,7 @@ fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let mut bytes = [0u8; RECORD_MAX_BYTES];
     let n = vehicle(3).encode_record(&mut bytes).unwrap();
     bytes[6..14].copy_from_slice(&(-1.0f64).to_le_bytes());
-    s.store_item(&KEY_VEHICLE, &&bytes[..n]).unwrap();
+    s.store_item(KEY_VEHICLE, &bytes[..n]).unwrap();
     let l = s.load_config();
     assert!(matches!(
         l.source,
