@@ -171,6 +171,7 @@ fn a_power_cut_at_any_byte_of_a_config_write_leaves_the_old_or_the_new_one() {
     // An item becomes valid with its last byte, so every cut before the end of a write left the
     // old vehicle (the new one is what the completed write gives, checked above).
     assert_eq!((saw_old, saw_new), (cuts, 0));
+    eprintln!("config writes: {cuts} power cuts, each booted with the old vehicle");
     assert!(cuts > 8 * MIN_CUTS_PER_WRITE, "{cuts} cuts");
 }
 
@@ -188,6 +189,7 @@ fn a_power_cut_at_any_byte_of_an_append_loses_at_most_the_entry_being_written() 
     let mut flash = Flash::new();
     let mut old: Vec<LogEntry> = Vec::new();
     let mut dropped_seen = false;
+    let mut cuts = 0u32;
     for k in 0..120u32 {
         let new = shimmy(k);
         // What the append (or, when it must wait, the flush) does without a cut.
@@ -213,6 +215,7 @@ fn a_power_cut_at_any_byte_of_an_append_loses_at_most_the_entry_being_written() 
             if finished {
                 break;
             }
+            cuts += 1;
             let mut s = reboot(s.into_flash()).store;
             let got: Vec<LogEntry> = log_of(&mut s)
                 .into_iter()
@@ -237,6 +240,8 @@ fn a_power_cut_at_any_byte_of_an_append_loses_at_most_the_entry_being_written() 
         dropped_seen,
         "the log filled and dropped its oldest entries"
     );
+    assert!(cuts > 120 * 40, "{cuts} cuts");
+    eprintln!("appends and flushes: {cuts} power cuts, at most the entry being written lost");
 }
 
 /// While the vehicle moves, an append that needs an erase waits in RAM (the flash is never
