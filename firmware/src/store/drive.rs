@@ -13,7 +13,9 @@
 //!
 //! The yaw carries a small road vibration throughout (a still encoder reads as stuck).
 
-use super::{EpisodeRecorder, FlashError, LogEntry, Motion, StoreTask};
+use super::flash::FlashError;
+use super::log::{EpisodeRecorder, LogEntry};
+use super::task::{Motion, StoreTask};
 use crate::monitoring::{safe_controller, DataMargin, MeterSample, DT_S};
 use embedded_storage_async::nor_flash::NorFlash;
 use shimmy_core::supervisor::frame::{RawFrame, NOMINAL_PERIOD_US};

@@ -1,7 +1,6 @@
 //! The flashes under the store: [`RamFlash`] (NOR semantics in RAM, with a power cut at any
-//! byte, for host tests, the fuzz target and QEMU, whose flash cannot be written), [`Gated`]
-//! (refuses every erase unless the standstill token opened it) and, on the board, the
-//! STM32F405's internal flash.
+//! byte, for host tests, the fuzz target and QEMU, whose flash cannot be written) and, on the
+//! board, the STM32F405's internal flash.
 
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
@@ -19,7 +18,7 @@ pub enum FlashError {
     NotErased,
     /// The power went: the operation stopped part-way ([`RamFlash::cut_power_after`]).
     PowerCut,
-    /// An erase outside standstill ([`Gated`]): refused, nothing changed.
+    /// An erase outside standstill (`Gated`): refused, nothing changed.
     EraseRefused,
     /// The board's flash controller reported an error.
     Device,
@@ -173,89 +172,12 @@ impl<const BYTES: usize, const PAGE: usize> NorFlash for RamFlash<BYTES, PAGE> {
     }
 }
 
-/// A flash whose erase is refused unless opened by [`Gated::open`], which only the store's
-/// standstill operations call (each takes the [`super::Standstill`] token). Writes always go
-/// through: programming a few bytes stalls the flash for microseconds, an erase of a 128 KiB
-/// sector for over a second.
-pub struct Gated<F> {
-    flash: F,
-    /// Set only by [`Gated::open`] and by `Store::boot` (before the control loop starts).
-    pub(super) erase_open: bool,
-}
-
-impl<F> Gated<F> {
-    /// Closed (no erase).
-    pub(super) const fn new(flash: F) -> Self {
-        Gated {
-            flash,
-            erase_open: false,
-        }
-    }
-
-    /// Opens the erase for the standstill operations of the store.
-    pub(super) fn open(&mut self, _token: &super::Standstill<'_>) {
-        self.erase_open = true;
-    }
-
-    /// Closes it again.
-    pub(super) fn close(&mut self) {
-        self.erase_open = false;
-    }
-
-    /// The flash, without the gate.
-    pub(super) fn into_inner(self) -> F {
-        self.flash
-    }
-
-    /// The flash under the gate.
-    pub fn inner(&self) -> &F {
-        &self.flash
-    }
-
-    /// The flash under the gate, mutable (tests arm power cuts with it).
-    pub fn inner_mut(&mut self) -> &mut F {
-        &mut self.flash
-    }
-}
-
-impl<F: ErrorType<Error = FlashError>> ErrorType for Gated<F> {
-    type Error = FlashError;
-}
-
-impl<F: ReadNorFlash<Error = FlashError>> ReadNorFlash for Gated<F> {
-    const READ_SIZE: usize = F::READ_SIZE;
-
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        self.flash.read(offset, bytes).await
-    }
-
-    fn capacity(&self) -> usize {
-        self.flash.capacity()
-    }
-}
-
-impl<F: NorFlash<Error = FlashError>> NorFlash for Gated<F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
-
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        if !self.erase_open {
-            return Err(FlashError::EraseRefused);
-        }
-        self.flash.erase(from, to).await
-    }
-
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        self.flash.write(offset, bytes).await
-    }
-}
-
 /// The STM32F405's internal flash as the store sees it: offsets count from the first storage
 /// sector (`__shimmy_store_start` in `memory.x`), erase units are its 128 KiB sectors, writes
 /// are byte programs (x8 parallelism, any supply voltage).
 #[cfg(target_os = "none")]
 pub mod board {
-    use super::FlashError;
+    use crate::store::flash::FlashError;
     use embedded_storage::nor_flash as blocking;
     use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
     use stm32f4xx_hal::flash::{FlashExt, LockedFlash};

@@ -2,21 +2,22 @@
 //! flash under QEMU (whose flash cannot be written) in RAM that a reset leaves alone, so the
 //! log survives a simulated reset.
 
-use super::{BootReport, Layout, Store, StoreError, StoreTask};
+use super::storage::{BootReport, Layout, Store, StoreError};
+use super::task::StoreTask;
 use crate::fault_memory::ResetCause;
 use core::sync::atomic::{AtomicBool, Ordering};
 use shimmy_core::supervisor::faults::FaultSet;
 
 /// The flash the store runs on in this build.
 #[cfg(not(feature = "qemu"))]
-pub type TargetFlash = super::board::BoardFlash;
+pub type TargetFlash = super::flash::board::BoardFlash;
 /// The flash the store runs on in this build.
 #[cfg(feature = "qemu")]
 pub type TargetFlash = &'static mut qemu::QemuFlash;
 
 /// The store's layout on the board: the configuration in sectors 8-9, the log in 10-11.
 #[cfg(not(feature = "qemu"))]
-pub const LAYOUT: Layout = Layout::split(super::board::SECTOR_BYTES as u32, 2, 2);
+pub const LAYOUT: Layout = Layout::split(super::flash::board::SECTOR_BYTES as u32, 2, 2);
 /// The store's layout under QEMU: the same split over 16 KiB sectors.
 #[cfg(feature = "qemu")]
 pub const LAYOUT: Layout = Layout::split(qemu::SECTOR_BYTES as u32, 2, 2);
@@ -36,7 +37,7 @@ fn take(ram_lost: bool) -> Option<TargetFlash> {
         // except the HAL's clock set-up, which only writes the wait states (FLASH_ACR); the
         // store uses the key, status and control registers.
         let flash = unsafe { stm32f4xx_hal::pac::FLASH::steal() };
-        Some(super::board::BoardFlash::new(flash))
+        Some(super::flash::board::BoardFlash::new(flash))
     }
     #[cfg(feature = "qemu")]
     {
@@ -60,7 +61,7 @@ pub fn boot(
 /// The RAM flash of the QEMU build.
 #[cfg(feature = "qemu")]
 pub mod qemu {
-    use super::super::RamFlash;
+    use super::super::flash::RamFlash;
     use core::mem::MaybeUninit;
 
     /// Sector size of the QEMU flash: the F405's 16 KiB sectors (its 128 KiB ones would not

@@ -2,9 +2,10 @@
 //! latched faults from the control task, and the standstill work (the only holder of a
 //! [`Standstill`] token at run time).
 
-use super::{
-    FaultEntry, FlashError, LogEntry, Maintenance, Standstill, StandstillWatch, Store, StoreError,
-};
+use super::flash::FlashError;
+use super::log::{FaultEntry, LogEntry};
+use super::standstill::{Standstill, StandstillWatch};
+use super::storage::{Maintenance, Store, StoreError};
 use embedded_storage_async::nor_flash::NorFlash;
 use shimmy_core::supervisor::faults::FaultSet;
 

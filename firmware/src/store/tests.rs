@@ -2,6 +2,8 @@
 //! (the store's own NOR model: write-once bytes, page erase, a cut stops an operation part-way).
 
 use super::*;
+use crate::store::drive;
+use crate::store::{RamFlash, ShimmyEntry, StandstillWatch, StoreTask};
 use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
 use shimmy_core::vehicle::FIELDS;
