@@ -333,21 +333,43 @@ mod app {
         }
     }
 
-    /// Logs where the configuration came from; anything but a stored record is a fault.
+    /// Logs where the configuration came from. Anything but a stored record is a fault; a
+    /// refused record names what was wrong (the field, its value and the allowed range).
     fn report_config(boot: &shimmy_firmware::store::BootReport) {
-        let source = match boot.config.source {
-            ConfigSource::Stored => "stored vehicle record",
-            ConfigSource::Missing => "no record stored",
-            ConfigSource::Unreadable(_) => "store unreadable",
-            ConfigSource::Rejected(_) => "record rejected (schema, length or a value out of range)",
-        };
-        if boot.config.is_fault() {
-            defmt::error!(
-                "config fault: {=str}; running the compiled-in defaults",
-                source
-            );
-        } else {
-            defmt::info!("config: {=str} loaded", source);
+        use shimmy_core::vehicle::{Problem, RecordError};
+        const DEFAULTS: &str = "running the compiled-in defaults";
+        match boot.config.source {
+            ConfigSource::Stored => defmt::info!("config: stored vehicle record loaded"),
+            ConfigSource::Missing => {
+                defmt::error!("config fault: no vehicle record stored; {=str}", DEFAULTS)
+            }
+            ConfigSource::Unreadable(_) => {
+                defmt::error!("config fault: the store cannot be read; {=str}", DEFAULTS)
+            }
+            ConfigSource::Rejected(RecordError::Invalid(e)) => match e.problem {
+                Problem::OutOfRange { lo, hi, unit } => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} is outside [{=f64}, {=f64}] {=str}; {=str}",
+                    e.section, e.name, e.value, lo, hi, unit, DEFAULTS
+                ),
+                Problem::NotInteger { lo, hi } => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} is not a whole number in [{=f64}, {=f64}]; {=str}",
+                    e.section, e.name, e.value, lo, hi, DEFAULTS
+                ),
+                Problem::Inconsistent(rule) => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} breaks the rule {=str}; {=str}",
+                    e.section, e.name, e.value, rule, DEFAULTS
+                ),
+            },
+            ConfigSource::Rejected(RecordError::Schema { found, expected }) => defmt::error!(
+                "config fault: stored record schema {=u32:#x} is not this firmware's {=u32:#x}; {=str}",
+                found, expected, DEFAULTS
+            ),
+            ConfigSource::Rejected(
+                RecordError::Length { need, have } | RecordError::BufferTooSmall { need, have },
+            ) => defmt::error!(
+                "config fault: stored record is {=usize} B, expected {=usize} B; {=str}",
+                have, need, DEFAULTS
+            ),
         }
         defmt::info!(
             "store: boot {=u32}, {=usize} log entries",

@@ -20,6 +20,9 @@ use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
 pub const KEY_VEHICLE: u8 = 0;
 /// Map key of the boot count (u32, little-endian).
 pub const KEY_BOOTS: u8 = 1;
+/// Map key of the clearing mark: 1 while a log clear is under way, so a clear cut by a power
+/// loss is finished at the next boot (a half-erased log page is not left for the queue).
+pub const KEY_CLEARING: u8 = 2;
 /// Log entries kept in RAM while an append waits for a standstill erase.
 pub const PENDING: usize = 16;
 /// The map's work buffer: the largest vehicle record and its key, with room for alignment.
@@ -311,6 +314,10 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         let mut store = Store::new(flash, layout)?;
         store.flash.erase_open = true;
         let config = store.load_config();
+        if let Ok(Some(&[1])) = store.fetch(KEY_CLEARING) {
+            // A clear was cut by a power loss: finish it.
+            let _ = store.clear_open();
+        }
         // Reading the whole log finishes an interrupted page turn of the queue.
         let log_entries = store.read_log(|_| ()).unwrap_or(0);
         let entry = store.record_boot(cause, resets_since_power_on);
@@ -501,14 +508,20 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// Empties the log (flash and pending entries). The configuration stays.
     pub fn clear_log(&mut self, token: &Standstill<'_>) -> Result<(), StoreError> {
         self.flash.open(token);
-        let result = self
-            .queue()
-            .and_then(|mut q| block_on(q.erase_all()).map_err(StoreError::from));
+        let result = self.clear_open();
         self.flash.close();
         if result.is_ok() {
             self.pending.clear();
         }
         result
+    }
+
+    /// The clear with the erase open: mark, erase, unmark (a cut in between: finished at boot).
+    fn clear_open(&mut self) -> Result<(), StoreError> {
+        self.store_item(KEY_CLEARING, &[1])?;
+        let mut queue = self.queue()?;
+        block_on(queue.erase_all()).map_err(StoreError::from)?;
+        self.store_item(KEY_CLEARING, &[0])
     }
 }
 
