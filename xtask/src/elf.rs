@@ -7,12 +7,12 @@ use std::path::Path;
 /// Budgets of the release application image (issue 6): what the firmware may use of the
 /// STM32F405RG, leaving room for a bootloader. Flash: 88 KiB for the image before the flash
 /// store (87,188 B, 97.9 KB before the design-time math moved to the estimator's precision,
-/// issue 17), raised by what the store measurably adds (issue 23: 87,188 -> 123,560 B, +36,372
+/// issue 17), raised by what the store measurably adds (issue 23: 87,188 -> 124,388 B, +37,200
 /// B: sequential-storage 13.1 KB with its CRC table, the core's vehicle record with its field
-/// table, names and checks 12.8 KB, the store, log, task and watchdog-stretch glue 10.5 KB),
-/// rounded up to the KiB. That is over issue 23's 96 KiB (README, "Flash store"); raise it deliberately, with the
+/// table, names and checks 12.8 KB, the store, log, task, config-fault report and
+/// watchdog-stretch glue 11.3 KB), rounded up to the KiB. That is over issue 23's 96 KiB (README, "Flash store"); raise it deliberately, with the
 /// measured size, when a feature needs more.
-pub const FLASH_BUDGET: u64 = 124 * 1024;
+pub const FLASH_BUDGET: u64 = 125 * 1024;
 pub const RAM_BUDGET: u64 = 24 * 1024;
 
 /// STM32F405RG memory map (must match `memory.x`): code in flash sectors 0-7 (the store owns
