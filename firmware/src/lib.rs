@@ -10,6 +10,7 @@ pub mod clock;
 pub mod control;
 pub mod drivers;
 pub mod fault_memory;
+pub mod link;
 pub mod monitoring;
 pub mod replay;
 pub mod sensors;

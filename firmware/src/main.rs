@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
+//! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
 //! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
@@ -26,15 +27,19 @@ mod app {
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
+    use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
         safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
-    use shimmy_firmware::periph::PERIOD_TICKS;
+    use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
     use shimmy_firmware::store::{ConfigSource, EpisodeRecorder, LogEntry, Motion, StoreTask};
+    use shimmy_link::device::{Device, REPLY_BYTES};
 
     /// Telemetry every this many meter runs (1 Hz).
     const TELEMETRY_DIVIDER: u32 = 100;
+    /// The link's telemetry stream every this many meter runs (10 Hz).
+    const LINK_STREAM_DIVIDER: u32 = 10;
     /// SPSC capacity is one less than this: 3 meter periods of samples.
     const QUEUE_N: usize = 32;
     /// Log entries from `meter` to the store in the background loop (capacity one less).
@@ -54,6 +59,8 @@ mod app {
         motion: Motion,
         /// The supervisor's latched faults (written by `control`, logged by the store).
         latched: FaultSet,
+        /// What the host link serves (written by `meter`, read and configured by `link`).
+        link: LinkState,
     }
 
     #[local]
@@ -74,6 +81,9 @@ mod app {
         log_tx: Producer<'static, LogEntry>,
         log_rx: Consumer<'static, LogEntry>,
         episodes: EpisodeRecorder,
+        port: LinkPort,
+        /// The ready frame has been sent.
+        announced: bool,
     }
 
     #[init(local = [
@@ -123,7 +133,7 @@ mod app {
         );
         let mut ctrl = safe_controller_for(&vehicle);
         ctrl.supervisor_mut().restore_latched(latched);
-        let board = board::init(cx.device, coil_dead);
+        let (board, port) = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
         let (log_tx, log_rx) = cx.local.log_queue.split();
         let Ok(data) = DataMargin::with_params(&vehicle.pipeline_params()) else {
@@ -131,6 +141,9 @@ mod app {
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
+        let link = LinkState::new(&record);
+        // The link task's first run sends the ready frame (the port listens from now on).
+        rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
         // The watchdog runs since the board's first line; init ends here.
         board.watchdog.feed();
         (
@@ -141,6 +154,7 @@ mod app {
                 margin: MarginStatus::Invalid,
                 motion: Motion::UNKNOWN,
                 latched,
+                link,
             },
             Local {
                 board,
@@ -157,6 +171,8 @@ mod app {
                 log_tx,
                 log_rx,
                 episodes: EpisodeRecorder::new(),
+                port,
+                announced: false,
             },
         )
     }
@@ -267,15 +283,21 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs, episodes, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion])]
+    #[task(priority = 2, local = [rx, data, meter_runs, episodes, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion, link])]
     async fn meter(mut cx: meter::Context) {
         let model = cx.shared.model.lock(|m| *m);
         while let Some(s) = cx.local.rx.dequeue() {
             cx.local.episodes.sample(s.cmd_a);
             *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
+            cx.shared.link.lock(|l| l.on_sample(s.cmd_a));
             let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
+            let health = cx.shared.health.lock(|h| *h);
+            let data = &*cx.local.data;
+            cx.shared
+                .link
+                .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
             // The store: a closed shimmy episode, and the motion for its standstill watch.
             if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
                 if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
@@ -297,6 +319,9 @@ mod app {
             cx.shared.margin.lock(|m| *m = status);
             *cx.local.meter_runs += 1;
             let runs = *cx.local.meter_runs;
+            if runs.is_multiple_of(LINK_STREAM_DIVIDER) {
+                rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
+            }
             if changed {
                 defmt::warn!(
                     "warning level {=str} at t = {=f64} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
@@ -401,6 +426,28 @@ mod app {
             ),
             Some(Err(_)) => defmt::error!("store: standstill maintenance failed, retried later"),
             None => {}
+        }
+    }
+
+    /// The host link, below `meter` and `control`: every received byte goes to the protocol
+    /// handler, each complete request frame gets its reply (polled transmit, at most ~9 ms at
+    /// 921,600 baud); while the stream is on, the newest margin report goes out when `meter`
+    /// pends this task (10 Hz). `link` is locked only to run the handler, never while sending.
+    #[task(binds = USART1, priority = 1, local = [port, announced, device: Device = Device::new(), reply: [u8; REPLY_BYTES] = [0; REPLY_BYTES]], shared = [link])]
+    fn link(mut cx: link::Context) {
+        let (port, device, reply) = (cx.local.port, cx.local.device, cx.local.reply);
+        if !*cx.local.announced {
+            *cx.local.announced = true;
+            let n = cx.shared.link.lock(|l| Device::ready(l, reply));
+            port.write(reply.get(..n).unwrap_or_default());
+        }
+        while let Some(byte) = port.read() {
+            if let Some(n) = cx.shared.link.lock(|l| device.on_byte(byte, l, reply)) {
+                port.write(reply.get(..n).unwrap_or_default());
+            }
+        }
+        if let Some(n) = cx.shared.link.lock(|l| device.poll_stream(l, reply)) {
+            port.write(reply.get(..n).unwrap_or_default());
         }
     }
 

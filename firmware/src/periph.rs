@@ -141,3 +141,66 @@ pub fn with_watchdog_stretched<R>(erase: impl FnOnce() -> R) -> R {
     set(IWDG_PR, IWDG_RLR);
     result
 }
+
+/// The host link's serial port: USART1, 8N1, receive interrupt on, polled transmit. On the board
+/// PA9 (TX) and PA10 (RX) at [`LINK_BAUD`] to a USB-serial adapter; under QEMU the first
+/// `-serial` chardev (netduinoplus2 wires `serial_hd(0)` to USART1, IRQ 37).
+///
+/// Why a USART and not USB CDC: a few hundred bytes of flash instead of a USB stack (~10 KiB,
+/// its own interrupt load and the 48 MHz clock), and the same code runs under QEMU, which models
+/// the USARTs and no USB device.
+pub struct LinkPort {
+    usart: pac::USART1,
+}
+
+/// Link speed, baud: a 0.8 KiB reply (a vehicle record) takes 9 ms, so the polled transmit in
+/// the priority-1 link task holds the background model loop for at most that (its period is
+/// 100 ms).
+pub use shimmy_link::LINK_BAUD;
+
+impl LinkPort {
+    /// Clocks and enables USART1 (transmitter, receiver, RXNE interrupt) for [`LINK_BAUD`] from
+    /// its bus clock `pclk2_hz` (84 MHz on the board; QEMU ignores the divider). Bytes a host
+    /// sent before this are lost: the link task announces itself after it (the ready frame).
+    pub fn start(usart: pac::USART1, pclk2_hz: u32) -> Self {
+        // SAFETY: RCC APB2ENR bit 4 (USART1EN) set with a read-modify-write during init, when
+        // nothing else touches APB2ENR.
+        unsafe {
+            let rcc = &*pac::RCC::ptr();
+            rcc.apb2enr().modify(|r, w| w.bits(r.bits() | (1 << 4)));
+        }
+        // Oversampling by 16: BRR = f_ck / baud holds mantissa and fraction (RM0090 30.3.4).
+        let brr = (pclk2_hz + LINK_BAUD / 2) / LINK_BAUD;
+        // SAFETY: BRR takes any 16-bit divider; CR1 = UE | RXNEIE | TE | RE.
+        unsafe {
+            usart.brr().write(|w| w.bits(brr.min(0xFFFF) as u16));
+            usart
+                .cr1()
+                .write(|w| w.bits((1 << 13) | (1 << 5) | (1 << 3) | (1 << 2)));
+        }
+        LinkPort { usart }
+    }
+
+    /// The received byte, if one is waiting (an overrun is cleared by the same SR/DR read:
+    /// the lost bytes make the frame fail its CRC, and the host gets an error reply).
+    pub fn read(&mut self) -> Option<u8> {
+        let sr = self.usart.sr().read().bits();
+        // RXNE (bit 5) or ORE (bit 3): reading DR after SR clears both.
+        if sr & ((1 << 5) | (1 << 3)) == 0 {
+            return None;
+        }
+        let dr = self.usart.dr().read().bits();
+        (sr & (1 << 5) != 0).then_some(dr as u8)
+    }
+
+    /// Sends `bytes`, waiting for TXE before each.
+    pub fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            while self.usart.sr().read().bits() & (1 << 7) == 0 {}
+            // SAFETY: DR takes any 8-bit value.
+            unsafe {
+                self.usart.dr().write(|w| w.bits(u16::from(b)));
+            }
+        }
+    }
+}

@@ -58,9 +58,16 @@ enum Command {
     /// Fault campaign: every sensor/coil fault (and combinations) injected into the supervised
     /// ASMC loop inside and outside the Hopf window: detection time, safe state, suppression.
     Faults(cmd::faults::FaultsArgs),
+    /// The host link to a device (a board's serial port, QEMU over TCP, or the in-process
+    /// simulated device): identity, vehicle configuration, event log, faults, live margin.
+    Device(cmd::device::DeviceArgs),
     /// Run scenario files (default: the standard set in host-sim/scenarios/) and write one
     /// self-contained report: Markdown page, PNG plots, metrics table and CSV traces.
     Report(cmd::report::ReportArgs),
+    /// The board's mode meter, fusion and monitor on a measured log (CSV: wheel yaw or a
+    /// steering signal, speed): damping and frequency over time with uncertainty, warnings and
+    /// events as CSV, plot, Markdown/HTML report and JSON summary.
+    Analyze(cmd::analyze::AnalyzeArgs),
 }
 
 fn main() -> Result<()> {
@@ -78,8 +85,10 @@ fn main() -> Result<()> {
         Some(Command::Margin(a)) => cmd::margin::command(&a),
         Some(Command::MeterAccuracy(a)) => cmd::meter_accuracy::command(&a),
         Some(Command::Mismatch(a)) => cmd::mismatch::command(&a),
+        Some(Command::Device(a)) => cmd::device::command(&a),
         Some(Command::Faults(a)) => cmd::faults::command(&a),
         Some(Command::Report(a)) => cmd::report::command(&a),
+        Some(Command::Analyze(a)) => cmd::analyze::command(&a),
         None => cmd::demo::command(&cli.demo),
     }
 }

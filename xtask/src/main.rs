@@ -6,9 +6,13 @@
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
-//!                                against the budgets (flash <= 125 KiB, static RAM <= 24 KiB),
+//!                                against the budgets (flash <= 88 KiB + the host link's
+//!                                23,640 B + the flash store's, static RAM <= 24 KiB),
 //!                                flash by crate, largest symbols, and where the bytes go
 //!                                that no sized symbol covers
+//! cargo xtask link               the host link end to end: the QEMU app with its USART on a
+//!                                TCP socket and `shimmy-sim device` against it (identity,
+//!                                config written and read back, events of the scenario as CSV)
 //! cargo xtask conformance        replay the committed sensor trace on the host and under QEMU
 //!                                and require bit-identical controller/estimator outputs
 //! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
@@ -28,6 +32,7 @@
 mod conformance;
 mod elf;
 mod fuzz;
+mod link_e2e;
 mod qemu;
 
 use std::path::{Path, PathBuf};
@@ -36,7 +41,8 @@ use std::time::Instant;
 
 /// The firmware's target triple (Cortex-M4F with hardware floating point).
 pub const TARGET: &str = "thumbv7em-none-eabihf";
-const FIRMWARE: &str = "shimmy-firmware";
+/// The application binary.
+pub const FIRMWARE: &str = "shimmy-firmware";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -49,10 +55,11 @@ fn main() -> ExitCode {
             host_reference_bench()
         }),
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
+        Some("link") => link_e2e::step().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench | conformance | link | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -147,6 +154,10 @@ fn test() -> Result<(), String> {
             let story = qemu::check_supervisor(&run.log)?;
             Ok(format!("{} log lines; {story}", run.log.len()))
         }),
+        (
+            "host link under QEMU (shimmy-sim device over TCP)",
+            link_e2e::step,
+        ),
     ];
 
     let mut results = Vec::new();

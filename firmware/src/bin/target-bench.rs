@@ -91,6 +91,16 @@ mod bench {
             run: meter_run,
         },
         Entry {
+            name: "link: LinkState::on_update in the meter task (max)",
+            budget: Budget::None,
+            run: link_update,
+        },
+        Entry {
+            name: "link: a config-get request (handler, record, frame)",
+            budget: Budget::None,
+            run: link_request,
+        },
+        Entry {
             name: "eigen update: linearise + eigenvalues (f32, balanced)",
             budget: Budget::None,
             run: eigen_update_f32,
@@ -442,6 +452,66 @@ mod bench {
 
     fn meter_run() -> u32 {
         meter_counts().2
+    }
+
+    /// The link's work in the meter task after each update (recorder, fault bits, telemetry),
+    /// worst over 0.5 s after 3 s of warm-up; the meter task runs it on top of the meter run.
+    fn link_update() -> u32 {
+        use shimmy_firmware::control::Health;
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
+        let Ok(mut d) = DataMargin::new() else {
+            return u32::MAX;
+        };
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed());
+        let h = Health::default();
+        let mut seed = 7;
+        let mut worst = 0;
+        for k in 0..3500u32 {
+            let (l, r) = yaw(k, &mut seed);
+            let s = MeterSample {
+                step: k,
+                psi_l_rad: l,
+                psi_r_rad: r,
+                speed_mps: 15.0,
+                cmd_a: 0.5,
+            };
+            link.on_sample(s.cmd_a);
+            if let Some((u, _)) = d.push(&s, None) {
+                let n = measure_once(|| {
+                    link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), black_box(&h))
+                });
+                if k >= 3000 {
+                    worst = worst.max(n);
+                }
+            }
+        }
+        worst
+    }
+
+    /// One request through the link's handler: the bytes of a config-get frame fed one by one
+    /// (the last completes it: decode, record, reply frame), summed.
+    fn link_request() -> u32 {
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::LinkState;
+        use shimmy_link::device::{Device, REPLY_BYTES};
+        use shimmy_link::frame::{encode, MAX_FRAME};
+        use shimmy_link::wire::{Request, PROTOCOL_HEADER};
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed());
+        let mut dev = Device::new();
+        let mut req = [0u8; MAX_FRAME + 1];
+        let Ok(n) = encode(PROTOCOL_HEADER, &Request::GetConfig, &mut req) else {
+            return u32::MAX;
+        };
+        let mut reply = [0u8; REPLY_BYTES];
+        let mut total = 0;
+        for &b in req.iter().take(n) {
+            total += measure_once(|| {
+                black_box(dev.on_byte(black_box(b), &mut link, &mut reply));
+            });
+        }
+        total
     }
 
     fn eigen_update_f32() -> u32 {

@@ -25,7 +25,7 @@ use crate::hal::{
     spi::Spi,
     timer::{CaptureChannel, CaptureHzManager, CapturePolarity, Flag, PwmChannel, Timer},
 };
-use crate::periph::{ControlTimer, Watchdog};
+use crate::periph::{ControlTimer, LinkPort, Watchdog};
 use crate::sensors::{Sensors, YawChannel};
 use core::convert::Infallible;
 use embedded_hal_bus::spi::{ExclusiveDevice, NoDelay};
@@ -109,8 +109,9 @@ pub type Board = BoardParts<BoardSensors, Pwm>;
 
 /// Brings up the board: 168 MHz from the 8 MHz HSE, peripherals, coil at the fail-safe
 /// current (or off: `coil_off`, a coil fault latched before the reset), watchdog running,
-/// control timer started (its interrupt fires once `init` returns).
-pub fn init(dp: pac::Peripherals, coil_off: bool) -> Board {
+/// control timer started (its interrupt fires once `init` returns); and the host link's port
+/// (USART1, enabled).
+pub fn init(dp: pac::Peripherals, coil_off: bool) -> (Board, LinkPort) {
     // Watchdog first: a clock that does not start must not hang the boot unsupervised.
     let watchdog = Watchdog::start(dp.IWDG);
     // The HAL waits for the HSE without a bound: start it here and give it a bounded time.
@@ -211,11 +212,17 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> Board {
         current,
     };
 
+    // Host link: USART1 on PA9 (TX) / PA10 (RX), alternate function 7.
+    let _link_tx = gpioa.pa9.into_alternate::<7>();
+    let _link_rx = gpioa.pa10.into_alternate::<7>();
+    let link = LinkPort::start(dp.USART1, rcc.clocks.pclk2().raw());
+
     watchdog.feed();
-    Board {
+    let board = Board {
         sensors,
         coil,
         timer: ControlTimer::start(dp.TIM2, timer_clock_hz),
         watchdog,
-    }
+    };
+    (board, link)
 }

@@ -3,9 +3,11 @@
 //!
 //! Rule: a command uses `out`, `sim` and `model`, never another command.
 
+pub mod analyze;
 pub mod bifurcation;
 pub mod compare;
 pub mod demo;
+pub mod device;
 pub mod faults;
 pub mod margin;
 pub mod meter_accuracy;

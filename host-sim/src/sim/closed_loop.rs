@@ -225,6 +225,14 @@ pub struct TraceRow {
     pub zeta: f64,
     /// Latest mode-meter frequency, Hz (NaN before the first valid one).
     pub freq_hz: f64,
+    /// Left wheel yaw the mode meter received this period, rad (the validated measurement;
+    /// NaN when it received none): with `trace_every = 1` the trace is the meter's input log
+    /// (`shimmy-sim analyze`).
+    pub psi_l_meas_rad: f64,
+    /// Right wheel yaw the mode meter received, rad (NaN: none).
+    pub psi_r_meas_rad: f64,
+    /// Measured speed of the meter's wheel-order reference, m/s (NaN: no sample).
+    pub speed_meas_mps: f64,
 }
 
 /// One 100 Hz output of the mode meter.
@@ -466,12 +474,14 @@ impl LoopResult {
         let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
         writeln!(
             w,
-            "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz"
+            "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps"
         )?;
+        // The meter's inputs are f32 widened to f64: printed in shortest round-trip form,
+        // parsing them back gives the very same f32.
         for r in &self.trace {
             writeln!(
                 w,
-                "{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{}",
+                "{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 r.t_s,
                 r.psi_l_rad,
                 r.psi_r_rad,
@@ -485,7 +495,10 @@ impl LoopResult {
                 r.gain_radps2,
                 r.flags,
                 r.zeta,
-                r.freq_hz
+                r.freq_hz,
+                r.psi_l_meas_rad,
+                r.psi_r_meas_rad,
+                r.speed_meas_mps
             )?;
         }
         w.flush()
@@ -645,6 +658,13 @@ pub fn run(
                 damper_cmd: out.current_cmd_a,
             }),
         };
+        let meter_in = sample.map_or((f64::NAN, f64::NAN, f64::NAN), |smp| {
+            (
+                f64::from(smp.psi_l_rad),
+                f64::from(smp.psi_r_rad),
+                f64::from(meas.speed_mps),
+            )
+        });
         let mo = match (meter.as_mut(), sample) {
             (Some(m), Some(smp)) => m.push(&smp),
             _ => None,
@@ -700,6 +720,9 @@ pub fn run(
                 flags: flag_bits(&out),
                 zeta,
                 freq_hz: freq,
+                psi_l_meas_rad: meter_in.0,
+                psi_r_meas_rad: meter_in.1,
+                speed_meas_mps: meter_in.2,
             });
         }
         sim.advance(cfg.dt_s, &inputs)?;

@@ -1,0 +1,348 @@
+//! `shimmy-sim device ...`: the host tool of the link. Reads a device's identity, gets and sets
+//! its vehicle configuration (vehicle TOML files), reads its event log (table and CSV) and fault
+//! record, and watches its live margin report; over a serial port (`--serial`), a TCP socket
+//! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
+
+use crate::sim::device_link::{Client, DeviceInfo, EventLog, Port, SerialPort, TcpPort};
+use crate::sim::sim_device::SimDevice;
+use crate::sim::vehicle_file;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
+use shimmy_core::vehicle::FIELDS;
+use shimmy_link::wire::{fault_name, level_name, FaultReport, LogEntry};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Where the device is and what to do with it.
+#[derive(Args, Debug)]
+pub struct DeviceArgs {
+    /// Serial port of a board (its USART1 through a USB-serial adapter), e.g. /dev/ttyUSB0.
+    #[arg(long, conflicts_with_all = ["tcp", "sim"])]
+    pub serial: Option<String>,
+    /// Serial speed, baud (the firmware's).
+    #[arg(long, default_value_t = shimmy_link::LINK_BAUD)]
+    pub baud: u32,
+    /// TCP address of a device, e.g. QEMU's `-serial tcp:127.0.0.1:4321,server=on`.
+    #[arg(long, conflicts_with = "sim")]
+    pub tcp: Option<String>,
+    /// The in-process simulated device (a simulated drive with a shimmy warning and a fault).
+    #[arg(long)]
+    pub sim: bool,
+    /// The simulated device's vehicle (with `--sim`): a set name or a vehicle file.
+    #[arg(long, default_value = "nominal", requires = "sim")]
+    pub vehicle: String,
+    /// How long to wait for the device's ready frame before asking for its identity, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub ready_s: f64,
+    /// What to do.
+    #[command(subcommand)]
+    pub action: DeviceAction,
+}
+
+/// A device command.
+#[derive(Subcommand, Debug)]
+pub enum DeviceAction {
+    /// Firmware, core and protocol versions, vehicle schema, log capacity.
+    Info,
+    /// The vehicle configuration.
+    Config {
+        /// Get or set.
+        #[command(subcommand)]
+        action: ConfigAction,
+    },
+    /// The event log: shimmy episodes and faults, as a table (and CSV).
+    Events {
+        /// Also write the log as CSV to this file (`-`: standard output instead of the table).
+        #[arg(long)]
+        csv: Option<PathBuf>,
+        /// Empty the log after reading it.
+        #[arg(long)]
+        clear: bool,
+    },
+    /// The fault record: resets, reset cause, latched and active faults.
+    Faults,
+    /// The live margin report (the device's telemetry stream) in the terminal.
+    Watch {
+        /// Stop after this many seconds.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+    },
+}
+
+/// Get or set the configuration.
+#[derive(Subcommand, Debug)]
+pub enum ConfigAction {
+    /// Read the stored vehicle and write it as a vehicle TOML file.
+    Get {
+        /// File to write (default: standard output).
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+    },
+    /// Validate a vehicle file here, then store it on the device (validated there again; it
+    /// takes effect at standstill).
+    Set {
+        /// The vehicle file (or a set name).
+        file: String,
+    },
+}
+
+/// Runs a device command.
+pub fn command(a: &DeviceArgs) -> Result<()> {
+    if !(a.ready_s.is_finite() && (0.0..=60.0).contains(&a.ready_s)) {
+        bail!("--ready-s {}: allowed 0 ..= 60 s", a.ready_s);
+    }
+    let ready = Duration::from_secs_f64(a.ready_s);
+    match (&a.serial, &a.tcp, a.sim) {
+        (Some(path), None, false) => run(SerialPort::open(path, a.baud)?, ready, &a.action),
+        (None, Some(addr), false) => run(
+            TcpPort::connect(addr, Duration::from_secs(5))?,
+            ready,
+            &a.action,
+        ),
+        (None, None, true) => {
+            let v = vehicle_file::load(&a.vehicle)?;
+            eprintln!("simulating the drive of the in-process device ...");
+            run(SimDevice::new(&v)?, ready, &a.action)
+        }
+        _ => bail!("say where the device is: --serial PORT, --tcp HOST:PORT or --sim"),
+    }
+}
+
+fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
+    let (mut c, info) = Client::connect(port, ready)?;
+    match action {
+        DeviceAction::Info => print!("{}", info_text(&info)),
+        DeviceAction::Config {
+            action: ConfigAction::Get { out },
+        } => {
+            let (v, pending) = c.config()?;
+            let text = vehicle_file::to_toml(&v);
+            match out {
+                Some(p) => {
+                    std::fs::write(p, &text).with_context(|| format!("writing {}", p.display()))?;
+                    eprintln!(
+                        "vehicle written to {}{}",
+                        p.display(),
+                        if pending {
+                            " (stored, takes effect at the next standstill)"
+                        } else {
+                            ""
+                        }
+                    );
+                }
+                None => print!("{text}"),
+            }
+        }
+        DeviceAction::Config {
+            action: ConfigAction::Set { file },
+        } => {
+            let v = vehicle_file::load(file)?;
+            let now = c.set_config(&v)?;
+            // Read back: the device must hold exactly what was sent.
+            let (back, _) = c.config()?;
+            let differ: Vec<String> = FIELDS
+                .iter()
+                .filter(|f| back.get(f).to_bits() != v.get(f).to_bits())
+                .map(|f| format!("{}.{}", f.section, f.name))
+                .collect();
+            if !differ.is_empty() {
+                bail!(
+                    "the device reads back another configuration (fields {})",
+                    differ.join(", ")
+                );
+            }
+            println!(
+                "configuration stored and read back identical ({} fields); {}",
+                FIELDS.len(),
+                if now {
+                    "in effect (vehicle at standstill)"
+                } else {
+                    "takes effect at the next standstill"
+                }
+            );
+        }
+        DeviceAction::Events { csv, clear } => {
+            let log = c.events()?;
+            match csv.as_deref() {
+                Some(p) if p.as_os_str() == "-" => print!("{}", events_csv(&log)),
+                Some(p) => {
+                    std::fs::write(p, events_csv(&log))
+                        .with_context(|| format!("writing {}", p.display()))?;
+                    print!("{}", events_table(&log));
+                    eprintln!("CSV written to {}", p.display());
+                }
+                None => print!("{}", events_table(&log)),
+            }
+            if *clear {
+                let n = c.clear_events()?;
+                eprintln!("log cleared ({n} entries removed)");
+            }
+        }
+        DeviceAction::Faults => print!("{}", faults_text(&c.faults()?)),
+        DeviceAction::Watch { seconds } => {
+            if !(seconds.is_finite() && (0.0..=86_400.0).contains(seconds)) {
+                bail!("--seconds {seconds}: allowed 0 ..= 86400");
+            }
+            watch(&mut c, Duration::from_secs_f64(*seconds))?;
+        }
+    }
+    Ok(())
+}
+
+fn info_text(i: &DeviceInfo) -> String {
+    format!(
+        "firmware        {}\ncore            {}\nprotocol        {}\nvehicle schema  {:#010x}{}\nlog capacity    {} entries\n",
+        i.firmware,
+        i.core,
+        i.protocol,
+        i.vehicle_schema,
+        if i.vehicle_schema == shimmy_core::vehicle::record_schema() {
+            " (same as this tool's)"
+        } else {
+            " (NOT this tool's: configurations cannot be exchanged)"
+        },
+        i.log_capacity
+    )
+}
+
+fn names(bits: u32) -> String {
+    let v: Vec<&str> = FaultSet::from_bits(bits)
+        .iter()
+        .map(FaultKind::name)
+        .collect();
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(", ")
+    }
+}
+
+fn faults_text(f: &FaultReport) -> String {
+    let cause = match f.last_cause {
+        0 => "power-on",
+        1 => "watchdog",
+        2 => "software (panic or fault handler)",
+        3 => "reset pin",
+        _ => "other",
+    };
+    format!(
+        "resets since power-on   {}\nlast reset cause        {cause}\nabnormal resets in row  {}\nuptime                  {:.3} s\nlatched faults          {}\nactive faults           {}\nfaults raised           {}\n",
+        f.resets,
+        f.quick_resets,
+        f64::from(f.uptime_ms) * 1e-3,
+        names(f.latched),
+        names(f.active),
+        f.raised
+    )
+}
+
+/// The CSV header of the event log.
+pub const EVENTS_CSV_HEADER: &str = "index,kind,start_s,speed_kmh,freq_hz,peak_amplitude_mrad,duration_s,level,open,peak_current_a,mean_current_a,fault,latched";
+
+/// The log as CSV, one row per entry (shimmy columns empty for a fault and vice versa).
+pub fn events_csv(log: &EventLog) -> String {
+    let mut s = String::from(EVENTS_CSV_HEADER);
+    s.push('\n');
+    for (i, e) in log.entries.iter().enumerate() {
+        let _ = match e {
+            LogEntry::Shimmy(x) => writeln!(
+                s,
+                "{i},shimmy,{:.3},{:.1},{:.2},{:.2},{:.2},{},{},{:.3},{:.3},,",
+                x.start_s,
+                f64::from(x.speed_mps) * 3.6,
+                x.freq_hz,
+                x.peak_amplitude_rad * 1e3,
+                x.duration_s,
+                level_name(x.level),
+                x.open,
+                x.peak_current_a,
+                x.mean_current_a
+            ),
+            LogEntry::Fault(f) => writeln!(
+                s,
+                "{i},fault,{:.3},,,,,,,,,{},{}",
+                f64::from(f.t_ms) * 1e-3,
+                fault_name(f.kind),
+                f.latched
+            ),
+        };
+    }
+    s
+}
+
+fn events_table(log: &EventLog) -> String {
+    let mut s = format!(
+        "{} entries{}\n  #  kind     start s   km/h    Hz  peak mrad  dur s  level                 I peak/mean A  fault\n",
+        log.entries.len(),
+        if log.dropped > 0 {
+            format!(" ({} older ones dropped: log full)", log.dropped)
+        } else {
+            String::new()
+        }
+    );
+    for (i, e) in log.entries.iter().enumerate() {
+        let _ = match e {
+            LogEntry::Shimmy(x) => writeln!(
+                s,
+                "{i:>3}  shimmy {:>9.3} {:>6.1} {:>5.2} {:>10.2} {:>6.2}  {:<20}  {:.2}/{:.2}{}",
+                x.start_s,
+                f64::from(x.speed_mps) * 3.6,
+                x.freq_hz,
+                x.peak_amplitude_rad * 1e3,
+                x.duration_s,
+                level_name(x.level),
+                x.peak_current_a,
+                x.mean_current_a,
+                if x.open { "  (still going on)" } else { "" }
+            ),
+            LogEntry::Fault(f) => writeln!(
+                s,
+                "{i:>3}  fault  {:>9.3} {:>59}  {}{}",
+                f64::from(f.t_ms) * 1e-3,
+                "",
+                fault_name(f.kind),
+                if f.latched { " (latched)" } else { "" }
+            ),
+        };
+    }
+    s
+}
+
+fn watch<P: Port>(c: &mut Client<P>, for_: Duration) -> Result<()> {
+    c.stream(true)?;
+    println!(
+        "     t s    km/h  zeta data  +- sigma  zeta fast     Hz  zeta model  margin km/h  level"
+    );
+    let end = Instant::now() + for_;
+    let mut n = 0u32;
+    while Instant::now() < end {
+        let left = end.saturating_duration_since(Instant::now());
+        let Some(t) = c.next_telemetry(left.min(Duration::from_millis(500)))? else {
+            continue;
+        };
+        n += 1;
+        println!(
+            "{:>8.2} {:>7.1} {:>10.4} {:>9.4} {:>10.4} {:>6.2} {:>11.4} {:>12.1}  {}{}",
+            t.t_s,
+            f64::from(t.speed_mps) * 3.6,
+            t.zeta_data,
+            t.sigma_zeta_data,
+            t.zeta_fast,
+            t.freq_hz,
+            t.zeta_model,
+            f64::from(t.speed_margin_mps) * 3.6,
+            level_name(t.level),
+            if t.valid { "" } else { " (not valid)" }
+        );
+    }
+    c.stream(false)?;
+    if n == 0 {
+        bail!(
+            "no margin report came from the device within {:.1} s",
+            for_.as_secs_f64()
+        );
+    }
+    Ok(())
+}

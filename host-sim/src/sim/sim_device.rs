@@ -1,0 +1,300 @@
+//! The in-process simulator device: the link's own handler (`shimmy_link::device::Device`) on a
+//! backend filled by the simulator's closed loop, behind the same [`Port`] as a board, so every
+//! `shimmy-sim device` command works without hardware.
+//!
+//! The drive: the demo's road (noise, imbalance, a pothole) on a ramp through the vehicle's Hopf
+//! window with the supervised ASMC, the margin pipeline (`ShimmyPipeline`, as on the board) on
+//! the validated samples, a left-encoder parity fault injected for half a second, then braking to
+//! a stop. The link's recorder turns the monitor's episodes and the supervisor's faults into the
+//! log; the 10 Hz margin reports become the telemetry stream. After the drive the vehicle stands
+//! still, so a configuration write takes effect at once.
+
+use crate::model::disturbance::SpeedProfile;
+use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopObserver, SampleRecord};
+use crate::sim::demo_case::demo_case_for;
+use crate::sim::device_link::Port;
+use anyhow::{Context, Result};
+use shimmy_core::control::ControllerKind;
+use shimmy_core::estimator::meter::mode_meter::WheelOrder;
+use shimmy_core::estimator::pipeline::ShimmyPipeline;
+use shimmy_core::params::kmh_to_mps;
+use shimmy_core::supervisor::faults::FaultSet;
+use shimmy_core::supervisor::safe_controller::SafeController;
+use shimmy_core::vehicle::{record_schema, Vehicle};
+use shimmy_link::device::{Backend, Device, REPLY_BYTES};
+use shimmy_link::log::{RamLog, Recorder};
+use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry};
+use shimmy_link::PROTOCOL_VERSION;
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+/// The period of the telemetry stream, as on the board (10 Hz).
+const REPORT_PERIOD: Duration = Duration::from_millis(100);
+
+/// Capacity of the simulated device's log.
+pub const SIM_LOG_CAPACITY: usize = 64;
+/// The drive: ramp seconds, braking seconds, seconds standing at the end.
+pub const DRIVE_S: (f64, f64, f64) = (16.0, 4.0, 1.0);
+/// The injected parity fault on the left encoder: start and end, s.
+pub const PARITY_FAULT_S: (f64, f64) = (6.0, 6.5);
+
+/// What the simulated device serves.
+pub struct SimBackend {
+    vehicle: Vehicle,
+    pending: bool,
+    standstill: bool,
+    log: RamLog<SIM_LOG_CAPACITY>,
+    open: Option<ShimmyEvent>,
+    faults: FaultReport,
+    telemetry: VecDeque<Telemetry>,
+}
+
+impl Backend for SimBackend {
+    fn identity(&self) -> Identity<'_> {
+        Identity {
+            firmware: concat!("shimmy-sim in-process device ", env!("CARGO_PKG_VERSION")),
+            core: shimmy_core::VERSION,
+            protocol: PROTOCOL_VERSION,
+            vehicle_schema: record_schema(),
+            log_capacity: SIM_LOG_CAPACITY as u16,
+        }
+    }
+    fn vehicle(&self) -> (&Vehicle, bool) {
+        (&self.vehicle, self.pending)
+    }
+    fn store_vehicle(&mut self, v: Vehicle) -> bool {
+        self.vehicle = v;
+        self.pending = !self.standstill;
+        self.standstill
+    }
+    fn log_len(&self) -> (u16, u32) {
+        let (kept, dropped) = self.log.len();
+        (kept + u16::from(self.open.is_some()), dropped)
+    }
+    fn log_entry(&self, i: u16) -> Option<LogEntry> {
+        let (kept, _) = self.log.len();
+        if i < kept {
+            self.log.get(i)
+        } else if i == kept {
+            self.open.map(LogEntry::Shimmy)
+        } else {
+            None
+        }
+    }
+    fn clear_log(&mut self) -> u16 {
+        self.log.clear()
+    }
+    fn faults(&self) -> FaultReport {
+        self.faults
+    }
+    fn take_telemetry(&mut self) -> Option<Telemetry> {
+        self.telemetry.pop_front()
+    }
+}
+
+/// The loop observer of the drive: pipeline, recorder, fault bits, telemetry.
+struct DriveObserver {
+    pipe: Box<ShimmyPipeline<16>>,
+    recorder: Recorder,
+    backend: SimBackend,
+    radius_m: f32,
+    last_v: Option<(f64, f32)>,
+    updates: u32,
+}
+
+impl LoopObserver for DriveObserver {
+    fn on_sample(&mut self, r: &SampleRecord<'_>) {
+        let Some(o) = r.safe else {
+            return;
+        };
+        self.recorder.on_command(o.current_cmd_a);
+        let v = o.validated.speed_mps.unwrap_or(f32::NAN);
+        let accel = match self.last_v {
+            Some((t0, v0)) if v.is_finite() && r.t_s > t0 => (v - v0) / (r.t_s - t0) as f32,
+            _ => 0.0,
+        };
+        if v.is_finite() {
+            self.last_v = Some((r.t_s, v));
+        }
+        let wheel = WheelOrder::Speed {
+            speed_mps: v,
+            radius_m: self.radius_m,
+        };
+        let b = &mut self.backend;
+        let active = o.verdict.faults.bits();
+        let latched = FaultSet::from_bits(active)
+            .iter()
+            .filter(|k| k.latched())
+            .fold(FaultSet::from_bits(0), |mut s, k| {
+                s.insert(k);
+                s
+            })
+            .bits();
+        let t_ms = (r.t_s * 1e3).round() as u32;
+        self.recorder.on_faults(t_ms, active, latched, &mut b.log);
+        let new = active & !b.faults.active;
+        b.faults.raised = b.faults.raised.saturating_add(new.count_ones());
+        b.faults.uptime_ms = t_ms;
+        b.faults.active = active;
+        b.faults.latched |= latched;
+        b.standstill = v.is_finite() && v.abs() < STANDSTILL_MPS;
+        let Some(sample) = SafeController::estimator_sample(o, wheel) else {
+            return;
+        };
+        let Some(u) = self.pipe.push(&sample, v, accel, r.t_s) else {
+            return;
+        };
+        self.recorder.on_update(self.pipe.monitor(), &mut b.log);
+        b.open = self.recorder.open_event(self.pipe.monitor());
+        self.updates += 1;
+        if self.updates.is_multiple_of(10) {
+            let m = &u.report;
+            b.telemetry.push_back(Telemetry {
+                t_s: m.t_s,
+                speed_mps: m.speed_mps,
+                zeta_data: m.zeta_data,
+                sigma_zeta_data: m.sigma_zeta_data,
+                zeta_fast: m.zeta_fast,
+                freq_hz: m.freq_hz,
+                zeta_model: m.zeta_model.unwrap_or(f32::NAN),
+                speed_margin_mps: m.speed_margin_mps.unwrap_or(f32::NAN),
+                level: level_code(u.level),
+                valid: m.valid,
+            });
+        }
+    }
+}
+
+/// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's value).
+pub const STANDSTILL_MPS: f32 = 0.3;
+
+/// Runs the drive with `vehicle` as plant and firmware model; returns the filled backend.
+pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
+    let (ramp_s, brake_s, stand_s) = DRIVE_S;
+    let mut case = demo_case_for(vehicle, vehicle, ramp_s)?;
+    let top = kmh_to_mps(120.0);
+    case.scenario.speed = SpeedProfile::Piecewise(vec![
+        (0.0, kmh_to_mps(20.0)),
+        (ramp_s, top),
+        (ramp_s + brake_s, 0.0),
+    ]);
+    let duration = ramp_s + brake_s + stand_s;
+    let mut cfg = LoopConfig::new(vehicle, Arm::Mr(ControllerKind::Asmc), duration);
+    cfg.estimator = false;
+    cfg.record_every = 1000;
+    cfg.faults = vec![FaultSpec {
+        mode: FaultMode::Parity(Side::Left),
+        start_s: PARITY_FAULT_S.0,
+        end_s: Some(PARITY_FAULT_S.1),
+    }];
+    let pipe = ShimmyPipeline::new(vehicle.plant, vehicle.pipeline_params())
+        .context("pipeline configuration")?;
+    let mut obs = DriveObserver {
+        pipe: Box::new(pipe),
+        recorder: Recorder::new(),
+        backend: SimBackend {
+            vehicle: *vehicle,
+            pending: false,
+            standstill: false,
+            log: RamLog::new(),
+            open: None,
+            faults: FaultReport {
+                resets: 0,
+                last_cause: 0,
+                quick_resets: 0,
+                uptime_ms: 0,
+                latched: 0,
+                active: 0,
+                raised: 0,
+            },
+            telemetry: VecDeque::new(),
+        },
+        radius_m: vehicle.plant.r as f32,
+        last_v: None,
+        updates: 0,
+    };
+    closed_loop::run(&cfg, &mut case.scenario, Some(&mut obs)).context("the simulated drive")?;
+    Ok(obs.backend)
+}
+
+/// The simulated device as a [`Port`]: bytes written go to the handler, its replies (and the
+/// stream, while on) come back on reads.
+pub struct SimDevice {
+    device: Device,
+    backend: SimBackend,
+    out: VecDeque<u8>,
+    reply: Box<[u8; REPLY_BYTES]>,
+    /// When the stream last sent a report (the drive's reports go out at their 10 Hz).
+    last_report: Option<Instant>,
+}
+
+impl SimDevice {
+    /// Runs the drive with `vehicle` and announces the device (the ready frame).
+    pub fn new(vehicle: &Vehicle) -> Result<Self> {
+        let backend = drive(vehicle)?;
+        let mut d = SimDevice {
+            device: Device::new(),
+            backend,
+            out: VecDeque::new(),
+            reply: Box::new([0; REPLY_BYTES]),
+            last_report: None,
+        };
+        let n = Device::ready(&d.backend, &mut d.reply);
+        d.out.extend(&d.reply[..n]);
+        Ok(d)
+    }
+
+    /// The state behind the link (tests check that bad input leaves it alone).
+    pub fn backend(&self) -> &SimBackend {
+        &self.backend
+    }
+}
+
+impl SimBackend {
+    /// The stored vehicle.
+    pub fn stored_vehicle(&self) -> &Vehicle {
+        &self.vehicle
+    }
+    /// Entries in the log (kept, dropped), without the open episode.
+    pub fn logged(&self) -> (u16, u32) {
+        self.log.len()
+    }
+}
+
+impl Port for SimDevice {
+    fn send(&mut self, bytes: &[u8]) -> Result<()> {
+        for &b in bytes {
+            if let Some(n) = self.device.on_byte(b, &mut self.backend, &mut self.reply) {
+                self.out.extend(&self.reply[..n]);
+            }
+        }
+        Ok(())
+    }
+
+    fn receive(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize> {
+        if self.out.is_empty() {
+            let due = self
+                .last_report
+                .is_none_or(|t| t.elapsed() >= REPORT_PERIOD);
+            let report = if due {
+                self.device.poll_stream(&mut self.backend, &mut self.reply)
+            } else {
+                None
+            };
+            if let Some(n) = report {
+                self.last_report = Some(Instant::now());
+                self.out.extend(&self.reply[..n]);
+            } else {
+                // Nothing will come: what a quiet serial line does until the timeout.
+                std::thread::sleep(timeout.min(Duration::from_millis(5)));
+                return Ok(0);
+            }
+        }
+        let n = buf.len().min(self.out.len());
+        for (slot, b) in buf.iter_mut().zip(self.out.drain(..n)) {
+            *slot = b;
+        }
+        Ok(n)
+    }
+}

@@ -1,0 +1,531 @@
+//! The device side: [`Device::on_byte`] turns received bytes into response frames over a
+//! [`Backend`] that owns the state (configuration, event log, fault record, telemetry). It is
+//! transport-independent: the firmware feeds it from a USART, the simulator's in-process device
+//! from a byte queue, a test from a slice.
+//!
+//! Contract: every complete frame gets exactly one reply (a corrupted or unknown one an
+//! [`ErrorReply`]); nothing the host sends can panic the handler or change the backend's state
+//! unless it is a valid request (a configuration is decoded and validated whole by the core
+//! before [`Backend::store_vehicle`] sees it).
+
+use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
+
+use crate::frame::{self, Fed, FrameError, FrameReader, MAX_FRAME};
+use crate::wire::{
+    ConfigProblem, ErrorReply, EventPage, FaultReport, Header, Identity, LogEntry, Request,
+    Response, Telemetry, EVENTS_PER_PAGE, PROTOCOL_HEADER,
+};
+use crate::PROTOCOL_VERSION;
+
+/// The state behind the link. The firmware implements it on its RAM-held (later flash-held)
+/// configuration and log; the simulator on its closed loop.
+pub trait Backend {
+    /// Firmware name and version, core version, log capacity.
+    fn identity(&self) -> Identity<'_>;
+    /// The stored vehicle configuration and whether it is still waiting for standstill.
+    fn vehicle(&self) -> (&Vehicle, bool);
+    /// Stores a validated vehicle; returns whether it took effect at once (standstill) or waits
+    /// for the next standstill.
+    fn store_vehicle(&mut self, v: Vehicle) -> bool;
+    /// Entries in the log and entries dropped because it was full.
+    fn log_len(&self) -> (u16, u32);
+    /// Log entry `i` (0 = oldest kept).
+    fn log_entry(&self, i: u16) -> Option<LogEntry>;
+    /// Empties the log; returns the number of entries removed.
+    fn clear_log(&mut self) -> u16;
+    /// The fault record.
+    fn faults(&self) -> FaultReport;
+    /// The newest margin report not handed out before, if any.
+    fn take_telemetry(&mut self) -> Option<Telemetry>;
+}
+
+/// Largest reply of one request, bytes (one frame and its delimiter).
+pub const REPLY_BYTES: usize = MAX_FRAME + 1;
+
+/// The link's protocol state: the frame reader, the stream switch and the buffers.
+pub struct Device {
+    reader: FrameReader,
+    streaming: bool,
+    record: [u8; RECORD_MAX_BYTES],
+}
+
+impl Default for Device {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Device {
+    /// A device with the stream off.
+    pub const fn new() -> Self {
+        Device {
+            reader: FrameReader::new(),
+            streaming: false,
+            record: [0; RECORD_MAX_BYTES],
+        }
+    }
+
+    /// The telemetry stream is on.
+    pub fn streaming(&self) -> bool {
+        self.streaming
+    }
+
+    /// The handshake frame, sent once the port listens: [`Response::Ready`].
+    pub fn ready<B: Backend>(backend: &B, out: &mut [u8; REPLY_BYTES]) -> usize {
+        frame::encode(PROTOCOL_HEADER, &Response::Ready(backend.identity()), out).unwrap_or(0)
+    }
+
+    /// Drops a partial frame (the transport timed out in the middle of one).
+    pub fn abandon_partial(&mut self) {
+        self.reader.reset();
+    }
+
+    /// Feeds one received byte; when it completes a frame, writes the reply into `out` and
+    /// returns its length.
+    pub fn on_byte<B: Backend>(
+        &mut self,
+        byte: u8,
+        backend: &mut B,
+        out: &mut [u8; REPLY_BYTES],
+    ) -> Option<usize> {
+        let failure = match self.reader.feed(byte) {
+            Fed::Pending => return None,
+            Fed::TooLong => (0, ErrorReply::TooLong),
+            Fed::Frame(f) => match frame::decode(f) {
+                Err(e) => (0, ErrorReply::BadFrame(e.text())),
+                Ok((h, _)) if h.version != PROTOCOL_VERSION => (
+                    h.seq,
+                    ErrorReply::Version {
+                        device: PROTOCOL_VERSION,
+                    },
+                ),
+                Ok((h, body)) => {
+                    let h = Header {
+                        seq: h.seq,
+                        ..PROTOCOL_HEADER
+                    };
+                    return Some(Self::answer(
+                        &mut self.streaming,
+                        &mut self.record,
+                        h,
+                        body,
+                        backend,
+                        out,
+                    ));
+                }
+            },
+        };
+        let (seq, e) = failure;
+        let h = Header {
+            seq,
+            ..PROTOCOL_HEADER
+        };
+        Some(frame::encode(h, &Response::Error(e), out).unwrap_or(0))
+    }
+
+    /// When the stream is on and a new report is there: its frame in `out`.
+    pub fn poll_stream<B: Backend>(
+        &mut self,
+        backend: &mut B,
+        out: &mut [u8; REPLY_BYTES],
+    ) -> Option<usize> {
+        if !self.streaming {
+            return None;
+        }
+        let t = backend.take_telemetry()?;
+        frame::encode(PROTOCOL_HEADER, &Response::Telemetry(t), out).ok()
+    }
+
+    fn answer<B: Backend>(
+        streaming: &mut bool,
+        record: &mut [u8; RECORD_MAX_BYTES],
+        h: Header,
+        body: &[u8],
+        backend: &mut B,
+        out: &mut [u8; REPLY_BYTES],
+    ) -> usize {
+        let reply = match frame::message::<Request<'_>>(body) {
+            None => Response::Error(ErrorReply::UnknownRequest),
+            Some(req) => match req {
+                Request::Identify => Response::Identity(backend.identity()),
+                Request::GetConfig => {
+                    let (v, pending) = backend.vehicle();
+                    match v.encode_record(record) {
+                        Ok(n) => Response::Config {
+                            record: record.get(..n).unwrap_or_default(),
+                            pending,
+                        },
+                        Err(e) => Response::Error(ErrorReply::Config(ConfigProblem::of(e))),
+                    }
+                }
+                Request::SetConfig(bytes) => match Vehicle::decode_record(bytes) {
+                    Ok(v) => Response::ConfigStored {
+                        in_effect: backend.store_vehicle(v),
+                    },
+                    Err(e) => Response::Error(ErrorReply::Config(ConfigProblem::of(e))),
+                },
+                Request::ReadEvents { first } => {
+                    let (kept, dropped) = backend.log_len();
+                    if first > kept {
+                        Response::Error(ErrorReply::NoSuchEntry { kept })
+                    } else {
+                        let mut entries = heapless::Vec::new();
+                        for i in (first..kept).take(EVENTS_PER_PAGE) {
+                            if let Some(e) = backend.log_entry(i) {
+                                let _ = entries.push(e);
+                            }
+                        }
+                        Response::Events(EventPage {
+                            kept,
+                            dropped,
+                            first,
+                            entries,
+                        })
+                    }
+                }
+                Request::ClearEvents => Response::Cleared {
+                    removed: backend.clear_log(),
+                },
+                Request::ReadFaults => Response::Faults(backend.faults()),
+                Request::Telemetry { on } => {
+                    *streaming = on;
+                    Response::Streaming { on }
+                }
+            },
+        };
+        frame::encode(h, &reply, out).unwrap_or_else(|_| {
+            // Cannot happen for the bounded replies above (a test sends each); still a reply.
+            frame::encode(
+                h,
+                &Response::Error(ErrorReply::BadFrame(FrameError::PayloadTooLong.text())),
+                out,
+            )
+            .unwrap_or(0)
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{decode, encode, message};
+    use crate::log::{EventSink, RamLog};
+    use crate::wire::{FaultEvent, PROTOCOL_HEADER};
+    use std::vec::Vec;
+
+    struct TestBackend {
+        vehicle: Vehicle,
+        moving: bool,
+        pending: bool,
+        log: RamLog<20>,
+    }
+
+    impl TestBackend {
+        fn new() -> Self {
+            let mut log = RamLog::new();
+            for t in 0..12 {
+                log.append(LogEntry::Fault(FaultEvent {
+                    t_ms: t,
+                    kind: 1,
+                    latched: false,
+                }));
+            }
+            TestBackend {
+                vehicle: Vehicle::nominal(),
+                moving: true,
+                pending: false,
+                log,
+            }
+        }
+    }
+
+    impl Backend for TestBackend {
+        fn identity(&self) -> Identity<'_> {
+            Identity {
+                firmware: "test",
+                core: shimmy_core::VERSION,
+                protocol: PROTOCOL_VERSION,
+                vehicle_schema: shimmy_core::vehicle::record_schema(),
+                log_capacity: 20,
+            }
+        }
+        fn vehicle(&self) -> (&Vehicle, bool) {
+            (&self.vehicle, self.pending)
+        }
+        fn store_vehicle(&mut self, v: Vehicle) -> bool {
+            self.vehicle = v;
+            self.pending = self.moving;
+            !self.moving
+        }
+        fn log_len(&self) -> (u16, u32) {
+            self.log.len()
+        }
+        fn log_entry(&self, i: u16) -> Option<LogEntry> {
+            self.log.get(i)
+        }
+        fn clear_log(&mut self) -> u16 {
+            self.log.clear()
+        }
+        fn faults(&self) -> FaultReport {
+            FaultReport {
+                resets: 2,
+                last_cause: 1,
+                quick_resets: 0,
+                uptime_ms: 5,
+                latched: 0,
+                active: 0,
+                raised: 3,
+            }
+        }
+        fn take_telemetry(&mut self) -> Option<Telemetry> {
+            None
+        }
+    }
+
+    /// Feeds `bytes`; returns the decoded replies (header and message bytes).
+    fn feed(dev: &mut Device, b: &mut TestBackend, bytes: &[u8]) -> Vec<(Header, Vec<u8>)> {
+        let mut out = [0u8; REPLY_BYTES];
+        let mut replies = Vec::new();
+        for &x in bytes {
+            if let Some(n) = dev.on_byte(x, b, &mut out) {
+                assert!(n > 0 && out[n - 1] == 0, "a reply frame");
+                let (h, m) = decode(&mut out[..n - 1]).expect("device replies are valid frames");
+                replies.push((h, m.to_vec()));
+            }
+        }
+        replies
+    }
+
+    fn request_bytes(seq: u16, r: &Request<'_>) -> Vec<u8> {
+        let mut out = [0u8; MAX_FRAME + 1];
+        let n = encode(
+            Header {
+                seq,
+                ..PROTOCOL_HEADER
+            },
+            r,
+            &mut out,
+        )
+        .unwrap();
+        out[..n].to_vec()
+    }
+
+    fn one_reply(dev: &mut Device, b: &mut TestBackend, bytes: &[u8]) -> (u16, Response<'static>) {
+        let mut r = feed(dev, b, bytes);
+        assert_eq!(r.len(), 1, "exactly one reply");
+        let (h, m) = r.remove(0);
+        let m: &'static [u8] = std::boxed::Box::leak(m.into_boxed_slice());
+        (h.seq, message::<Response<'_>>(m).expect("a known response"))
+    }
+
+    fn record(v: &Vehicle) -> Vec<u8> {
+        let mut buf = [0u8; RECORD_MAX_BYTES];
+        let n = v.encode_record(&mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn other_vehicle() -> Vehicle {
+        let mut v = Vehicle::nominal();
+        v.set("plant", "k_d", 4321.0).unwrap();
+        v
+    }
+
+    #[test]
+    fn identity_config_round_trip_and_events_paging() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let (seq, r) = one_reply(&mut dev, &mut b, &request_bytes(5, &Request::Identify));
+        assert_eq!(seq, 5);
+        assert!(matches!(r, Response::Identity(i) if i.firmware == "test"));
+        let rec = record(&other_vehicle());
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(6, &Request::SetConfig(&rec)),
+        );
+        assert_eq!(
+            r,
+            Response::ConfigStored { in_effect: false },
+            "moving: pending"
+        );
+        let (_, r) = one_reply(&mut dev, &mut b, &request_bytes(7, &Request::GetConfig));
+        let Response::Config {
+            record: got,
+            pending,
+        } = r
+        else {
+            panic!("{r:?}")
+        };
+        assert!(pending);
+        assert_eq!(got, rec.as_slice(), "read back identical");
+        // Paging: 12 entries in pages of 8.
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(8, &Request::ReadEvents { first: 8 }),
+        );
+        let Response::Events(p) = r else {
+            panic!("{r:?}")
+        };
+        assert_eq!((p.kept, p.first, p.entries.len()), (12, 8, 4));
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(9, &Request::ReadEvents { first: 13 }),
+        );
+        assert_eq!(r, Response::Error(ErrorReply::NoSuchEntry { kept: 12 }));
+        let (_, r) = one_reply(&mut dev, &mut b, &request_bytes(10, &Request::ClearEvents));
+        assert_eq!(r, Response::Cleared { removed: 12 });
+    }
+
+    fn assert_intact(b: &TestBackend) {
+        assert_eq!(b.vehicle, Vehicle::nominal(), "configuration unchanged");
+        assert_eq!(b.log.len(), (12, 0), "log unchanged");
+    }
+
+    #[test]
+    fn a_corrupted_frame_gets_an_error_and_changes_nothing() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let rec = record(&other_vehicle());
+        let mut bytes = request_bytes(3, &Request::SetConfig(&rec));
+        bytes[40] ^= 0x10;
+        let (seq, r) = one_reply(&mut dev, &mut b, &bytes);
+        assert_eq!(seq, 0, "no trusted seq in a corrupted frame");
+        assert!(
+            matches!(r, Response::Error(ErrorReply::BadFrame(_))),
+            "{r:?}"
+        );
+        assert_intact(&b);
+    }
+
+    #[test]
+    fn a_frame_too_long_gets_an_error_and_changes_nothing() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let mut bytes = std::vec![0x11u8; MAX_FRAME + 1];
+        bytes.push(0);
+        let (_, r) = one_reply(&mut dev, &mut b, &bytes);
+        assert_eq!(r, Response::Error(ErrorReply::TooLong));
+        assert_intact(&b);
+        // The device listens again at once.
+        let (seq, r) = one_reply(&mut dev, &mut b, &request_bytes(4, &Request::ReadFaults));
+        assert_eq!(seq, 4);
+        assert!(matches!(r, Response::Faults(_)));
+    }
+
+    #[test]
+    fn an_unknown_request_or_version_gets_an_error() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        // A well-formed frame whose request kind is beyond the known ones (a newer host).
+        let mut out = [0u8; MAX_FRAME + 1];
+        let n = encode(
+            Header {
+                seq: 9,
+                ..PROTOCOL_HEADER
+            },
+            &(42u8, 1u8),
+            &mut out,
+        )
+        .unwrap();
+        let (seq, r) = one_reply(&mut dev, &mut b, &out[..n]);
+        assert_eq!((seq, r), (9, Response::Error(ErrorReply::UnknownRequest)));
+        let n = encode(
+            Header {
+                version: 99,
+                seq: 10,
+            },
+            &Request::ClearEvents,
+            &mut out,
+        )
+        .unwrap();
+        let (seq, r) = one_reply(&mut dev, &mut b, &out[..n]);
+        assert_eq!(seq, 10);
+        assert_eq!(
+            r,
+            Response::Error(ErrorReply::Version {
+                device: PROTOCOL_VERSION
+            })
+        );
+        assert_intact(&b);
+    }
+
+    #[test]
+    fn a_configuration_out_of_range_is_refused_naming_the_field() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let mut rec = record(&Vehicle::nominal());
+        let f = shimmy_core::vehicle::find_field("plant", "k_d").unwrap();
+        let i = shimmy_core::vehicle::FIELDS
+            .iter()
+            .position(|x| core::ptr::eq(x, f))
+            .unwrap();
+        let at = shimmy_core::vehicle::RECORD_HEADER_BYTES + 8 * i;
+        rec[at..at + 8].copy_from_slice(&(f.hi * 10.0).to_le_bytes());
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(2, &Request::SetConfig(&rec)),
+        );
+        let Response::Error(ErrorReply::Config(ConfigProblem::Field {
+            section,
+            name,
+            value,
+            ..
+        })) = r
+        else {
+            panic!("{r:?}")
+        };
+        assert_eq!((section, name, value), ("plant", "k_d", f.hi * 10.0));
+        // A truncated record too.
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(3, &Request::SetConfig(&rec[..20])),
+        );
+        assert!(matches!(
+            r,
+            Response::Error(ErrorReply::Config(ConfigProblem::Length { .. }))
+        ));
+        assert_intact(&b);
+    }
+
+    #[test]
+    fn a_link_unplugged_mid_transfer_changes_nothing_and_the_next_request_works() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let rec = record(&other_vehicle());
+        let bytes = request_bytes(3, &Request::SetConfig(&rec));
+        // Half the frame, then nothing: no reply, nothing stored.
+        assert!(feed(&mut dev, &mut b, &bytes[..bytes.len() / 2]).is_empty());
+        assert_intact(&b);
+        // The transport's timeout drops the partial frame; a new request is answered.
+        dev.abandon_partial();
+        let (seq, _) = one_reply(&mut dev, &mut b, &request_bytes(4, &Request::Identify));
+        assert_eq!(seq, 4);
+        // Without the timeout, the next frame's bytes join the stale half: an error, still
+        // nothing stored, and the request after it is answered.
+        assert!(feed(&mut dev, &mut b, &bytes[..bytes.len() / 2]).is_empty());
+        let (_, r) = one_reply(&mut dev, &mut b, &request_bytes(5, &Request::Identify));
+        assert!(matches!(r, Response::Error(_)), "{r:?}");
+        assert_intact(&b);
+        let (seq, _) = one_reply(&mut dev, &mut b, &request_bytes(6, &Request::Identify));
+        assert_eq!(seq, 6);
+    }
+
+    #[test]
+    fn the_stream_sends_only_when_on() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let mut out = [0u8; REPLY_BYTES];
+        assert!(dev.poll_stream(&mut b, &mut out).is_none());
+        let (_, r) = one_reply(
+            &mut dev,
+            &mut b,
+            &request_bytes(1, &Request::Telemetry { on: true }),
+        );
+        assert_eq!(r, Response::Streaming { on: true });
+        assert!(dev.streaming());
+        let n = Device::ready(&b, &mut out);
+        let (h, m) = decode(&mut out[..n - 1]).unwrap();
+        assert_eq!(h.seq, 0);
+        assert!(matches!(
+            message::<Response<'_>>(m),
+            Some(Response::Ready(_))
+        ));
+    }
+}

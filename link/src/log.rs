@@ -1,0 +1,276 @@
+//! What goes into the event log, and a RAM-held log to put it in.
+//!
+//! [`Recorder`] turns what the device's tasks see (the core monitor after each margin update,
+//! the damper commands in between, the supervisor's active and latched fault bits) into
+//! [`LogEntry`]s: one [`ShimmyEvent`] per closed monitor episode, with the controller's action
+//! during it, and one [`FaultEvent`] per fault that became active. The episode still open is
+//! not an entry yet ([`Recorder::open_event`] shows it).
+//!
+//! [`RamLog`] is a bounded queue of entries in RAM (oldest dropped when full, drop count kept):
+//! the store of the simulator's device and of the firmware until the flash log takes its place
+//! behind the same [`EventSink`].
+
+use shimmy_core::estimator::monitor::{Event, Monitor};
+use shimmy_core::supervisor::faults::FaultKind;
+
+use crate::wire::{fault_code, level_code, FaultEvent, LogEntry, ShimmyEvent};
+
+/// Where recorded entries go (a RAM queue, the flash log).
+pub trait EventSink {
+    /// Appends an entry (the oldest goes when full).
+    fn append(&mut self, e: LogEntry);
+}
+
+/// Turns monitor episodes and fault bits into log entries.
+#[derive(Clone, Debug, Default)]
+pub struct Recorder {
+    /// Closed episodes of the monitor already recorded (kept + dropped by the monitor).
+    closed_seen: u32,
+    /// Commands since the last margin update: highest, sum, count.
+    since_update: (f32, f32, u32),
+    /// Controller action during the open episode: highest, sum, count.
+    episode: (f32, f32, u32),
+    /// Fault bits active at the last look.
+    active: u32,
+}
+
+fn merge(a: (f32, f32, u32), b: (f32, f32, u32)) -> (f32, f32, u32) {
+    (a.0.max(b.0), a.1 + b.1, a.2.saturating_add(b.2))
+}
+
+impl Recorder {
+    /// A recorder that has seen nothing.
+    pub const fn new() -> Self {
+        Recorder {
+            closed_seen: 0,
+            since_update: (0.0, 0.0, 0),
+            episode: (0.0, 0.0, 0),
+            active: 0,
+        }
+    }
+
+    /// One control step's damper command, A (non-finite ones are skipped).
+    pub fn on_command(&mut self, cmd_a: f32) {
+        if cmd_a.is_finite() {
+            self.since_update = merge(self.since_update, (cmd_a, cmd_a, 1));
+        }
+    }
+
+    /// After a margin update: records the episodes the monitor closed since the last call.
+    pub fn on_update<const N: usize>(&mut self, monitor: &Monitor<N>, sink: &mut impl EventSink) {
+        let open = monitor.events().last().is_some_and(|e| e.open);
+        let closed_kept = monitor.events().filter(|e| !e.open).count();
+        let closed_total = monitor
+            .dropped_events()
+            .saturating_add(u32::try_from(closed_kept).unwrap_or(u32::MAX));
+        let new = closed_total.saturating_sub(self.closed_seen);
+        let commands = core::mem::take(&mut self.since_update);
+        if new > 0 {
+            // The commands of this update belong to the episode that just closed.
+            let action = merge(self.episode, commands);
+            let skip = closed_kept.saturating_sub(usize::try_from(new).unwrap_or(usize::MAX));
+            for (i, e) in monitor.events().filter(|e| !e.open).skip(skip).enumerate() {
+                // Only the last closed episode can have been open at the last update.
+                let last = i + 1 == usize::try_from(new).unwrap_or(0).min(closed_kept);
+                let act = if last { action } else { (0.0, 0.0, 0) };
+                sink.append(LogEntry::Shimmy(shimmy_event(e, act)));
+            }
+            self.episode = (0.0, 0.0, 0);
+        }
+        if open {
+            let prior = if new > 0 { (0.0, 0.0, 0) } else { self.episode };
+            self.episode = merge(prior, commands);
+        }
+        self.closed_seen = closed_total;
+    }
+
+    /// The episode going on now, if any, with the controller's action so far.
+    pub fn open_event<const N: usize>(&self, monitor: &Monitor<N>) -> Option<ShimmyEvent> {
+        let e = monitor.events().last().filter(|e| e.open)?;
+        Some(shimmy_event(e, merge(self.episode, self.since_update)))
+    }
+
+    /// The supervisor's fault bits at `t_ms`: every bit newly active becomes a [`FaultEvent`].
+    pub fn on_faults(&mut self, t_ms: u32, active: u32, latched: u32, sink: &mut impl EventSink) {
+        let raised = active & !self.active;
+        for (i, kind) in FaultKind::ALL.iter().enumerate() {
+            let bit = 1u32
+                .checked_shl(u32::try_from(i).unwrap_or(32))
+                .unwrap_or(0);
+            if raised & bit != 0 {
+                sink.append(LogEntry::Fault(FaultEvent {
+                    t_ms,
+                    kind: fault_code(*kind),
+                    latched: latched & bit != 0,
+                }));
+            }
+        }
+        self.active = active;
+    }
+}
+
+fn shimmy_event(e: &Event, (peak, sum, n): (f32, f32, u32)) -> ShimmyEvent {
+    ShimmyEvent {
+        start_s: e.start_s,
+        speed_mps: e.speed_mps,
+        freq_hz: e.freq_hz,
+        peak_amplitude_rad: e.peak_amplitude_rad,
+        duration_s: e.duration_s,
+        level: level_code(e.worst),
+        open: e.open,
+        peak_current_a: if n > 0 { peak } else { f32::NAN },
+        mean_current_a: if n > 0 { sum / n as f32 } else { f32::NAN },
+    }
+}
+
+/// A bounded log in RAM: `N` entries, the oldest dropped when full.
+#[derive(Clone, Debug, Default)]
+pub struct RamLog<const N: usize> {
+    entries: heapless::Deque<LogEntry, N>,
+    dropped: u32,
+}
+
+impl<const N: usize> RamLog<N> {
+    /// An empty log.
+    pub const fn new() -> Self {
+        RamLog {
+            entries: heapless::Deque::new(),
+            dropped: 0,
+        }
+    }
+
+    /// Entries kept and entries dropped since the last clear.
+    pub fn len(&self) -> (u16, u32) {
+        (
+            u16::try_from(self.entries.len()).unwrap_or(u16::MAX),
+            self.dropped,
+        )
+    }
+
+    /// No entry kept.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Entry `i`, oldest first.
+    pub fn get(&self, i: u16) -> Option<LogEntry> {
+        self.entries.iter().nth(usize::from(i)).copied()
+    }
+
+    /// Empties the log; returns how many entries it held.
+    pub fn clear(&mut self) -> u16 {
+        let n = self.len().0;
+        self.entries.clear();
+        self.dropped = 0;
+        n
+    }
+}
+
+impl<const N: usize> EventSink for RamLog<N> {
+    fn append(&mut self, e: LogEntry) {
+        if self.entries.is_full() {
+            let _ = self.entries.pop_front();
+            self.dropped = self.dropped.saturating_add(1);
+        }
+        let _ = self.entries.push_back(e);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shimmy_core::estimator::fusion::MarginReport;
+    use shimmy_core::estimator::monitor::{Level, MonitorInput, MonitorParams};
+
+    fn fault(t_ms: u32) -> LogEntry {
+        LogEntry::Fault(FaultEvent {
+            t_ms,
+            kind: 0,
+            latched: false,
+        })
+    }
+
+    #[test]
+    fn the_ram_log_drops_the_oldest_and_counts_it() {
+        let mut log = RamLog::<3>::new();
+        for t in 0..5 {
+            log.append(fault(t));
+        }
+        assert_eq!(log.len(), (3, 2));
+        assert_eq!(log.get(0), Some(fault(2)));
+        assert_eq!(log.get(2), Some(fault(4)));
+        assert_eq!(log.get(3), None);
+        assert_eq!(log.clear(), 3);
+        assert_eq!(log.len(), (0, 0));
+    }
+
+    #[test]
+    fn each_newly_active_fault_is_one_entry() {
+        let mut r = Recorder::new();
+        let mut log = RamLog::<8>::new();
+        let left_flag = 1 << fault_code(FaultKind::LeftFlag);
+        let coil_short = 1 << fault_code(FaultKind::CoilShort);
+        r.on_faults(10, left_flag, 0, &mut log);
+        r.on_faults(20, left_flag, 0, &mut log); // still active: nothing new
+        r.on_faults(30, left_flag | coil_short, coil_short, &mut log);
+        r.on_faults(40, 0, coil_short, &mut log);
+        r.on_faults(50, left_flag, 0, &mut log); // raised again
+        let kinds: std::vec::Vec<_> = (0..log.len().0)
+            .filter_map(|i| match log.get(i) {
+                Some(LogEntry::Fault(f)) => Some((f.t_ms, f.kind, f.latched)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                (10, fault_code(FaultKind::LeftFlag), false),
+                (30, fault_code(FaultKind::CoilShort), true),
+                (50, fault_code(FaultKind::LeftFlag), false),
+            ]
+        );
+    }
+
+    /// A monitor driven through one shimmy episode by amplitude alone: the recorder logs it
+    /// once, when it closes, with the commands given while it was open.
+    #[test]
+    fn a_closed_episode_is_logged_once_with_the_controller_action() {
+        let params = MonitorParams::default();
+        let mut m = Monitor::<4>::new(params);
+        let report = MarginReport::default();
+        let mut r = Recorder::new();
+        let mut log = RamLog::<8>::new();
+        let mut open_seen = None;
+        for k in 0..400u32 {
+            let t = f64::from(k) * 0.01;
+            let shimmy = (100..200).contains(&k);
+            let amp = if shimmy { 2.0 * params.amp_on_rad } else { 0.0 };
+            // The controller answers the shimmy with 1.5 A, otherwise 0.2 A.
+            for _ in 0..10 {
+                r.on_command(if shimmy { 1.5 } else { 0.2 });
+            }
+            m.update(&MonitorInput {
+                t_s: t,
+                amplitude_rad: amp,
+                report: &report,
+            });
+            r.on_update(&m, &mut log);
+            if k == 150 {
+                open_seen = r.open_event(&m);
+            }
+        }
+        let open = open_seen.expect("episode open at step 150");
+        assert!(open.open && open.level == level_code(Level::ShimmyPresent));
+        assert_eq!(log.len().0, 1, "one episode, logged once");
+        let Some(LogEntry::Shimmy(e)) = log.get(0) else {
+            panic!("not a shimmy entry");
+        };
+        assert!(!e.open);
+        assert_eq!(e.level, level_code(Level::ShimmyPresent));
+        assert!((e.start_s - 1.0).abs() < 0.011, "{}", e.start_s);
+        assert_eq!(e.peak_current_a, 1.5);
+        // Mostly 1.5 A, plus the 0.2 A of the release time after the shimmy.
+        assert!(e.mean_current_a > 0.2 && e.mean_current_a <= 1.5);
+        assert!(r.open_event(&m).is_none());
+    }
+}
