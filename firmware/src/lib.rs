@@ -16,6 +16,7 @@ pub mod pil;
 pub mod replay;
 pub mod sensors;
 pub mod sim;
+pub mod store;
 
 #[cfg(target_os = "none")]
 pub mod board;

@@ -5,7 +5,7 @@
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -22,7 +22,6 @@ mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
     use shimmy_core::estimator::model_margin::ModelMargin;
-    use shimmy_core::params::PlantParams;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
@@ -31,9 +30,11 @@ mod app {
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
-        safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
+    use shimmy_firmware::store::target::{self as store_target, TargetFlash};
+    use shimmy_firmware::store::{ConfigSource, EpisodeRecorder, LogEntry, Motion, StoreTask};
     use shimmy_link::device::{Device, REPLY_BYTES};
 
     /// Telemetry every this many meter runs (1 Hz).
@@ -42,6 +43,8 @@ mod app {
     const LINK_STREAM_DIVIDER: u32 = 10;
     /// SPSC capacity is one less than this: 3 meter periods of samples.
     const QUEUE_N: usize = 32;
+    /// Log entries from `meter` to the store in the background loop (capacity one less).
+    const LOG_QUEUE_N: usize = 8;
 
     #[shared]
     struct Shared {
@@ -52,6 +55,11 @@ mod app {
         now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
         margin: MarginStatus,
+        /// Time, trusted speed and peak coil command of the newest meter run (for the store's
+        /// standstill watch).
+        motion: Motion,
+        /// The supervisor's latched faults (written by `control`, logged by the store).
+        latched: FaultSet,
         /// What the host link serves (written by `meter`, read and configured by `link`).
         link: LinkState,
     }
@@ -70,12 +78,19 @@ mod app {
         data: DataMargin,
         meter_runs: u32,
         model_task: ModelTask,
+        store_task: StoreTask<TargetFlash>,
+        log_tx: Producer<'static, LogEntry>,
+        log_rx: Consumer<'static, LogEntry>,
+        episodes: EpisodeRecorder,
         port: LinkPort,
         /// The ready frame has been sent.
         announced: bool,
     }
 
-    #[init(local = [queue: Queue<MeterSample, QUEUE_N> = Queue::new()])]
+    #[init(local = [
+        queue: Queue<MeterSample, QUEUE_N> = Queue::new(),
+        log_queue: Queue<LogEntry, LOG_QUEUE_N> = Queue::new(),
+    ])]
     fn init(cx: init::Context) -> (Shared, Local) {
         shimmy_firmware::stack::paint();
         // An overflow into the statics faults instead (MemManage: coil off, reported, reset).
@@ -88,9 +103,21 @@ mod app {
             FAILSAFE_CURRENT_A
         );
         let cause = reset_cause(&cx.device.RCC);
-        let (record, policy) = ResetRecord::on_boot(&persist::load(), cause);
+        let stored = persist::load();
+        let (record, policy) = ResetRecord::on_boot(&stored, cause);
         persist::store(&record);
         let latched = FaultSet::from_bits(record.latched_faults);
+        // The store opens before board::init starts the watchdog: a boot after a power cut in a
+        // standstill write may finish the compaction the cut interrupted (an erase).
+        let Ok((store_task, boot)) =
+            store_target::boot(!stored.is_valid(), cause, record.resets, latched)
+        else {
+            // Only a second call or a layout that does not fit could fail (the layout is a
+            // constant); the damper still gets the fail-safe current out of reset.
+            panic!("store layout rejected");
+        };
+        report_config(&boot);
+        let vehicle = boot.config.vehicle;
         let coil_dead =
             latched.contains(FaultKind::CoilOpen) || latched.contains(FaultKind::CoilShort);
         let hold_safe = policy == BootPolicy::HoldSafe;
@@ -105,11 +132,12 @@ mod app {
                 ""
             }
         );
-        let mut ctrl = safe_controller();
+        let mut ctrl = safe_controller_for(&vehicle);
         ctrl.supervisor_mut().restore_latched(latched);
         let (board, port) = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
-        let Ok(data) = DataMargin::new() else {
+        let (log_tx, log_rx) = cx.local.log_queue.split();
+        let Ok(data) = DataMargin::with_params(&vehicle.pipeline_params()) else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
@@ -125,6 +153,8 @@ mod app {
                 model: None,
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
+                motion: Motion::UNKNOWN,
+                latched,
                 link,
             },
             Local {
@@ -137,7 +167,11 @@ mod app {
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelTask::new(PlantParams::nominal()),
+                model_task: ModelTask::new(vehicle.plant),
+                store_task,
+                log_tx,
+                log_rx,
+                episodes: EpisodeRecorder::new(),
                 port,
                 announced: false,
             },
@@ -148,9 +182,15 @@ mod app {
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged.
-    #[idle(local = [model_task], shared = [model, now, health])]
+    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
+            store_pass(
+                cx.local.store_task,
+                cx.local.log_rx,
+                cx.shared.motion.lock(|m| *m),
+                cx.shared.latched.lock(|l| *l),
+            );
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
             #[cfg(feature = "pil")]
@@ -193,7 +233,7 @@ mod app {
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         #[cfg(feature = "pil")]
@@ -242,6 +282,8 @@ mod app {
         let latched = cx.local.ctrl.supervisor().latched().bits();
         if cx.local.record.update(uptime_ms, latched) {
             persist::store(cx.local.record);
+            let mut shared_latched = cx.shared.latched;
+            shared_latched.lock(|l| *l = FaultSet::from_bits(latched));
         }
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
@@ -255,7 +297,7 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs], shared = [health, model, now, margin, link])]
+    #[task(priority = 2, local = [rx, data, meter_runs, episodes, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion, link])]
     async fn meter(mut cx: meter::Context) {
         #[cfg(feature = "pil")]
         let entry_instructions = board::pil::instructions();
@@ -267,6 +309,8 @@ mod app {
         #[cfg(feature = "pil")]
         let mut spawned_by = None;
         while let Some(s) = cx.local.rx.dequeue() {
+            cx.local.episodes.sample(s.cmd_a);
+            *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
             cx.shared.link.lock(|l| l.on_sample(s.cmd_a));
             #[cfg(feature = "pil")]
             {
@@ -282,6 +326,21 @@ mod app {
             cx.shared
                 .link
                 .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
+            // The store: a closed shimmy episode, and the motion for its standstill watch.
+            if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
+                if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
+                    defmt::error!(
+                        "store queue full: shimmy episode at t = {=f64} s not logged",
+                        e.event.start_s
+                    );
+                }
+            }
+            let motion = Motion {
+                t_s: u.report.t_s,
+                speed_mps: cx.local.data.speed_mps(),
+                cmd_peak_a: core::mem::take(cx.local.cmd_peak_a),
+            };
+            cx.shared.motion.lock(|m| *m = motion);
             let now = (u.report.t_s, cx.local.data.speed_mps());
             cx.shared.now.lock(|n| *n = now);
             let status = cx.local.data.margin_status();
@@ -328,6 +387,77 @@ mod app {
         #[cfg(feature = "pil")]
         if let Some(step) = spawned_by {
             board::pil::report_meter_run(step, entry_instructions);
+        }
+    }
+
+    /// Logs where the configuration came from. Anything but a stored record is a fault; a
+    /// refused record names what was wrong (the field, its value and the allowed range).
+    fn report_config(boot: &shimmy_firmware::store::BootReport) {
+        use shimmy_core::vehicle::{Problem, RecordError};
+        const DEFAULTS: &str = "running the compiled-in defaults";
+        match boot.config.source {
+            ConfigSource::Stored => defmt::info!("config: stored vehicle record loaded"),
+            ConfigSource::Missing => {
+                defmt::error!("config fault: no vehicle record stored; {=str}", DEFAULTS)
+            }
+            ConfigSource::Unreadable(_) => {
+                defmt::error!("config fault: the store cannot be read; {=str}", DEFAULTS)
+            }
+            ConfigSource::Rejected(RecordError::Invalid(e)) => match e.problem {
+                Problem::OutOfRange { lo, hi, unit } => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} is outside [{=f64}, {=f64}] {=str}; {=str}",
+                    e.section, e.name, e.value, lo, hi, unit, DEFAULTS
+                ),
+                Problem::NotInteger { lo, hi } => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} is not a whole number in [{=f64}, {=f64}]; {=str}",
+                    e.section, e.name, e.value, lo, hi, DEFAULTS
+                ),
+                Problem::Inconsistent(rule) => defmt::error!(
+                    "config fault: stored {=str}.{=str} = {=f64} breaks the rule {=str}; {=str}",
+                    e.section, e.name, e.value, rule, DEFAULTS
+                ),
+            },
+            ConfigSource::Rejected(RecordError::Schema { found, expected }) => defmt::error!(
+                "config fault: stored record schema {=u32:#x} is not this firmware's {=u32:#x}; {=str}",
+                found, expected, DEFAULTS
+            ),
+            ConfigSource::Rejected(
+                RecordError::Length { need, have } | RecordError::BufferTooSmall { need, have },
+            ) => defmt::error!(
+                "config fault: stored record is {=usize} B, expected {=usize} B; {=str}",
+                have, need, DEFAULTS
+            ),
+        }
+        defmt::info!(
+            "store: boot {=u32}, {=usize} log entries",
+            boot.entry.boot_count,
+            boot.log_entries
+        );
+    }
+
+    /// One pass of the store in the background loop; reports what it did.
+    fn store_pass(
+        task: &mut StoreTask<TargetFlash>,
+        rx: &mut Consumer<'static, LogEntry>,
+        motion: Motion,
+        latched: FaultSet,
+    ) {
+        let pass = task.step(motion, latched, core::iter::from_fn(|| rx.dequeue()));
+        if pass.appended > 0 {
+            defmt::info!(
+                "store: {=u32} log entries appended at t = {=f64} s ({=usize} waiting for a standstill)",
+                pass.appended,
+                motion.t_s,
+                task.store().pending_entries()
+            );
+        }
+        match pass.maintained {
+            Some(Ok(m)) => defmt::info!(
+                "store: standstill, {=u32} waiting entries written",
+                m.written
+            ),
+            Some(Err(_)) => defmt::error!("store: standstill maintenance failed, retried later"),
+            None => {}
         }
     }
 

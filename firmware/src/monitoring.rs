@@ -31,6 +31,7 @@ use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
+use shimmy_core::vehicle::Vehicle;
 
 /// Control period, s.
 pub const DT_S: f32 = 1e-3;
@@ -66,6 +67,17 @@ pub fn safe_controller() -> SafeController {
         ControllerKind::Asmc,
         ControlParams::default(),
         SupervisorParams::default(),
+    )
+}
+
+/// The supervised controller for `vehicle` (its controller and supervisor parameters, as the
+/// store loaded it); for `Vehicle::nominal()` it is [`safe_controller`] (the core test
+/// `the_nominal_vehicle_reproduces_todays_defaults`).
+pub fn safe_controller_for(vehicle: &Vehicle) -> SafeController {
+    SafeController::new(
+        ControllerKind::Asmc,
+        vehicle.control_params(),
+        vehicle.supervisor_params(),
     )
 }
 
@@ -120,8 +132,13 @@ pub struct DataMargin {
 impl DataMargin {
     /// The data path with the core's tuned parameters.
     pub fn new() -> Result<Self, ConfigError> {
+        Self::with_params(&PipelineParams::default())
+    }
+
+    /// The data path with `params` (a vehicle's `pipeline_params()`).
+    pub fn with_params(params: &PipelineParams) -> Result<Self, ConfigError> {
         Ok(DataMargin {
-            pipe: DataPipeline::new(&PipelineParams::default())?,
+            pipe: DataPipeline::new(params)?,
             last_speed_mps: f32::NAN,
             accel: AccelEstimator::new(),
             steps: 0,

@@ -76,6 +76,11 @@ pub struct Watchdog {
     iwdg: pac::IWDG,
 }
 
+/// IWDG prescaler code of the running firmware (/4).
+const IWDG_PR: u16 = 0;
+/// IWDG reload of the running firmware (80 LSI/4 ticks, ~10 ms).
+const IWDG_RLR: u16 = 80;
+
 impl Watchdog {
     /// Starts the IWDG. LSI varies 17..47 kHz: the timeout is 6.8..18.8 ms, so the 1 ms loop
     /// can miss several steps before a reset.
@@ -84,8 +89,8 @@ impl Watchdog {
         unsafe {
             iwdg.kr().write(|w| w.bits(0xCCCC)); // start (LSI turns on)
             iwdg.kr().write(|w| w.bits(0x5555)); // unlock PR/RLR
-            iwdg.pr().write(|w| w.bits(0)); // /4
-            iwdg.rlr().write(|w| w.bits(80));
+            iwdg.pr().write(|w| w.bits(IWDG_PR)); // /4
+            iwdg.rlr().write(|w| w.bits(IWDG_RLR));
         }
         // Wait for the prescaler/reload update (bounded: QEMU reads 0 at once).
         let mut n = 0u32;
@@ -104,6 +109,37 @@ impl Watchdog {
             self.iwdg.kr().write(|w| w.bits(0xAAAA));
         }
     }
+}
+
+/// Runs `erase` with the watchdog's timeout stretched from ~10 ms to at least 11 s (LSI /128,
+/// reload 4095) and restores it after. Erasing a 128 KiB flash sector at x8 parallelism takes up
+/// to 4 s (STM32F405 datasheet, t_ERASE128KB) and stalls every read of the flash, so the
+/// control task and its watchdog feed stop meanwhile; only the store's standstill work (vehicle
+/// stopped, damper idle: the coil keeps its 0 A duty) and its boot repair reach this.
+pub fn with_watchdog_stretched<R>(erase: impl FnOnce() -> R) -> R {
+    let set = |pr: u16, rlr: u16| {
+        // SAFETY: the IWDG is only written by `Watchdog` (the key register) and here; the
+        // unlock-write-reload sequence runs with interrupts off so no feed of the control task
+        // (another key) relocks PR/RLR halfway. Values from RM0090 section 19.
+        cortex_m::interrupt::free(|_| unsafe {
+            let iwdg = pac::IWDG::steal();
+            iwdg.kr().write(|w| w.bits(0xAAAA));
+            iwdg.kr().write(|w| w.bits(0x5555));
+            iwdg.pr().write(|w| w.bits(pr));
+            iwdg.rlr().write(|w| w.bits(rlr));
+            iwdg.kr().write(|w| w.bits(0xAAAA));
+        });
+        // SAFETY: a read of the status register.
+        let sr = || unsafe { pac::IWDG::steal() }.sr().read().bits();
+        let mut n = 0u32;
+        while sr() != 0 && n < 1_000_000 {
+            n += 1;
+        }
+    };
+    set(5, 4095);
+    let result = erase();
+    set(IWDG_PR, IWDG_RLR);
+    result
 }
 
 /// The host link's serial port: USART1, 8N1, receive interrupt on, polled transmit. On the board

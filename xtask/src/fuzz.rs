@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 /// The fuzz targets (binaries of `fuzz/Cargo.toml`).
-pub const TARGETS: &[&str] = &["safe_step"];
+pub const TARGETS: &[&str] = &["safe_step", "store_ops"];
 
 /// Default length of the run in `cargo xtask test`, s.
 pub const CI_SECONDS: u64 = 60;

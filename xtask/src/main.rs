@@ -106,6 +106,7 @@ const FIRMWARE_IMAGES: &[(&[&str], &[&str])] = &[
             "target-bench",
             "conformance",
             "reset-memory",
+            "store-check",
         ],
     ),
     (
@@ -195,6 +196,7 @@ fn test() -> Result<(), String> {
         ("on-target tests (QEMU netduinoplus2)", on_target_tests),
         ("stack overflow caught by the guard (QEMU)", stack_guard),
         ("fault memory across resets (QEMU)", reset_memory),
+        ("flash store across resets (QEMU)", store_check),
         (
             "host/target conformance (trace replay, bit-identical)",
             conformance::step,
@@ -320,6 +322,23 @@ fn reset_memory() -> Step {
         .iter()
         .find(|l| l.contains("reset memory ok"))
         .map(|_| "record survived 3 resets, latch restored (0 A), reset loop held".to_string())
+        .ok_or_else(|| "the run ended without the final report".to_string())
+}
+
+/// The flash store on QEMU's RAM flash across two resets (firmware/src/bin/store-check.rs):
+/// a configuration saved at standstill and loaded at the next boot, a shimmy episode and a
+/// latched coil short logged while driving, the log read back after the reset.
+fn store_check() -> Step {
+    let elf = build_firmware("store-check", &["qemu"])?;
+    let run = qemu::run(&elf)?;
+    run.print();
+    run.expect_success()?;
+    run.log
+        .iter()
+        .find(|l| l.contains("store ok"))
+        .map(|_| {
+            "configuration kept, episode and fault logged, log read back after 2 resets".to_string()
+        })
         .ok_or_else(|| "the run ended without the final report".to_string())
 }
 
@@ -486,6 +505,9 @@ fn run_in_qemu(bin: &str) -> Result<(), String> {
     }
     if bin == "reset-memory" {
         return reset_memory().map(|s| println!("xtask: {s}"));
+    }
+    if bin == "store-check" {
+        return store_check().map(|s| println!("xtask: {s}"));
     }
     let elf = build_firmware(bin, &["qemu"])?;
     let run = qemu::run_with(&elf, qemu::APP_ICOUNT)?;

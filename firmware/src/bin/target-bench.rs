@@ -156,6 +156,16 @@ mod bench {
             budget: Budget::None,
             run: sinf,
         },
+        Entry {
+            name: "store: load the vehicle (RAM flash, background loop)",
+            budget: Budget::None,
+            run: store_load,
+        },
+        Entry {
+            name: "store: append a shimmy entry (RAM flash, background loop)",
+            budget: Budget::None,
+            run: store_append,
+        },
         // Proves that an entry over its budget fails the run (`cargo xtask test` builds it).
         #[cfg(feature = "deliberate-failure")]
         Entry {
@@ -369,6 +379,68 @@ mod bench {
         }
         METER_RUN_MAX.store(run, Ordering::Relaxed);
         (plain, dec, run)
+    }
+
+    /// The store's RAM flash for the benchmark: 2 KiB sectors (the page scans of the board's
+    /// 128 KiB sectors cost more per operation; the instructions per byte are the same).
+    type BenchFlash = shimmy_firmware::store::RamFlash<{ 4 * 2048 }, 2048>;
+
+    /// A booted store on a fresh RAM flash with a saved vehicle and `entries` log entries.
+    fn bench_store(entries: u32) -> shimmy_firmware::store::Store<BenchFlash> {
+        use shimmy_firmware::fault_memory::ResetCause;
+        use shimmy_firmware::store::{Layout, StandstillWatch, Store};
+        let Ok(b) = Store::boot(
+            BenchFlash::new(),
+            Layout::split(2048, 2, 2),
+            ResetCause::PowerOn,
+            0,
+        ) else {
+            finish(Outcome::Failure)
+        };
+        let mut store = b.store;
+        let mut watch = StandstillWatch::new();
+        watch.observe(0.0, 0.0, 0.0);
+        if let Some(token) = watch.check(2.0) {
+            let _ = store.save_config(&shimmy_core::vehicle::Vehicle::nominal(), &token);
+        }
+        for k in 0..entries {
+            store.append(&shimmy_entry(k));
+        }
+        store
+    }
+
+    fn shimmy_entry(k: u32) -> shimmy_firmware::store::LogEntry {
+        use shimmy_core::estimator::monitor::{Event, Level};
+        shimmy_firmware::store::LogEntry::Shimmy(shimmy_firmware::store::ShimmyEntry {
+            event: Event {
+                start_s: f64::from(k),
+                speed_mps: 20.0,
+                freq_hz: 8.0,
+                peak_amplitude_rad: 0.02,
+                worst: Level::ShimmyPresent,
+                duration_s: 3.0,
+                shimmy_s: 2.0,
+                open: false,
+            },
+            cmd_peak_a: 2.0,
+            cmd_mean_a: 1.0,
+        })
+    }
+
+    fn store_load() -> u32 {
+        let mut store = bench_store(20);
+        measure(|| {
+            black_box(store.load_config());
+        })
+    }
+
+    fn store_append() -> u32 {
+        let mut store = bench_store(20);
+        let mut k = 100;
+        measure(|| {
+            k += 1;
+            black_box(store.append(&shimmy_entry(k)));
+        })
     }
 
     fn push_plain() -> u32 {

@@ -1,0 +1,200 @@
+//! The flash store under QEMU (whose flash cannot be written: the store runs on the RAM flash
+//! of `store::target::qemu`, 16 KiB sectors in RAM that a reset leaves alone), across two
+//! system resets:
+//!
+//! - boot 1 finds the RAM lost (QEMU starts with zeroed RAM: a power-on), formats the flash,
+//!   boots with the defaults (no record: a reported config fault), and at standstill saves a
+//!   vehicle that differs from the defaults; reset;
+//! - boot 2 loads that vehicle, then runs the scripted drive (`store::drive`: the firmware's
+//!   controller, data pipeline and store task): a shimmy episode and a coil short while moving
+//!   are appended to the log; reset;
+//! - boot 3 reads the log back: the three boots with their causes, the fault and the episode.
+//!
+//! QEMU has no RCC reset flags: the resets this binary makes are given as `Software`, as in
+//! `reset-memory`.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(target_os = "none")]
+mod app {
+    use cortex_m_rt::entry;
+    use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
+    use shimmy_core::vehicle::Vehicle;
+    use shimmy_firmware::fault_memory::{persist, ResetCause, ResetRecord};
+    use shimmy_firmware::runtime::{finish, Outcome};
+    use shimmy_firmware::store::target::{self as store_target, TargetFlash};
+    use shimmy_firmware::store::{drive, ConfigSource, LogEntry, Motion, StoreTask};
+
+    fn check(ok: bool, what: &str) {
+        if !ok {
+            defmt::error!("store check failed: {=str}", what);
+            finish(Outcome::Failure);
+        }
+    }
+
+    /// The vehicle boot 1 saves: the nominal one with another kingpin inertia and coil rating.
+    fn configured() -> Vehicle {
+        let mut v = Vehicle::nominal();
+        let set = v
+            .set("plant", "i_k", 9.0)
+            .and_then(|_| v.set("damper", "rated_current_a", 2.5));
+        check(set.is_ok(), "the test vehicle is valid");
+        v
+    }
+
+    fn reset(record: &mut ResetRecord) -> ! {
+        record.update(5_000, record.latched_faults);
+        persist::store(record);
+        cortex_m::peripheral::SCB::sys_reset()
+    }
+
+    /// Logs every entry of the log and checks them against what boots 1 and 2 wrote.
+    fn read_back(task: &mut StoreTask<TargetFlash>) {
+        let mut n = 0usize;
+        let mut boots = 0u32;
+        let mut shimmy = false;
+        let mut fault = false;
+        let read = task.store().read_log(|e| {
+            n += 1;
+            match e {
+                Ok(LogEntry::Boot(b)) => {
+                    boots += 1;
+                    check(b.boot_count == boots, "boots counted in order");
+                    defmt::info!(
+                        "log {=usize}: boot {=u32}, cause {=str}, {=u32} resets since power-on",
+                        n,
+                        b.boot_count,
+                        b.cause.name(),
+                        b.resets_since_power_on
+                    );
+                }
+                Ok(LogEntry::Fault(f)) => {
+                    fault = f.fault == FaultKind::CoilShort;
+                    defmt::info!(
+                        "log {=usize}: fault {=str} latched at t = {=f64} s (latched set {=u32:#x})",
+                        n,
+                        f.fault.name(),
+                        f.t_s,
+                        f.latched.bits()
+                    );
+                }
+                Ok(LogEntry::Shimmy(s)) => {
+                    let e = &s.event;
+                    shimmy = e.freq_hz > 7.5 && e.freq_hz < 8.5 && e.speed_mps > 19.5;
+                    defmt::info!(
+                        "log {=usize}: shimmy from t = {=f64} s for {=f32} s at {=f32} m/s, {=f32} Hz, peak {=f32} mrad, level {=u8}; coil peak {=f32} A, mean {=f32} A",
+                        n,
+                        e.start_s,
+                        e.duration_s,
+                        e.speed_mps,
+                        e.freq_hz,
+                        e.peak_amplitude_rad * 1e3,
+                        e.worst as u8,
+                        s.cmd_peak_a,
+                        s.cmd_mean_a
+                    );
+                }
+                Err(u) => {
+                    defmt::error!("log {=usize}: unreadable entry {}", n, u);
+                    check(false, "every entry reads back whole");
+                }
+            }
+        });
+        check(
+            read == Ok(5),
+            "five entries: boots 1-3, the fault, the episode",
+        );
+        check(
+            boots == 3 && shimmy && fault,
+            "the boots, the fault and the episode",
+        );
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let stored = persist::load();
+        let cause = if stored.is_valid() {
+            ResetCause::Software
+        } else {
+            ResetCause::PowerOn
+        };
+        let (mut record, _) = ResetRecord::on_boot(&stored, cause);
+        persist::store(&record);
+        let boot = record.resets + 1;
+        let Ok((mut task, report)) = store_target::boot(
+            !stored.is_valid(),
+            cause,
+            record.resets,
+            FaultSet::from_bits(record.latched_faults),
+        ) else {
+            check(false, "the store opens");
+            finish(Outcome::Failure)
+        };
+        check(report.entry.boot_count == boot, "the boot is counted");
+        match boot {
+            1 => {
+                check(
+                    report.config.source == ConfigSource::Missing && report.config.is_fault(),
+                    "boot 1: no record, the defaults, a fault",
+                );
+                check(
+                    report.config.vehicle == Vehicle::nominal(),
+                    "boot 1: the defaults",
+                );
+                // Standing for 2 s with the coil off: the token, and the write.
+                let still = |t_s| Motion {
+                    t_s,
+                    speed_mps: 0.0,
+                    cmd_peak_a: 0.0,
+                };
+                task.step(still(0.0), FaultSet::EMPTY, core::iter::empty());
+                task.step(still(2.0), FaultSet::EMPTY, core::iter::empty());
+                let saved = task.at_standstill(2.0, |s, t| s.save_config(&configured(), t));
+                check(
+                    saved == Some(Ok(())),
+                    "boot 1: the vehicle saved at standstill",
+                );
+                defmt::info!("boot 1: no configuration (defaults, fault reported); vehicle saved at standstill; reset");
+                reset(&mut record)
+            }
+            2 => {
+                check(
+                    report.config.source == ConfigSource::Stored
+                        && report.config.vehicle == configured(),
+                    "boot 2: the saved vehicle is loaded",
+                );
+                defmt::info!(
+                    "boot 2: configuration loaded (i_k {=f64} kg m^2, coil {=f32} A); driving",
+                    report.config.vehicle.plant.i_k,
+                    report.config.vehicle.rated_current_a()
+                );
+                let d = drive::run(&mut task);
+                check(
+                    d.appended == 2,
+                    "boot 2: the fault and the episode appended",
+                );
+                defmt::info!(
+                    "boot 2: drive done, {=u32} entries appended while moving, {=usize} waiting; reset",
+                    d.appended,
+                    task.store().pending_entries()
+                );
+                reset(&mut record)
+            }
+            _ => {
+                check(
+                    report.config.source == ConfigSource::Stored,
+                    "boot 3: still configured",
+                );
+                defmt::info!(
+                    "boot 3: {=usize} log entries found; reading them back",
+                    report.log_entries
+                );
+                read_back(&mut task);
+                defmt::info!("store ok: configuration kept, episode and fault logged, log read back after resets");
+                finish(Outcome::Success)
+            }
+        }
+    }
+}
+
+#[cfg(not(target_os = "none"))]
+fn main() {}

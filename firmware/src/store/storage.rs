@@ -1,0 +1,530 @@
+//! The store itself: the configuration map and the event-log queue on one gated flash (the
+//! module documentation of `store` says what and why).
+
+use super::flash::FlashError;
+use super::log::FaultEntry;
+use super::log::{BootEntry, LogEntry, Unreadable, ENTRY_MAX_BYTES};
+use super::standstill::Standstill;
+use crate::fault_memory::ResetCause;
+use core::future::Future;
+use core::ops::Range;
+use core::pin::pin;
+use core::task::{Context, Poll, Waker};
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::map::{MapConfig, MapStorage};
+use sequential_storage::queue::{QueueConfig, QueueStorage};
+use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
+
+/// Map key of the vehicle record.
+pub const KEY_VEHICLE: u8 = 0;
+/// Map key of the boot count (u32, little-endian).
+pub const KEY_BOOTS: u8 = 1;
+/// Map key of the clearing mark: 1 while a log clear is under way, so a clear cut by a power
+/// loss is finished at the next boot (a half-erased log page is not left for the queue).
+pub const KEY_CLEARING: u8 = 2;
+/// Log entries kept in RAM while an append waits for a standstill erase.
+pub const PENDING: usize = 16;
+/// The map's work buffer: the largest vehicle record and its key, with room for alignment.
+const BUF_BYTES: usize = RECORD_MAX_BYTES + 8;
+
+/// The store keeps no cache: every operation scans its pages (entries are rare, and a cache
+/// would have to follow every power cut).
+type NoCache<K> = Cache<Uncached, Uncached, Uncached, K>;
+
+/// Runs a future of the store to completion. The flashes here never return `Pending`, so this
+/// loop polls once per future; it needs no executor and no waker.
+pub fn block_on<T>(fut: impl Future<Output = T>) -> T {
+    let mut fut = pin!(fut);
+    let mut cx = Context::from_waker(Waker::noop());
+    loop {
+        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+}
+
+/// A flash whose erase is refused unless opened by `Gated::open`, which only the store's
+/// standstill operations call (each takes the [`Standstill`] token). Writes always go
+/// through: programming a few bytes stalls the flash for microseconds, an erase of a 128 KiB
+/// sector for over a second.
+pub struct Gated<F> {
+    flash: F,
+    /// Set only by `Gated::open` and by `Store::boot` (before the control loop starts).
+    erase_open: bool,
+}
+
+impl<F> Gated<F> {
+    /// Closed (no erase).
+    const fn new(flash: F) -> Self {
+        Gated {
+            flash,
+            erase_open: false,
+        }
+    }
+
+    /// Opens the erase for the standstill operations of the store.
+    fn open(&mut self, _token: &Standstill<'_>) {
+        self.erase_open = true;
+    }
+
+    /// Closes it again.
+    fn close(&mut self) {
+        self.erase_open = false;
+    }
+
+    /// The flash, without the gate.
+    fn into_inner(self) -> F {
+        self.flash
+    }
+
+    /// The flash under the gate.
+    pub fn inner(&self) -> &F {
+        &self.flash
+    }
+
+    /// The flash under the gate, mutable (tests arm power cuts with it).
+    pub fn inner_mut(&mut self) -> &mut F {
+        &mut self.flash
+    }
+}
+
+impl<F: ErrorType<Error = FlashError>> ErrorType for Gated<F> {
+    type Error = FlashError;
+}
+
+impl<F: ReadNorFlash<Error = FlashError>> ReadNorFlash for Gated<F> {
+    const READ_SIZE: usize = F::READ_SIZE;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        self.flash.read(offset, bytes).await
+    }
+
+    fn capacity(&self) -> usize {
+        self.flash.capacity()
+    }
+}
+
+impl<F: NorFlash<Error = FlashError>> NorFlash for Gated<F> {
+    const WRITE_SIZE: usize = F::WRITE_SIZE;
+    const ERASE_SIZE: usize = F::ERASE_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        if !self.erase_open {
+            return Err(FlashError::EraseRefused);
+        }
+        self.flash.erase(from, to).await
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        self.flash.write(offset, bytes).await
+    }
+}
+
+/// Where the configuration map and the event log lie in the flash (offsets, whole erase
+/// units; the map needs at least two).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Layout {
+    /// The configuration map.
+    pub config: Range<u32>,
+    /// The event-log queue.
+    pub log: Range<u32>,
+}
+
+impl Layout {
+    /// The first `config_pages` erase units of `page` bytes for the map, the next `log_pages`
+    /// for the log.
+    pub const fn split(page: u32, config_pages: u32, log_pages: u32) -> Layout {
+        Layout {
+            config: 0..config_pages * page,
+            log: config_pages * page..(config_pages + log_pages) * page,
+        }
+    }
+}
+
+/// Why a store operation failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StoreError {
+    /// The flash failed (a power cut, an erase outside standstill, the device).
+    Flash(FlashError),
+    /// No room, even after dropping what may be dropped.
+    Full,
+    /// The store found its flash corrupted beyond its own repair.
+    Corrupted,
+    /// The layout does not fit the flash's geometry (or two ranges overlap).
+    Layout,
+    /// The vehicle could not be written as a record (it fails its validation).
+    Record(RecordError),
+    /// Any other error of the store library (a bug there: reported, not hidden).
+    Library,
+}
+
+impl From<sequential_storage::Error<FlashError>> for StoreError {
+    fn from(e: sequential_storage::Error<FlashError>) -> Self {
+        use sequential_storage::Error as E;
+        match e {
+            E::Storage { value, .. } => StoreError::Flash(value),
+            E::FullStorage => StoreError::Full,
+            E::Corrupted { .. } => StoreError::Corrupted,
+            _ => StoreError::Library,
+        }
+    }
+}
+
+/// Where the configuration in use came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ConfigSource {
+    /// The stored record.
+    Stored,
+    /// No record stored: the compiled-in defaults.
+    Missing,
+    /// The flash could not be read: the defaults.
+    Unreadable(StoreError),
+    /// A record is stored but refused (another schema, wrong length, a value out of range):
+    /// the defaults.
+    Rejected(RecordError),
+}
+
+/// The configuration to run with, and where it came from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConfigLoad {
+    /// The vehicle (the stored one, or [`Vehicle::nominal`]).
+    pub vehicle: Vehicle,
+    /// Why this one.
+    pub source: ConfigSource,
+}
+
+impl ConfigLoad {
+    /// The defaults are in use instead of a stored configuration: a fault to report (the issue:
+    /// a missing, corrupt or invalid record means the compiled-in defaults plus a fault).
+    pub fn is_fault(&self) -> bool {
+        self.source != ConfigSource::Stored
+    }
+}
+
+/// What became of an appended entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Appended {
+    /// In flash.
+    Written,
+    /// Kept in RAM until the next standstill (the log needs an erase first).
+    Pending,
+}
+
+/// What one standstill maintenance did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Maintenance {
+    /// Pending entries written.
+    pub written: u32,
+    /// The boot count was written.
+    pub boots_saved: bool,
+}
+
+/// What [`Store::boot`] found and did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BootReport {
+    /// The configuration to run with.
+    pub config: ConfigLoad,
+    /// This boot, as logged.
+    pub entry: BootEntry,
+    /// Entries in the log before this boot's (0 if it could not be read).
+    pub log_entries: usize,
+}
+
+/// The store after [`Store::boot`], and what the boot found.
+pub struct Boot<F> {
+    /// The store, ready for the running firmware.
+    pub store: Store<F>,
+    /// What the boot found and did.
+    pub report: BootReport,
+}
+
+/// The configuration map and the event log on one flash (see the module documentation).
+pub struct Store<F> {
+    flash: Gated<F>,
+    layout: Layout,
+    buf: [u8; BUF_BYTES],
+    pending: heapless::Deque<LogEntry, PENDING>,
+    lost: u32,
+    boots_unsaved: Option<u32>,
+}
+
+impl<F: NorFlash<Error = FlashError>> Store<F> {
+    /// The store on `flash` with `layout`; refused when the layout does not fit the flash.
+    fn new(flash: F, layout: Layout) -> Result<Self, StoreError> {
+        let fits = |r: &Range<u32>| r.end as usize <= flash.capacity();
+        let apart = layout.config.end <= layout.log.start || layout.log.end <= layout.config.start;
+        if !(fits(&layout.config) && fits(&layout.log) && apart)
+            || MapConfig::<Gated<F>>::try_new(layout.config.clone()).is_err()
+            || QueueConfig::<Gated<F>>::try_new(layout.log.clone()).is_err()
+        {
+            return Err(StoreError::Layout);
+        }
+        Ok(Store {
+            flash: Gated::new(flash),
+            layout,
+            buf: [0; BUF_BYTES],
+            pending: heapless::Deque::new(),
+            lost: 0,
+            boots_unsaved: None,
+        })
+    }
+
+    /// The flash (tests arm power cuts with it).
+    pub fn flash_mut(&mut self) -> &mut F {
+        self.flash.inner_mut()
+    }
+
+    /// The flash.
+    pub fn flash(&self) -> &F {
+        self.flash.inner()
+    }
+
+    /// Gives the flash back.
+    pub fn into_flash(self) -> F {
+        self.flash.into_inner()
+    }
+
+    /// Entries lost because more than [`PENDING`] waited for a standstill.
+    pub fn lost_entries(&self) -> u32 {
+        self.lost
+    }
+
+    /// Something waits for a standstill (pending entries, the boot count).
+    pub fn needs_maintenance(&self) -> bool {
+        !self.pending.is_empty() || self.boots_unsaved.is_some()
+    }
+
+    /// Entries waiting in RAM for a standstill.
+    pub fn pending_entries(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Opens the store at boot, before the control loop and the watchdog start: repairs what a
+    /// power cut interrupted (the only erase outside standstill, see the module
+    /// documentation), loads the configuration, counts the boot and logs it (`cause` and
+    /// `resets_since_power_on` from the fault memory). Refused only when the layout does not
+    /// fit the flash; a flash it cannot read gives the defaults ([`ConfigLoad`]).
+    pub fn boot(
+        flash: F,
+        layout: Layout,
+        cause: ResetCause,
+        resets_since_power_on: u32,
+    ) -> Result<Boot<F>, StoreError> {
+        let mut store = Store::new(flash, layout)?;
+        store.flash.erase_open = true;
+        let config = store.load_config();
+        if let Ok(Some(&[1])) = store.fetch(KEY_CLEARING) {
+            // A clear was cut by a power loss: finish it.
+            let _ = store.clear_open();
+        }
+        // Reading the whole log finishes an interrupted page turn of the queue.
+        let log_entries = store.read_log(|_| ()).unwrap_or(0);
+        let entry = store.record_boot(cause, resets_since_power_on);
+        store.flash.close();
+        Ok(Boot {
+            store,
+            report: BootReport {
+                config,
+                entry,
+                log_entries,
+            },
+        })
+    }
+
+    /// The vehicle to run with (never fails; see [`ConfigLoad`]).
+    pub fn load_config(&mut self) -> ConfigLoad {
+        let nominal = |source| ConfigLoad {
+            vehicle: Vehicle::nominal(),
+            source,
+        };
+        match self.fetch(KEY_VEHICLE) {
+            Ok(Some(bytes)) => match Vehicle::decode_record(bytes) {
+                Ok(vehicle) => ConfigLoad {
+                    vehicle,
+                    source: ConfigSource::Stored,
+                },
+                Err(e) => nominal(ConfigSource::Rejected(e)),
+            },
+            Ok(None) => nominal(ConfigSource::Missing),
+            Err(e) => nominal(ConfigSource::Unreadable(e)),
+        }
+    }
+
+    /// The newest value of `key` in the map. Every value is bytes: one instance of the map's
+    /// code in the image.
+    fn fetch(&mut self, key: u8) -> Result<Option<&[u8]>, StoreError> {
+        let config =
+            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
+        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        block_on(map.fetch_item::<&[u8]>(&mut self.buf, &key)).map_err(StoreError::from)
+    }
+
+    /// Writes `vehicle` as the configuration (validated first: an invalid vehicle is refused
+    /// and nothing is written). Atomic: after a power cut the board has the old or the new one.
+    pub fn save_config(
+        &mut self,
+        vehicle: &Vehicle,
+        token: &Standstill<'_>,
+    ) -> Result<(), StoreError> {
+        let mut record = [0u8; RECORD_MAX_BYTES];
+        vehicle
+            .validate()
+            .map_err(|e| StoreError::Record(RecordError::Invalid(e)))?;
+        let n = vehicle
+            .encode_record(&mut record)
+            .map_err(StoreError::Record)?;
+        let bytes = record.get(..n).ok_or(StoreError::Library)?;
+        self.flash.open(token);
+        let result = self.store_item(KEY_VEHICLE, bytes);
+        self.flash.close();
+        result
+    }
+
+    fn store_item(&mut self, key: u8, value: &[u8]) -> Result<(), StoreError> {
+        let config =
+            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
+        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
+        block_on(map.store_item(&mut self.buf, &key, &value)).map_err(StoreError::from)
+    }
+
+    /// Counts this boot (the persistent count) and logs it with the reset cause and the fault
+    /// memory's reset count; what cannot be written now is written at the next standstill.
+    fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
+        let stored = match self.fetch(KEY_BOOTS) {
+            Ok(Some(&[a, b, c, d])) => u32::from_le_bytes([a, b, c, d]),
+            _ => 0,
+        };
+        let boot_count = stored.saturating_add(1);
+        if self
+            .store_item(KEY_BOOTS, &boot_count.to_le_bytes())
+            .is_err()
+        {
+            self.boots_unsaved = Some(boot_count);
+        }
+        let entry = BootEntry {
+            cause,
+            resets_since_power_on,
+            boot_count,
+        };
+        self.append(&LogEntry::Boot(entry));
+        entry
+    }
+
+    fn queue(&mut self) -> Result<QueueStorage<&mut Gated<F>, NoCache<()>>, StoreError> {
+        let config =
+            QueueConfig::try_new(self.layout.log.clone()).map_err(|_| StoreError::Layout)?;
+        Ok(QueueStorage::new(
+            &mut self.flash,
+            config,
+            Cache::new_uncached(),
+        ))
+    }
+
+    fn push(&mut self, entry: &LogEntry, drop_oldest: bool) -> Result<(), StoreError> {
+        let mut bytes = [0u8; ENTRY_MAX_BYTES];
+        let n = entry.encode(&mut bytes);
+        let data = bytes.get(..n).ok_or(StoreError::Library)?;
+        let mut queue = self.queue()?;
+        block_on(queue.push(data, drop_oldest)).map_err(StoreError::from)
+    }
+
+    /// Appends `entry` to the log without erasing: in flash when there is erased room, else in
+    /// RAM until the next [`Self::maintain`] (the oldest pending entry is lost, and counted,
+    /// when more than [`PENDING`] wait). Order is kept: while entries wait, new ones queue
+    /// behind them.
+    pub fn append(&mut self, entry: &LogEntry) -> Appended {
+        if self.pending.is_empty() && self.push(entry, false).is_ok() {
+            return Appended::Written;
+        }
+        if self.pending.is_full() {
+            let _ = self.pending.pop_front();
+            self.lost = self.lost.saturating_add(1);
+        }
+        let _ = self.pending.push_back(*entry);
+        Appended::Pending
+    }
+
+    /// At standstill: writes the pending entries (dropping the oldest of the log where it is
+    /// full) and the unsaved boot count. Stops at the first failure (a power cut); what was not
+    /// written stays pending.
+    pub fn maintain(&mut self, token: &Standstill<'_>) -> Result<Maintenance, StoreError> {
+        self.flash.open(token);
+        let result = self.maintain_open();
+        self.flash.close();
+        result
+    }
+
+    fn maintain_open(&mut self) -> Result<Maintenance, StoreError> {
+        let mut done = Maintenance::default();
+        while let Some(entry) = self.pending.front().copied() {
+            self.push(&entry, true)?;
+            let _ = self.pending.pop_front();
+            done.written += 1;
+        }
+        if let Some(count) = self.boots_unsaved {
+            self.store_item(KEY_BOOTS, &count.to_le_bytes())?;
+            self.boots_unsaved = None;
+            done.boots_saved = true;
+        }
+        Ok(done)
+    }
+
+    /// Calls `each` with every entry of the log, oldest first (entries still pending in RAM
+    /// last); returns how many. Reads only.
+    pub fn read_log(
+        &mut self,
+        mut each: impl FnMut(Result<LogEntry, Unreadable>),
+    ) -> Result<usize, StoreError> {
+        let mut count = 0;
+        let config =
+            QueueConfig::try_new(self.layout.log.clone()).map_err(|_| StoreError::Layout)?;
+        let mut queue = QueueStorage::new(&mut self.flash, config, Cache::new_uncached());
+        let mut iter = block_on(queue.iter())?;
+        let mut buf = [0u8; ENTRY_MAX_BYTES + 8];
+        while let Some(item) = block_on(iter.next(&mut buf))? {
+            each(LogEntry::decode(&item));
+            count += 1;
+        }
+        for e in &self.pending {
+            each(Ok(*e));
+            count += 1;
+        }
+        Ok(count)
+    }
+
+    /// Calls `each` with every latched fault in the log, oldest first; returns how many.
+    pub fn read_faults(&mut self, mut each: impl FnMut(&FaultEntry)) -> Result<usize, StoreError> {
+        let mut count = 0;
+        self.read_log(|e| {
+            if let Ok(LogEntry::Fault(f)) = e {
+                each(&f);
+                count += 1;
+            }
+        })?;
+        Ok(count)
+    }
+
+    /// Empties the log (flash and pending entries). The configuration stays.
+    pub fn clear_log(&mut self, token: &Standstill<'_>) -> Result<(), StoreError> {
+        self.flash.open(token);
+        let result = self.clear_open();
+        self.flash.close();
+        if result.is_ok() {
+            self.pending.clear();
+        }
+        result
+    }
+
+    /// The clear with the erase open: mark, erase, unmark (a cut in between: finished at boot).
+    fn clear_open(&mut self) -> Result<(), StoreError> {
+        self.store_item(KEY_CLEARING, &[1])?;
+        let mut queue = self.queue()?;
+        block_on(queue.erase_all()).map_err(StoreError::from)?;
+        self.store_item(KEY_CLEARING, &[0])
+    }
+}
+
+#[cfg(test)]
+#[path = "tests.rs"]
+mod tests;
