@@ -116,7 +116,7 @@ pub struct DataMargin {
     steps: u64,
     last_step: Option<u32>,
     last_level: Level,
-    last_valid: bool,
+    last_status: MarginStatus,
 }
 
 impl DataMargin {
@@ -131,7 +131,7 @@ impl DataMargin {
             steps: 0,
             last_step: None,
             last_level: Level::Normal,
-            last_valid: false,
+            last_status: MarginStatus::Invalid,
         })
     }
 
@@ -145,13 +145,10 @@ impl DataMargin {
         self.last_speed_mps
     }
 
-    /// The validity of the newest report, for the supervisor's margin check.
+    /// The newest report as the control task takes it: its validity for the supervisor's
+    /// margin check and, when valid, the margin schedule's input.
     pub fn margin_status(&self) -> MarginStatus {
-        if self.last_valid {
-            MarginStatus::Valid
-        } else {
-            MarginStatus::Invalid
-        }
+        self.last_status
     }
 
     /// Feeds one 1 kHz sample; every 10th returns the 100 Hz update (using `model`, the newest
@@ -188,7 +185,7 @@ impl DataMargin {
         let out = self.pipe.push(&sample, v, self.accel_mps2, t_s, model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
-        self.last_valid = out.report.valid;
+        self.last_status = MarginStatus::of_report(&out.report);
         Some((out, changed))
     }
 

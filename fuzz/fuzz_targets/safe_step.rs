@@ -9,6 +9,7 @@
 use libfuzzer_sys::fuzz_target;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
+use shimmy_core::control::schedule::MarginSignal;
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeController;
@@ -69,7 +70,11 @@ fuzz_target!(|data: &[u8]| {
         };
         let margin = match (flags >> 9) & 3 {
             0 => MarginStatus::NotUsed,
-            1 => MarginStatus::Valid,
+            1 => MarginStatus::Valid(MarginSignal {
+                speed_margin_mps: f32_at(b, 2),
+                time_to_critical_s: f32_at(b, 6),
+                zeta_fast: f32_at(b, 10),
+            }),
             _ => MarginStatus::Invalid,
         };
         let o = safe.step(&frame, margin);

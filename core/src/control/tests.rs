@@ -615,3 +615,47 @@ fn switching_the_law_at_run_time_keeps_the_state() {
     a.reset();
     assert_eq!(a.adaptive_gain(), p.asmc.k_init_radps2);
 }
+
+// ---------------------------------------------------------------- margin schedule, quiet coil
+
+/// Encoder noise alone (+-1 LSB on each 14-bit encoder): (rms and max of the shimmy-band
+/// amplitude, mean current, TV of the command) of `kind`.
+fn noise_amplitude(kind: ControllerKind, p: ControlParams, secs: f64) -> (f64, f64, f64, f64) {
+    let lsb = 2.0 * PI / 16384.0;
+    let (mut nl, mut nr) = (noise(7), noise(11));
+    let mut c = Controller::new(kind, p);
+    let mut amp = schedule::QuietCoil::new();
+    let n = (secs * 1000.0) as usize;
+    let (mut aa, mut amax, mut isum, mut tv, mut last) = (0.0, 0.0f64, 0.0, 0.0, 0.0);
+    for k in 0..n {
+        let mut i = input(0.0, 1e-3);
+        i.psi_l_rad = quantise(lsb * nl());
+        i.psi_r_rad = quantise(lsb * nr());
+        let o = c.step(&i);
+        let a = f64::from(amp.band_amplitude(
+            &p.schedule,
+            o.conditioned.psi_hp_rad,
+            o.conditioned.rate_hp_radps,
+            1e-3,
+        ));
+        if k > 500 {
+            aa += a * a;
+            amax = amax.max(a);
+        }
+        isum += f64::from(o.current_cmd_a);
+        tv += (f64::from(o.current_cmd_a) - last).abs();
+        last = f64::from(o.current_cmd_a);
+    }
+    ((aa / (n - 501) as f64).sqrt(), amax, isum / n as f64, tv)
+}
+
+#[test]
+fn quiet_coil_stays_off_on_encoder_noise() {
+    let p = ControlParams::default();
+    let (a_rms, a_max, i_mean, tv) = noise_amplitude(ControllerKind::MarginAsmc, p, 5.0);
+    println!(
+        "encoder noise: band amplitude rms {:.4} deg, max {:.4} deg; margin-asmc mean current {i_mean:.4} A, TV {tv:.3} A",
+        a_rms.to_degrees(),
+        a_max.to_degrees()
+    );
+}

@@ -31,6 +31,7 @@ use shimmy_core::control::{
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
+use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::SupervisorEvent;
@@ -114,6 +115,9 @@ pub struct LoopConfig {
     pub coil_drive: CoilDrive,
     /// The nominal coil and driver the board's drive assumes (the vehicle's).
     pub coil: CoilParams,
+    /// The margin pipeline's plant model and parameters (the vehicle the firmware believes).
+    /// It runs in the loop for the margin-scheduled arm, whose controller gets its report.
+    pub margin_model: (PlantParams, PipelineParams),
 }
 
 /// The supervisor thresholds `p` for `arm`: unchanged, except that the passive-off reference
@@ -150,6 +154,7 @@ impl LoopConfig {
             supervised: true,
             coil_drive: CoilDrive::Ideal,
             coil: vehicle.damper.coil,
+            margin_model: (vehicle.plant, vehicle.pipeline_params()),
         }
     }
 
@@ -160,7 +165,14 @@ impl LoopConfig {
     pub fn with_model(mut self, model: &Vehicle) -> Self {
         self.control = model.control_params();
         self.supervisor = reference_supervisor(self.arm, model.supervisor_params());
+        self.margin_model = (model.plant, model.pipeline_params());
         self
+    }
+
+    /// The margin pipeline runs in the loop and feeds the controller (the margin-scheduled
+    /// arm only: the other laws do not read the report, and their runs stay as they were).
+    pub fn margin_in_loop(&self) -> bool {
+        self.arm == Arm::Mr(ControllerKind::MarginAsmc)
     }
 }
 
@@ -537,6 +549,25 @@ pub fn run(
     } else {
         None
     };
+    // The margin pipeline of the board (meter task + model loop) on the model vehicle: its
+    // 100 Hz report reaches the controller on the next step, as the board's control task reads
+    // the meter task's newest report (10 ms cadence, one control period of latency).
+    let mut pipeline = if cfg.margin_in_loop() {
+        let (plant, pp) = cfg.margin_model;
+        // The parameters come from a validated vehicle; a configuration the meter rejects
+        // leaves the report invalid, the schedule's safe side.
+        ShimmyPipeline::<8>::new(plant, pp).ok().map(Box::new)
+    } else {
+        None
+    };
+    let mut margin = if cfg.margin_in_loop() {
+        MarginStatus::Invalid
+    } else {
+        MarginStatus::NotUsed
+    };
+    // The board's meter task: newest trusted speed, its first-order filter (tau 0.5 s) and
+    // the filter's derivative as the acceleration (`firmware::monitoring::DataMargin`).
+    let (mut v_held, mut v_filt, mut accel) = (f32::NAN, f32::NAN, 0.0f32);
     let n = (cfg.duration_s / cfg.dt_s).round() as usize;
     let every = cfg.record_every.max(1);
     let mut res = LoopResult::default();
@@ -579,7 +610,7 @@ pub fn run(
             held
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
-            let o = safe.step(&meas.raw_frame(t_us), MarginStatus::NotUsed);
+            let o = safe.step(&meas.raw_frame(t_us), margin);
             log_verdict(&mut res.faults, &mut safe, &o, t);
             safe_out = Some(o);
             let mut c = o.control.unwrap_or_default();
@@ -645,6 +676,26 @@ pub fn run(
                 damper_cmd: out.current_cmd_a,
             }),
         };
+        if let (Some(p), Some(o)) = (pipeline.as_mut(), &safe_out) {
+            // What the board's meter task is given: the trusted yaw and speed of the step; the
+            // acceleration of the trusted speed (the board filters its own).
+            if let Some(v) = o.validated.speed_mps.filter(|v| v.is_finite()) {
+                v_held = v;
+                if v_filt.is_finite() {
+                    let dt = cfg.dt_s as f32;
+                    let prev = v_filt;
+                    v_filt += dt / (0.5 + dt) * (v - v_filt);
+                    accel = (v_filt - prev) / dt;
+                } else {
+                    v_filt = v;
+                }
+            }
+            if let Some(smp) = sample {
+                if let Some(out) = p.push(&smp, v_held, accel, t) {
+                    margin = MarginStatus::of_report(&out.report);
+                }
+            }
+        }
         let mo = match (meter.as_mut(), sample) {
             (Some(m), Some(smp)) => m.push(&smp),
             _ => None,
