@@ -38,13 +38,14 @@
 //! 0. amplitude: the pair (psi_hp, psi_hp') through one first-order band-pass from half to
 //!    twice `band_hz` (steering harmonics below, the rate observer's quantisation noise up to
 //!    60 Hz above), A of the filtered pair;
-//! 1. noise floor: a slow average of A while the coil is not engaged (time constant
-//!    `noise_tau_s`), so road noise raises its own threshold: the engage amplitude is
+//! 1. noise floor: the running mean of A while the coil is not engaged, over at most
+//!    `noise_tau_s` (then a first-order average with that time constant), so road noise raises its own threshold: the engage amplitude is
 //!    max(scheduled amplitude, `noise_factor` x floor), the floor's part capped at the idle
 //!    engage amplitude (a slow growth, which the floor follows with a lag, still engages);
 //! 2. engage when A exceeds it; stay engaged until A has stayed below half of it for `hold_s`
 //!    (the tail of a decay is damped, not left to the 0 A damper);
-//! 3. while engaged the target is max(ASMC current, base current); otherwise 0 A;
+//! 3. while engaged the target is max(ASMC current, base current), in the hold the base
+//!    current alone (the ASMC's switching term would act on sensor noise there); otherwise 0 A;
 //! 4. envelope: the command follows a rising target at once (the coil driver's current loop
 //!    and the coil's own L/R limit the rise) and falls with the time constant `release_s`,
 //!    so the clipped half cycles of one burst keep their current instead of switching it.
@@ -146,12 +147,12 @@ impl Default for ScheduleParams {
             idle_zeta: 0.02,
             base_current_a: 1.0,
             armed_phi_radps: 0.05,
-            armed_engage_rad: 0.06f32 * (core::f32::consts::PI / 180.0),
+            armed_engage_rad: 0.1f32 * (core::f32::consts::PI / 180.0),
             idle_engage_rad: 0.3f32 * (core::f32::consts::PI / 180.0),
             noise_factor: 3.0,
             noise_tau_s: 2.0,
             hold_s: 0.4,
-            release_s: 0.15,
+            release_s: 0.1,
             band_hz: 6.0,
         }
     }
@@ -254,6 +255,7 @@ pub struct QuietCoil {
     lp_psi_rad: f32,
     lp_rate_radps: f32,
     noise_rad: f32,
+    learnt_s: f32,
     engaged: bool,
     below_s: f32,
     envelope_a: f32,
@@ -324,9 +326,12 @@ impl QuietCoil {
         } else {
             amplitude_rad
         };
-        if !self.engaged && amp.is_finite() && p.noise_tau_s > 0.0 {
-            // backward-Euler first-order average (no expf on the control path)
-            self.noise_rad += dt_s / (p.noise_tau_s + dt_s) * (amp - self.noise_rad);
+        if !self.engaged && amp.is_finite() && p.noise_tau_s > 0.0 && dt_s > 0.0 {
+            // The running mean over the time learnt so far, then a first-order average over
+            // `noise_tau_s` (backward Euler, no expf): the floor is there within the first
+            // second of driving, not after several time constants.
+            self.learnt_s = (self.learnt_s + dt_s).min(p.noise_tau_s);
+            self.noise_rad += dt_s / (self.learnt_s + dt_s) * (amp - self.noise_rad);
         }
         // The floor raises the threshold at most to the idle one: a slow growth, which the
         // floor follows with a lag, is still engaged at the idle amplitude.
@@ -346,10 +351,13 @@ impl QuietCoil {
                 self.below_s = 0.0;
             }
         }
-        let target = if self.engaged {
-            law_current_a.max(sch.base_current_a)
-        } else {
-            0.0
+        // Engaged: the law's current, at least the base; holding (the amplitude below half the
+        // engage amplitude, the tail of a decay): the base current only, because the law's
+        // switching term then acts on sensor noise at near-zero stroke rates.
+        let target = match (self.engaged, self.below_s > 0.0) {
+            (true, false) => law_current_a.max(sch.base_current_a),
+            (true, true) => sch.base_current_a,
+            (false, _) => 0.0,
         };
         let released = if p.release_s > 0.0 {
             self.envelope_a * (p.release_s / (p.release_s + dt_s))
