@@ -2,10 +2,10 @@
 
 use super::mr_fit::{self, FitSample, Smoothing, REFERENCE_GRID};
 use super::*;
-use schedule::ScheduleParams;
 use crate::mr_damper::{rates, SpencerParams, SpencerState};
 use core::f64::consts::PI;
 use proptest::prelude::*;
+use schedule::ScheduleParams;
 
 fn input(psi: f32, dt: f32) -> ControlInput {
     ControlInput {
@@ -661,7 +661,10 @@ fn quiet_coil_stays_off_on_encoder_noise() {
         a_rms.to_degrees(),
         a_max.to_degrees()
     );
-    assert!(a_max < 0.5 * f64::from(p.schedule.armed_engage_rad), "{a_max}");
+    assert!(
+        a_max < 0.5 * f64::from(p.schedule.armed_engage_rad),
+        "{a_max}"
+    );
     assert_eq!(tv, 0.0);
     // The band-pass is what keeps it off: the raw pair's amplitude (the observer's rate noise
     // up to 60 Hz) reaches several times the armed engage amplitude.
@@ -682,7 +685,10 @@ fn quiet_coil_stays_off_on_encoder_noise() {
             ));
         }
     }
-    assert!(raw_max > p.schedule.armed_engage_rad, "raw amplitude max {raw_max}");
+    assert!(
+        raw_max > p.schedule.armed_engage_rad,
+        "raw amplitude max {raw_max}"
+    );
 }
 
 /// A decaying 6 Hz shimmy burst (0.5 deg, decay 2 1/s) on noisy 14-bit encoders: (total
