@@ -195,7 +195,8 @@ impl ScheduleParams {
         let Some(m) = margin else {
             return 1.0;
         };
-        let a = closeness(
+        // Each term is in [0, 1] (NaN maps to 1), so their largest is too.
+        closeness(
             m.speed_margin_mps,
             self.arm_margin_mps,
             self.idle_margin_mps,
@@ -205,9 +206,7 @@ impl ScheduleParams {
             self.arm_ttc_s,
             self.idle_ttc_s,
         ))
-        .max(closeness(m.zeta_fast, self.arm_zeta, self.idle_zeta));
-        // max/min instead of clamp: no panic path on NaN.
-        a.max(0.0).min(1.0)
+        .max(closeness(m.zeta_fast, self.arm_zeta, self.idle_zeta))
     }
 
     /// The schedule for `margin`; `idle_phi_radps` is the ASMC's own boundary layer.
