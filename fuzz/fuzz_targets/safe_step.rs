@@ -7,9 +7,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use shimmy_core::control::schedule::MarginSignal;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
-use shimmy_core::control::schedule::MarginSignal;
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeController;
@@ -27,13 +27,14 @@ fuzz_target!(|data: &[u8]| {
     let Some((&sel, rest)) = data.split_first() else {
         return;
     };
-    let kind = match sel % 5 {
+    let kind = match sel % 6 {
         0 => ControllerKind::PassiveOff,
         1 => ControllerKind::PassiveOn {
             current_a: f32::from(sel) / 64.0,
         },
         2 => ControllerKind::Smc,
         3 => ControllerKind::Asmc,
+        4 => ControllerKind::MarginAsmc,
         _ => ControllerKind::Skyhook,
     };
     let params = ControlParams::default();

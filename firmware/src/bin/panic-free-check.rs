@@ -51,13 +51,14 @@ mod check {
 
     #[entry]
     fn main() -> ! {
-        let kind = match word(9) % 5 {
+        let kind = match word(9) % 6 {
             0 => ControllerKind::PassiveOff,
             1 => ControllerKind::PassiveOn {
                 current_a: f32::from_bits(word(8)),
             },
             2 => ControllerKind::Smc,
             3 => ControllerKind::Asmc,
+            4 => ControllerKind::MarginAsmc,
             _ => ControllerKind::Skyhook,
         };
         let mut safe =
