@@ -136,12 +136,14 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
 /// same seeds as before the split).
 ///
 /// One deviation from (0.25 b, 1.5 b), measured and kept visible rather than hidden: at
-/// zeta = 0.1, 18 Hz the spread is 2.21 b (200 runs; 2.09 b in the default 30) with the
-/// meter's AR(8) slow instance, tolerance 2.3 b (it was 1.67 b with AR(6), tolerance 1.75 b). AR(8) is the default because on the simulated
-/// vehicle the in-phase yaw carries the tramp mode, the steering-wheel mode and two tyre-lag
-/// poles next to the shimmy mode, and AR(6) then reads the shimmy damping +1.9 b (10 km/h) to
-/// +3.9 b (120 km/h) high, an optimistic margin (`shimmy-sim meter-accuracy`,
-/// `docs/margin-estimator.md`); AR(8) buys that bias down for this spread. Sampling a continuous
+/// zeta = 0.1, 18 Hz the spread is 2.45 b in the default 30 runs with the meter's AR(10) slow
+/// instance (README: the 200-run figure), tolerance 2.6 b. History: 1.67 b with AR(6)
+/// (tolerance 1.75 b), 2.09 b (30 runs) with AR(8) (tolerance 2.3 b). AR(10) is the default
+/// because on the simulated vehicle the in-phase yaw carries the tramp mode, the
+/// steering-wheel mode and two tyre-lag poles next to the shimmy mode: AR(8) reads the
+/// well-damped shimmy pole +0.7 to +2.3 b high at 105-120 km/h, AR(6) +1.9 to +4.9 b, an
+/// optimistic margin (`shimmy-sim meter-accuracy --slow-ar-order 8`,
+/// `docs/margin-estimator.md`); each order step buys that bias down for this spread. Sampling a continuous
 /// second-order mode gives an ARMA(2,1) process; the AR(6) represents its moving-average zero
 /// with four extra poles, and for a broad mode at 5.5 samples per cycle their estimation error
 /// leaks into the modal damping. Measured in exploratory runs (30-40 runs each): on exactly
@@ -162,7 +164,7 @@ fn one_mode_ambient_bias_and_spread_within_bound_18hz() {
                 snr_db: 20.0,
                 target: ModeSpec::unit(0.1, 18.0),
                 bias_tol: 0.25,
-                spread_tol: 2.3,
+                spread_tol: 2.6,
             },
             Case {
                 modes: vec![ModeSpec::unit(0.01, 18.0)],
@@ -230,7 +232,7 @@ fn two_mode_equal_participation_is_a_known_limitation() {
 /// discretised system at 100 Hz (Yule-Walker), independent of the RLS: returns the damping of
 /// the pole closest in frequency to `f_target` in the band.
 fn yule_walker_zeta(modes: &[ModeSpec], ord: usize, f_target: f64) -> f64 {
-    use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
+    use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64, MAX_ORDER};
     let tr = Truth::new(modes, 0.01);
     let qd = tr.l * tr.l.transpose();
     // stationary covariance by doubling: S = sum_k Ad^k Qd Ad'^k
@@ -248,7 +250,7 @@ fn yule_walker_zeta(modes: &[ModeSpec], ord: usize, f_target: f64) -> f64 {
     let rhs = nalgebra::DVector::<f64>::from_fn(ord, |i, _| r[i + 1]);
     let th = t.lu().solve(&rhs).unwrap();
     let c: Vec<f64> = th.iter().map(|v| -v).collect();
-    let mut z = [C64::default(); 8];
+    let mut z = [C64::default(); MAX_ORDER];
     aberth(&c, &mut z, false, 200).unwrap();
     z[..ord]
         .iter()

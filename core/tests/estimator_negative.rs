@@ -4,7 +4,7 @@ mod common;
 use common::*;
 use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
 use shimmy_core::estimator::meter::real::Real;
-use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64};
+use shimmy_core::estimator::meter::roots::{aberth, mode_of_root, C64, MAX_ORDER};
 
 /// Slow-instance estimates (every 10 s after 30 s) over `runs` runs; the wheel reference is
 /// replaced by the speed + radius form when `speed_radius` is given.
@@ -113,7 +113,7 @@ fn f32_coefficient_rounding_ruins_ar4_at_1khz_but_not_at_100hz() {
                     }
                 }
                 let c32: Vec<f64> = c[1..].iter().map(|v| (*v as f32) as f64).collect();
-                let mut r = [C64::default(); 8];
+                let mut r = [C64::default(); MAX_ORDER];
                 let e = match aberth(&c32, &mut r, false, 200) {
                     Ok(_) => r[..4]
                         .iter()

@@ -25,7 +25,7 @@ use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
@@ -103,13 +103,11 @@ pub type MarginUpdate = PipelineOutput;
 
 /// The data path at 100 Hz: the core's [`DataPipeline`] (mode meter -> fusion with the
 /// newest model margin -> monitor, thresholds from `PipelineParams::default()`), plus the
-/// vehicle acceleration the fusion needs (from the sampled speed).
+/// vehicle acceleration the fusion needs (the core's `AccelEstimator` on the sampled speed).
 pub struct DataMargin {
     pipe: DataPipeline<EVENT_LOG>,
     last_speed_mps: f32,
-    speed_filt_mps: f32,
-    accel_mps2: f32,
-    last_t_s: Option<f64>,
+    accel: AccelEstimator,
     /// Control steps since the first sample, widened from the samples' wrapping `u32` step
     /// count so the pipeline's time neither wraps (49.7 days at 1 kHz) nor loses the
     /// millisecond (an `f32` second count does after 2^24 ms = 4.66 h).
@@ -125,9 +123,7 @@ impl DataMargin {
         Ok(DataMargin {
             pipe: DataPipeline::new(&PipelineParams::default())?,
             last_speed_mps: f32::NAN,
-            speed_filt_mps: 0.0,
-            accel_mps2: 0.0,
-            last_t_s: None,
+            accel: AccelEstimator::new(),
             steps: 0,
             last_step: None,
             last_level: Level::Normal,
@@ -181,30 +177,12 @@ impl DataMargin {
             },
             damper_cmd: s.cmd_a,
         };
-        self.update_accel(t_s, v);
-        let out = self.pipe.push(&sample, v, self.accel_mps2, t_s, model)?;
+        let accel_mps2 = self.accel.update(t_s, v);
+        let out = self.pipe.push(&sample, v, accel_mps2, t_s, model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_status = MarginStatus::of_report(&out.report);
         Some((out, changed))
-    }
-
-    /// Acceleration: the derivative of the first-order filtered speed (tau 0.5 s).
-    fn update_accel(&mut self, t_s: f64, v: f32) {
-        if !v.is_finite() {
-            return;
-        }
-        match self.last_t_s {
-            Some(t0) if t_s > t0 => {
-                let dt = (t_s - t0) as f32;
-                let a = dt / (0.5 + dt);
-                let prev = self.speed_filt_mps;
-                self.speed_filt_mps += a * (v - self.speed_filt_mps);
-                self.accel_mps2 = (self.speed_filt_mps - prev) / dt;
-            }
-            _ => self.speed_filt_mps = v,
-        }
-        self.last_t_s = Some(t_s);
     }
 }
 

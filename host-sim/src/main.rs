@@ -61,6 +61,10 @@ enum Command {
     /// Run scenario files (default: the standard set in host-sim/scenarios/) and write one
     /// self-contained report: Markdown page, PNG plots, metrics table and CSV traces.
     Report(cmd::report::ReportArgs),
+    /// The board's mode meter, fusion and monitor on a measured log (CSV: wheel yaw or a
+    /// steering signal, speed): damping and frequency over time with uncertainty, warnings and
+    /// events as CSV, plot, Markdown/HTML report and JSON summary.
+    Analyze(cmd::analyze::AnalyzeArgs),
 }
 
 fn main() -> Result<()> {
@@ -80,6 +84,7 @@ fn main() -> Result<()> {
         Some(Command::Mismatch(a)) => cmd::mismatch::command(&a),
         Some(Command::Faults(a)) => cmd::faults::command(&a),
         Some(Command::Report(a)) => cmd::report::command(&a),
+        Some(Command::Analyze(a)) => cmd::analyze::command(&a),
         None => cmd::demo::command(&cli.demo),
     }
 }

@@ -104,6 +104,56 @@ impl Default for PipelineParams {
     }
 }
 
+/// The vehicle acceleration the fusion needs, from sampled speed: the derivative of the
+/// first-order filtered speed (time constant [`AccelEstimator::TAU_S`]). One place for the
+/// firmware's meter task and for `shimmy-sim analyze` on measured logs, so both hand the
+/// fusion the same number.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AccelEstimator {
+    speed_filt_mps: f32,
+    accel_mps2: f32,
+    last_t_s: Option<f64>,
+}
+
+impl AccelEstimator {
+    /// Time constant of the speed filter, s (a wheel-speed sensor's tooth noise differentiated
+    /// raw would swamp the fusion's time to critical).
+    pub const TAU_S: f32 = 0.5;
+
+    /// Zero acceleration, no speed seen yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Takes the speed `v` at time `t_s` (a non-finite speed is ignored, a time that does not
+    /// advance only re-seeds the filter) and returns the acceleration estimate, m/s^2.
+    /// (Inlined: it was the meter task's own code, and a call costs the task 7 instructions a
+    /// sample, `cargo xtask bench`.)
+    #[inline]
+    pub fn update(&mut self, t_s: f64, v: f32) -> f32 {
+        if !v.is_finite() {
+            return self.accel_mps2;
+        }
+        match self.last_t_s {
+            Some(t0) if t_s > t0 => {
+                let dt = (t_s - t0) as f32;
+                let a = dt / (Self::TAU_S + dt);
+                let prev = self.speed_filt_mps;
+                self.speed_filt_mps += a * (v - self.speed_filt_mps);
+                self.accel_mps2 = (self.speed_filt_mps - prev) / dt;
+            }
+            _ => self.speed_filt_mps = v,
+        }
+        self.last_t_s = Some(t_s);
+        self.accel_mps2
+    }
+
+    /// The latest estimate, m/s^2.
+    pub fn accel_mps2(&self) -> f32 {
+        self.accel_mps2
+    }
+}
+
 /// What a decimated step of the pipeline produced.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PipelineOutput {
@@ -294,6 +344,21 @@ impl<const N: usize> ShimmyPipeline<N> {
 mod tests {
     use super::*;
     use crate::estimator::meter::mode_meter::WheelOrder;
+
+    /// On a speed ramp the estimate settles on the ramp's slope (after a few filter time
+    /// constants), and a NaN speed leaves it alone.
+    #[test]
+    fn accel_estimator_follows_a_ramp() {
+        let mut acc = AccelEstimator::new();
+        let mut a = 0.0;
+        for k in 0..5000u32 {
+            let t = f64::from(k) * 1e-3;
+            a = acc.update(t, 5.0 + 0.8 * t as f32);
+        }
+        assert!((a - 0.8).abs() < 0.01, "{a}");
+        assert_eq!(acc.update(5.0, f32::NAN), a);
+        assert_eq!(acc.accel_mps2(), a);
+    }
 
     /// `ShimmyPipeline` is exactly a `DataPipeline` fed by a tracker stepped each tick: the
     /// composition by hand gives bit-identical outputs (so the firmware, which composes them

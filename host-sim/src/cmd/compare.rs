@@ -4,6 +4,7 @@
 use crate::model::sensors::SensorConfig;
 use crate::out::file_name::sanitize;
 use crate::out::plots::plot_runs;
+use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{f32_in, Range};
 use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
@@ -501,9 +502,12 @@ pub fn run_all(
     let jobs: Vec<(usize, Arm)> = (0..specs.len())
         .flat_map(|i| arms.iter().map(move |&a| (i, a)))
         .collect();
-    jobs.par_iter()
+    let bar = progress::bar(jobs.len(), "closed-loop runs");
+    let rows = jobs
+        .par_iter()
         .map(|&(i, arm)| {
             let (m, result) = run_one(&specs[i], arm, control)?;
+            bar.inc(1);
             Ok(RunRow {
                 scenario: specs[i].name.clone(),
                 arm,
@@ -512,7 +516,9 @@ pub fn run_all(
                 result,
             })
         })
-        .collect()
+        .collect();
+    bar.finish_and_clear();
+    rows
 }
 
 /// The `compare` command.

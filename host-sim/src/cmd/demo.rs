@@ -5,10 +5,11 @@
 
 use crate::model::plant::Method;
 use crate::out::plot_util;
+use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{LoopResult, RunMetrics, CLOSED_LOOP_METHOD};
-use crate::sim::demo_case::{demo_case_for, run_arm, ARMS};
+use crate::sim::demo_case::{demo_case_for, run_arm, ARMS, ROAD_SEED};
 use crate::sim::standard::POTHOLE_NM;
 use crate::sim::vehicle_file;
 use anyhow::{Context, Result};
@@ -220,6 +221,13 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
         case.t_pothole_s,
         mps_to_kmh(case.v_fastest_mps)
     );
+    let mut provenance = Provenance::of_this_process().vehicle("vehicle", plant_name, plant)?;
+    if let Some((model_name, m)) = &o.model {
+        provenance = provenance.vehicle("model vehicle", model_name, m)?;
+    }
+    let provenance = provenance
+        .seed("road noise", ROAD_SEED)
+        .seed("sensor noise", results[0].cfg.sensors.seed);
     let report = Report {
         title: "shimmy demo: MR damper off vs adaptive sliding-mode control".into(),
         intro,
@@ -232,6 +240,7 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
                 "meter.png".into(),
             )],
         }],
+        provenance: Some(provenance),
     };
     let w = report::write(&o.out, &report)?;
     Ok(DemoOutput {

@@ -11,6 +11,7 @@
 use crate::model::coil_drive::CoilDrive;
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
@@ -554,10 +555,16 @@ pub fn campaign(setup: &Setup, cases: &[Case], speeds_kmh: &[f64]) -> Result<Vec
             jobs.push((Arm::Mr(ControllerKind::Asmc), c, v));
         }
     }
+    let bar = progress::bar(jobs.len(), "fault runs");
     let mut out: Vec<CaseResult> = jobs
         .par_iter()
-        .map(|&(arm, c, v)| run_case(setup, arm, c, v, true).map(|r| r.0))
+        .map(|&(arm, c, v)| {
+            let r = run_case(setup, arm, c, v, true).map(|r| r.0);
+            bar.inc(1);
+            r
+        })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
     out.sort_by(|a, b| a.speed_kmh.total_cmp(&b.speed_kmh));
     Ok(out)
 }

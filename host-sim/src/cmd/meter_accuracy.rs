@@ -33,6 +33,7 @@ use shimmy_core::vehicle::Vehicle;
 use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::out::progress;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::vehicle_file;
 
@@ -72,9 +73,9 @@ pub struct MeterAccuracyArgs {
     /// Recorded time per run after the warm-up (30 s + 2 slow time constants), s: 10 to 3600.
     #[arg(long, default_value_t = 60.0, value_parser = arg_range::f64_in(RECORD_S))]
     pub record_s: f64,
-    /// AR order of the meter's slow instance, 2 to 8 (default: the meter's own, 8; 6 shows
-    /// the previous meter).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=8))]
+    /// AR order of the meter's slow instance, 2 to 10 (default: the meter's own, 10; 8 and 6
+    /// show the previous meters).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(2..=10))]
     pub slow_ar_order: Option<u8>,
     /// Output directory (meter_accuracy.md, meter_accuracy.csv).
     #[arg(long, default_value = "out/meter-accuracy")]
@@ -289,10 +290,16 @@ pub fn study(
     let jobs: Vec<(usize, u64)> = (0..cases.len())
         .flat_map(|c| (1..=u64::from(seeds)).map(move |s| (c, s)))
         .collect();
+    let bar = progress::bar(jobs.len(), "meter runs");
     let runs: Vec<(usize, CaseRun)> = jobs
         .par_iter()
-        .map(|&(c, s)| run_case(vehicle, cfg, cases[c], s, record_s).map(|r| (c, r)))
+        .map(|&(c, s)| {
+            let r = run_case(vehicle, cfg, cases[c], s, record_s).map(|r| (c, r));
+            bar.inc(1);
+            r
+        })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
     cases
         .iter()
         .enumerate()

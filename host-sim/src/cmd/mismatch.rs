@@ -26,6 +26,7 @@ use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::params::{Param, ParamSet, PlantParams};
 use shimmy_core::vehicle::Vehicle;
 
+use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
@@ -307,10 +308,16 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     }
     let wall = std::time::Instant::now();
     let pp = vehicle.pipeline_params();
+    let bar = progress::bar(chosen.len(), "mismatch cases");
     let rows: Vec<CaseResult> = chosen
         .par_iter()
-        .map(|c| run_case(c, &a.rates_kmh_per_s, a.drive_s, pp, a.seed))
+        .map(|c| {
+            let r = run_case(c, &a.rates_kmh_per_s, a.drive_s, pp, a.seed);
+            bar.inc(1);
+            r
+        })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
     let md = markdown(&rows, &a.rates_kmh_per_s);
     println!(
         "plant vs model mismatch (model `{}`; open loop, damper off, 5 N m road noise (seed {}), 2 N m imbalance; drive {:.0} s at 70 % of the true onset), {:.0} s wall",

@@ -3,6 +3,7 @@
 //!
 //! Rule: a command uses `out`, `sim` and `model`, never another command.
 
+pub mod analyze;
 pub mod bifurcation;
 pub mod compare;
 pub mod demo;

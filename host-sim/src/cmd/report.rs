@@ -2,9 +2,12 @@
 //! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
 //! report (see [`report`]). Every file is parsed and validated before anything runs.
 
+use crate::out::progress;
+use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
 use crate::sim::scenario_file;
+use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -114,14 +117,17 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
         .enumerate()
         .flat_map(|(i, (_, specs))| specs.iter().map(move |s| (i, s)))
         .collect();
+    let bar = progress::bar(jobs.len(), "closed-loop runs");
     let runs: Vec<(usize, ReportRun)> = jobs
         .par_iter()
         .map(|&(i, spec)| {
             let (cfg, r) = scenario::run(spec)
                 .with_context(|| format!("{} / {}", spec.name, spec.controller))?;
+            bar.inc(1);
             Ok((i, ReportRun::new(&spec.controller, cfg, r, spec.t_dist_s)))
         })
         .collect::<Result<_>>()?;
+    bar.finish_and_clear();
     let mut sections: Vec<Section> = plan
         .iter()
         .map(|(file, specs)| {
@@ -144,6 +150,21 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     for (i, r) in runs {
         sections[i].runs.push(r);
     }
+    let mut provenance = Provenance::of_this_process();
+    for (file, specs) in &plan {
+        provenance = provenance.file("scenario file", file)?;
+        if let Some(s) = specs.first() {
+            provenance = provenance.seed(
+                &format!("{} (road and sensor noise)", s.name),
+                s.sensors.seed,
+            );
+        }
+    }
+    for (role, spec) in [("vehicle", &a.vehicle), ("model vehicle", &a.model_vehicle)] {
+        if let Some(v) = spec {
+            provenance = provenance.vehicle(role, v, &vehicle_file::load(v)?)?;
+        }
+    }
     Ok(Report {
         title: "shimmy-sim scenario report".into(),
         intro: format!(
@@ -156,6 +177,7 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
             }
         ),
         sections,
+        provenance: Some(provenance),
     })
 }
 
@@ -214,6 +236,19 @@ mod tests {
         };
         command(&a).unwrap();
         let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+        crate::out::html::check_tables(&md).unwrap();
+        // The same page self-contained, and the metrics for scripts, with provenance.
+        let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(json["metrics"]["runs"].as_array().unwrap().len(), 4);
+        assert_eq!(json["provenance"]["inputs"][0]["role"], "scenario file");
+        assert!(
+            md.contains("| seed: kick (road and sensor noise) | 1 |"),
+            "{md}"
+        );
         for needle in [
             "## kick",
             "## bump",

@@ -35,6 +35,10 @@ pub struct RunArgs {
     /// The vehicle the firmware believes (overrides the file's `[model]`): a set or a file.
     #[arg(long)]
     pub model_vehicle: Option<String>,
+    /// Record every n-th 1 ms period in trace.csv (overrides the file's `output.trace_every`;
+    /// 1 makes the trace the mode meter's 1 kHz input log for `shimmy-sim analyze`): 1 to 1000.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1000))]
+    pub trace_every: Option<u64>,
 }
 
 /// The output folder of a run: `--out`, else the file's `output.dir`, else `out/<name>` with
@@ -58,6 +62,9 @@ pub fn command(a: &RunArgs) -> Result<()> {
     };
     spec.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
+    if let Some(n) = a.trace_every {
+        spec.trace_every = n as usize;
+    }
     let out = out_dir(a, &spec);
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let (cfg, r) = scenario::run(&spec)?;
@@ -172,6 +179,7 @@ mod tests {
             on_current_a: 1.0,
             vehicle: None,
             model_vehicle: None,
+            trace_every: None,
         };
         // The command path itself (with a file on disk).
         let file = out.with_extension("toml");

@@ -74,6 +74,63 @@ pub fn cells(xs: &[f64], y_first: f64, y_last: f64, ny: usize) -> Cells {
     }
 }
 
+/// Diverging colour of `t` in [-1, 1]: blue (-1) through white (0) to red (1); clipped.
+pub fn diverging(t: f64) -> RGBColor {
+    let t = t.clamp(-1.0, 1.0);
+    if t >= 0.0 {
+        let gb = (255.0 * (1.0 - t)) as u8;
+        RGBColor(255, gb, gb)
+    } else {
+        let rg = (255.0 * (1.0 + t)) as u8;
+        RGBColor(rg, rg, 255)
+    }
+}
+
+/// Sequential colour of `t` in [0, 1]: white (0) to red (1); clipped.
+pub fn white_to_red(t: f64) -> RGBColor {
+    diverging(t.clamp(0.0, 1.0))
+}
+
+/// Width of a heat map's colour bar, px (split off the right of the picture).
+pub const COLOUR_BAR_PX: u32 = 130;
+
+/// Draws a vertical colour bar into `area`: the values `lo..hi` (axis with ticks, described by
+/// `label`) in the colours `colour(value)` the heat map uses. `top_px` aligns it below the
+/// heat map's caption.
+pub fn colour_bar(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    lo: f64,
+    hi: f64,
+    label: &str,
+    top_px: u32,
+    colour: impl Fn(f64) -> RGBColor,
+) -> Result<()> {
+    let (lo, hi) = if hi > lo { (lo, hi) } else { (lo, lo + 1.0) };
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(top_px)
+        .margin_bottom(40)
+        .margin_right(10)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0.0..1.0, lo..hi)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .disable_y_mesh()
+        .x_labels(0)
+        .y_labels(9)
+        .y_label_style(("sans-serif", 12).into_font())
+        .axis_desc_style(("sans-serif", 13).into_font())
+        .y_desc(label)
+        .draw()?;
+    const STEPS: usize = 200;
+    let dy = (hi - lo) / STEPS as f64;
+    chart.draw_series((0..STEPS).map(|i| {
+        let y = lo + i as f64 * dy;
+        Rectangle::new([(0.0, y), (1.0, y + dy)], colour(y + dy / 2.0).filled())
+    }))?;
+    Ok(())
+}
+
 /// Colour-blind-safe palette (Okabe-Ito based) used for runs in every plot.
 pub const COLORS: [RGBColor; 6] = [
     RGBColor(120, 120, 120),

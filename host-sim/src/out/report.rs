@@ -6,14 +6,19 @@
 //! `report.md`, `metrics.csv` (every run, units in the header), per section `<name>-time.png`
 //! (wheel yaw, coil current, gain vs time), `<name>-margin.png` (the mode meter's damping
 //! estimate next to each run's reference line, the plant's shimmy mode as it runs, when the
-//! meter ran) and one trace CSV per run.
+//! meter ran) and one trace CSV per run; next to `report.md` the same page as one self-contained
+//! `report.html` (plots embedded) and `summary.json` (the metrics for scripts), both with the
+//! report's [`Provenance`] ([`write_pages`], also used by `shimmy-sim analyze`).
 
 use crate::out::file_name::sanitize;
+use crate::out::html;
 use crate::out::plots::{plot_margin, plot_runs};
+use crate::out::provenance::Provenance;
 use crate::out::table::opt;
 use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use crate::sim::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
+use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -65,6 +70,85 @@ pub struct Report {
     pub intro: String,
     /// The scenarios.
     pub sections: Vec<Section>,
+    /// Where it comes from (`None`: this process's command line only).
+    pub provenance: Option<Provenance>,
+}
+
+/// What [`write_pages`] produced.
+#[derive(Clone, Debug)]
+pub struct Pages {
+    /// `report.md`.
+    pub markdown: PathBuf,
+    /// `report.html`.
+    pub html: PathBuf,
+    /// `summary.json`.
+    pub json: PathBuf,
+}
+
+/// Writes a report's pages into `out`: `report.md` (`md` with the provenance section
+/// appended), `report.html` (the same page, self-contained: every referenced plot embedded)
+/// and `summary.json` (`{"title", "provenance", "metrics": metrics}`). The Markdown's tables
+/// are checked first: an invalid table is an error, not a broken page.
+pub fn write_pages(
+    out: &Path,
+    title: &str,
+    md: &str,
+    provenance: &Provenance,
+    metrics: Value,
+) -> Result<Pages> {
+    let md = format!("{}\n\n{}", md.trim_end(), provenance.markdown());
+    html::check_tables(&md).context("report.md")?;
+    let page = html::page(title, &md, out)?;
+    let pages = Pages {
+        markdown: out.join("report.md"),
+        html: out.join("report.html"),
+        json: out.join("summary.json"),
+    };
+    let summary = json!({"title": title, "provenance": provenance.json(), "metrics": metrics});
+    for (path, text) in [
+        (&pages.markdown, md),
+        (&pages.html, page),
+        (
+            &pages.json,
+            format!("{}\n", serde_json::to_string_pretty(&summary)?),
+        ),
+    ] {
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(pages)
+}
+
+/// The metrics of every run as JSON (for `summary.json`).
+fn metrics_json(report: &Report) -> Value {
+    let runs: Vec<Value> = report
+        .sections
+        .iter()
+        .flat_map(|sec| {
+            sec.runs.iter().map(move |r| {
+                let m = &r.metrics;
+                json!({
+                    "scenario": sec.name,
+                    "controller": r.label,
+                    "peak_yaw_deg": m.peak_yaw_rad.to_degrees(),
+                    "rms_yaw_deg": m.rms_yaw_rad.to_degrees(),
+                    "settle_s": m.settle_s,
+                    "peak_sw_deg": m.peak_sw_rad.to_degrees(),
+                    "rms_current_a": m.rms_current_a,
+                    "peak_current_a": m.peak_current_a,
+                    "energy_j": m.energy_j,
+                    "chatter_a": m.chatter_a,
+                    "rms_force_n": m.rms_force_n,
+                    "shimmy_s": m.shimmy_s,
+                    "amp_end_deg": m.amp_end_rad.to_degrees(),
+                    "amp_max_deg": m.amp_max_rad.to_degrees(),
+                    "shimmies": m.shimmies(),
+                    "sim_s": r.result.sim_s,
+                    "wall_s": r.result.wall_s,
+                })
+            })
+        })
+        .collect();
+    json!({ "runs": runs })
 }
 
 /// What [`write()`] produced.
@@ -72,6 +156,8 @@ pub struct Report {
 pub struct Written {
     /// `report.md`.
     pub report: PathBuf,
+    /// `report.html` and `summary.json`.
+    pub pages: Pages,
     /// Every PNG written.
     pub plots: Vec<PathBuf>,
     /// `metrics.csv` and the trace CSVs.
@@ -234,10 +320,14 @@ pub fn write(out: &Path, report: &Report) -> Result<Written> {
         "Run time: {sim:.1} s simulated in {wall:.2} s of summed run wall time ({:.0} simulated s per wall s per core).\n",
         sim / wall.max(1e-9)
     );
-    let report_md = out.join("report.md");
-    std::fs::write(&report_md, md).with_context(|| format!("writing {}", report_md.display()))?;
+    let provenance = report
+        .provenance
+        .clone()
+        .unwrap_or_else(Provenance::of_this_process);
+    let pages = write_pages(out, &report.title, &md, &provenance, metrics_json(report))?;
     Ok(Written {
-        report: report_md,
+        report: pages.markdown.clone(),
+        pages,
         plots,
         csv,
     })

@@ -31,7 +31,7 @@ use shimmy_core::control::{
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
-use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
+use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams, ShimmyPipeline};
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::SupervisorEvent;
@@ -237,6 +237,14 @@ pub struct TraceRow {
     pub zeta: f64,
     /// Latest mode-meter frequency, Hz (NaN before the first valid one).
     pub freq_hz: f64,
+    /// Left wheel yaw the mode meter received this period, rad (the validated measurement;
+    /// NaN when it received none): with `trace_every = 1` the trace is the meter's input log
+    /// (`shimmy-sim analyze`).
+    pub psi_l_meas_rad: f64,
+    /// Right wheel yaw the mode meter received, rad (NaN: none).
+    pub psi_r_meas_rad: f64,
+    /// Measured speed of the meter's wheel-order reference, m/s (NaN: no sample).
+    pub speed_meas_mps: f64,
 }
 
 /// One 100 Hz output of the mode meter.
@@ -478,12 +486,14 @@ impl LoopResult {
         let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
         writeln!(
             w,
-            "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz"
+            "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps"
         )?;
+        // The meter's inputs are f32 widened to f64: printed in shortest round-trip form,
+        // parsing them back gives the very same f32.
         for r in &self.trace {
             writeln!(
                 w,
-                "{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{}",
+                "{},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 r.t_s,
                 r.psi_l_rad,
                 r.psi_r_rad,
@@ -497,7 +507,10 @@ impl LoopResult {
                 r.gain_radps2,
                 r.flags,
                 r.zeta,
-                r.freq_hz
+                r.freq_hz,
+                r.psi_l_meas_rad,
+                r.psi_r_meas_rad,
+                r.speed_meas_mps
             )?;
         }
         w.flush()
@@ -565,9 +578,9 @@ pub fn run(
     } else {
         MarginStatus::NotUsed
     };
-    // The board's meter task: newest trusted speed, its first-order filter (tau 0.5 s) and
-    // the filter's derivative as the acceleration (`firmware::monitoring::DataMargin`).
-    let (mut v_held, mut v_filt, mut accel) = (f32::NAN, f32::NAN, 0.0f32);
+    // The board's meter task: the newest trusted speed and the core's acceleration estimate
+    // on it (`firmware::monitoring::DataMargin`).
+    let (mut v_held, mut accel) = (f32::NAN, AccelEstimator::new());
     let n = (cfg.duration_s / cfg.dt_s).round() as usize;
     let every = cfg.record_every.max(1);
     let mut res = LoopResult::default();
@@ -677,25 +690,24 @@ pub fn run(
             }),
         };
         if let (Some(p), Some(o)) = (pipeline.as_mut(), &safe_out) {
-            // What the board's meter task is given: the trusted yaw and speed of the step; the
-            // acceleration of the trusted speed (the board filters its own).
+            // What the board's meter task is given: the trusted yaw and speed of the step.
             if let Some(v) = o.validated.speed_mps.filter(|v| v.is_finite()) {
                 v_held = v;
-                if v_filt.is_finite() {
-                    let dt = cfg.dt_s as f32;
-                    let prev = v_filt;
-                    v_filt += dt / (0.5 + dt) * (v - v_filt);
-                    accel = (v_filt - prev) / dt;
-                } else {
-                    v_filt = v;
-                }
             }
+            let a = accel.update(t, v_held);
             if let Some(smp) = sample {
-                if let Some(out) = p.push(&smp, v_held, accel, t) {
+                if let Some(out) = p.push(&smp, v_held, a, t) {
                     margin = MarginStatus::of_report(&out.report);
                 }
             }
         }
+        let meter_in = sample.map_or((f64::NAN, f64::NAN, f64::NAN), |smp| {
+            (
+                f64::from(smp.psi_l_rad),
+                f64::from(smp.psi_r_rad),
+                f64::from(meas.speed_mps),
+            )
+        });
         let mo = match (meter.as_mut(), sample) {
             (Some(m), Some(smp)) => m.push(&smp),
             _ => None,
@@ -751,6 +763,9 @@ pub fn run(
                 flags: flag_bits(&out),
                 zeta,
                 freq_hz: freq,
+                psi_l_meas_rad: meter_in.0,
+                psi_r_meas_rad: meter_in.1,
+                speed_meas_mps: meter_in.2,
             });
         }
         sim.advance(cfg.dt_s, &inputs)?;

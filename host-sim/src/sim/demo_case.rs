@@ -47,6 +47,9 @@ pub fn demo_case(ramp_s: f64) -> Result<DemoCase> {
     demo_case_for(&nominal, &nominal, ramp_s)
 }
 
+/// Seed of the demo's road noise.
+pub const ROAD_SEED: u64 = 7;
+
 /// The demo's case on the simulated vehicle `plant` with a firmware that believes `model`;
 /// the Hopf window and the pothole's speed are the simulated plant's.
 pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
@@ -70,7 +73,7 @@ pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<De
         t0_s: 0.0,
         t1_s: ramp_s,
     });
-    let (n, im) = road(7, &p);
+    let (n, im) = road(ROAD_SEED, &p);
     sc.noise = Some(n);
     sc.imbalance = Some(im);
     let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);

@@ -5,9 +5,11 @@
 //!
 //! Rule: uses only `model` (and `shimmy-core`), never `out` or `cmd`.
 
+pub mod analyze;
 pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
+pub mod log_file;
 pub mod margin_run;
 pub mod open_loop;
 pub mod reference;

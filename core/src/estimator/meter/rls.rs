@@ -13,8 +13,8 @@
 
 use super::real::Real;
 
-/// Largest regressor dimension (8 AR + sin + cos + bias + damper input).
-pub const N_MAX: usize = 12;
+/// Largest regressor dimension (10 AR + sin + cos + bias + damper input).
+pub const N_MAX: usize = 14;
 
 /// Why an RLS update was refused (the state is unchanged in every case).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]

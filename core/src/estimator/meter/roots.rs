@@ -10,7 +10,7 @@
 //! Schur decomposition of the companion matrix) checks it in the tests.
 
 /// Largest AR order supported.
-pub const MAX_ORDER: usize = 8;
+pub const MAX_ORDER: usize = 10;
 
 use super::real::Real;
 

@@ -210,8 +210,10 @@ fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Resu
 }
 
 fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
-    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE)?;
+    let picture =
+        BitMapBackend::new(path, (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
+    picture.fill(&WHITE)?;
+    let (root, bar) = picture.split_horizontally(1000);
     let cells = plot_util::cells(
         &map.speeds_kmh,
         map.rows[0].value,
@@ -250,27 +252,29 @@ fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
         .max(1e-9);
     chart.draw_series(map.rows.iter().flat_map(|r| {
         map.speeds_kmh.iter().zip(&r.max_re).map(move |(&v, &re)| {
-            let t = (re / scale).clamp(-1.0, 1.0);
-            let (red, green, blue) = if t >= 0.0 {
-                (255.0, 255.0 * (1.0 - t), 255.0 * (1.0 - t))
-            } else {
-                (255.0 * (1.0 + t), 255.0 * (1.0 + t), 255.0)
-            };
             Rectangle::new(
                 [
                     (v - dv / 2.0, r.value - dp / 2.0),
                     (v + dv / 2.0, r.value + dp / 2.0),
                 ],
-                RGBColor(red as u8, green as u8, blue as u8).filled(),
+                plot_util::diverging(re / scale).filled(),
             )
         })
     }))?;
+    plot_util::colour_bar(
+        &bar,
+        -scale,
+        scale,
+        "max Re lambda [1/s] (clipped)",
+        40,
+        |re| plot_util::diverging(re / scale),
+    )?;
     chart.draw_series(map.rows.iter().flat_map(|r| {
         r.crossings
             .iter()
             .map(move |&(v, _)| Circle::new((v, r.value), 3, BLACK.filled()))
     }))?;
-    root.present()?;
+    picture.present()?;
     Ok(())
 }
 

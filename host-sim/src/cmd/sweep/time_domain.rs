@@ -241,8 +241,10 @@ fn boundary_csv(g: &TdGrid) -> String {
 /// Heat map of the end amplitude (white 0 -> red at `scale_deg`), shimmy cells marked with a
 /// black cross, the linear no-damper Hopf boundary as black dots joined per onset/offset.
 pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Result<()> {
-    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE)?;
+    let picture =
+        BitMapBackend::new(path, (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
+    picture.fill(&WHITE)?;
+    let (root, bar) = picture.split_horizontally(1000);
     let cells = plot_util::cells(
         &g.speeds_kmh,
         g.values[0],
@@ -268,16 +270,22 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
         &format!("{} [{}]", g.param.name(), g.param.unit()),
     )?;
     chart.draw_series(m.points.iter().map(|p| {
-        let t = (p.amp_end_rad.to_degrees() / scale_deg).clamp(0.0, 1.0);
-        let gb = (255.0 * (1.0 - t)) as u8;
         Rectangle::new(
             [
                 (p.speed_kmh - dv / 2.0, p.value - dp / 2.0),
                 (p.speed_kmh + dv / 2.0, p.value + dp / 2.0),
             ],
-            RGBColor(255, gb, gb).filled(),
+            plot_util::white_to_red(p.amp_end_rad.to_degrees() / scale_deg).filled(),
         )
     }))?;
+    plot_util::colour_bar(
+        &bar,
+        0.0,
+        scale_deg,
+        "amplitude at the end [deg]",
+        40,
+        |a| plot_util::white_to_red(a / scale_deg),
+    )?;
     chart.draw_series(
         m.points
             .iter()
@@ -294,7 +302,7 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
         chart.draw_series(LineSeries::new(line.clone(), BLACK.stroke_width(2)))?;
         chart.draw_series(line.iter().map(|&p| Circle::new(p, 3, BLACK.filled())))?;
     }
-    root.present()?;
+    picture.present()?;
     Ok(())
 }
 

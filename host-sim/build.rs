@@ -1,0 +1,38 @@
+//! Build-time provenance for the reports: `SHIMMY_GIT` is `git describe --always --dirty
+//! --tags` of the source tree, or a sentence saying why there is none (no git, not a
+//! checkout), so a build from a tarball still works and says so.
+
+use std::process::Command;
+
+fn git(args: &[&str]) -> Option<String> {
+    let out = Command::new("git").args(args).output().ok()?;
+    if !out.status.success() {
+        return None;
+    }
+    let s = String::from_utf8(out.stdout).ok()?.trim().to_string();
+    (!s.is_empty()).then_some(s)
+}
+
+fn main() {
+    let describe = match git(&["describe", "--always", "--dirty", "--tags"]) {
+        Some(d) => d,
+        None if git(&["--version"]).is_none() => "unknown (built without git)".to_string(),
+        None => "unknown (not built from a git checkout)".to_string(),
+    };
+    println!("cargo:rustc-env=SHIMMY_GIT={describe}");
+    // Rebuild on a new commit or checkout (HEAD and the branch it points to) and on source
+    // edits (for the `-dirty` mark).
+    if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
+        println!("cargo:rerun-if-changed={dir}/HEAD");
+    }
+    if let (Some(common), Some(head)) = (
+        git(&["rev-parse", "--git-common-dir"]),
+        git(&["symbolic-ref", "-q", "HEAD"]),
+    ) {
+        println!("cargo:rerun-if-changed={common}/{head}");
+        println!("cargo:rerun-if-changed={common}/packed-refs");
+    }
+    for d in ["src", "../core/src", "build.rs"] {
+        println!("cargo:rerun-if-changed={d}");
+    }
+}
