@@ -292,7 +292,8 @@ impl Controller {
     /// One control step. Call once per sample (the filters are designed for
     /// `params.conditioning.sample_rate_hz`).
     pub fn step(&mut self, input: &ControlInput) -> ControlOutput {
-        let p = self.params;
+        // By reference: a copy of the whole parameter set costs the 1 kHz step ~250 instructions.
+        let p = &self.params;
         let mut flags = ControlFlags::default();
         if !self.inputs_valid(input) {
             flags.input_invalid = true;
