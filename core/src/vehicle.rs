@@ -18,6 +18,7 @@
 use crate::control::actuator::{CoilParams, CurrentLimits};
 use crate::control::conditioning::ConditioningParams;
 use crate::control::mr_model::MrModel;
+use crate::control::schedule::ScheduleParams;
 use crate::control::smc::{AsmcParams, NominalPlant, SmcParams};
 use crate::control::ControlParams;
 use crate::estimator::fusion::FusionParams;
@@ -80,6 +81,8 @@ pub struct ControllerGains {
     pub slew_a_per_s: f32,
     /// Speed gate: below it the damper gets the minimum current, m/s.
     pub min_speed_mps: f32,
+    /// Margin schedule and quiet coil of the margin-scheduled ASMC.
+    pub schedule: ScheduleParams,
 }
 
 impl Default for ControllerGains {
@@ -91,6 +94,7 @@ impl Default for ControllerGains {
             skyhook_ns_per_m: c.skyhook_ns_per_m,
             slew_a_per_s: c.limits.slew_a_per_s,
             min_speed_mps: c.min_speed_mps,
+            schedule: c.schedule,
         }
     }
 }
@@ -162,6 +166,7 @@ impl Vehicle {
             mr: self.damper.model,
             smc: self.controller.smc,
             asmc: self.controller.asmc,
+            schedule: self.controller.schedule,
             skyhook_ns_per_m: self.controller.skyhook_ns_per_m,
             limits: CurrentLimits {
                 i_min_a: 0.0,
@@ -397,6 +402,41 @@ const RULES: &[Rule] = &[
             let a = &v.controller.asmc;
             a.k_min_radps2 <= a.k_init_radps2 && a.k_init_radps2 <= a.k_max_radps2
         },
+    },
+    Rule {
+        section: "controller",
+        name: "idle_margin_mps",
+        rule: "must not be below arm_margin_mps",
+        value: |v| f64::from(v.controller.schedule.idle_margin_mps),
+        holds: |v| v.controller.schedule.idle_margin_mps >= v.controller.schedule.arm_margin_mps,
+    },
+    Rule {
+        section: "controller",
+        name: "idle_ttc_s",
+        rule: "must not be below arm_ttc_s",
+        value: |v| f64::from(v.controller.schedule.idle_ttc_s),
+        holds: |v| v.controller.schedule.idle_ttc_s >= v.controller.schedule.arm_ttc_s,
+    },
+    Rule {
+        section: "controller",
+        name: "idle_zeta",
+        rule: "must not be below arm_zeta",
+        value: |v| f64::from(v.controller.schedule.idle_zeta),
+        holds: |v| v.controller.schedule.idle_zeta >= v.controller.schedule.arm_zeta,
+    },
+    Rule {
+        section: "controller",
+        name: "idle_engage_rad",
+        rule: "must not be below armed_engage_rad (arming engages the coil earlier)",
+        value: |v| f64::from(v.controller.schedule.idle_engage_rad),
+        holds: |v| v.controller.schedule.idle_engage_rad >= v.controller.schedule.armed_engage_rad,
+    },
+    Rule {
+        section: "controller",
+        name: "base_current_a",
+        rule: "must not exceed the coil rating damper.rated_current_a",
+        value: |v| f64::from(v.controller.schedule.base_current_a),
+        holds: |v| v.controller.schedule.base_current_a <= v.damper.model.i_max_a,
     },
     Rule {
         section: "thresholds",
@@ -874,6 +914,141 @@ pub static FIELDS: &[Field] = &[
         30.0,
         "speed gate: minimum current below this speed (and the supervisor's low-speed plausibility limit)",
         |v| v.controller.min_speed_mps
+    ),
+    field!(
+        "controller",
+        "arm_margin_mps",
+        "m/s",
+        0.0,
+        50.0,
+        "margin schedule: speed margin at and below which the damper is fully armed",
+        |v| v.controller.schedule.arm_margin_mps
+    ),
+    field!(
+        "controller",
+        "idle_margin_mps",
+        "m/s",
+        0.0,
+        50.0,
+        "margin schedule: speed margin at and above which it idles",
+        |v| v.controller.schedule.idle_margin_mps
+    ),
+    field!(
+        "controller",
+        "arm_ttc_s",
+        "s",
+        0.0,
+        600.0,
+        "margin schedule: time to critical speed at and below which it is fully armed",
+        |v| v.controller.schedule.arm_ttc_s
+    ),
+    field!(
+        "controller",
+        "idle_ttc_s",
+        "s",
+        0.0,
+        600.0,
+        "margin schedule: time to critical speed at and above which that term idles",
+        |v| v.controller.schedule.idle_ttc_s
+    ),
+    field!(
+        "controller",
+        "arm_zeta",
+        "-",
+        -0.5,
+        0.5,
+        "margin schedule: fast data damping at and below which it is fully armed (growth)",
+        |v| v.controller.schedule.arm_zeta
+    ),
+    field!(
+        "controller",
+        "idle_zeta",
+        "-",
+        -0.5,
+        0.5,
+        "margin schedule: fast data damping at and above which that term idles",
+        |v| v.controller.schedule.idle_zeta
+    ),
+    field!(
+        "controller",
+        "base_current_a",
+        "A",
+        0.0,
+        20.0,
+        "margin schedule: base current while the coil is engaged and fully armed (at most the coil rating)",
+        |v| v.controller.schedule.base_current_a
+    ),
+    field!(
+        "controller",
+        "armed_phi_radps",
+        "rad/s",
+        1.0e-3,
+        10.0,
+        "margin schedule: ASMC boundary layer when fully armed (idle: phi_radps)",
+        |v| v.controller.schedule.armed_phi_radps
+    ),
+    field!(
+        "controller",
+        "armed_engage_rad",
+        "rad",
+        0.0,
+        0.1,
+        "quiet coil: shimmy-band amplitude that engages the coil when fully armed",
+        |v| v.controller.schedule.armed_engage_rad
+    ),
+    field!(
+        "controller",
+        "idle_engage_rad",
+        "rad",
+        0.0,
+        0.1,
+        "quiet coil: shimmy-band amplitude that engages the coil when idle",
+        |v| v.controller.schedule.idle_engage_rad
+    ),
+    field!(
+        "controller",
+        "noise_factor",
+        "-",
+        0.0,
+        100.0,
+        "quiet coil: the engage amplitude is at least this many times the road-noise floor",
+        |v| v.controller.schedule.noise_factor
+    ),
+    field!(
+        "controller",
+        "noise_tau_s",
+        "s",
+        0.0,
+        100.0,
+        "quiet coil: time constant of the road-noise floor (0: no floor)",
+        |v| v.controller.schedule.noise_tau_s
+    ),
+    field!(
+        "controller",
+        "hold_s",
+        "s",
+        0.0,
+        10.0,
+        "quiet coil: stays engaged this long after the amplitude fell below half the engage amplitude",
+        |v| v.controller.schedule.hold_s
+    ),
+    field!(
+        "controller",
+        "release_s",
+        "s",
+        0.0,
+        10.0,
+        "quiet coil: release time constant of the command envelope",
+        |v| v.controller.schedule.release_s
+    ),
+    field!(
+        "controller",
+        "band_hz",
+        "Hz",
+        0.5,
+        50.0,
+        "quiet coil: frequency that turns the shimmy-band rate into an amplitude (the shimmy mode's)",
+        |v| v.controller.schedule.band_hz
     ),
     // Warning thresholds of the margin monitor.
     field!(

@@ -126,7 +126,7 @@ pub struct DataMargin {
     steps: u64,
     last_step: Option<u32>,
     last_level: Level,
-    last_valid: bool,
+    last_status: MarginStatus,
 }
 
 impl DataMargin {
@@ -144,7 +144,7 @@ impl DataMargin {
             steps: 0,
             last_step: None,
             last_level: Level::Normal,
-            last_valid: false,
+            last_status: MarginStatus::Invalid,
         })
     }
 
@@ -158,13 +158,10 @@ impl DataMargin {
         self.last_speed_mps
     }
 
-    /// The validity of the newest report, for the supervisor's margin check.
+    /// The newest report as the control task takes it: its validity for the supervisor's
+    /// margin check and, when valid, the margin schedule's input.
     pub fn margin_status(&self) -> MarginStatus {
-        if self.last_valid {
-            MarginStatus::Valid
-        } else {
-            MarginStatus::Invalid
-        }
+        self.last_status
     }
 
     /// Feeds one 1 kHz sample; every 10th returns the 100 Hz update (using `model`, the newest
@@ -203,7 +200,7 @@ impl DataMargin {
             .push_timed(&sample, v, accel_mps2, || step_time_s(steps), model)?;
         let changed = out.level != self.last_level;
         self.last_level = out.level;
-        self.last_valid = out.report.valid;
+        self.last_status = MarginStatus::of_report(&out.report);
         Some((out, changed))
     }
 

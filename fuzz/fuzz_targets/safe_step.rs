@@ -7,6 +7,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use shimmy_core::control::schedule::MarginSignal;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
@@ -26,13 +27,14 @@ fuzz_target!(|data: &[u8]| {
     let Some((&sel, rest)) = data.split_first() else {
         return;
     };
-    let kind = match sel % 5 {
+    let kind = match sel % 6 {
         0 => ControllerKind::PassiveOff,
         1 => ControllerKind::PassiveOn {
             current_a: f32::from(sel) / 64.0,
         },
         2 => ControllerKind::Smc,
         3 => ControllerKind::Asmc,
+        4 => ControllerKind::MarginAsmc,
         _ => ControllerKind::Skyhook,
     };
     let params = ControlParams::default();
@@ -69,7 +71,11 @@ fuzz_target!(|data: &[u8]| {
         };
         let margin = match (flags >> 9) & 3 {
             0 => MarginStatus::NotUsed,
-            1 => MarginStatus::Valid,
+            1 => MarginStatus::Valid(MarginSignal {
+                speed_margin_mps: f32_at(b, 2),
+                time_to_critical_s: f32_at(b, 6),
+                zeta_fast: f32_at(b, 10),
+            }),
             _ => MarginStatus::Invalid,
         };
         let o = safe.step(&frame, margin);

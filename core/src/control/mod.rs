@@ -39,11 +39,13 @@ pub mod conditioning;
 #[cfg_attr(not(test), allow(clippy::indexing_slicing))]
 pub mod mr_fit;
 pub mod mr_model;
+pub mod schedule;
 pub mod smc;
 
 use actuator::{CurrentLimiter, CurrentLimits};
 use conditioning::{Conditioned, Conditioner, ConditioningParams};
 use mr_model::MrModel;
+use schedule::{MarginSignal, QuietCoil, ScheduleParams, SpeedSchedule};
 use smc::{AdaptiveGain, AsmcParams, NominalPlant, SmcParams};
 
 /// Which control law runs. Selectable at run time with [`Controller::set_kind`].
@@ -62,6 +64,10 @@ pub enum ControllerKind {
     Asmc,
     /// Clipped-optimal skyhook on the shimmy-band stroke rate: F_des = c_sky v_d,hp.
     Skyhook,
+    /// The ASMC scheduled by the margin report, through the quiet coil ([`schedule`]).
+    MarginAsmc,
+    /// Current as a function of speed only (the production damper's baseline).
+    SpeedScheduled(SpeedSchedule),
 }
 
 impl ControllerKind {
@@ -73,10 +79,13 @@ impl ControllerKind {
             ControllerKind::Smc => "smc",
             ControllerKind::Asmc => "asmc",
             ControllerKind::Skyhook => "skyhook",
+            ControllerKind::MarginAsmc => "margin-asmc",
+            ControllerKind::SpeedScheduled(_) => "speed-sched",
         }
     }
 
-    /// Parses a name (`passive-on` takes `on_current_a`).
+    /// Parses a name (`passive-on` takes `on_current_a`; `speed-sched` needs its table and is
+    /// not parsed).
     pub fn from_name(name: &str, on_current_a: f32) -> Option<Self> {
         Some(match name {
             "passive-off" | "off" => ControllerKind::PassiveOff,
@@ -86,6 +95,7 @@ impl ControllerKind {
             "smc" => ControllerKind::Smc,
             "asmc" => ControllerKind::Asmc,
             "skyhook" => ControllerKind::Skyhook,
+            "margin-asmc" => ControllerKind::MarginAsmc,
             _ => return None,
         })
     }
@@ -104,6 +114,8 @@ pub struct ControlParams {
     pub smc: SmcParams,
     /// Adaptation law.
     pub asmc: AsmcParams,
+    /// Margin schedule and quiet coil of [`ControllerKind::MarginAsmc`].
+    pub schedule: ScheduleParams,
     /// Skyhook coefficient on the shimmy-band stroke rate, N s/m.
     pub skyhook_ns_per_m: f32,
     /// Coil-current limits and slew rate.
@@ -129,6 +141,7 @@ impl Default for ControlParams {
             mr: MrModel::FITTED,
             smc: SmcParams::default(),
             asmc: AsmcParams::default(),
+            schedule: ScheduleParams::default(),
             skyhook_ns_per_m: 1000.0,
             limits: CurrentLimits::default(),
             // the fail-safe current (one place, next to the coil limits; chosen from the stability
@@ -173,6 +186,8 @@ pub struct ControlFlags {
     pub below_speed: bool,
     /// The ASMC growth term was active this step.
     pub adapting: bool,
+    /// The quiet coil is engaged ([`ControllerKind::MarginAsmc`]).
+    pub engaged: bool,
 }
 
 /// Outputs of one control step.
@@ -204,6 +219,8 @@ pub struct Controller {
     cond: Conditioner,
     gain: AdaptiveGain,
     limiter: CurrentLimiter,
+    coil: QuietCoil,
+    margin: Option<MarginSignal>,
 }
 
 impl Controller {
@@ -215,7 +232,25 @@ impl Controller {
             cond: Conditioner::new(&params.conditioning),
             gain: AdaptiveGain::new(&params.asmc),
             limiter: CurrentLimiter::new(params.limits),
+            coil: QuietCoil::new(),
+            margin: None,
         }
+    }
+
+    /// The newest margin report for the schedule (`None`: no valid report, the schedule's safe
+    /// side). Kept until the next call.
+    pub fn set_margin(&mut self, margin: Option<MarginSignal>) {
+        self.margin = margin;
+    }
+
+    /// The margin the schedule uses.
+    pub fn margin(&self) -> Option<&MarginSignal> {
+        self.margin.as_ref()
+    }
+
+    /// The quiet coil's state (noise floor).
+    pub fn quiet_coil(&self) -> &QuietCoil {
+        &self.coil
     }
 
     /// The law in use.
@@ -245,6 +280,7 @@ impl Controller {
         self.cond.reset();
         self.gain.reset(&self.params.asmc);
         self.limiter.reset_to(0.0);
+        self.coil = QuietCoil::new();
     }
 
     fn inputs_valid(&self, i: &ControlInput) -> bool {
@@ -258,7 +294,8 @@ impl Controller {
     /// One control step. Call once per sample (the filters are designed for
     /// `params.conditioning.sample_rate_hz`).
     pub fn step(&mut self, input: &ControlInput) -> ControlOutput {
-        let p = self.params;
+        // By reference: a copy of the whole parameter set costs the 1 kHz step ~250 instructions.
+        let p = &self.params;
         let mut flags = ControlFlags::default();
         if !self.inputs_valid(input) {
             flags.input_invalid = true;
@@ -290,6 +327,27 @@ impl Controller {
         let (target, force, gain) = match self.kind {
             ControllerKind::PassiveOff => (0.0, None, 0.0),
             ControllerKind::PassiveOn { current_a } => (current_a, None, 0.0),
+            ControllerKind::SpeedScheduled(table) => (table.current_at(input.speed_mps), None, 0.0),
+            ControllerKind::MarginAsmc => {
+                let sch = p.schedule.schedule(self.margin.as_ref(), p.smc.phi_radps);
+                let smc = SmcParams {
+                    phi_radps: sch.phi_radps,
+                    ..p.smc
+                };
+                let k = self.gain.get();
+                let f = smc::smc_force_n(nom, &smc, s, c.rate_hp_radps, k);
+                let inv = p.mr.inverse(f, v_d);
+                flags.clipped = inv.clipped;
+                flags.saturated = inv.saturated;
+                let amp = self
+                    .coil
+                    .band_amplitude(&p.schedule, c.psi_hp_rad, c.rate_hp_radps, dt);
+                let q = self
+                    .coil
+                    .step(&p.schedule, &sch, amp, inv.current_a, p.limits.i_max_a, dt);
+                flags.engaged = q.engaged;
+                (q.current_a, Some(f), k)
+            }
             ControllerKind::Smc | ControllerKind::Asmc | ControllerKind::Skyhook => {
                 let (f, k) = match self.kind {
                     ControllerKind::Smc => (
@@ -316,9 +374,13 @@ impl Controller {
         flags.slew_limited = lim.slew_limited;
         flags.saturated |= lim.clamped && target > p.limits.i_max_a;
         let force = force.unwrap_or_else(|| p.mr.force_n(lim.current_a, v_d));
-        if self.kind == ControllerKind::Asmc {
+        let adaptive = matches!(self.kind, ControllerKind::Asmc | ControllerKind::MarginAsmc);
+        if adaptive {
             let limited = flags.clipped || flags.saturated || flags.slew_limited;
-            let freeze = gated || (p.asmc.anti_windup && limited);
+            // The margin-scheduled law learns only while its coil is engaged (road noise below
+            // the engage amplitude does not pump K).
+            let idle = self.kind == ControllerKind::MarginAsmc && !flags.engaged;
+            let freeze = gated || idle || (p.asmc.anti_windup && limited);
             flags.adapting = self.gain.update(&p.asmc, s, dt, freeze);
         }
         ControlOutput {

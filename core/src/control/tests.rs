@@ -5,6 +5,7 @@ use super::*;
 use crate::mr_damper::{rates, SpencerParams, SpencerState};
 use core::f64::consts::PI;
 use proptest::prelude::*;
+use schedule::ScheduleParams;
 
 fn input(psi: f32, dt: f32) -> ControlInput {
     ControlInput {
@@ -517,6 +518,7 @@ fn kinds() -> impl Strategy<Value = ControllerKind> {
         Just(ControllerKind::Smc),
         Just(ControllerKind::Asmc),
         Just(ControllerKind::Skyhook),
+        Just(ControllerKind::MarginAsmc),
     ]
 }
 
@@ -614,4 +616,204 @@ fn switching_the_law_at_run_time_keeps_the_state() {
     assert_eq!(a.adaptive_gain(), k_before);
     a.reset();
     assert_eq!(a.adaptive_gain(), p.asmc.k_init_radps2);
+}
+
+// ---------------------------------------------------------------- margin schedule, quiet coil
+
+/// Encoder noise alone (+-1 LSB on each 14-bit encoder): (rms and max of the shimmy-band
+/// amplitude, mean current, TV of the command) of `kind`.
+fn noise_amplitude(kind: ControllerKind, p: ControlParams, secs: f64) -> (f64, f64, f64, f64) {
+    let lsb = 2.0 * PI / 16384.0;
+    let (mut nl, mut nr) = (noise(7), noise(11));
+    let mut c = Controller::new(kind, p);
+    let mut amp = schedule::QuietCoil::new();
+    let n = (secs * 1000.0) as usize;
+    let (mut aa, mut amax, mut isum, mut tv, mut last) = (0.0, 0.0f64, 0.0, 0.0, 0.0);
+    for k in 0..n {
+        let mut i = input(0.0, 1e-3);
+        i.psi_l_rad = quantise(lsb * nl());
+        i.psi_r_rad = quantise(lsb * nr());
+        let o = c.step(&i);
+        let a = f64::from(amp.band_amplitude(
+            &p.schedule,
+            o.conditioned.psi_hp_rad,
+            o.conditioned.rate_hp_radps,
+            1e-3,
+        ));
+        if k > 500 {
+            aa += a * a;
+            amax = amax.max(a);
+        }
+        isum += f64::from(o.current_cmd_a);
+        tv += (f64::from(o.current_cmd_a) - last).abs();
+        last = f64::from(o.current_cmd_a);
+    }
+    ((aa / (n - 501) as f64).sqrt(), amax, isum / n as f64, tv)
+}
+
+#[test]
+fn quiet_coil_stays_off_on_encoder_noise() {
+    // Encoder noise alone must not reach the coil, even fully armed (no margin report).
+    let p = ControlParams::default();
+    let (a_rms, a_max, i_mean, tv) = noise_amplitude(ControllerKind::MarginAsmc, p, 5.0);
+    println!(
+        "encoder noise: band amplitude rms {:.4} deg, max {:.4} deg; margin-asmc mean current {i_mean:.4} A, TV {tv:.3} A",
+        a_rms.to_degrees(),
+        a_max.to_degrees()
+    );
+    assert!(
+        a_max < 0.5 * f64::from(p.schedule.armed_engage_rad),
+        "{a_max}"
+    );
+    assert_eq!(tv, 0.0);
+    // The band-pass is what keeps it off: the raw pair's amplitude (the observer's rate noise
+    // up to 60 Hz) reaches several times the armed engage amplitude.
+    let mut c = Controller::new(ControllerKind::MarginAsmc, p);
+    let lsb = 2.0 * PI / 16384.0;
+    let (mut nl, mut nr) = (noise(7), noise(11));
+    let mut raw_max = 0.0f32;
+    for k in 0..5000 {
+        let mut i = input(0.0, 1e-3);
+        i.psi_l_rad = quantise(lsb * nl());
+        i.psi_r_rad = quantise(lsb * nr());
+        let o = c.step(&i);
+        if k > 500 {
+            raw_max = raw_max.max(schedule::band_amplitude_rad(
+                o.conditioned.psi_hp_rad,
+                o.conditioned.rate_hp_radps,
+                p.schedule.band_hz,
+            ));
+        }
+    }
+    assert!(
+        raw_max > p.schedule.armed_engage_rad,
+        "raw amplitude max {raw_max}"
+    );
+}
+
+/// A decaying 6 Hz shimmy burst (0.5 deg, decay 2 1/s) on noisy 14-bit encoders: (total
+/// variation of the command, coil energy at 4 ohm) over 3 s.
+fn burst_chatter(kind: ControllerKind, p: ControlParams) -> (f64, f64) {
+    let lsb = 2.0 * PI / 16384.0;
+    let (mut nl, mut nr) = (noise(3), noise(5));
+    let mut c = Controller::new(kind, p);
+    let (mut tv, mut e, mut last) = (0.0, 0.0, 0.0);
+    for k in 0..3000 {
+        let t = k as f64 * 1e-3;
+        let y = 0.5f64.to_radians() * (-2.0 * t).exp() * (2.0 * PI * 6.0 * t).sin();
+        let mut i = input(0.0, 1e-3);
+        i.psi_l_rad = quantise(y + lsb * nl());
+        i.psi_r_rad = quantise(y + lsb * nr());
+        let cmd = f64::from(c.step(&i).current_cmd_a);
+        tv += (cmd - last).abs();
+        e += 4.0 * cmd * cmd * 1e-3;
+        last = cmd;
+    }
+    (tv, e)
+}
+
+#[test]
+fn quiet_coil_holds_the_chatter_down() {
+    // The measured chatter figure: the margin-scheduled law's command has a small fraction of
+    // the plain ASMC's total variation on the same burst (the ASMC switches every half cycle).
+    let p = ControlParams::default();
+    let (tv_m, e_m) = burst_chatter(ControllerKind::MarginAsmc, p);
+    let (tv_a, e_a) = burst_chatter(ControllerKind::Asmc, p);
+    println!("burst: TV margin-asmc {tv_m:.1} A ({e_m:.2} J), asmc {tv_a:.1} A ({e_a:.2} J)");
+    assert!(tv_m > 0.0, "the coil must act on the burst");
+    assert!(tv_m < 20.0 && 5.0 * tv_m < tv_a, "TV {tv_m} vs {tv_a}");
+    // Without the envelope (release 0) the clipped half cycles switch again.
+    let mut q = p;
+    q.schedule.release_s = 0.0;
+    let (tv_0, _) = burst_chatter(ControllerKind::MarginAsmc, q);
+    println!("without the envelope: TV {tv_0:.1} A");
+    assert!(tv_0 > 3.0 * tv_m, "{tv_0}");
+}
+
+/// The arming is a function of the margin: a reference margin and the same with one quantity
+/// smaller.
+fn margin_signal() -> impl Strategy<Value = schedule::MarginSignal> {
+    let q = || prop_oneof![4 => -1.0f32..50.0, 1 => Just(f32::INFINITY), 1 => any::<f32>()];
+    (q(), q(), q()).prop_map(|(dv, ttc, z)| schedule::MarginSignal {
+        speed_margin_mps: dv,
+        time_to_critical_s: ttc,
+        zeta_fast: z / 100.0,
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    #[test]
+    fn schedule_is_monotone_in_the_margin(
+        m in margin_signal(),
+        which in 0usize..3,
+        cut in 0.0f32..1.0,
+    ) {
+        // A smaller margin (any one quantity moved towards critical) never lowers the base
+        // current, never widens the boundary layer, never raises the engage amplitude.
+        let p = ScheduleParams::default();
+        let phi = SmcParams::default().phi_radps;
+        let mut closer = m;
+        match which {
+            0 => closer.speed_margin_mps = m.speed_margin_mps * cut,
+            1 => closer.time_to_critical_s = m.time_to_critical_s * cut,
+            _ => closer.zeta_fast = m.zeta_fast - cut,
+        }
+        let (far, near) = (p.schedule(Some(&m), phi), p.schedule(Some(&closer), phi));
+        for s in [far, near] {
+            prop_assert!(s.arming.is_finite() && (0.0..=1.0).contains(&s.arming));
+            prop_assert!(s.base_current_a.is_finite() && s.phi_radps.is_finite());
+        }
+        let finite = m.speed_margin_mps.is_finite() && m.time_to_critical_s.is_finite()
+            && m.zeta_fast.is_finite();
+        if finite && m.speed_margin_mps >= 0.0 && m.time_to_critical_s >= 0.0 {
+            prop_assert!(near.arming >= far.arming, "{far:?} -> {near:?}");
+            prop_assert!(near.base_current_a >= far.base_current_a);
+            prop_assert!(near.phi_radps <= far.phi_radps);
+            prop_assert!(near.engage_rad <= far.engage_rad);
+        }
+        // No report is the safe side: at least as armed as any report.
+        let none = p.schedule(None, phi);
+        prop_assert!(none.arming >= far.arming && none.base_current_a >= far.base_current_a);
+    }
+
+    #[test]
+    fn margin_asmc_command_is_bounded_finite_and_semi_active(
+        seq in proptest::collection::vec((wild_input(), prop_oneof![Just(None), margin_signal().prop_map(Some)]), 1..300),
+    ) {
+        // Whatever the inputs and margin reports: never NaN, always in [0, I_max], and the
+        // damper model's force at the command always resists the stroke rate (semi-active).
+        let p = ControlParams::default();
+        let mut c = Controller::new(ControllerKind::MarginAsmc, p);
+        for (i, m) in &seq {
+            c.set_margin(*m);
+            let o = c.step(i);
+            prop_assert!(o.current_cmd_a.is_finite());
+            prop_assert!(o.current_cmd_a >= 0.0 && o.current_cmd_a <= p.limits.i_max_a,
+                "current {}", o.current_cmd_a);
+            let v = o.stroke_rate_mps;
+            if v.is_finite() {
+                prop_assert!(p.mr.force_n(o.current_cmd_a, v) * v >= 0.0);
+            }
+            let k = c.adaptive_gain();
+            prop_assert!(k >= p.asmc.k_min_radps2 && k <= p.asmc.k_max_radps2, "K {}", k);
+        }
+    }
+}
+
+#[test]
+fn speed_schedule_is_a_trapezoid_over_speed() {
+    let t = schedule::SpeedSchedule {
+        v_lo_mps: 10.0,
+        v_hi_mps: 20.0,
+        ramp_mps: 2.0,
+        current_a: 1.5,
+    };
+    assert_eq!(t.current_at(15.0), 1.5);
+    assert_eq!(t.current_at(10.0), 1.5);
+    assert!((t.current_at(9.0) - 0.75).abs() < 1e-6);
+    assert!((t.current_at(21.5) - 0.375).abs() < 1e-6);
+    assert_eq!(t.current_at(5.0), 0.0);
+    assert_eq!(t.current_at(f32::NAN), 1.5);
 }

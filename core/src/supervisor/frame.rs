@@ -4,6 +4,9 @@
 //! Time is an input: a free-running microsecond counter (`t_us`, wrapping u32; differences are
 //! taken with wrapping arithmetic, so the 71.6 min wrap is harmless).
 
+use crate::control::schedule::MarginSignal;
+use crate::estimator::fusion::MarginReport;
+
 /// Nominal sample period, us.
 pub const NOMINAL_PERIOD_US: u32 = 1000;
 
@@ -65,13 +68,41 @@ impl RawFrame {
     }
 }
 
-/// Input of the margin check: the latest margin report's validity.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Input of the margin check and of the margin schedule: the latest margin report.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MarginStatus {
     /// No margin estimator in this build / not checked.
     NotUsed,
-    /// The latest [`crate::estimator::fusion::MarginReport`] is valid.
-    Valid,
+    /// The latest [`crate::estimator::fusion::MarginReport`] is valid; what the controller's
+    /// margin schedule needs of it.
+    Valid(MarginSignal),
     /// The latest report is invalid (frozen, warming up, no mode in band).
     Invalid,
+}
+
+impl MarginStatus {
+    /// The status of a fused report: `Valid` with its speed margin, time to critical and fast
+    /// damping (absent ones as +infinity) when the report is valid, else `Invalid`.
+    pub fn of_report(r: &MarginReport) -> Self {
+        match (r.valid, r.speed_margin_mps) {
+            (true, Some(dv)) => MarginStatus::Valid(MarginSignal {
+                speed_margin_mps: dv,
+                time_to_critical_s: r.time_to_critical_s.unwrap_or(f32::INFINITY),
+                zeta_fast: if r.fast_valid {
+                    r.zeta_fast
+                } else {
+                    f32::INFINITY
+                },
+            }),
+            _ => MarginStatus::Invalid,
+        }
+    }
+
+    /// The margin signal of a valid report.
+    pub fn signal(&self) -> Option<MarginSignal> {
+        match self {
+            MarginStatus::Valid(m) => Some(*m),
+            _ => None,
+        }
+    }
 }

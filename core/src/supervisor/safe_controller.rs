@@ -70,7 +70,9 @@ impl SafeController {
     }
 
     /// One step: validate `frame`, run the controller on the validated inputs unless in
-    /// FailSafe, apply the verdict, limit. `margin` is the validity of the latest margin report.
+    /// FailSafe, apply the verdict, limit. `margin` is the latest margin report (its validity
+    /// for the supervisor's margin check; a valid one also feeds the controller's margin
+    /// schedule, an invalid one leaves the schedule on its safe side).
     pub fn step(&mut self, frame: &RawFrame, margin: MarginStatus) -> SafeOutput {
         let last_cmd = self.out.last();
         let (verdict, v) = self.sup.check(frame, last_cmd, margin);
@@ -87,6 +89,7 @@ impl SafeController {
                 None,
             ),
             (_, Some((l, r))) => {
+                self.ctl.set_margin(margin.signal());
                 let c = self.ctl.step(&ControlInput {
                     t_s: v.t_s,
                     dt_s: v.dt_s,

@@ -13,6 +13,13 @@ use proptest::prelude::*;
 
 const I_MAX: f32 = 2.0;
 
+/// A valid margin report far from the Hopf window.
+const VALID_FAR: MarginStatus = MarginStatus::Valid(crate::control::schedule::MarginSignal {
+    speed_margin_mps: 10.0,
+    time_to_critical_s: f32::INFINITY,
+    zeta_fast: 0.05,
+});
+
 fn safe() -> SafeController {
     SafeController::new(
         ControllerKind::Asmc,
@@ -57,7 +64,7 @@ fn healthy_shimmy_raises_nothing_and_is_transparent() {
     let mut bare = Controller::new(ControllerKind::Asmc, ControlParams::default());
     for k in 0..3000 {
         let f = frame(k, 20.0);
-        let o = s.step(&f, MarginStatus::Valid);
+        let o = s.step(&f, VALID_FAR);
         let b = bare.step(&ControlInput {
             t_s: k as f32 * 1e-3,
             dt_s: 1e-3,
@@ -606,7 +613,9 @@ proptest! {
     fn safe_step_contract(
         kind in any_kind(),
         steps in proptest::collection::vec(any_step(), 1..400),
-        margin in prop_oneof![Just(MarginStatus::NotUsed), Just(MarginStatus::Valid), Just(MarginStatus::Invalid)],
+        margin in prop_oneof![Just(MarginStatus::NotUsed), Just(VALID_FAR), Just(MarginStatus::Invalid),
+            (any::<f32>(), any::<f32>(), any::<f32>()).prop_map(|(a, b, c)| MarginStatus::Valid(
+                crate::control::schedule::MarginSignal { speed_margin_mps: a, time_to_critical_s: b, zeta_fast: c }))],
     ) {
         let mut s = SafeController::new(kind, ControlParams::default(), SupervisorParams::default());
         let mut t = 0u32;

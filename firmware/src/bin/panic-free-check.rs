@@ -16,6 +16,7 @@ mod check {
     use core::ptr::{read_volatile, write_volatile};
     use cortex_m_rt::entry;
     // The device crate supplies the interrupt vector table the runtime's linker script expects.
+    use shimmy_core::control::schedule::MarginSignal;
     use shimmy_core::control::{ControlParams, ControllerKind};
     use shimmy_core::estimator::fusion::{Fusion, FusionInput, FusionParams};
     use shimmy_core::estimator::meter::mode_meter::{EstimatorConfig, MarginEstimator, WheelOrder};
@@ -50,13 +51,14 @@ mod check {
 
     #[entry]
     fn main() -> ! {
-        let kind = match word(9) % 5 {
+        let kind = match word(9) % 6 {
             0 => ControllerKind::PassiveOff,
             1 => ControllerKind::PassiveOn {
                 current_a: f32::from_bits(word(8)),
             },
             2 => ControllerKind::Smc,
             3 => ControllerKind::Asmc,
+            4 => ControllerKind::MarginAsmc,
             _ => ControllerKind::Skyhook,
         };
         let mut safe =
@@ -79,7 +81,11 @@ mod check {
             };
             let margin = match flags >> 8 & 3 {
                 0 => MarginStatus::NotUsed,
-                1 => MarginStatus::Valid,
+                1 => MarginStatus::Valid(MarginSignal {
+                    speed_margin_mps: f32::from_bits(word(3)),
+                    time_to_critical_s: f32::from_bits(word(5)),
+                    zeta_fast: f32::from_bits(word(6)),
+                }),
                 _ => MarginStatus::Invalid,
             };
             let o = safe.step(&frame, margin);

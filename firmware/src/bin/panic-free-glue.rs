@@ -33,6 +33,7 @@ mod stub {
 mod check {
     use core::ptr::{read_volatile, write_volatile};
     use cortex_m_rt::entry;
+    use shimmy_core::control::schedule::MarginSignal;
     use shimmy_core::control::{ControlParams, ControllerKind};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::params::SupervisorParams;
@@ -157,7 +158,11 @@ mod check {
             };
             let margin = match flags >> 8 & 3 {
                 0 => MarginStatus::NotUsed,
-                1 => MarginStatus::Valid,
+                1 => MarginStatus::Valid(MarginSignal {
+                    speed_margin_mps: f32::from_bits(word(5)),
+                    time_to_critical_s: f32::from_bits(word(6)),
+                    zeta_fast: f32::from_bits(word(7)),
+                }),
                 _ => MarginStatus::Invalid,
             };
             let o = supervised_step(&mut safe, &set, margin, &mut health);

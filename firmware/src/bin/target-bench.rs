@@ -288,8 +288,17 @@ mod bench {
     static CONTROL_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static METER_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
 
+    /// A valid margin report inside the Hopf window (the margin schedule fully armed).
+    const INSIDE_WINDOW: shimmy_core::supervisor::frame::MarginStatus =
+        shimmy_core::supervisor::frame::MarginStatus::Valid(
+            shimmy_core::control::schedule::MarginSignal {
+                speed_margin_mps: 0.0,
+                time_to_critical_s: f32::INFINITY,
+                zeta_fast: 0.01,
+            },
+        );
+
     fn control_step() -> u32 {
-        use shimmy_core::supervisor::frame::MarginStatus;
         use shimmy_firmware::control::{drive_coil, supervised_step, Health};
         use shimmy_firmware::drivers::coil_pwm::CoilDriver;
         use shimmy_firmware::monitoring::safe_controller;
@@ -308,7 +317,7 @@ mod bench {
             WORLD.set_step(step);
             let mut one = || {
                 let s = sensors.sample(sim::TICKS_PER_STEP);
-                let o = supervised_step(&mut ctrl, &s, MarginStatus::Valid, &mut h);
+                let o = supervised_step(&mut ctrl, &s, INSIDE_WINDOW, &mut h);
                 let _ = drive_coil(&mut coil, &o);
             };
             if step < 1100 {
@@ -325,7 +334,7 @@ mod bench {
     }
 
     fn safe_step() -> u32 {
-        use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
+        use shimmy_core::supervisor::frame::RawFrame;
         let mut c = shimmy_firmware::monitoring::safe_controller();
         let mut seed = 1;
         let mut worst = 0;
@@ -334,10 +343,10 @@ mod bench {
             let mut f = RawFrame::ok(k * 1000, 10.0 * l, 10.0 * r, 15.0);
             f.coil_current_a = Some(c.last_command_a());
             if k < 300 {
-                c.step(&f, MarginStatus::Valid);
+                c.step(&f, INSIDE_WINDOW);
             } else {
                 worst = worst.max(measure_once(|| {
-                    black_box(c.step(black_box(&f), MarginStatus::Valid));
+                    black_box(c.step(black_box(&f), INSIDE_WINDOW));
                 }));
             }
         }

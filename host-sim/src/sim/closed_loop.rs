@@ -31,6 +31,7 @@ use shimmy_core::control::{
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
+use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams, ShimmyPipeline};
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
@@ -114,6 +115,9 @@ pub struct LoopConfig {
     pub coil_drive: CoilDrive,
     /// The nominal coil and driver the board's drive assumes (the vehicle's).
     pub coil: CoilParams,
+    /// The margin pipeline's plant model and parameters (the vehicle the firmware believes).
+    /// It runs in the loop for the margin-scheduled arm, whose controller gets its report.
+    pub margin_model: (PlantParams, PipelineParams),
 }
 
 /// The supervisor thresholds `p` for `arm`: unchanged, except that the passive-off reference
@@ -150,6 +154,7 @@ impl LoopConfig {
             supervised: true,
             coil_drive: CoilDrive::Ideal,
             coil: vehicle.damper.coil,
+            margin_model: (vehicle.plant, vehicle.pipeline_params()),
         }
     }
 
@@ -160,7 +165,14 @@ impl LoopConfig {
     pub fn with_model(mut self, model: &Vehicle) -> Self {
         self.control = model.control_params();
         self.supervisor = reference_supervisor(self.arm, model.supervisor_params());
+        self.margin_model = (model.plant, model.pipeline_params());
         self
+    }
+
+    /// The margin pipeline runs in the loop and feeds the controller (the margin-scheduled
+    /// arm only: the other laws do not read the report, and their runs stay as they were).
+    pub fn margin_in_loop(&self) -> bool {
+        self.arm == Arm::Mr(ControllerKind::MarginAsmc)
     }
 }
 
@@ -521,19 +533,21 @@ fn flag_bits(o: &ControlOutput) -> u8 {
 pub trait FirmwareStep {
     /// Why a step failed (e.g. the image under QEMU hung or crashed).
     type Error;
-    /// One control period on `frame`: the supervised step's output.
-    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error>;
+    /// One control period on `frame`: the supervised step's output. `margin` is the loop's own
+    /// margin pipeline's newest report (for the margin-scheduled controller); a firmware image
+    /// computes its own and ignores it.
+    fn step(&mut self, frame: &RawFrame, margin: MarginStatus) -> Result<SafeOutput, Self::Error>;
     /// The supervisor, when it runs in this process (the fault log's counters and events).
     fn supervisor(&mut self) -> Option<&mut Supervisor>;
 }
 
-/// The core's `SafeController` in this process (no margin estimator in the loop).
+/// The core's `SafeController` in this process.
 struct InProcess(SafeController);
 
 impl FirmwareStep for InProcess {
     type Error = std::convert::Infallible;
-    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
-        Ok(self.0.step(frame, MarginStatus::NotUsed))
+    fn step(&mut self, frame: &RawFrame, margin: MarginStatus) -> Result<SafeOutput, Self::Error> {
+        Ok(self.0.step(frame, margin))
     }
     fn supervisor(&mut self) -> Option<&mut Supervisor> {
         Some(self.0.supervisor_mut())
@@ -627,6 +641,25 @@ fn run_loop<F: FirmwareStep>(
     } else {
         None
     };
+    // The margin pipeline of the board (meter task + model loop) on the model vehicle: its
+    // 100 Hz report reaches the controller on the next step, as the board's control task reads
+    // the meter task's newest report (10 ms cadence, one control period of latency).
+    let mut pipeline = if cfg.margin_in_loop() {
+        let (plant, pp) = cfg.margin_model;
+        // The parameters come from a validated vehicle; a configuration the meter rejects
+        // leaves the report invalid, the schedule's safe side.
+        ShimmyPipeline::<8>::new(plant, pp).ok().map(Box::new)
+    } else {
+        None
+    };
+    let mut margin = if cfg.margin_in_loop() {
+        MarginStatus::Invalid
+    } else {
+        MarginStatus::NotUsed
+    };
+    // The board's meter task: the newest trusted speed and the core's acceleration estimate
+    // on it (`firmware::monitoring::DataMargin`).
+    let (mut v_held, mut accel) = (f32::NAN, AccelEstimator::new());
     let n = (cfg.duration_s / cfg.dt_s).round() as usize;
     let every = cfg.record_every.max(1);
     let mut res = LoopResult::default();
@@ -670,7 +703,7 @@ fn run_loop<F: FirmwareStep>(
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
             let o = safe
-                .step(&meas.raw_frame(t_us))
+                .step(&meas.raw_frame(t_us), margin)
                 .map_err(LoopError::Firmware)?;
             log_verdict(&mut res.faults, safe.supervisor(), &o, t);
             last_verdict = Some(o.verdict);
@@ -738,6 +771,18 @@ fn run_loop<F: FirmwareStep>(
                 damper_cmd: out.current_cmd_a,
             }),
         };
+        if let (Some(p), Some(o)) = (pipeline.as_mut(), &safe_out) {
+            // What the board's meter task is given: the trusted yaw and speed of the step.
+            if let Some(v) = o.validated.speed_mps.filter(|v| v.is_finite()) {
+                v_held = v;
+            }
+            let a = accel.update(t, v_held);
+            if let Some(smp) = sample {
+                if let Some(out) = p.push(&smp, v_held, a, t) {
+                    margin = MarginStatus::of_report(&out.report);
+                }
+            }
+        }
         let meter_in = sample.map_or((f64::NAN, f64::NAN, f64::NAN), |smp| {
             (
                 f64::from(smp.psi_l_rad),

@@ -16,7 +16,7 @@
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::supervisor::checks::Supervisor;
-use shimmy_core::supervisor::frame::RawFrame;
+use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
 use shimmy_core::vehicle::Vehicle;
@@ -453,7 +453,7 @@ fn summary(f: &TargetFrame) -> String {
 impl FirmwareStep for PilFirmware {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
         self.remember(format!(
             "-> sensors t {} us: yaw {} / {} rad, {} m/s",
             frame.t_us, frame.left.angle_rad, frame.right.angle_rad, frame.speed_mps
@@ -508,7 +508,7 @@ impl<'a> SilFirmware<'a> {
 impl FirmwareStep for SilFirmware<'_> {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
         let k = self.periods.len();
         let model_cycles = self.pil.and_then(|p| p.get(k)).and_then(|p| {
             p.after.iter().find_map(|f| match f {

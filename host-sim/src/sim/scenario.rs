@@ -18,13 +18,14 @@ use std::path::PathBuf;
 /// The controller names, one per controller, as they appear in tables, legends and file names
 /// (`no-damper` = no damper force at all). Every command and scenario file also accepts the
 /// short forms `none`, `off` and `on` (see [`controller_name`]).
-pub const CONTROLLERS: [&str; 6] = [
+pub const CONTROLLERS: [&str; 7] = [
     "no-damper",
     "passive-off",
     "passive-on",
     "smc",
     "asmc",
     "skyhook",
+    "margin-asmc",
 ];
 
 /// The one name of the controller called `name` (one of [`CONTROLLERS`] or a short form:
