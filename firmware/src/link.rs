@@ -3,11 +3,14 @@
 //! handler in the `link` task (USART1 interrupt, priority 1: below `meter` and `control`), and
 //! the meter task feeds [`LinkState::on_sample`] / [`LinkState::on_update`].
 //!
-//! Storage today is RAM: the configuration is the compiled-in vehicle until a host writes one,
-//! the log a [`RamLog`] of [`LOG_CAPACITY`] entries; both are lost at reset. The flash store
-//! (configuration and event log, issue 23) takes their place here, behind the same trait:
-//! [`LinkState::vehicle`]/[`LinkState::store_vehicle`] become the stored configuration record,
-//! and [`LinkState::log`]'s `append`/`get`/`clear` the flash log (the [`Recorder`] stays).
+//! The configuration it serves is the vehicle this boot runs (the flash store's, else the
+//! compiled-in defaults). A vehicle a host writes is kept here until the background loop saves
+//! it with the store's standstill token ([`LinkState::take_unsaved`]); the boot after the save
+//! runs it. The event log it serves is a [`RamLog`] of [`LOG_CAPACITY`] entries of this boot,
+//! filled by its own [`Recorder`]; the flash log (`crate::store`) keeps the same episodes and
+//! faults across resets through the store's own recorder. TODO(issue 24): serve the flash log
+//! here, with one recorder for both, and hand a saved vehicle to the running tasks at
+//! standstill instead of at the next boot.
 //!
 //! A configuration write is validated whole by the core (`Vehicle::decode_record`) before it
 //! gets here; it takes effect only at standstill ([`STANDSTILL_MPS`]): while the vehicle moves it
@@ -34,6 +37,8 @@ pub const STANDSTILL_MPS: f32 = 0.3;
 pub struct LinkState {
     vehicle: Vehicle,
     pending: bool,
+    /// A vehicle the host wrote that the flash store has not saved yet.
+    unsaved: Option<Vehicle>,
     standstill: bool,
     log: RamLog<LOG_CAPACITY>,
     recorder: Recorder,
@@ -43,12 +48,14 @@ pub struct LinkState {
 }
 
 impl LinkState {
-    /// The compiled-in vehicle, an empty log, no fault seen, speed unknown; `boot`: the reset
-    /// record of this boot (resets, cause, faults latched before it).
-    pub fn new(boot: &ResetRecord) -> Self {
+    /// `vehicle`: the one this boot runs (the flash store's, or the compiled-in defaults), an
+    /// empty log, no fault seen, speed unknown; `boot`: the reset record of this boot (resets,
+    /// cause, faults latched before it).
+    pub fn new(boot: &ResetRecord, vehicle: Vehicle) -> Self {
         LinkState {
-            vehicle: Vehicle::nominal(),
+            vehicle,
             pending: false,
+            unsaved: None,
             standstill: false,
             log: RamLog::new(),
             recorder: Recorder::new(),
@@ -69,6 +76,18 @@ impl LinkState {
     /// The event log.
     pub fn log(&self) -> &RamLog<LOG_CAPACITY> {
         &self.log
+    }
+
+    /// The vehicle a host wrote that is not in flash yet, for the background loop to save with
+    /// the store's standstill token ([`Self::keep_unsaved`] hands it back when it cannot).
+    pub fn take_unsaved(&mut self) -> Option<Vehicle> {
+        self.unsaved.take()
+    }
+
+    /// Hands back a vehicle [`Self::take_unsaved`] gave out and the store could not save yet
+    /// (no standstill), unless the host has written a newer one since.
+    pub fn keep_unsaved(&mut self, v: Vehicle) {
+        self.unsaved.get_or_insert(v);
     }
 
     /// One 1 kHz sample's damper command, A (the controller's action during an episode).
@@ -150,6 +169,7 @@ impl Backend for LinkState {
 
     fn store_vehicle(&mut self, v: Vehicle) -> bool {
         self.vehicle = v;
+        self.unsaved = Some(v);
         self.pending = !self.standstill;
         self.standstill
     }
@@ -202,7 +222,7 @@ mod tests {
         let mut sensors = sim::sensors(world);
         let mut ctrl = crate::monitoring::safe_controller();
         let mut data = DataMargin::new().unwrap();
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed());
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), Vehicle::nominal());
         let mut h = Health::default();
         let pwm = sim::SimPwm::new(world);
         let mut coil = crate::drivers::coil_pwm::CoilDriver::new(pwm, sim::COIL).unwrap();
@@ -252,5 +272,30 @@ mod tests {
         v.set("plant", "k_d", 4000.0).unwrap();
         assert!(!link.store_vehicle(v));
         assert!(link.vehicle().1, "pending");
+    }
+
+    #[test]
+    fn a_written_vehicle_waits_for_the_store_and_a_newer_one_wins() {
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), Vehicle::nominal());
+        assert_eq!(
+            link.take_unsaved(),
+            None,
+            "the booted vehicle is in flash already"
+        );
+        let mut first = Vehicle::nominal();
+        first.set("controller", "slew_a_per_s", 100.0).unwrap();
+        let mut second = first;
+        second.set("controller", "slew_a_per_s", 200.0).unwrap();
+        link.store_vehicle(first);
+        let taken = link.take_unsaved().unwrap();
+        assert_eq!(taken, first);
+        assert_eq!(link.take_unsaved(), None, "handed out once");
+        // No standstill yet: the background loop hands it back...
+        link.keep_unsaved(taken);
+        assert_eq!(link.take_unsaved(), Some(first));
+        // ...unless the host wrote a newer one meanwhile.
+        link.store_vehicle(second);
+        link.keep_unsaved(first);
+        assert_eq!(link.take_unsaved(), Some(second));
     }
 }

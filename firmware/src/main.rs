@@ -142,7 +142,7 @@ mod app {
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
-        let link = LinkState::new(&record);
+        let link = LinkState::new(&record, vehicle);
         // The link task's first run sends the ready frame (the port listens from now on).
         rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
         // The watchdog runs since the board's first line; init ends here.
@@ -182,15 +182,17 @@ mod app {
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged.
-    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched])]
+    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched, link])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
+            let motion = cx.shared.motion.lock(|m| *m);
             store_pass(
                 cx.local.store_task,
                 cx.local.log_rx,
-                cx.shared.motion.lock(|m| *m),
+                motion,
                 cx.shared.latched.lock(|l| *l),
             );
+            save_host_config(cx.local.store_task, &mut cx.shared.link, motion.t_s);
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
             #[cfg(feature = "pil")]
@@ -458,6 +460,27 @@ mod app {
             ),
             Some(Err(_)) => defmt::error!("store: standstill maintenance failed, retried later"),
             None => {}
+        }
+    }
+
+    /// A vehicle the host link accepted goes to flash here, with the store's standstill token
+    /// (the erase a map write may need stalls flash reads): saved at the first standstill, kept
+    /// in the link's state until then. The boot after the save runs it.
+    fn save_host_config(
+        task: &mut StoreTask<TargetFlash>,
+        link: &mut impl rtic::Mutex<T = LinkState>,
+        t_s: f64,
+    ) {
+        let Some(v) = link.lock(|l| l.take_unsaved()) else {
+            return;
+        };
+        match task.at_standstill(t_s, |store, token| store.save_config(&v, token)) {
+            Some(Ok(())) => defmt::info!("store: the host's vehicle saved at t = {=f64} s", t_s),
+            Some(Err(_)) => {
+                defmt::error!("store: saving the host's vehicle failed, retried at the next pass");
+                link.lock(|l| l.keep_unsaved(v));
+            }
+            None => link.lock(|l| l.keep_unsaved(v)),
         }
     }
 

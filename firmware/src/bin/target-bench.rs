@@ -474,7 +474,10 @@ mod bench {
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed());
+        let mut link = LinkState::new(
+            &ResetRecord::fresh().sealed(),
+            shimmy_core::vehicle::Vehicle::nominal(),
+        );
         let h = Health::default();
         let mut seed = 7;
         let mut worst = 0;
@@ -508,7 +511,10 @@ mod bench {
         use shimmy_link::device::{Device, REPLY_BYTES};
         use shimmy_link::frame::{encode, MAX_FRAME};
         use shimmy_link::wire::{Request, PROTOCOL_HEADER};
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed());
+        let mut link = LinkState::new(
+            &ResetRecord::fresh().sealed(),
+            shimmy_core::vehicle::Vehicle::nominal(),
+        );
         let mut dev = Device::new();
         let mut req = [0u8; MAX_FRAME + 1];
         let Ok(n) = encode(PROTOCOL_HEADER, &Request::GetConfig, &mut req) else {
