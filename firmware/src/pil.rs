@@ -54,14 +54,14 @@ mod host {
     use super::sample_set;
     use crate::control::{supervised_step, Health};
     use crate::monitoring::{
-        safe_controller, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
     };
     use heapless::Deque;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
     use shimmy_core::estimator::model_margin::ModelMargin;
-    use shimmy_core::params::PlantParams;
     use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
     use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_core::vehicle::Vehicle;
     use shimmy_pil::{MarginFrame, ModelFrame, StepReport, TargetFrame};
 
     /// The application's tasks on the host, one control period per [`HostApp::period`], with the
@@ -81,15 +81,17 @@ mod host {
     }
 
     impl HostApp {
-        /// The application as `init` leaves it after a power-on (no latched fault).
-        pub fn new() -> Result<Self, ConfigError> {
+        /// The application as `init` leaves it after a power-on (no latched fault) with
+        /// `vehicle` loaded (the image under PIL boots with an empty RAM flash: the compiled-in
+        /// [`Vehicle::nominal`]).
+        pub fn new(vehicle: &Vehicle) -> Result<Self, ConfigError> {
             Ok(HostApp {
-                ctrl: safe_controller(),
+                ctrl: safe_controller_for(vehicle),
                 health: Health::default(),
                 step: 0,
                 queue: Deque::new(),
-                data: DataMargin::new()?,
-                model_task: ModelTask::new(PlantParams::nominal()),
+                data: DataMargin::with_params(&vehicle.pipeline_params())?,
+                model_task: ModelTask::new(vehicle.plant),
                 published: Vec::new(),
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
@@ -213,7 +215,8 @@ mod tests {
     #[test]
     fn host_app_emits_the_frames_of_each_period_in_order() {
         use shimmy_pil::TargetFrame;
-        let mut app = HostApp::new().expect("default configuration");
+        let mut app =
+            HostApp::new(&shimmy_core::vehicle::Vehicle::nominal()).expect("default configuration");
         let mut frames = Vec::new();
         for k in 0..300u32 {
             let mut f = RawFrame::ok(k * 1000, 0.0, 0.0, 12.0);

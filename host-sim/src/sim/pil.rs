@@ -493,7 +493,9 @@ impl<'a> SilFirmware<'a> {
     /// The application after a power-on; `pil`: the PIL run to take the model timing from.
     pub fn new(pil: Option<&'a [Period]>) -> Result<Self, String> {
         Ok(SilFirmware {
-            app: HostApp::new().map_err(|e| format!("estimator configuration: {e:?}"))?,
+            // The image boots with an empty RAM flash: the compiled-in vehicle.
+            app: HostApp::new(&Vehicle::nominal())
+                .map_err(|e| format!("estimator configuration: {e:?}"))?,
             pil,
             periods: Vec::new(),
         })
