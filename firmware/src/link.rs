@@ -30,8 +30,9 @@ use crate::monitoring::MarginUpdate;
 
 /// Entries the RAM log keeps (the oldest go first).
 pub const LOG_CAPACITY: usize = 32;
-/// Below this trusted speed the vehicle is at standstill, m/s (an unknown speed is not).
-pub const STANDSTILL_MPS: f32 = 0.3;
+/// Below this trusted speed the vehicle is at standstill, m/s (an unknown speed is not): the
+/// flash store's threshold, so the link and the store agree on what a standstill is.
+pub const STANDSTILL_MPS: f32 = crate::store::STANDSTILL_SPEED_MPS;
 
 /// What the link serves: configuration, event log, fault record, newest margin report.
 pub struct LinkState {

@@ -167,7 +167,7 @@ impl LoopObserver for DriveObserver {
 }
 
 /// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's value).
-pub const STANDSTILL_MPS: f32 = 0.3;
+pub use shimmy_firmware::link::STANDSTILL_MPS;
 
 /// Runs the drive with `vehicle` as plant and firmware model; returns the filled backend.
 pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
