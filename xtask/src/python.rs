@@ -1,4 +1,4 @@
-//! The Python side of `cargo xtask test`: a virtual environment in `target/py-venv` (it sees
+//! `cargo xtask python` (run by hand, not a step of `cargo xtask test`): a virtual environment in `target/py-venv` (it sees
 //! the system's numpy/scipy; what is missing is installed into it with pip, never into the
 //! system), the `shimmy` wheel built with maturin (dev profile: the workspace's compiled
 //! dependencies are reused) and its pytest suite.
