@@ -2,8 +2,8 @@
 //!
 //! | task | runs | priority | work |
 //! |---|---|---|---|
-//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
-//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
+//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + margin-scheduled ASMC on the newest margin report + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; spawns `meter` on every 10th sample (`MeterCadence`); timing counters; feeds the watchdog |
+//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); publishes the report for the next control step; warnings on level changes, telemetry at 1 Hz |
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
 //! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
 //!
@@ -30,7 +30,7 @@ mod app {
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
-        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -69,6 +69,8 @@ mod app {
         board: Board,
         ctrl: SafeController,
         step: u32,
+        /// Which step spawns the meter task.
+        cadence: MeterCadence,
         /// The fault memory of this run (written back when it changes).
         record: ResetRecord,
         /// A reset loop was detected at boot: stay in the safe state.
@@ -161,6 +163,7 @@ mod app {
                 board,
                 ctrl,
                 step: 0,
+                cadence: MeterCadence::default(),
                 record,
                 hold_safe,
                 tx,
@@ -235,7 +238,7 @@ mod app {
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin, latched])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, cadence, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         #[cfg(feature = "pil")]
@@ -268,7 +271,7 @@ mod app {
         let pwm_ok = drive_coil(&mut b.coil, &out).is_ok();
 
         let dropped = cx.local.tx.enqueue(MeterSample::of(step, &out)).is_err();
-        let busy = step.is_multiple_of(METER_DECIMATION) && meter::spawn().is_err();
+        let busy = cx.local.cadence.tick() && meter::spawn().is_err();
 
         let exit = b.timer.now_ticks();
         let wrapped = b.timer.update_pending();

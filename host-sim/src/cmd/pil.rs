@@ -81,7 +81,8 @@ pub fn command(a: &PilArgs) -> Result<()> {
 
     let trace = out.join("trace.csv");
     r.write_trace_csv(&trace)?;
-    let label = "asmc (PIL)";
+    let label = format!("{} (PIL)", cfg.arm.name());
+    let label = label.as_str();
     let time_png = out.join("time.png");
     plot_runs(&time_png, &spec.name, &[(label, &r)])?;
     let margin_png = out.join("margin.png");

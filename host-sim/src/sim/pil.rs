@@ -14,12 +14,13 @@
 //!   the software-in-the-loop side; [`compare`] checks the two runs bit for bit.
 
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
-use shimmy_core::control::{ControlParams, ControllerKind};
+use shimmy_core::control::ControlParams;
 use shimmy_core::supervisor::checks::Supervisor;
-use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
+use shimmy_core::supervisor::frame::RawFrame;
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_firmware::monitoring::CONTROLLER;
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
     body_len, decode, encode, HostFrame, StepReport, TargetFrame, HEADER_BYTES, MAX_FRAME,
@@ -43,14 +44,17 @@ const LAST_FRAMES: usize = 12;
 /// Decoded log lines shown with a hang or crash.
 const LAST_LOG_LINES: usize = 40;
 
-/// The image runs the firmware's own controller and parameters (ASMC, the nominal vehicle:
+/// The image runs the firmware's own controller and parameters
+/// (`shimmy_firmware::monitoring::CONTROLLER`, the margin-scheduled ASMC; the nominal vehicle:
 /// its controller, supervisor and model-margin plant): a loop whose firmware believes anything
 /// else (`believed`) cannot be closed by it.
 pub fn check_firmware_matches(cfg: &LoopConfig, believed: &Vehicle) -> Result<(), String> {
-    if cfg.arm != Arm::Mr(ControllerKind::Asmc) {
+    let image = Arm::Mr(CONTROLLER);
+    if cfg.arm != image {
         return Err(format!(
-            "field `controller.kind`: `{}`, but the PIL image runs `asmc`",
-            cfg.arm.name()
+            "field `controller.kind`: `{}`, but the PIL image runs `{}`",
+            cfg.arm.name(),
+            image.name()
         ));
     }
     if *believed != Vehicle::nominal()
@@ -453,7 +457,7 @@ fn summary(f: &TargetFrame) -> String {
 impl FirmwareStep for PilFirmware {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
         self.remember(format!(
             "-> sensors t {} us: yaw {} / {} rad, {} m/s",
             frame.t_us, frame.left.angle_rad, frame.right.angle_rad, frame.speed_mps
@@ -510,7 +514,7 @@ impl<'a> SilFirmware<'a> {
 impl FirmwareStep for SilFirmware<'_> {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
         let k = self.periods.len();
         let model_cycles = self.pil.and_then(|p| p.get(k)).and_then(|p| {
             p.after.iter().find_map(|f| match f {
@@ -519,7 +523,8 @@ impl FirmwareStep for SilFirmware<'_> {
             })
         });
         let mut frames = Vec::new();
-        self.app
+        let _ = self
+            .app
             .period(frame, model_cycles, &mut |f| frames.push(f));
         let mut it = frames.into_iter();
         let Some(TargetFrame::Step(step)) = it.next() else {
@@ -810,15 +815,45 @@ mod tests {
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         assert_eq!(check_firmware_matches(&cfg, spec.model()), Ok(()));
         assert!(!spec.faults.is_empty() && spec.duration_s >= 10.0);
-        spec.controller = "smc".into();
-        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
-        let e = check_firmware_matches(&cfg, spec.model()).expect_err("smc");
-        assert!(e.contains("controller.kind"), "{e}");
-        spec.controller = "asmc".into();
+        for other in ["smc", "asmc"] {
+            spec.controller = other.into();
+            let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+            let e = check_firmware_matches(&cfg, spec.model()).expect_err(other);
+            assert!(
+                e.contains("controller.kind") && e.contains("margin-asmc"),
+                "{e}"
+            );
+        }
+        spec.controller = "margin-asmc".into();
         spec.model_vehicle = Some(crate::sim::vehicle_file::load("hard").expect("named set"));
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         let e = check_firmware_matches(&cfg, spec.model()).expect_err("hard");
         assert!(e.contains("[model]"), "{e}");
+    }
+
+    /// The simulator's own closed loop on the margin-scheduled arm is the firmware's
+    /// application (SIL, with each model cycle done at once): the same command on every step,
+    /// bit for bit, so the simulator's studies show what the image does.
+    #[test]
+    fn the_simulators_closed_loop_runs_the_firmware_app() {
+        use crate::sim::closed_loop::{self, run_on};
+        use crate::sim::{scenario, scenario_file};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
+        let mut spec = scenario_file::load(&path).expect("valid demo");
+        spec.duration_s = 3.0;
+        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+        let own = closed_loop::run(&cfg, &mut spec.scenario.clone(), None).expect("run");
+        let mut sil = SilFirmware::new(None).expect("app");
+        let app = run_on(&cfg, &mut spec.scenario.clone(), None, &mut sil).expect("run");
+        let bits = |r: &closed_loop::LoopResult| -> Vec<u64> {
+            r.series.cmd_a.iter().map(|x| x.to_bits()).collect()
+        };
+        assert_eq!(own.series.cmd_a.len(), 3000);
+        assert!(
+            own.series.cmd_a.iter().any(|&i| i > 0.1),
+            "the coil engages"
+        );
+        assert_eq!(bits(&own), bits(&app));
     }
 
     #[test]
