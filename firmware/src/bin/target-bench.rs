@@ -44,8 +44,11 @@ mod bench {
     /// integer entry checks (worst warm model cycle 264 k -> 177 k instructions) and the margin
     /// path's f64 time only on the reporting sample (plain meter push 562 -> 263) took the
     /// firmware to 49.1, inside issue 17's 5 %; the AR(10) slow meter merged since (+2,121 per
-    /// meter run) took it to 50.3, so the 5 % goal is missed by 0.03 % and stays open.
-    const CPU_LOAD_BUDGET_PERMILLE: u32 = 51;
+    /// meter run) took it to 50.3, so the 5 % goal is missed by 0.03 % and stays open. The
+    /// firmware's switch from the plain to the margin-scheduled ASMC (issue 19: the schedule,
+    /// the amplitude band-pass and the quiet coil on every step; control step 2,904 -> 3,243)
+    /// took it to 52.4: the guard is 53 now.
+    const CPU_LOAD_BUDGET_PERMILLE: u32 = 53;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
@@ -72,7 +75,7 @@ mod bench {
             run: control_step,
         },
         Entry {
-            name: "SafeController::step alone (supervisor + ASMC)",
+            name: "SafeController::step alone (supervisor, margin ASMC)",
             budget: Budget::None,
             run: safe_step,
         },
