@@ -13,7 +13,8 @@
 //! The `qemu` build runs the same application on simulated sensors with injected faults and
 //! exits after `board::QEMU_STEPS` steps with the counters, failing if they are not what the
 //! simulation injected. The `pil` build runs it on the host's plant in lockstep
-//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines only report to the host.
+//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines report to the host, and the idle
+//! loop starts the next step at once where the board would wait for the timer.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -231,10 +232,15 @@ mod app {
                     );
                 }
             }
-            if !task.tracker().busy() {
+            let busy = task.tracker().busy();
+            if !busy {
                 // Nothing due: sleep until the next interrupt (at most 1 ms).
+                #[cfg(not(feature = "pil"))]
                 cortex_m::asm::wfi();
             }
+            // PIL: the next step at once when nothing is due, else at the period's end.
+            #[cfg(feature = "pil")]
+            board::pil::background_pass(busy);
         }
     }
 

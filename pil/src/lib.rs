@@ -89,6 +89,12 @@ pub enum TargetFrame {
     },
     /// A completed model cycle.
     Model(ModelFrame),
+    /// The image's answer to [`HostFrame::Finish`], its last frame.
+    Finished {
+        /// Instructions the image executed since reset (the virtual time in ns under `-icount
+        /// shift=0`: the PIL build never halts, see `firmware/src/board/pil.rs`).
+        instructions: u64,
+    },
 }
 
 /// Why a frame could not be encoded or decoded.

@@ -331,6 +331,8 @@ pub struct PilFirmware {
     qemu: Qemu,
     periods: Vec<Period>,
     last: VecDeque<String>,
+    finished: Option<u64>,
+    host_cpu_at_start_s: f64,
 }
 
 /// A finished PIL run.
@@ -340,15 +342,37 @@ pub struct PilRun {
     pub periods: Vec<Period>,
     /// The image's decoded defmt log.
     pub log: Vec<String>,
+    /// Instructions the image executed from reset to the end of the run.
+    pub instructions: Option<u64>,
+    /// CPU time QEMU used (user + system), s.
+    pub qemu_cpu_s: f64,
+    /// CPU time this process used meanwhile (plant, sensors, frames; user + system), s.
+    pub host_cpu_s: f64,
+}
+
+/// CPU time (user + system) of this process (`RUSAGE_SELF`) or of its waited-for children
+/// (`RUSAGE_CHILDREN`), s.
+fn cpu_s(who: libc::c_int) -> f64 {
+    // SAFETY: an all-zero `rusage` is valid; getrusage fills it.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `u` is a valid, writable rusage.
+    if unsafe { libc::getrusage(who, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    s(u.ru_utime) + s(u.ru_stime)
 }
 
 impl PilFirmware {
     /// Starts the image `elf` (a `pil` build).
     pub fn start(elf: &Path) -> Result<Self, String> {
+        let host_cpu_at_start_s = cpu_s(libc::RUSAGE_SELF);
         Ok(PilFirmware {
             qemu: Qemu::start(elf)?,
             periods: Vec::new(),
             last: VecDeque::new(),
+            finished: None,
+            host_cpu_at_start_s,
         })
     }
 
@@ -387,6 +411,7 @@ impl PilFirmware {
     fn file(&mut self, f: TargetFrame) {
         self.remember(format!("<- {}", summary(&f)));
         match (f, self.periods.last_mut()) {
+            (TargetFrame::Finished { instructions }, _) => self.finished = Some(instructions),
             (TargetFrame::Step(step), _) => self.periods.push(Period {
                 step,
                 after: Vec::new(),
@@ -407,6 +432,9 @@ impl PilFirmware {
             .send(&HostFrame::Finish)
             .map_err(|e| self.failure(&e))?;
         let status = self.qemu.wait_exit().map_err(|e| self.failure(&e))?;
+        let host_cpu_s = cpu_s(libc::RUSAGE_SELF) - self.host_cpu_at_start_s;
+        // QEMU is this run's only child process, and it has been waited for.
+        let qemu_cpu_s = cpu_s(libc::RUSAGE_CHILDREN);
         // What the image wrote before it exited is in the pipe now.
         loop {
             match take_frame(&mut self.qemu.pending) {
@@ -425,6 +453,9 @@ impl PilFirmware {
         Ok(PilRun {
             log: self.qemu.log(),
             periods: std::mem::take(&mut self.periods),
+            instructions: self.finished,
+            qemu_cpu_s,
+            host_cpu_s,
         })
     }
 }
@@ -451,6 +482,9 @@ fn summary(f: &TargetFrame) -> String {
             "model cycle {}: zeta {}, onset {:?} m/s, {} instructions",
             m.cycle, m.margin.zeta, m.margin.v_crit_onset_mps, m.instructions
         ),
+        TargetFrame::Finished { instructions } => {
+            format!("finished after {instructions} instructions")
+        }
     }
 }
 
