@@ -299,11 +299,11 @@ fn send(frame: &TargetFrame) {
 /// End of a control step that began at instruction `entry`: its report, and its instructions
 /// (the report's cost included) booked as busy time.
 pub fn report_step(step: u32, out: &SafeOutput, entry: u32) {
+    let instructions = crate::board::pil::instructions().wrapping_sub(entry);
     if entry < STEP_ENTRY.load(Ordering::Relaxed) {
         WRAPS.fetch_add(1, Ordering::Relaxed);
     }
     STEP_ENTRY.store(entry, Ordering::Relaxed);
-    let instructions = crate::board::pil::instructions().wrapping_sub(entry);
     send(&TargetFrame::Step(StepReport {
         step,
         out: *out,
