@@ -44,8 +44,10 @@ mod bench {
     /// integer entry checks (worst warm model cycle 264 k -> 177 k instructions) and the margin
     /// path's f64 time only on the reporting sample (plain meter push 562 -> 263) took the
     /// firmware to 49.1, inside issue 17's 5 %; the AR(10) slow meter merged since (+2,121 per
-    /// meter run) took it to 50.3, so the 5 % goal is missed by 0.03 % and stays open.
-    const CPU_LOAD_BUDGET_PERMILLE: u32 = 51;
+    /// meter run) took it to 50.3; the RLS covariance updated in place (no clear and copy of
+    /// the 14 x 14 matrix per update: meter run 37,910 -> 35,079) to 48.7, inside the 5 %
+    /// again, which this guard now holds.
+    const CPU_LOAD_BUDGET_PERMILLE: u32 = 50;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
