@@ -47,6 +47,6 @@ pub use standstill::{
 };
 pub use storage::{
     block_on, Appended, Boot, BootReport, ConfigLoad, ConfigSource, Gated, Layout, Maintenance,
-    Store, StoreError, KEY_BOOTS, KEY_CLEARING, KEY_VEHICLE, PENDING,
+    Store, StoreError, PENDING, STATE_HEADER_BYTES, STATE_MAX_BYTES,
 };
 pub use task::{Motion, Pass, StoreTask, RETRY_S};
