@@ -261,7 +261,9 @@ pub struct Field {
     pub hi: f64,
     /// Only whole numbers are allowed.
     pub integer: bool,
-    /// One line on what it is (empty without the `field-docs` feature).
+    /// One line on what it is (only with the `field-docs` feature: the host tools print it; the
+    /// firmware image checks names and ranges without ~4 KB of descriptions).
+    #[cfg(feature = "field-docs")]
     pub doc: &'static str,
     get: fn(&Vehicle) -> f64,
     set: fn(&mut Vehicle, f64),
@@ -516,22 +518,6 @@ impl Scalar for u8 {
     }
 }
 
-/// A field's one-line description: kept with the `field-docs` feature (the simulator, the Python
-/// module), empty without it (the firmware image, which checks names and ranges but prints no
-/// description: ~4.7 KB of flash, `cargo xtask size`).
-#[cfg(feature = "field-docs")]
-macro_rules! field_doc {
-    ($doc:expr) => {
-        $doc
-    };
-}
-#[cfg(not(feature = "field-docs"))]
-macro_rules! field_doc {
-    ($doc:expr) => {
-        ""
-    };
-}
-
 macro_rules! plant_field {
     ($p:ident, $doc:literal) => {
         Field {
@@ -541,7 +527,8 @@ macro_rules! plant_field {
             lo: Param::$p.range().0,
             hi: Param::$p.range().1,
             integer: false,
-            doc: field_doc!($doc),
+            #[cfg(feature = "field-docs")]
+            doc: $doc,
             get: |v| v.plant.get(Param::$p),
             set: |v, x| v.plant = v.plant.with(Param::$p, x),
         }
@@ -566,7 +553,8 @@ macro_rules! field {
             lo: $lo,
             hi: $hi,
             integer: $int,
-            doc: field_doc!($doc),
+            #[cfg(feature = "field-docs")]
+            doc: $doc,
             get: |$v| Scalar::to_f64($place),
             set: |$v, x| $place = Scalar::from_f64(x),
         }
@@ -608,10 +596,9 @@ pub static FIELDS: &[Field] = &[
         lo: 0.1,
         hi: 10.0,
         integer: false,
-        doc: field_doc!(
-            "coil rating: the Spencer model's u_max, the firmware model's and the controller's \
-             current limit and the fail-safe current"
-        ),
+        #[cfg(feature = "field-docs")]
+        doc: "coil rating: the Spencer model's u_max, the firmware model's and the controller's \
+              current limit and the fail-safe current",
         get: |v| v.damper.spencer.u_max,
         set: |v, x| {
             v.damper.spencer.u_max = x;
