@@ -25,6 +25,7 @@ mod app {
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_firmware::background::PassGate;
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
@@ -181,11 +182,21 @@ mod app {
     /// The background loop: the model-margin tracker, one unit of work (at most one f32
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
-    /// (1 Hz) is logged.
-    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched, link])]
+    /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
+    /// (`PassGate`); other wakes go back to sleep.
+    #[idle(local = [model_task, store_task, log_rx, gate: PassGate = PassGate::new()], shared = [model, now, health, motion, latched, link])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
+            if !cx
+                .local
+                .gate
+                .due(motion.t_s, cx.local.model_task.tracker().busy())
+            {
+                // Nothing new since the last pass: sleep until the next interrupt.
+                cortex_m::asm::wfi();
+                continue;
+            }
             store_pass(
                 cx.local.store_task,
                 cx.local.log_rx,
@@ -325,9 +336,15 @@ mod app {
             board::pil::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
             let data = &*cx.local.data;
-            cx.shared
-                .link
-                .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
+            cx.shared.link.lock(|l| {
+                l.on_update(
+                    &u,
+                    data.pipeline().monitor(),
+                    data.speed_mps(),
+                    &health,
+                    s.step,
+                )
+            });
             // The store: a closed shimmy episode, and the motion for its standstill watch.
             if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
                 if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
