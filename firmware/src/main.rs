@@ -5,7 +5,7 @@
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
