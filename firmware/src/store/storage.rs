@@ -21,6 +21,8 @@ pub const PENDING: usize = 16;
 /// little-endian) and the clearing mark (1 while a log clear is under way, so a clear cut by a
 /// power loss is finished at the next boot: a half-erased log page is not left for the queue).
 pub const STATE_HEADER_BYTES: usize = 5;
+/// Where the clearing mark is in a configuration state (the boot count is in front of it).
+const CLEARING_AT: usize = 4;
 /// The largest configuration state: the header and the largest vehicle record.
 pub const STATE_MAX_BYTES: usize = STATE_HEADER_BYTES + RECORD_MAX_BYTES;
 
@@ -404,7 +406,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// Sets the boot count of the configuration state.
     fn store_boots(&mut self, count: u32) -> Result<(), StoreError> {
         self.update_state(|state, n| {
-            if let Some(boots) = state.first_chunk_mut::<4>() {
+            if let Some(boots) = state.first_chunk_mut() {
                 *boots = count.to_le_bytes();
             }
             Ok(n)
@@ -414,7 +416,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// Sets or clears the clearing mark of the configuration state.
     fn store_clearing(&mut self, clearing: bool) -> Result<(), StoreError> {
         self.update_state(|state, n| {
-            if let Some(mark) = state.get_mut(4) {
+            if let Some(mark) = state.get_mut(CLEARING_AT) {
                 *mark = u8::from(clearing);
             }
             Ok(n)
@@ -457,9 +459,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
         let mut state = [0u8; STATE_MAX_BYTES];
         let stored = match self.read_state(&mut state) {
-            Ok(n) if n > 0 => state
-                .first_chunk::<4>()
-                .map_or(0, |b| u32::from_le_bytes(*b)),
+            Ok(n) if n > 0 => state_boots(&state),
             _ => 0,
         };
         let boot_count = stored.saturating_add(1);
@@ -591,7 +591,12 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
 
 /// The clearing mark of a configuration state.
 fn state_clearing(state: &[u8; STATE_MAX_BYTES]) -> bool {
-    state.get(4) == Some(&1)
+    state.get(CLEARING_AT) == Some(&1)
+}
+
+/// The boot count of a configuration state.
+fn state_boots(state: &[u8; STATE_MAX_BYTES]) -> u32 {
+    state.first_chunk().map_or(0, |b| u32::from_le_bytes(*b))
 }
 
 #[cfg(test)]
