@@ -5,7 +5,7 @@
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + margin-scheduled ASMC on the newest margin report + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; spawns `meter` on every 10th sample (`MeterCadence`); timing counters; feeds the watchdog |
 //! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); publishes the report for the next control step; warnings on level changes, telemetry at 1 Hz |
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -26,6 +26,7 @@ mod app {
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_firmware::background::PassGate;
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
@@ -185,11 +186,21 @@ mod app {
     /// The background loop: the model-margin tracker, one unit of work (at most one f32
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
-    /// (1 Hz) is logged.
-    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched, link])]
+    /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
+    /// (`PassGate`); other wakes go back to sleep.
+    #[idle(local = [model_task, store_task, log_rx, gate: PassGate = PassGate::new()], shared = [model, now, health, motion, latched, link])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
+            if !cx
+                .local
+                .gate
+                .due(motion.t_s, cx.local.model_task.tracker().busy())
+            {
+                // Nothing new since the last pass: sleep until the next interrupt.
+                cortex_m::asm::wfi();
+                continue;
+            }
             store_pass(
                 cx.local.store_task,
                 cx.local.log_rx,
@@ -334,9 +345,15 @@ mod app {
             board::pil::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
             let data = &*cx.local.data;
-            cx.shared
-                .link
-                .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
+            cx.shared.link.lock(|l| {
+                l.on_update(
+                    &u,
+                    data.pipeline().monitor(),
+                    data.speed_mps(),
+                    &health,
+                    s.step,
+                )
+            });
             // The store: a closed shimmy episode, and the motion for its standstill watch.
             if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
                 if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
