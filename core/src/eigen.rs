@@ -54,7 +54,7 @@ pub enum EigenError {
 /// f32: ~20x fewer instructions on the M4 than soft-float f64. Balancing is what makes this
 /// accurate enough (`docs/margin-estimator.md`: unscaled f32 loses ~0.04 in zeta); the
 /// tracker's critical speeds still meet 0.05 km/h (tests/tests/margin_model.rs).
-pub trait SolveFloat: nalgebra::RealField + Copy + sealed::Sealed {
+pub trait SolveFloat: nalgebra::RealField + Copy + crate::sqrt::Sqrt + sealed::Sealed {
     /// Name for reports ("f32", "f64").
     const NAME: &'static str;
     /// Machine epsilon: the QR deflation threshold.
@@ -329,7 +329,7 @@ fn unit_array<T: SolveFloat, const N: usize>(
     let n2 = x
         .iter()
         .fold(T::zero(), |acc, c| acc + c.re * c.re + c.im * c.im);
-    let n = n2.sqrt();
+    let n = n2.sqrt_rounded();
     if !(n.to_f64().is_finite() && n > T::zero()) {
         return Err(EigenError::Singular);
     }

@@ -1,6 +1,7 @@
 //! shimmy-core: the `no_std`, heap-free code shared by the firmware and the host simulator
 //! (`docs/architecture.md`). The modules, lowest layer first (each uses only those above it):
 //!
+//! - [`sqrt`]: the correctly rounded f32 square root on the FPU (libm's off the target);
 //! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
 //! - [`plant`]: the plant linearised at a forward speed (state matrix A(V), dA/dV);
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
@@ -44,6 +45,7 @@ pub mod estimator;
 pub mod mr_damper;
 pub mod params;
 pub mod plant;
+pub mod sqrt;
 pub mod stability;
 // Control path: panic-free by lint (tests may unwrap/index).
 #[cfg_attr(
