@@ -2,9 +2,11 @@
 //! (`docs/architecture.md`). The modules, lowest layer first (each uses only those above it):
 //!
 //! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
-//! - [`plant`]: the plant linearised at a forward speed (state matrix A(V), dA/dV);
+//! - [`model`]: the vehicle-model family: the trait a linear steering model with N states
+//!   implements (A(V), dA/dV, damper input, measured output, mode shapes);
+//! - [`plant`]: the car's plant linearised at a forward speed (state matrix A(V), dA/dV);
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
-//! - [`stability`]: stability over speed: Hopf crossings and critical speeds;
+//! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -41,6 +43,7 @@ pub mod eigen;
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 pub mod estimator;
+pub mod model;
 pub mod mr_damper;
 pub mod params;
 pub mod plant;
