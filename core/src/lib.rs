@@ -7,6 +7,7 @@
 //! - [`plant`]: the car's plant linearised at a forward speed (state matrix A(V), dA/dV);
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
 //! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
+//! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -48,6 +49,7 @@ pub mod mr_damper;
 pub mod params;
 pub mod plant;
 pub mod stability;
+pub mod truck;
 // Control path: panic-free by lint (tests may unwrap/index).
 #[cfg_attr(
     not(test),
