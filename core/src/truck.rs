@@ -428,6 +428,279 @@ impl TruckParams {
     }
 }
 
+/// One field of the truck's parameters in a vehicle file: name, unit, plausible range (both
+/// ends included: wide enough for any heavy truck's front axle, narrow enough to reject a typo
+/// by orders of magnitude).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TruckField {
+    /// Field name (`[truck]` section of a vehicle file; the strut's with an `hps_` prefix).
+    pub name: &'static str,
+    /// SI unit.
+    pub unit: &'static str,
+    /// Plausible range (lo, hi).
+    pub range: (f64, f64),
+}
+
+/// Every field of [`TruckParams`], in the order of `docs/mining-truck.md`'s model.
+pub const TRUCK_FIELDS: [TruckField; 30] = [
+    TruckField {
+        name: "i_k",
+        unit: "kg m^2",
+        range: (100.0, 100000.0),
+    },
+    TruckField {
+        name: "i_p",
+        unit: "kg m^2",
+        range: (0.0, 100000.0),
+    },
+    TruckField {
+        name: "r",
+        unit: "m",
+        range: (0.3, 2.5),
+    },
+    TruckField {
+        name: "h_r",
+        unit: "m",
+        range: (0.0, 3.0),
+    },
+    TruckField {
+        name: "sigma",
+        unit: "m",
+        range: (0.05, 5.0),
+    },
+    TruckField {
+        name: "e",
+        unit: "m",
+        range: (0.0, 0.5),
+    },
+    TruckField {
+        name: "t_p",
+        unit: "m",
+        range: (0.0, 0.5),
+    },
+    TruckField {
+        name: "c_a_per_fz",
+        unit: "1/rad",
+        range: (0.5, 30.0),
+    },
+    TruckField {
+        name: "l_t",
+        unit: "m",
+        range: (0.05, 2.0),
+    },
+    TruckField {
+        name: "k_tr",
+        unit: "N m/rad",
+        range: (10000.0, 10000000000.0),
+    },
+    TruckField {
+        name: "c_k",
+        unit: "N m s/rad",
+        range: (0.0, 1000000.0),
+    },
+    TruckField {
+        name: "i_phi",
+        unit: "kg m^2",
+        range: (100.0, 10000000.0),
+    },
+    TruckField {
+        name: "m_axle",
+        unit: "kg",
+        range: (100.0, 100000.0),
+    },
+    TruckField {
+        name: "k_y",
+        unit: "N/m",
+        range: (10000.0, 10000000000.0),
+    },
+    TruckField {
+        name: "c_y",
+        unit: "N s/m",
+        range: (0.0, 100000000.0),
+    },
+    TruckField {
+        name: "track",
+        unit: "m",
+        range: (0.5, 8.0),
+    },
+    TruckField {
+        name: "k_tz",
+        unit: "N/m",
+        range: (10000.0, 1000000000.0),
+    },
+    TruckField {
+        name: "strut_spacing",
+        unit: "m",
+        range: (0.2, 8.0),
+    },
+    TruckField {
+        name: "c_strut",
+        unit: "N s/m",
+        range: (0.0, 100000000.0),
+    },
+    TruckField {
+        name: "hps_v0_m3",
+        unit: "m^3",
+        range: (0.0001, 0.2),
+    },
+    TruckField {
+        name: "hps_p0_pa",
+        unit: "Pa",
+        range: (10000.0, 50000000.0),
+    },
+    TruckField {
+        name: "hps_area_m2",
+        unit: "m^2",
+        range: (0.0001, 1.0),
+    },
+    TruckField {
+        name: "hps_n",
+        unit: "-",
+        range: (1.0, 1.67),
+    },
+    TruckField {
+        name: "j_c",
+        unit: "kg m^2",
+        range: (0.01, 100000.0),
+    },
+    TruckField {
+        name: "k_d",
+        unit: "N m/rad",
+        range: (1000.0, 10000000000.0),
+    },
+    TruckField {
+        name: "k_h",
+        unit: "N m/rad",
+        range: (0.0, 10000000000.0),
+    },
+    TruckField {
+        name: "c_h",
+        unit: "N m s/rad",
+        range: (0.0, 10000000.0),
+    },
+    TruckField {
+        name: "front_empty_kg",
+        unit: "kg",
+        range: (100.0, 500000.0),
+    },
+    TruckField {
+        name: "payload_kg",
+        unit: "kg",
+        range: (0.0, 1000000.0),
+    },
+    TruckField {
+        name: "payload_front_share",
+        unit: "-",
+        range: (0.0, 1.0),
+    },
+];
+
+/// Why a truck parameter set is rejected.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum TruckFieldError {
+    /// No field of that name.
+    #[error("no truck field of that name")]
+    Unknown,
+    /// A value outside its field's plausible range (or not finite).
+    #[error("field `{name}` = {value} {unit} is outside {lo} ..= {hi} {unit}")]
+    OutOfRange {
+        /// The field.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// Lower end of the range.
+        lo: f64,
+        /// Upper end of the range.
+        hi: f64,
+        /// The field's unit.
+        unit: &'static str,
+    },
+    /// The struts cannot carry the load at this charge.
+    #[error("the struts cannot carry the load: {0}")]
+    Strut(HpsError),
+}
+
+impl TruckParams {
+    fn field_mut(&mut self, name: &str) -> Option<&mut f64> {
+        Some(match name {
+            "i_k" => &mut self.i_k,
+            "i_p" => &mut self.i_p,
+            "r" => &mut self.r,
+            "h_r" => &mut self.h_r,
+            "sigma" => &mut self.sigma,
+            "e" => &mut self.e,
+            "t_p" => &mut self.t_p,
+            "c_a_per_fz" => &mut self.c_a_per_fz,
+            "l_t" => &mut self.l_t,
+            "k_tr" => &mut self.k_tr,
+            "c_k" => &mut self.c_k,
+            "i_phi" => &mut self.i_phi,
+            "m_axle" => &mut self.m_axle,
+            "k_y" => &mut self.k_y,
+            "c_y" => &mut self.c_y,
+            "track" => &mut self.track,
+            "k_tz" => &mut self.k_tz,
+            "strut_spacing" => &mut self.strut_spacing,
+            "c_strut" => &mut self.c_strut,
+            "hps_v0_m3" => &mut self.hps.v0_m3,
+            "hps_p0_pa" => &mut self.hps.p0_pa,
+            "hps_area_m2" => &mut self.hps.area_m2,
+            "hps_n" => &mut self.hps.n,
+            "j_c" => &mut self.j_c,
+            "k_d" => &mut self.k_d,
+            "k_h" => &mut self.k_h,
+            "c_h" => &mut self.c_h,
+            "front_empty_kg" => &mut self.front_empty_kg,
+            "payload_kg" => &mut self.payload_kg,
+            "payload_front_share" => &mut self.payload_front_share,
+            _ => return None,
+        })
+    }
+
+    /// The value of the field `name`.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        let mut copy = *self;
+        copy.field_mut(name).map(|v| *v)
+    }
+
+    /// Sets the field `name` to `value` if it is inside the field's range.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<(), TruckFieldError> {
+        let field = TRUCK_FIELDS
+            .iter()
+            .find(|f| f.name == name)
+            .ok_or(TruckFieldError::Unknown)?;
+        check(field, value)?;
+        *self.field_mut(name).ok_or(TruckFieldError::Unknown)? = value;
+        Ok(())
+    }
+
+    /// Every field inside its range, and struts that carry the load (neither topped nor
+    /// bottomed out); the first offender.
+    pub fn validate(&self) -> Result<(), TruckFieldError> {
+        for f in &TRUCK_FIELDS {
+            check(f, self.get(f.name).ok_or(TruckFieldError::Unknown)?)?;
+        }
+        self.operating_point()
+            .map(|_| ())
+            .map_err(TruckFieldError::Strut)
+    }
+}
+
+fn check(f: &TruckField, value: f64) -> Result<(), TruckFieldError> {
+    let (lo, hi) = f.range;
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(TruckFieldError::OutOfRange {
+            name: f.name,
+            value,
+            lo,
+            hi,
+            unit: f.unit,
+        })
+    }
+}
+
 impl LinearModel<N_STATES> for TruckParams {
     const NAME: &'static str = "mining-truck-5dof";
     const STATE_NAMES: [&'static str; N_STATES] = STATE_NAMES;
@@ -619,6 +892,39 @@ mod tests {
         let empty = TruckSet::Empty.params().operating_point().unwrap();
         assert!(soft.strut.stiffness_npm < base.strut.stiffness_npm);
         assert!(empty.strut.stiffness_npm < base.strut.stiffness_npm);
+    }
+
+    /// Every field is in the table, reads back what was set, and a value out of range or a
+    /// charge the struts cannot carry is rejected naming the field.
+    #[test]
+    fn the_field_table_covers_every_field_and_checks_ranges() {
+        let mut t = TruckSet::Full.params();
+        t.validate().unwrap();
+        for f in &TRUCK_FIELDS {
+            let v = t.get(f.name).unwrap();
+            let mid = 0.5 * (f.range.0 + f.range.1);
+            let mut u = t;
+            u.set(f.name, mid).unwrap();
+            assert_eq!(u.get(f.name), Some(mid), "{}", f.name);
+            assert!(u != t || v == mid, "{} sets nothing", f.name);
+        }
+        let e = t.set("hps_v0_m3", 5.0).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                TruckFieldError::OutOfRange {
+                    name: "hps_v0_m3",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert_eq!(t.set("no_such", 1.0), Err(TruckFieldError::Unknown));
+        t.set("hps_p0_pa", 2.0e7).unwrap();
+        assert!(matches!(
+            t.validate(),
+            Err(TruckFieldError::Strut(HpsError::ToppedOut { .. }))
+        ));
     }
 
     #[test]
