@@ -238,6 +238,10 @@ pub struct TruckParams {
     pub payload_kg: f64,
     /// Share of the payload on the front axle.
     pub payload_front_share: f64,
+    /// Tyre-road friction coefficient mu (the simulator's tyre: peak force mu F_z).
+    pub mu: f64,
+    /// Magic-Formula shape factor C_s of the simulator's tyre.
+    pub c_s: f64,
 }
 
 /// The truck's derived linear coefficients at its load and gas charge.
@@ -358,6 +362,8 @@ impl TruckParams {
             front_empty_kg: front_empty,
             payload_kg: Self::RATED_PAYLOAD_KG,
             payload_front_share: (front_loaded - front_empty) / Self::RATED_PAYLOAD_KG,
+            mu: 0.6,
+            c_s: 1.3,
         }
     }
 
@@ -442,7 +448,7 @@ pub struct TruckField {
 }
 
 /// Every field of [`TruckParams`], in the order of `docs/mining-truck.md`'s model.
-pub const TRUCK_FIELDS: [TruckField; 30] = [
+pub const TRUCK_FIELDS: [TruckField; 32] = [
     TruckField {
         name: "i_k",
         unit: "kg m^2",
@@ -593,6 +599,16 @@ pub const TRUCK_FIELDS: [TruckField; 30] = [
         unit: "-",
         range: (0.0, 1.0),
     },
+    TruckField {
+        name: "mu",
+        unit: "-",
+        range: (0.05, 1.5),
+    },
+    TruckField {
+        name: "c_s",
+        unit: "-",
+        range: (0.5, 3.0),
+    },
 ];
 
 /// Why a truck parameter set is rejected.
@@ -653,6 +669,8 @@ impl TruckParams {
             "front_empty_kg" => &mut self.front_empty_kg,
             "payload_kg" => &mut self.payload_kg,
             "payload_front_share" => &mut self.payload_front_share,
+            "mu" => &mut self.mu,
+            "c_s" => &mut self.c_s,
             _ => return None,
         })
     }
