@@ -729,53 +729,54 @@ impl LinearModel<N_STATES> for TruckParams {
         let h = self.spin_momentum(v_mps);
         let cd = c_damper_nspm * self.l_t * self.l_t / 4.0;
         let lever = self.e + self.t_p;
-        let inertia = [self.i_k, self.i_k, self.i_phi, self.j_c, self.m_axle];
-        let mut k = Matrix::<N_DOF>::zeros();
-        k[(PSI_L, PSI_L)] = self.k_tr + self.k_d;
-        k[(PSI_L, PSI_R)] = -self.k_tr;
-        k[(PSI_R, PSI_L)] = -self.k_tr;
-        k[(PSI_R, PSI_R)] = self.k_tr;
-        k[(PSI_L, THETA_C)] = -self.k_d;
-        k[(THETA_C, PSI_L)] = -self.k_d;
-        k[(THETA_C, THETA_C)] = self.k_d + self.k_h;
-        k[(PHI, PHI)] = op.k_phi;
-        k[(Y, Y)] = self.k_y;
-        let mut c = Matrix::<N_DOF>::zeros();
-        c[(PSI_L, PSI_L)] = self.c_k + cd;
-        c[(PSI_L, PSI_R)] = cd;
-        c[(PSI_R, PSI_L)] = cd;
-        c[(PSI_R, PSI_R)] = self.c_k + cd;
-        c[(PHI, PHI)] = op.c_phi;
-        c[(THETA_C, THETA_C)] = self.c_h;
-        c[(Y, Y)] = self.c_y;
-        // gyroscopic: -H dphi in both wheel rows, +H (dpsi_L + dpsi_R) in the roll row
-        c[(PSI_L, PHI)] = h;
-        c[(PSI_R, PHI)] = h;
-        c[(PHI, PSI_L)] = -h;
-        c[(PHI, PSI_R)] = -h;
+        // entry by entry (the nonzeros of M^-1 K, M^-1 C, M^-1 G): soft-float f64 on the M4,
+        // so no full 5 x 5 products
+        let (ik, iphi, jc, ma) = (
+            1.0 / self.i_k,
+            1.0 / self.i_phi,
+            1.0 / self.j_c,
+            1.0 / self.m_axle,
+        );
         let mut a = Matrix::<N_STATES>::zeros();
         for i in 0..N_DOF {
             a[(i, N_DOF + i)] = 1.0;
-            let inv_m = 1.0 / inertia[i];
-            for j in 0..N_DOF {
-                a[(N_DOF + i, j)] = -k[(i, j)] * inv_m;
-                a[(N_DOF + i, N_DOF + j)] = -c[(i, j)] * inv_m;
-            }
         }
+        // stiffness: tie rod, linkage, oil columns, roll, lateral
+        a[(DPSI_L, PSI_L)] = -(self.k_tr + self.k_d) * ik;
+        a[(DPSI_L, PSI_R)] = self.k_tr * ik;
+        a[(DPSI_L, THETA_C)] = self.k_d * ik;
+        a[(DPSI_R, PSI_L)] = self.k_tr * ik;
+        a[(DPSI_R, PSI_R)] = -self.k_tr * ik;
+        a[(DTHETA_C, PSI_L)] = self.k_d * jc;
+        a[(DTHETA_C, THETA_C)] = -(self.k_d + self.k_h) * jc;
+        a[(DPHI, PHI)] = -op.k_phi * iphi;
+        a[(DY, Y)] = -self.k_y * ma;
+        // damping: kingpins with the track-rod damper, roll, linkage, lateral; gyroscopic
+        // -H dphi in both wheel rows, +H (dpsi_L + dpsi_R) in the roll row
+        a[(DPSI_L, DPSI_L)] = -(self.c_k + cd) * ik;
+        a[(DPSI_L, DPSI_R)] = -cd * ik;
+        a[(DPSI_R, DPSI_L)] = -cd * ik;
+        a[(DPSI_R, DPSI_R)] = -(self.c_k + cd) * ik;
+        a[(DPSI_L, DPHI)] = -h * ik;
+        a[(DPSI_R, DPHI)] = -h * ik;
+        a[(DPHI, DPSI_L)] = h * iphi;
+        a[(DPHI, DPSI_R)] = h * iphi;
+        a[(DPHI, DPHI)] = -op.c_phi * iphi;
+        a[(DTHETA_C, DTHETA_C)] = -self.c_h * jc;
+        a[(DY, DY)] = -self.c_y * ma;
         // generalised tyre forces per unit lagged slip: yaw moment -(e + t_p) C_a on its wheel,
         // roll moment h_r C_a, lateral force C_a on the axle
-        for (slip, wheel) in [(A_L, PSI_L), (A_R, PSI_R)] {
-            a[(N_DOF + wheel, slip)] = -lever * op.c_a / self.i_k;
-            a[(N_DOF + PHI, slip)] = self.h_r * op.c_a / self.i_phi;
-            a[(N_DOF + Y, slip)] = op.c_a / self.m_axle;
-        }
         let inv_sigma = 1.0 / self.sigma;
-        for (row, psi, dpsi) in [(A_L, PSI_L, DPSI_L), (A_R, PSI_R, DPSI_R)] {
-            a[(row, psi)] = v_mps * inv_sigma;
-            a[(row, row)] = -v_mps * inv_sigma;
-            a[(row, dpsi)] = self.e * inv_sigma;
-            a[(row, DPHI)] = -self.h_r * inv_sigma;
-            a[(row, DY)] = -inv_sigma;
+        for (slip, wheel, dpsi) in [(A_L, PSI_L, DPSI_L), (A_R, PSI_R, DPSI_R)] {
+            a[(dpsi, slip)] = -lever * op.c_a * ik;
+            a[(DPHI, slip)] = self.h_r * op.c_a * iphi;
+            a[(DY, slip)] = op.c_a * ma;
+            // tyre lag: sigma a' = V (psi - a) + e dpsi - h_r dphi - dy
+            a[(slip, wheel)] = v_mps * inv_sigma;
+            a[(slip, slip)] = -v_mps * inv_sigma;
+            a[(slip, dpsi)] = self.e * inv_sigma;
+            a[(slip, DPHI)] = -self.h_r * inv_sigma;
+            a[(slip, DY)] = -inv_sigma;
         }
         a
     }
