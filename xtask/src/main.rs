@@ -61,6 +61,9 @@ fn main() -> ExitCode {
         Some("size") => size(),
         Some("bench") => bench().and_then(|s| {
             println!("on-target benchmark: {s}");
+            println!("{TRUCK_MODEL} image (the model task on the truck's 12-state model):");
+            let truck = run_bench(&["qemu", TRUCK_MODEL])?;
+            println!("on-target benchmark, {TRUCK_MODEL} image: {truck}");
             if args.get(1).is_some_and(|a| a == "--target-only") {
                 return Ok(());
             }

@@ -272,7 +272,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 fn car_only(what: &str) -> String {
     format!(
         "{what} is a {} model; this command needs the {} (the truck runs through \
-         `stability` and `gas-charge`)",
+         `stability`, `sensitivity` and `gas-charge`)",
         TruckParams::NAME,
         PlantParams::NAME
     )
