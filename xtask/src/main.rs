@@ -287,7 +287,7 @@ fn rustdoc() -> Step {
 }
 
 fn clippy_firmware() -> Step {
-    for features in ["", "qemu,deliberate-failure", "pil"] {
+    for features in ["", "qemu,deliberate-failure", "pil", TRUCK_MODEL] {
         let mut args = vec!["clippy", "-p", FIRMWARE, "--target", TARGET, "--bins"];
         if !features.is_empty() {
             args.extend(["--features", features]);
