@@ -978,6 +978,61 @@ mod tests {
         );
     }
 
+    /// The bordered LU over `Ext` rows does the square LU's operations in its order: factors
+    /// and both solves of an (N+1) x (N+1) bordered matrix equal, bit for bit, those of
+    /// [`ComplexLu`] on the same matrix as plain arrays (the former 11 x 11 path of
+    /// `refine_eigenpair`), in both precisions; so the car's Newton steps are unchanged.
+    #[test]
+    fn bordered_lu_is_bit_identical_to_the_square_lu() {
+        fn check<T: SolveFloat>() {
+            const N: usize = N_STATES;
+            let p = ParamSet::Nominal.params();
+            let a = linearise(&p, 12.0, 300.0);
+            let l = least_damped_mode(&eigenvalues(&a).unwrap())
+                .unwrap()
+                .eigenvalue();
+            let v = eigenvector(&a, l).unwrap();
+            let t = T::of_f64;
+            let tc = |z: Complex<f64>| Complex::new(t(z.re), t(z.im));
+            let entry = |row: usize, col: usize| match (row < N, col < N) {
+                (true, true) if row == col => Complex::new(t(a[(row, col)]), T::zero()) - tc(l),
+                (true, true) => Complex::new(t(a[(row, col)]), T::zero()),
+                (true, false) => -tc(v[row]),
+                (false, true) => tc(v[col].conj()),
+                (false, false) => Complex::new(T::zero(), T::zero()),
+            };
+            let square = ComplexLu::<T, { N + 1 }>::factor(core::array::from_fn(|r| {
+                core::array::from_fn(|c| entry(r, c))
+            }))
+            .unwrap();
+            let bordered =
+                BorderedLu::<T, N>::factor(Ext::from_fn(|r| Ext::from_fn(|c| entry(r, c))))
+                    .unwrap();
+            let bits = |z: Complex<T>| (z.re.to_f64().to_bits(), z.im.to_f64().to_bits());
+            for r in 0..=N {
+                assert_eq!(square.perm[r], bordered.perm.get(r));
+                for c in 0..=N {
+                    assert_eq!(
+                        bits(square.m[r][c]),
+                        bits(bordered.m.at(r).get(c)),
+                        "{r} {c}"
+                    );
+                }
+            }
+            let b: [Complex<T>; N + 1] =
+                core::array::from_fn(|i| Complex::new(t(1.0 + 0.3 * i as f64), t(-0.2 * i as f64)));
+            let eb = Ext::<Complex<T>, N>::from_fn(|i| b[i]);
+            let (x, y) = (square.solve(&b), bordered.solve(&eb));
+            let (xa, ya) = (square.solve_adjoint(&b), bordered.solve_adjoint(&eb));
+            for i in 0..=N {
+                assert_eq!(bits(x[i]), bits(y.get(i)), "solve {i}");
+                assert_eq!(bits(xa[i]), bits(ya.get(i)), "adjoint solve {i}");
+            }
+        }
+        check::<f64>();
+        check::<f32>();
+    }
+
     #[test]
     fn mode_from_eigenvalue() {
         let m = Mode::from_eigenvalue(Complex::new(-1.0, 2.0 * core::f64::consts::PI * 5.0));

@@ -18,8 +18,9 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SensitivityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
+    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Relative change applied down and up in %: above 0, at most 90.

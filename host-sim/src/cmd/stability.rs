@@ -18,8 +18,9 @@ use crate::sim::vehicle_file;
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
+    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
