@@ -197,8 +197,12 @@ mod app {
                 .gate
                 .due(motion.t_s, cx.local.model_task.tracker().busy())
             {
-                // Nothing new since the last pass: sleep until the next interrupt.
+                // Nothing new since the last pass: sleep until the next interrupt (PIL: the
+                // next step at once, as after a pass with nothing due; its timer is off).
+                #[cfg(not(feature = "pil"))]
                 cortex_m::asm::wfi();
+                #[cfg(feature = "pil")]
+                board::pil::background_pass(false);
                 continue;
             }
             store_pass(
