@@ -21,16 +21,24 @@ fn main() {
     };
     println!("cargo:rustc-env=SHIMMY_GIT={describe}");
     // Rebuild on a new commit or checkout (HEAD and the branch it points to) and on source
-    // edits (for the `-dirty` mark).
+    // edits (for the `-dirty` mark). Only files that exist are named: cargo reruns a build
+    // script on every build while a file it names is missing (a branch whose ref is only in
+    // packed-refs, or a clone without packed-refs), and that rebuilt the simulator and
+    // everything above it in every cargo call of `cargo xtask test`.
+    let watch = |path: String| {
+        if std::path::Path::new(&path).exists() {
+            println!("cargo:rerun-if-changed={path}");
+        }
+    };
     if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
-        println!("cargo:rerun-if-changed={dir}/HEAD");
+        watch(format!("{dir}/HEAD"));
     }
     if let (Some(common), Some(head)) = (
         git(&["rev-parse", "--git-common-dir"]),
         git(&["symbolic-ref", "-q", "HEAD"]),
     ) {
-        println!("cargo:rerun-if-changed={common}/{head}");
-        println!("cargo:rerun-if-changed={common}/packed-refs");
+        watch(format!("{common}/{head}"));
+        watch(format!("{common}/packed-refs"));
     }
     for d in ["src", "../core/src", "build.rs"] {
         println!("cargo:rerun-if-changed={d}");

@@ -1,8 +1,8 @@
 //! The command line's contract, on the built binary: a bad numeric option is rejected before
 //! any work starts (non-zero exit, a message naming the option and its allowed range, nothing
 //! written), and `faults` exits non-zero when `--only` matches no case or a campaign check
-//! fails. Every run here is either rejected at once or a one-case, one-speed campaign, so the
-//! file takes well under a second.
+//! fails. Every run here is either rejected at once or a one-case, one-speed campaign (or a
+//! 1 s margin run), so the file takes well under a second.
 
 use std::path::PathBuf;
 use std::process::Output;
@@ -327,6 +327,53 @@ fn other_commands_reject_bad_numbers_before_running() {
     for (args, expect) in cases {
         rejected(args, expect);
     }
+}
+
+/// `margin`'s `summary.json` says where it comes from: the command line, the vehicle file's
+/// and the resolved vehicle's hashes, and the road-noise seed.
+#[test]
+fn margin_summary_carries_the_provenance() {
+    let dir = temp_dir();
+    std::fs::write(
+        dir.join("v.toml"),
+        "base = \"nominal\"\n[plant]\nk_d = 9000.0\n",
+    )
+    .expect("write vehicle");
+    let args = [
+        "margin",
+        "--vehicle",
+        "v.toml",
+        "--constant-kmh",
+        "20",
+        "--duration-s",
+        "1",
+        "--seed",
+        "5",
+        "--out",
+        "m",
+    ];
+    let o = run_in(&dir, &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(dir.join("m/summary.json")).expect("summary.json");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let prov = &json["provenance"];
+    assert_eq!(prov["git"], shimmy_sim::out::provenance::GIT);
+    assert!(
+        prov["command_line"]
+            .as_str()
+            .is_some_and(|c| c.ends_with(&args.join(" "))),
+        "{prov}"
+    );
+    let file_hash = shimmy_sim::out::provenance::sha256_hex(
+        &std::fs::read(dir.join("v.toml")).expect("read vehicle"),
+    );
+    assert_eq!(prov["inputs"][0]["role"], "vehicle file");
+    assert_eq!(prov["inputs"][0]["sha256"], file_hash.as_str());
+    assert_eq!(prov["inputs"][1]["role"], "vehicle record");
+    assert_eq!(prov["seeds"][0]["seed"], 5);
+    // The metrics stay where scripts read them.
+    assert_eq!(json["duration_s"], 1.0);
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// `gas-charge` exits non-zero when no charge in the range keeps the truck free of shimmy (the

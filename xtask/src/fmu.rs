@@ -1,11 +1,12 @@
-//! The FMU: `fmu/` (crate `shimmy-fmu`, fmi-export) built in the dev profile, packed into
-//! `target/fmu/shimmy_fmu.fmu` by its `shimmy-fmu-bundle` binary, then validated and
-//! co-simulated with fmpy against the SciPy reference plant (`fmu/tests/`, pytest).
+//! The FMU: `fmu/` (crate `shimmy-fmu`, fmi-export) from the host build (dev profile), packed
+//! into `target/fmu/shimmy_fmu.fmu` by its `shimmy-fmu-bundle` binary, then validated and
+//! co-simulated with fmpy against the SciPy reference plant (`fmu/tests/`, pytest; the
+//! simulator's side of the comparison through the `shimmy` module of the host build).
 
 use std::path::PathBuf;
 use std::process::Command;
 
-use crate::{apt_install, cargo, python, root, run, Step};
+use crate::{apt_install, python, root, run, Step};
 
 /// fmi-sys generates its FMI bindings with bindgen, which loads libclang: every workspace
 /// build (clippy, doc, test) needs it.
@@ -27,25 +28,35 @@ pub fn ensure_libclang() -> Result<(), String> {
 /// Builds the FMU and returns its path.
 pub fn build() -> Result<PathBuf, String> {
     ensure_libclang()?;
-    cargo(&["build", "--quiet", "-p", "shimmy-fmu"])?;
-    let target = root().join("target");
-    let lib = target.join("debug").join(format!(
+    let debug = crate::host_build()?;
+    let lib = debug.join(format!(
         "{}shimmy_fmu{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     ));
-    let fmu = target.join("fmu").join("shimmy_fmu.fmu");
-    run(Command::new(target.join("debug").join("shimmy-fmu-bundle"))
+    let fmu = root().join("target").join("fmu").join("shimmy_fmu.fmu");
+    run(Command::new(debug.join("shimmy-fmu-bundle"))
         .arg(&lib)
         .arg(&fmu))?;
     Ok(fmu)
 }
 
-/// Builds the FMU, then runs `fmu/tests` (fmpy validation and the co-simulation; needs the
-/// `shimmy` wheel in the venv, installed by the Python step).
+/// Builds the FMU, then runs `fmu/tests` (fmpy validation and the co-simulation).
 pub fn tests() -> Step {
     let fmu = build()?;
     let py = python::venv_python()?;
-    python::ensure_packages(&py, &[("fmpy", "fmpy"), ("pytest", "pytest")])?;
-    python::pytest_with(&py, "fmu/tests", &[("SHIMMY_FMU", fmu.as_os_str())])
+    python::ensure_packages(
+        &py,
+        &[("fmpy", "fmpy"), ("pytest", "pytest"), ("scipy", "scipy")],
+    )?;
+    let module = python::module_dir()?;
+    python::check_module_origin(&py, &module)?;
+    python::pytest_with(
+        &py,
+        "fmu/tests",
+        &[
+            ("SHIMMY_FMU", fmu.as_os_str()),
+            ("PYTHONPATH", module.as_os_str()),
+        ],
+    )
 }

@@ -42,8 +42,7 @@ impl Drop for Qemu {
 
 pub fn step() -> Result<String, String> {
     let elf = crate::build_firmware(crate::FIRMWARE, &["qemu", "link-e2e"])?;
-    crate::cargo(&["build", "-p", "shimmy-sim", "--bin", "shimmy-sim"])?;
-    let tool = crate::root().join("target/debug/shimmy-sim");
+    let tool = crate::host_build()?.join("shimmy-sim");
     let dir = crate::root().join("target/xtask/link-e2e");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;

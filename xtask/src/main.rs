@@ -1,8 +1,9 @@
 //! Project automation. `cargo xtask test` is the one test command (CI runs exactly it).
 //!
 //! ```text
-//! cargo xtask test               host tests, fmt, clippy (host + target), firmware build + size,
-//!                                on-target tests under QEMU (and proof that a failing one fails)
+//! cargo xtask test               host tests, fmt, clippy (host + target), the Python module's
+//!                                and the FMU's tests, firmware build + size, on-target tests
+//!                                under QEMU (and proof that a failing one fails)
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
@@ -17,8 +18,10 @@
 //! cargo xtask fuzz [--seconds N]  build the fuzz targets in fuzz/ with libFuzzer + coverage
 //!                                instrumentation on the pinned stable toolchain and run them for
 //!                                N s (default 60); a crash fails and prints the reproducer
-//! cargo xtask python             build the `shimmy` Python wheel (maturin, dev profile) into a
-//!                                venv in target/py-venv and run its pytest suite (python/tests)
+//! cargo xtask python [--wheel]   the `shimmy` Python module from the host build, run by the
+//!                                pytest suite (python/tests) in a venv in target/py-venv;
+//!                                `--wheel`: the wheel `pip install ./python` builds (maturin,
+//!                                dev profile, its own dependency build) installed there instead
 //! cargo xtask fmu                build the FMI 3.0 co-simulation FMU (fmu/) into
 //!                                target/fmu/shimmy_fmu.fmu, validate it with fmpy and
 //!                                co-simulate it with the SciPy reference plant (fmu/tests/)
@@ -44,6 +47,7 @@ mod qemu;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::thread::JoinHandle;
 use std::time::Instant;
@@ -72,12 +76,15 @@ fn main() -> ExitCode {
         Some("conformance") => conformance::step().map(|s| println!("{s}")),
         Some("link") => link_e2e::step().map(|s| println!("{s}")),
         Some("pil") => pil().map(|s| println!("xtask: {s}")),
-        Some("python") => python::package_tests().map(|s| println!("{s}")),
+        Some("python") if args.get(1).is_some_and(|a| a == "--wheel") => {
+            python::wheel_tests().map(|s| println!("{s}"))
+        }
+        Some("python") => python::module_tests().map(|s| println!("{s}")),
         Some("fmu") => fmu::tests().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
         _ => {
             eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench [--target-only] | conformance | link | pil | python | fmu | fuzz [--seconds N]>"
+                "usage: cargo xtask <test | qemu [BIN] | size | bench [--target-only] | conformance | link | pil | python [--wheel] | fmu | fuzz [--seconds N]>"
             );
             return ExitCode::from(2);
         }
@@ -125,6 +132,97 @@ const FIRMWARE_IMAGES: &[(&[&str], &[&str])] = &[
 /// The feature that builds the image for the mining truck's model (`docs/mining-truck.md`).
 const TRUCK_MODEL: &str = "model-truck";
 
+/// The one host build: every host artifact the steps use (the test binaries, `shimmy-sim` for
+/// the link and PIL steps, the Python module's and the FMU's libraries, the FMU packer) from a
+/// cargo call that resolves features as `cargo test --workspace` does (`--workspace`, and
+/// `--tests` turns the dev-dependencies on) and builds every target kind that it builds, so the
+/// host tests and every later step reuse it.
+/// Building one package (`-p shimmy-sim`, maturin's `cargo rustc` of `python/`) resolves its
+/// dependencies' features without the rest of the workspace and compiles most of them again.
+/// A new host artifact belongs here; a step uses it from [`host_build`]'s directory.
+const HOST_BUILD: &[&str] = &[
+    "build",
+    "--workspace",
+    "--lib",
+    "--tests",
+    "--examples",
+    "--bin",
+    "shimmy-sim",
+    "--bin",
+    "shimmy-fmu-bundle",
+];
+
+/// Set once [`HOST_BUILD`] has run in this process.
+static HOST_BUILT: AtomicBool = AtomicBool::new(false);
+
+/// Runs [`HOST_BUILD`] (a few seconds when nothing changed) and returns the directory of its
+/// artifacts (`target/debug`). Every call after the first in a process must find everything
+/// fresh, and fails naming what was compiled again (a build script that reruns on every build,
+/// or an input that a step changed).
+pub fn host_build() -> Result<PathBuf, String> {
+    let rebuilt = cargo_rebuilt(HOST_BUILD)?;
+    if HOST_BUILT.swap(true, Ordering::Relaxed) && !rebuilt.is_empty() {
+        return Err(format!(
+            "the host build was not reused: cargo compiled {} again",
+            rebuilt.join(", ")
+        ));
+    }
+    Ok(root().join("target").join("debug"))
+}
+
+/// The host tests on [`host_build`]'s artifacts: `cargo test --workspace` must find every test
+/// binary built (nothing compiled, else the step fails naming it), then runs them.
+fn host_tests() -> Step {
+    host_build()?;
+    let rebuilt = cargo_rebuilt(&["test", "--workspace", "--no-run"])?;
+    if !rebuilt.is_empty() {
+        return Err(format!(
+            "cargo test --workspace compiled {} that the host build had not (a target kind or \
+             feature resolution missing from HOST_BUILD)",
+            rebuilt.join(", ")
+        ));
+    }
+    cargo(&["test", "--workspace"])?;
+    Ok(String::new())
+}
+
+/// Runs cargo with `args` and JSON messages (diagnostics still rendered on stderr) and returns
+/// the packages it compiled ([`rebuilt_packages`]).
+fn cargo_rebuilt(args: &[&str]) -> Result<Vec<String>, String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args(args)
+        .arg("--message-format=json-render-diagnostics")
+        .stderr(std::process::Stdio::inherit())
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "cargo {} exited with {}",
+            args.join(" "),
+            out.status
+        ));
+    }
+    Ok(rebuilt_packages(&String::from_utf8_lossy(&out.stdout)))
+}
+
+/// The packages (`name@version`) of the artifacts that cargo's JSON messages report as
+/// compiled rather than fresh.
+fn rebuilt_packages(json_lines: &str) -> Vec<String> {
+    let mut names: Vec<String> = json_lines
+        .lines()
+        .filter(|l| l.contains(r#""reason":"compiler-artifact""#) && l.contains(r#""fresh":false"#))
+        .filter_map(|l| {
+            let id = l.split(r#""package_id":""#).nth(1)?.split('"').next()?;
+            Some(id.rsplit('#').next().unwrap_or(id).to_string())
+        })
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
 /// Runs every check, keeps going after a failure so the summary shows all of them, and fails
 /// if any failed.
 fn test() -> Result<(), String> {
@@ -149,9 +247,15 @@ fn test() -> Result<(), String> {
         }),
         ("clippy (firmware, thumbv7em)", clippy_firmware),
         ("rustdoc (workspace, -D warnings)", rustdoc),
-        ("host tests (cargo test --workspace)", || {
-            cargo(&["test", "--workspace"]).map(|_| String::new())
+        ("host build (tests, shimmy-sim, Python module, FMU)", || {
+            host_build().map(|_| "one feature resolution for every host step".into())
         }),
+        ("host tests (cargo test --workspace)", host_tests),
+        ("Python module (pytest python/tests)", python::module_tests),
+        (
+            "FMU (fmi-export, fmpy validation, co-simulation)",
+            fmu::tests,
+        ),
         (
             "firmware release builds (one cargo call per feature set)",
             || {
@@ -175,10 +279,6 @@ fn test() -> Result<(), String> {
                 fuzz::CI_SECONDS
             ))
         }),
-        // The Python package and the FMU have their own commands (`cargo xtask python`,
-        // `cargo xtask fmu`), not steps here: maturin builds the extension with its own feature
-        // resolution, a second full build of the simulator's dependencies, which with the FMU's
-        // build and the pip installs would take a cold CI run past its time.
         ("firmware size", || {
             let elf = build_firmware(FIRMWARE, &[])?;
             let report = elf::MemoryReport::read(&elf)?;
@@ -429,27 +529,18 @@ const PIL_SCENARIO: &str = "host-sim/scenarios/pil/demo.toml";
 /// Processor in the loop: the application image built with the `pil` feature closes the loop
 /// with the simulator's plant under QEMU (`shimmy-sim pil`), and the run must agree bit for bit
 /// with the firmware's application run natively (`--check-sil`); `shimmy-sim` exits non-zero
-/// otherwise. The dev build the host tests made is enough (11x real time here, 2.2 s with the
+/// otherwise. The dev build of [`host_build`] is enough (11x real time here, 2.2 s with the
 /// SIL run): a release build would add a fat-LTO link of the simulator to a cold CI run.
 fn pil() -> Step {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     let elf = build_firmware(FIRMWARE, &["pil"])?;
-    let elf = elf.to_str().ok_or("non-UTF-8 path of the PIL image")?;
-    cargo(&[
-        "run",
-        "--quiet",
-        "-p",
-        "shimmy-sim",
-        "--",
-        "pil",
-        PIL_SCENARIO,
-        "--elf",
-        elf,
-        "--check-sil",
-        "--out",
-        "target/xtask/pil",
-    ])?;
+    let sim = host_build()?.join("shimmy-sim");
+    run(Command::new(sim)
+        .args(["pil", PIL_SCENARIO, "--elf"])
+        .arg(&elf)
+        .args(["--check-sil", "--out", "target/xtask/pil"])
+        .current_dir(root()))?;
     Ok(format!("{PIL_SCENARIO}: PIL = SIL bit for bit"))
 }
 
@@ -685,5 +776,31 @@ fn ensure_scipy() -> Result<(), String> {
         Ok(())
     } else {
         Err("numpy/scipy still not importable after pip install".into())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rebuilt_packages;
+
+    #[test]
+    fn rebuilt_packages_names_only_compiled_artifacts() {
+        let lines = concat!(
+            r#"{"reason":"compiler-artifact","package_id":"registry+https://github.com/rust-lang/crates.io-index#serde@1.0.229","fresh":true}"#,
+            "\n",
+            r#"{"reason":"build-script-executed","package_id":"path+file:///w/host-sim#shimmy-sim@0.1.0"}"#,
+            "\n",
+            r#"{"reason":"compiler-artifact","package_id":"path+file:///w/host-sim#shimmy-sim@0.1.0","fresh":false}"#,
+            "\n",
+            r#"{"reason":"compiler-artifact","package_id":"path+file:///w/host-sim#shimmy-sim@0.1.0","fresh":false}"#,
+            "\n",
+            r#"{"reason":"compiler-artifact","package_id":"path+file:///w/python#shimmy-py@0.1.0","fresh":false}"#,
+            "\n",
+            r#"{"reason":"build-finished","success":true}"#,
+        );
+        assert_eq!(
+            rebuilt_packages(lines),
+            ["shimmy-py@0.1.0", "shimmy-sim@0.1.0"]
+        );
     }
 }

@@ -1,9 +1,13 @@
-//! `cargo xtask python` (run by hand, not a step of `cargo xtask test`): a virtual environment in `target/py-venv` (it sees
-//! the system's numpy/scipy; what is missing is installed into it with pip, never into the
-//! system), the `shimmy` wheel built with maturin (dev profile: the workspace's compiled
-//! dependencies are reused) and its pytest suite.
+//! `cargo xtask python` (a step of `cargo xtask test`): a virtual environment in
+//! `target/py-venv` (it sees the system's numpy/scipy; what is missing is installed into it with
+//! pip, never into the system) and the pytest suite, run on the `shimmy` module that the host
+//! build made (`target/debug/libshimmy.so`, staged as `target/py-module/shimmy.so` and put
+//! first on `PYTHONPATH`). `--wheel` runs it on the wheel that `pip install ./python` builds
+//! instead (maturin), which compiles the simulator's dependencies a second time: maturin builds
+//! `python/` alone, with that package's feature resolution.
 
-use std::path::PathBuf;
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::{root, run, Step};
@@ -22,7 +26,7 @@ pub fn venv_python() -> Result<PathBuf, String> {
 }
 
 /// Installs into the venv each of `packages` (pip name, import name) that does not import.
-pub fn ensure_packages(python: &PathBuf, packages: &[(&str, &str)]) -> Result<(), String> {
+pub fn ensure_packages(python: &Path, packages: &[(&str, &str)]) -> Result<(), String> {
     let missing: Vec<&str> = packages
         .iter()
         .filter(|(_, module)| {
@@ -42,13 +46,66 @@ pub fn ensure_packages(python: &PathBuf, packages: &[(&str, &str)]) -> Result<()
         .args(&missing))
 }
 
-/// Builds the `shimmy` wheel, installs it into the venv and runs `python/tests` with pytest.
-pub fn package_tests() -> Step {
+/// What the Python tests import besides `shimmy` (pip name, import name).
+const TEST_PACKAGES: &[(&str, &str)] =
+    &[("pytest", "pytest"), ("numpy", "numpy"), ("scipy", "scipy")];
+
+/// The `shimmy` extension module of [`crate::host_build`], copied under the name Python imports
+/// (`shimmy.so`) into a directory of its own; returns that directory, for `PYTHONPATH`.
+pub fn module_dir() -> Result<PathBuf, String> {
+    let built = crate::host_build()?.join(format!(
+        "{}shimmy{}",
+        std::env::consts::DLL_PREFIX,
+        std::env::consts::DLL_SUFFIX
+    ));
+    let dir = root().join("target").join("py-module");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
+    let module = dir.join(if cfg!(windows) {
+        "shimmy.pyd"
+    } else {
+        "shimmy.so"
+    });
+    std::fs::copy(&built, &module).map_err(|e| format!("copy {}: {e}", built.display()))?;
+    Ok(dir)
+}
+
+/// `python` imports `shimmy` from `dir` (not from a wheel installed in the venv by `--wheel`).
+pub fn check_module_origin(python: &Path, dir: &Path) -> Result<(), String> {
+    let out = Command::new(python)
+        .args(["-c", "import shimmy; print(shimmy.__file__)"])
+        .env("PYTHONPATH", dir)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
+    let file = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    if !out.status.success() {
+        return Err(format!(
+            "import shimmy failed: {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    if Path::new(&file).parent() != Some(dir) {
+        return Err(format!(
+            "import shimmy found {file}, not the module in {}",
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
+/// Runs `python/tests` with pytest on the module of the host build.
+pub fn module_tests() -> Step {
     let python = venv_python()?;
-    ensure_packages(
-        &python,
-        &[("pytest", "pytest"), ("numpy", "numpy"), ("scipy", "scipy")],
-    )?;
+    ensure_packages(&python, TEST_PACKAGES)?;
+    let dir = module_dir()?;
+    check_module_origin(&python, &dir)?;
+    pytest_with(&python, "python/tests", &[("PYTHONPATH", dir.as_os_str())])
+}
+
+/// Builds the `shimmy` wheel as `pip install ./python` does (maturin), installs it into the
+/// venv and runs `python/tests` with pytest on it.
+pub fn wheel_tests() -> Step {
+    let python = venv_python()?;
+    ensure_packages(&python, TEST_PACKAGES)?;
     // maturin runs as the venv's script (`python -m maturin` looks for it beside the venv's
     // interpreter): installed into the venv even when the system has one.
     let maturin = python.with_file_name("maturin");
@@ -93,12 +150,12 @@ pub fn package_tests() -> Step {
 }
 
 /// Runs pytest on `dir` and returns its summary line.
-pub fn pytest(python: &PathBuf, dir: &str) -> Step {
+pub fn pytest(python: &Path, dir: &str) -> Step {
     pytest_with(python, dir, &[])
 }
 
 /// [`pytest`] with extra environment variables.
-pub fn pytest_with(python: &PathBuf, dir: &str, env: &[(&str, &std::ffi::OsStr)]) -> Step {
+pub fn pytest_with(python: &Path, dir: &str, env: &[(&str, &OsStr)]) -> Step {
     let out = Command::new(python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider", dir])
         .envs(env.iter().copied())

@@ -14,8 +14,10 @@ use plotters::prelude::*;
 use shimmy_core::estimator::monitor::Level;
 
 use crate::model::disturbance::SpeedProfile;
+use crate::out::progress;
+use crate::out::provenance::Provenance;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::margin_run::{onset_kmh, run, MarginRow, MarginRun, MarginScenario};
+use crate::sim::margin_run::{onset_kmh, run_with_progress, MarginRow, MarginRun, MarginScenario};
 use crate::sim::vehicle_file;
 
 /// Ramp rate: 0.01 to 50 km/h per s.
@@ -80,9 +82,10 @@ fn level_num(l: Level) -> u8 {
     }
 }
 
-/// The run's key figures for scripts and CI (`summary.json`): the plant's linear onset, the
-/// model's onset, the first warning and its lead, and for a constant drive its duration and
-/// the number of warning onsets. Absent values are `null`.
+/// The run's key figures for scripts and CI (`summary.json`, with the `provenance` object
+/// beside them): the plant's linear onset, the model's onset, the first warning and its lead,
+/// and for a constant drive its duration and the number of warning onsets. Absent values are
+/// `null`.
 pub fn summary_json(sc: &MarginScenario, run: &MarginRun) -> serde_json::Value {
     let lead = run.lead();
     let constant = matches!(sc.speed, SpeedProfile::Constant(_));
@@ -281,8 +284,18 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     sc.imbalance_nm = a.imbalance_nm;
     sc.seed = a.seed;
     sc.model = Some(model.plant);
+    let mut provenance = Provenance::of_this_process().vehicle("vehicle", &a.vehicle, &vehicle)?;
+    if let Some(m) = &a.model_vehicle {
+        provenance = provenance.vehicle("model vehicle", m, &model)?;
+    }
+    let provenance = provenance.seed("road noise", sc.seed);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
-    let run = run(&sc, model.pipeline_params(), 10)?;
+    let bar = progress::bar(0, "1 ms steps");
+    let run = run_with_progress(&sc, model.pipeline_params(), 10, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
     println!(
         "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m, seed {}",
         a.vehicle,
@@ -332,11 +345,10 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     let png = a.out.join("margin.png");
     plot(&png, &run, &a.vehicle)?;
     let json = a.out.join("summary.json");
-    std::fs::write(
-        &json,
-        serde_json::to_string_pretty(&summary_json(&sc, &run))? + "\n",
-    )
-    .with_context(|| format!("writing {}", json.display()))?;
+    let mut summary = summary_json(&sc, &run);
+    summary["provenance"] = provenance.json();
+    std::fs::write(&json, serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("writing {}", json.display()))?;
     println!(
         "wrote {}, {} and {}",
         csv.display(),

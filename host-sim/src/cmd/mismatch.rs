@@ -14,7 +14,8 @@
 //!   data-only: warning onsets, as false warnings per hour.
 //!
 //! Targets: lead >= 3 km/h at 1 km/h/s in every single-parameter case, no false warning in any
-//! case. Writes `mismatch.md` and `mismatch.csv`; exits non-zero when a target is missed.
+//! case. Writes `mismatch.md` (with the provenance), `mismatch.csv` and `summary.json` (the
+//! same figures and the provenance, for scripts); exits non-zero when a target is missed.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -27,6 +28,7 @@ use shimmy_core::params::{Param, ParamSet, PlantParams};
 use shimmy_core::vehicle::Vehicle;
 
 use crate::out::progress;
+use crate::out::provenance::Provenance;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
@@ -65,7 +67,7 @@ pub struct MismatchArgs {
     /// default one).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Output directory (mismatch.md, mismatch.csv).
+    /// Output directory (mismatch.md, mismatch.csv, summary.json).
     #[arg(long, default_value = "out/mismatch")]
     pub out: PathBuf,
 }
@@ -288,6 +290,34 @@ pub fn markdown(rows: &[CaseResult], rates: &[f64]) -> String {
     s
 }
 
+/// Every case's figures and the provenance, as `summary.json` holds them (`null` where a
+/// figure is absent).
+pub fn summary_json(rows: &[CaseResult], provenance: &Provenance) -> serde_json::Value {
+    let cases: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            serde_json::json!({
+                "case": r.case.name,
+                "plant_onset_kmh": r.plant_onset_kmh,
+                "model_onset_kmh": r.model_onset_kmh,
+                "ramps": r.ramps.iter().map(|x| serde_json::json!({
+                    "rate_kmh_per_s": x.rate_kmh_per_s,
+                    "lead_kmh": x.lead_kmh,
+                    "lead_s": x.lead_s,
+                    "first_inconsistent_kmh": x.inconsistent_kmh,
+                })).collect::<Vec<_>>(),
+                "data_only_lead_kmh": r.data_only_lead.0,
+                "data_only_lead_s": r.data_only_lead.1,
+                "drive_kmh": r.drive_kmh,
+                "false_warnings_per_h": r.false_per_h,
+                "data_only_false_warnings_per_h": r.data_only_false_per_h,
+                "passes": r.passes(),
+            })
+        })
+        .collect();
+    serde_json::json!({"provenance": provenance.json(), "cases": cases})
+}
+
 /// `shimmy-sim mismatch`.
 pub fn command(a: &MismatchArgs) -> Result<()> {
     DRIVE_S.check("--drive-s", a.drive_s)?;
@@ -296,6 +326,9 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
         RATE.check("--rates-kmh-per-s", r)?;
     }
     let vehicle = vehicle_file::load(&a.vehicle)?;
+    let provenance = Provenance::of_this_process()
+        .vehicle("model vehicle", &a.vehicle, &vehicle)?
+        .seed("road noise", a.seed);
     let all = cases(&vehicle);
     let chosen: Vec<MismatchCase> = all
         .iter()
@@ -328,7 +361,14 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     );
     print!("{md}");
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
-    std::fs::write(a.out.join("mismatch.md"), &md)?;
+    std::fs::write(
+        a.out.join("mismatch.md"),
+        format!("{}\n\n{}", md.trim_end(), provenance.markdown()),
+    )?;
+    std::fs::write(
+        a.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary_json(&rows, &provenance))? + "\n",
+    )?;
     let mut f = std::fs::File::create(a.out.join("mismatch.csv"))?;
     writeln!(f, "case,plant_onset_kmh,model_onset_kmh,rate_kmh_per_s,lead_kmh,lead_s,first_inconsistent_kmh,data_only_lead_kmh,data_only_lead_s,drive_kmh,false_warnings_per_h,data_only_false_warnings_per_h,passes")?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.3}"));
@@ -365,4 +405,47 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_has_every_case_and_the_provenance() {
+        let nominal = Vehicle::nominal();
+        let case = cases(&nominal).remove(0);
+        let row = CaseResult {
+            plant_onset_kmh: Some(30.0),
+            model_onset_kmh: Some(29.0),
+            ramps: vec![RampResult {
+                rate_kmh_per_s: 1.0,
+                lead_kmh: Some(4.0),
+                lead_s: Some(4.0),
+                inconsistent_kmh: None,
+            }],
+            data_only_lead: (Some(1.0), None),
+            drive_kmh: 21.0,
+            false_per_h: 0.0,
+            data_only_false_per_h: 6.0,
+            case,
+        };
+        let provenance = Provenance::new(["shimmy-sim", "mismatch"].map(String::from))
+            .vehicle("model vehicle", "nominal", &nominal)
+            .unwrap()
+            .seed("road noise", 3);
+        let json = summary_json(std::slice::from_ref(&row), &provenance);
+        assert_eq!(json["provenance"]["command_line"], "shimmy-sim mismatch");
+        assert_eq!(json["provenance"]["seeds"][0]["seed"], 3);
+        assert_eq!(
+            json["provenance"]["inputs"][0]["role"],
+            "model vehicle record"
+        );
+        let c = &json["cases"][0];
+        assert_eq!(c["case"], row.case.name.as_str());
+        assert_eq!(c["ramps"][0]["lead_kmh"], 4.0);
+        assert!(c["ramps"][0]["first_inconsistent_kmh"].is_null());
+        assert!(c["data_only_lead_s"].is_null());
+        assert_eq!(c["passes"], row.passes());
+    }
 }

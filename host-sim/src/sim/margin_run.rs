@@ -224,6 +224,16 @@ impl Pipe {
 /// Runs the open-loop scenario through the pipeline. `true_every`: compute the true
 /// eigenvalues every n-th row (0 = never).
 pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result<MarginRun> {
+    run_with_progress(sc, pp, true_every, &mut |_, _| {})
+}
+
+/// [`run`], telling `progress(done, total)` 1 ms steps every simulated second and at the end.
+pub fn run_with_progress(
+    sc: &MarginScenario,
+    pp: PipelineParams,
+    true_every: usize,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<MarginRun> {
     let wall = std::time::Instant::now();
     let p = sc.params;
     let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
@@ -241,6 +251,9 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
     let mut max_solves = 0u8;
     let (mut zt, mut ft) = (f64::NAN, f64::NAN);
     for k in 0..n {
+        if k % 1000 == 0 {
+            progress(k, n);
+        }
         let t = k as f64 * DT_S;
         let u = scen.inputs(t, DT_S);
         sim.advance(DT_S, &u)
@@ -307,6 +320,7 @@ pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result
             yaw_deg: (0.5 * (x[idx::PSI_L] + x[idx::PSI_R])).to_degrees(),
         });
     }
+    progress(n, n);
     Ok(MarginRun {
         rows,
         onset_kmh: onset,
