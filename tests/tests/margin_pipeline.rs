@@ -108,8 +108,21 @@ mod wrong_model {
         for seed in [1, 2, 3] {
             let r = ramp_seeded(&c, PipelineParams::default(), seed);
             let lead = r.lead().map(|l| l.0);
-            println!("C_a -20 %, seed {seed}: lead {lead:?} km/h");
+            // and the warning stands where it matters, over the last 0.5 km/h before the onset
+            // (not only a nuisance warning at the ramp's start, withdrawn since)
+            let on = r.onset_kmh.expect("onset");
+            let near: Vec<_> = r
+                .rows
+                .iter()
+                .filter(|x| x.speed_kmh > on - 0.5 && x.speed_kmh < on)
+                .collect();
+            let standing = near.iter().all(|x| x.level > Level::Normal);
+            println!("C_a -20 %, seed {seed}: lead {lead:?} km/h, warning over the last 0.5 km/h: {standing}");
             assert!(lead.is_some_and(|l| l > 0.0), "seed {seed}: lead {lead:?}");
+            assert!(
+                !near.is_empty() && standing,
+                "seed {seed}: no warning at the onset"
+            );
         }
     }
 

@@ -40,6 +40,10 @@ pub struct FusionParams {
     pub mismatch_hold_speed_mps: f32,
     /// Agreement must persist this long to clear the flag, s.
     pub mismatch_release_s: f32,
+    /// With `DataMarginUse::WhenModelInconsistent`: when no consistency decision has come
+    /// this long after the first valid data estimate, s, the report becomes valid with the
+    /// smaller of the model margin and the corrected one until the first decision (0: wait).
+    pub first_decision_timeout_s: f32,
     /// Slopes smaller than this (|dzeta/dV|) give no data-based margin, 1/(m/s).
     pub min_slope_per_mps: f32,
     /// Accelerations smaller than this give no time-to-critical, m/s^2.
@@ -75,6 +79,7 @@ impl Default for FusionParams {
             mismatch_hold_s: 3.0,
             mismatch_hold_speed_mps: 0.0,
             mismatch_release_s: 3.0,
+            first_decision_timeout_s: 0.0,
             min_slope_per_mps: 1.0e-5,
             min_accel_mps2: 0.05,
             data_margin: DataMarginUse::Always,
@@ -393,14 +398,27 @@ impl Fusion {
             0.0
         };
         let model_onset = m.v_crit_onset_mps.filter(|x| x.is_finite());
+        // No first decision by the timeout: the offset sits between agreement and mismatch
+        // (e.g. a meter reading a well-damped mode 1-2 sigmas high). Then the smaller of the
+        // model margin and the corrected one counts: the data may not confirm the model, but
+        // a wrong model must not silence the warning either (plant = model, seed 3: no
+        // warning at all at 2 and 4 km/h/s without this).
+        let timeout = self.params.first_decision_timeout_s;
+        let undecided = self.params.data_margin == DataMarginUse::WhenModelInconsistent
+            && !self.checked
+            && timeout > 0.0
+            && self
+                .first_data_t_s
+                .is_some_and(|t0| (t - t0) as f32 >= timeout);
         let use_data = data_valid
             && slope_ok
             && match self.params.data_margin {
                 DataMarginUse::Always => true,
-                DataMarginUse::WhenModelInconsistent => !self.consistent || model_onset.is_none(),
+                DataMarginUse::WhenModelInconsistent => {
+                    !self.consistent || model_onset.is_none() || undecided
+                }
             };
-        let correction = if use_data { self.offset } else { 0.0 };
-        r.zeta_correction = correction;
+        let mut correction = if use_data { self.offset } else { 0.0 };
         let shift = correction as f64 * inv_slope;
         let candidate = match model_onset {
             Some(vc) if use_data => {
@@ -419,6 +437,14 @@ impl Fusion {
             }
             None => None,
         };
+        let candidate = match (candidate, model_onset) {
+            (Some((dv, MarginSource::Data)), Some(vc)) if undecided && vc - (v as f64) < dv => {
+                correction = 0.0;
+                Some((vc - v as f64, MarginSource::Model))
+            }
+            (c, _) => c,
+        };
+        r.zeta_correction = correction;
         let best = candidate
             .map(|(dv, src)| (dv.max(0.0) as f32, src))
             .filter(|(dv, _)| dv.is_finite());
@@ -443,7 +469,7 @@ impl Fusion {
         // model) would raise a warning that the comparison then withdraws.
         let gate = match self.params.data_margin {
             DataMarginUse::Always => true,
-            DataMarginUse::WhenModelInconsistent => self.checked,
+            DataMarginUse::WhenModelInconsistent => self.checked || undecided,
         };
         r.valid = data_valid && gate && r.speed_margin_mps.is_some();
         r

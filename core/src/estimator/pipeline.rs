@@ -50,6 +50,7 @@ impl PipelineParams {
             offset_tau_max_s: 30.0,
             offset_speed_window_mps: 1.0,
             mismatch_hold_speed_mps: 0.25,
+            first_decision_timeout_s: 15.0,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()
         }
