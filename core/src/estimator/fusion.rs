@@ -7,11 +7,15 @@
 //!   when they disagree): the measured damping offset
 //!   delta = zeta_hat - zeta_model,window (the model damping averaged with the slow meter's own
 //!   forgetting, so a ramp's data lag is not mistaken for a mismatch) shifts the model's onset by
-//!   delta / |dzeta/dV|: dV = max(V_crit,model - V + delta / |dzeta/dV|, 0), in both directions;
+//!   delta / |dzeta/dV| near V; the shift keeps the model curve's curvature (a quadratic
+//!   through its damping and slope at V and its onset, `corrected_onset_distance`), in both
+//!   directions;
 //! - time to critical speed = dV / (a d) where d = -sign(dzeta/dV) is the direction of
 //!   decreasing damping (None when not approaching, |a| below `min_accel_mps2`);
-//! - model consistency: |delta| > k sigma_zeta (k = 3) held for
-//!   `mismatch_hold_s` (or over `mismatch_hold_speed_mps` of speed change) sets the mismatch flag; it clears after `mismatch_release_s` of agreement.
+//! - model consistency: |delta| > k sigma_delta (sigma_delta the averaged offset's own sigma)
+//!   held for `mismatch_hold_s` (or over `mismatch_hold_speed_mps` of speed change) sets the
+//!   mismatch flag; it clears after `mismatch_release_s` of agreement. The first decision waits
+//!   one meter memory; without one by `first_decision_timeout_s` the smaller margin counts.
 //!
 //! The model-based quantities are plain inputs ([`ModelMargin`]), computed from the plant model
 //! by [`super::model_margin`].
