@@ -261,7 +261,9 @@ pub struct Field {
     pub hi: f64,
     /// Only whole numbers are allowed.
     pub integer: bool,
-    /// One line on what it is.
+    /// One line on what it is (only with the `field-docs` feature: the host tools print it; the
+    /// firmware image checks names and ranges without ~4 KB of descriptions).
+    #[cfg(feature = "field-docs")]
     pub doc: &'static str,
     get: fn(&Vehicle) -> f64,
     set: fn(&mut Vehicle, f64),
@@ -525,6 +527,7 @@ macro_rules! plant_field {
             lo: Param::$p.range().0,
             hi: Param::$p.range().1,
             integer: false,
+            #[cfg(feature = "field-docs")]
             doc: $doc,
             get: |v| v.plant.get(Param::$p),
             set: |v, x| v.plant = v.plant.with(Param::$p, x),
@@ -550,6 +553,7 @@ macro_rules! field {
             lo: $lo,
             hi: $hi,
             integer: $int,
+            #[cfg(feature = "field-docs")]
             doc: $doc,
             get: |$v| Scalar::to_f64($place),
             set: |$v, x| $place = Scalar::from_f64(x),
@@ -592,6 +596,7 @@ pub static FIELDS: &[Field] = &[
         lo: 0.1,
         hi: 10.0,
         integer: false,
+        #[cfg(feature = "field-docs")]
         doc: "coil rating: the Spencer model's u_max, the firmware model's and the controller's \
               current limit and the fail-safe current",
         get: |v| v.damper.spencer.u_max,

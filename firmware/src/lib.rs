@@ -5,6 +5,7 @@
 //! --workspace` on the host never needs the thumbv7em toolchain.
 #![cfg_attr(target_os = "none", no_std)]
 
+pub mod background;
 pub mod calibration;
 pub mod clock;
 pub mod control;

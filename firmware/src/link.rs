@@ -82,6 +82,9 @@ impl LinkState {
     /// The vehicle a host wrote that is not in flash yet, for the background loop to save with
     /// the store's standstill token ([`Self::keep_unsaved`] hands it back when it cannot).
     pub fn take_unsaved(&mut self) -> Option<Vehicle> {
+        // Checked first: `take` moves the whole vehicle-sized option even when it is `None`,
+        // and the background loop asks after every meter run.
+        self.unsaved.as_ref()?;
         self.unsaved.take()
     }
 
@@ -98,7 +101,10 @@ impl LinkState {
 
     /// After a 100 Hz margin update: the monitor's episodes and the supervisor's faults into
     /// the log, the fault record and the telemetry refreshed, and a pending configuration
-    /// applied if the vehicle stands still (`speed_mps`: the newest trusted speed).
+    /// applied if the vehicle stands still (`speed_mps`: the newest trusted speed; `t_ms`: the
+    /// control step of the update's sample, milliseconds since boot, wrapping after 49 days:
+    /// the same time as the report's f64 seconds without a soft-float multiply and conversion
+    /// per update).
     ///
     /// Latched faults: those restored at boot, plus the active ones of a latching kind (a
     /// latched fault stays active until the next power-on; the control task's own reset record
@@ -109,11 +115,10 @@ impl LinkState {
         monitor: &Monitor<N>,
         speed_mps: f32,
         health: &Health,
+        t_ms: u32,
     ) {
         self.recorder.on_update(monitor, &mut self.log);
         self.open = self.recorder.open_event(monitor);
-        // Milliseconds since boot (wraps after 49 days; the report's time is f64).
-        let t_ms = (u.report.t_s * 1e3) as u32;
         let latching = FaultSet::from_bits(health.active_faults)
             .iter()
             .filter(|k| k.latched())
@@ -236,7 +241,7 @@ mod tests {
             link.on_sample(s.cmd_a);
             if let Some((u, _)) = data.push(&s, None) {
                 let monitor = data.pipeline().monitor();
-                link.on_update(&u, monitor, data.speed_mps(), &h);
+                link.on_update(&u, monitor, data.speed_mps(), &h, step);
             }
         }
         let (kept, _) = link.log_len();

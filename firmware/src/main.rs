@@ -2,10 +2,10 @@
 //!
 //! | task | runs | priority | work |
 //! |---|---|---|---|
-//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + ASMC + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; every 10th step spawns `meter`; timing counters; feeds the watchdog |
-//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); warnings on level changes, telemetry at 1 Hz |
+//! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + margin-scheduled ASMC on the newest margin report + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; spawns `meter` on every 10th sample (`MeterCadence`); timing counters; feeds the watchdog |
+//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); publishes the report for the next control step; warnings on level changes, telemetry at 1 Hz |
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -13,7 +13,8 @@
 //! The `qemu` build runs the same application on simulated sensors with injected faults and
 //! exits after `board::QEMU_STEPS` steps with the counters, failing if they are not what the
 //! simulation injected. The `pil` build runs it on the host's plant in lockstep
-//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines only report to the host.
+//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines report to the host, and the idle
+//! loop starts the next step at once where the board would wait for the timer.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -25,12 +26,13 @@ mod app {
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_firmware::background::PassGate;
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
-        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -69,6 +71,8 @@ mod app {
         board: Board,
         ctrl: SafeController,
         step: u32,
+        /// Which step spawns the meter task.
+        cadence: MeterCadence,
         /// The fault memory of this run (written back when it changes).
         record: ResetRecord,
         /// A reset loop was detected at boot: stay in the safe state.
@@ -161,6 +165,7 @@ mod app {
                 board,
                 ctrl,
                 step: 0,
+                cadence: MeterCadence::default(),
                 record,
                 hold_safe,
                 tx,
@@ -181,11 +186,21 @@ mod app {
     /// The background loop: the model-margin tracker, one unit of work (at most one f32
     /// eigen-solve, ~0.16 M instructions, or one mode-shape/slope step) per call; the control and
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
-    /// (1 Hz) is logged.
-    #[idle(local = [model_task, store_task, log_rx], shared = [model, now, health, motion, latched, link])]
+    /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
+    /// (`PassGate`); other wakes go back to sleep.
+    #[idle(local = [model_task, store_task, log_rx, gate: PassGate = PassGate::new()], shared = [model, now, health, motion, latched, link])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
+            if !cx
+                .local
+                .gate
+                .due(motion.t_s, cx.local.model_task.tracker().busy())
+            {
+                // Nothing new since the last pass: sleep until the next interrupt.
+                cortex_m::asm::wfi();
+                continue;
+            }
             store_pass(
                 cx.local.store_task,
                 cx.local.log_rx,
@@ -228,14 +243,19 @@ mod app {
                     );
                 }
             }
-            if !task.tracker().busy() {
+            let busy = task.tracker().busy();
+            if !busy {
                 // Nothing due: sleep until the next interrupt (at most 1 ms).
+                #[cfg(not(feature = "pil"))]
                 cortex_m::asm::wfi();
             }
+            // PIL: the next step at once when nothing is due, else at the period's end.
+            #[cfg(feature = "pil")]
+            board::pil::background_pass(busy);
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, tx, record, hold_safe], shared = [health, margin, latched])]
+    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, cadence, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
         #[cfg(feature = "pil")]
@@ -268,7 +288,7 @@ mod app {
         let pwm_ok = drive_coil(&mut b.coil, &out).is_ok();
 
         let dropped = cx.local.tx.enqueue(MeterSample::of(step, &out)).is_err();
-        let busy = step.is_multiple_of(METER_DECIMATION) && meter::spawn().is_err();
+        let busy = cx.local.cadence.tick() && meter::spawn().is_err();
 
         let exit = b.timer.now_ticks();
         let wrapped = b.timer.update_pending();
@@ -325,9 +345,15 @@ mod app {
             board::pil::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
             let data = &*cx.local.data;
-            cx.shared
-                .link
-                .lock(|l| l.on_update(&u, data.pipeline().monitor(), data.speed_mps(), &health));
+            cx.shared.link.lock(|l| {
+                l.on_update(
+                    &u,
+                    data.pipeline().monitor(),
+                    data.speed_mps(),
+                    &health,
+                    s.step,
+                )
+            });
             // The store: a closed shimmy episode, and the motion for its standstill watch.
             if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
                 if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {

@@ -3,12 +3,15 @@
 //! this code on the host and on the target.
 //!
 //! Who calls what (see `main.rs`):
-//! - 1 kHz control task: [`safe_controller`] (the core's `SafeController`: supervisor + ASMC +
-//!   limiter) through [`crate::control::supervised_step`]; each step's validated sample
+//! - 1 kHz control task: [`safe_controller`] (the core's `SafeController`: supervisor +
+//!   margin-scheduled ASMC + limiter) through [`crate::control::supervised_step`], fed the
+//!   newest fused margin report ([`DataMargin::margin_status`]); each step's validated sample
 //!   becomes a [`MeterSample`] pushed into a lock-free SPSC queue;
-//! - 100 Hz meter task: drains the queue into [`DataMargin::push`] (the core's
+//! - 100 Hz meter task, spawned by the step that completes a block of ten samples
+//!   ([`MeterCadence`]): drains the queue into [`DataMargin::push`] (the core's
 //!   `DataPipeline`: mode meter -> fusion with the newest model margin -> monitor, with the
-//!   tuned `PipelineParams`), which answers every 10th sample;
+//!   tuned `PipelineParams`), which answers on the block's last sample, so its report reaches
+//!   the next control step: 10 ms cadence, one control period of latency;
 //! - background loop (idle, lowest priority): [`ModelTask::step`] (the core's
 //!   `ModelMarginTracker`, at most one f32 eigen-solve per call), publishing each completed model
 //!   margin to the meter task.
@@ -59,12 +62,16 @@ pub const EVENT_LOG: usize = 8;
 /// first cycle (the full scan) ~53 ms (`cargo xtask bench`).
 pub const MODEL_REFRESH_S: f32 = 0.1;
 
-/// The core's supervised controller as the firmware runs it: the adaptive sliding-mode
-/// controller with the default (nominal-plant) parameters, the default supervisor thresholds
-/// (fail-safe current `shimmy_core::control::actuator::FAILSAFE_CURRENT_A`).
+/// The controller the firmware runs: the margin-scheduled ASMC (`shimmy_core::control::
+/// schedule`), armed by the meter task's fused margin report, through the quiet coil.
+pub const CONTROLLER: ControllerKind = ControllerKind::MarginAsmc;
+
+/// The core's supervised controller as the firmware runs it: [`CONTROLLER`] with the default
+/// (nominal-plant) parameters, the default supervisor thresholds (fail-safe current
+/// `shimmy_core::control::actuator::FAILSAFE_CURRENT_A`).
 pub fn safe_controller() -> SafeController {
     SafeController::new(
-        ControllerKind::Asmc,
+        CONTROLLER,
         ControlParams::default(),
         SupervisorParams::default(),
     )
@@ -75,10 +82,33 @@ pub fn safe_controller() -> SafeController {
 /// `the_nominal_vehicle_reproduces_todays_defaults`).
 pub fn safe_controller_for(vehicle: &Vehicle) -> SafeController {
     SafeController::new(
-        ControllerKind::Asmc,
+        CONTROLLER,
         vehicle.control_params(),
         vehicle.supervisor_params(),
     )
+}
+
+/// When the control task spawns the meter task: on the step whose sample completes a block
+/// of [`METER_DECIMATION`] (the 10th, 20th, ... since boot), the sample on which the data
+/// path answers. The meter run then reports before the next control step, which takes the
+/// report: the simulator's closed loop has the same cadence and latency (it runs the
+/// application's tasks, `firmware::pil::HostApp`). A counter, not the step number modulo 10,
+/// so the phase survives the wrap of the `u32` step count.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MeterCadence {
+    in_block: u32,
+}
+
+impl MeterCadence {
+    /// Counts one control step's sample; true when the meter task is due after it.
+    pub fn tick(&mut self) -> bool {
+        self.in_block += 1;
+        let due = self.in_block >= METER_DECIMATION;
+        if due {
+            self.in_block = 0;
+        }
+        due
+    }
 }
 
 /// What the control task hands to the meter task per 1 kHz step (20 bytes).
@@ -339,6 +369,40 @@ mod tests {
         let n = u64::from(u32::MAX) - 100;
         let dt_old = (step_time_s(n + 1) - step_time_s(n)) as f32;
         assert_ne!(dt_old, DT_S, "old dt {dt_old}");
+    }
+
+    /// The meter runs after exactly the samples on which the data path answers, so every
+    /// run reports once and the report of sample k reaches step k + 1.
+    #[test]
+    fn the_meter_runs_on_the_samples_that_report() {
+        let mut d = DataMargin::new().expect("default config");
+        let mut cadence = MeterCadence::default();
+        let mut queue = Vec::new();
+        let (mut runs, mut reports) = (0, 0);
+        for k in 0..1000u32 {
+            queue.push(MeterSample {
+                step: k,
+                psi_l_rad: 0.0,
+                psi_r_rad: 0.0,
+                speed_mps: 12.0,
+                cmd_a: 0.0,
+            });
+            if !cadence.tick() {
+                continue;
+            }
+            runs += 1;
+            let last = queue.len() - 1;
+            for (i, s) in queue.drain(..).enumerate() {
+                if d.push(&s, None).is_some() {
+                    assert_eq!(
+                        i, last,
+                        "run after step {k}: the report is the last sample's"
+                    );
+                    reports += 1;
+                }
+            }
+        }
+        assert_eq!((runs, reports), (100, 100));
     }
 
     #[test]

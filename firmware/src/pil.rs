@@ -6,9 +6,11 @@
 //!   a bus, parity or error-flag reading carries no angle, a missing coil-current reading is an
 //!   ADC fault.
 //! - [`HostApp`] (host only): the application's three tasks in the order the RTIC app runs them
-//!   in one control period (control, the meter run every 10th step, the background loop until
-//!   it has nothing due), on the host. It is the software-in-the-loop side of the PIL/SIL
-//!   comparison (`shimmy-sim pil --check-sil`): the same code as the image, run natively.
+//!   in one control period (control, the meter run after every 10th sample, the background
+//!   loop until it has nothing due), on the host. It is the software-in-the-loop side of the
+//!   PIL/SIL comparison (`shimmy-sim pil --check-sil`): the same code as the image, run
+//!   natively; and the simulator's closed loop runs the margin-scheduled controller through it,
+//!   so the simulator's margin report reaches the controller as on the board.
 
 use crate::drivers::wheel_speed::{SpeedReading, SpeedStatus};
 use crate::sensors::{SampleSet, SensorFault};
@@ -54,13 +56,16 @@ mod host {
     use super::sample_set;
     use crate::control::{supervised_step, Health};
     use crate::monitoring::{
-        safe_controller_for, DataMargin, MeterSample, ModelTask, METER_DECIMATION,
+        safe_controller_for, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use heapless::Deque;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
     use shimmy_core::estimator::model_margin::ModelMargin;
+    use shimmy_core::estimator::pipeline::PipelineParams;
+    use shimmy_core::params::PlantParams;
+    use shimmy_core::supervisor::checks::Supervisor;
     use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
-    use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
     use shimmy_core::vehicle::Vehicle;
     use shimmy_pil::{MarginFrame, ModelFrame, StepReport, TargetFrame};
 
@@ -70,6 +75,7 @@ mod host {
         ctrl: SafeController,
         health: Health,
         step: u32,
+        cadence: MeterCadence,
         /// The SPSC queue of the app (capacity 31).
         queue: Deque<MeterSample, 31>,
         data: DataMargin,
@@ -85,13 +91,29 @@ mod host {
         /// `vehicle` loaded (the image under PIL boots with an empty RAM flash: the compiled-in
         /// [`Vehicle::nominal`]).
         pub fn new(vehicle: &Vehicle) -> Result<Self, ConfigError> {
+            Self::with_parts(
+                safe_controller_for(vehicle),
+                &vehicle.pipeline_params(),
+                vehicle.plant,
+            )
+        }
+
+        /// The application around `ctrl` (its controller, gains and supervisor), the data path
+        /// with `pipeline` and the model task on `model_plant`: [`Self::new`] takes all three
+        /// from one vehicle; the simulator's studies also run other controllers or gains.
+        pub fn with_parts(
+            ctrl: SafeController,
+            pipeline: &PipelineParams,
+            model_plant: PlantParams,
+        ) -> Result<Self, ConfigError> {
             Ok(HostApp {
-                ctrl: safe_controller_for(vehicle),
+                ctrl,
                 health: Health::default(),
                 step: 0,
+                cadence: MeterCadence::default(),
                 queue: Deque::new(),
-                data: DataMargin::with_params(&vehicle.pipeline_params())?,
-                model_task: ModelTask::new(vehicle.plant),
+                data: DataMargin::with_params(pipeline)?,
+                model_task: ModelTask::new(model_plant),
                 published: Vec::new(),
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
@@ -103,16 +125,22 @@ mod host {
             &self.health
         }
 
+        /// The control task's supervisor (fault records and events).
+        pub fn supervisor_mut(&mut self) -> &mut Supervisor {
+            self.ctrl.supervisor_mut()
+        }
+
         /// One control period on `raw`; `emit` gets the frames the image would send, in the
         /// same order. `model_cycles`: for a meter run, how many model cycles it sees
         /// published (on the target this depends on how far the background loop got in
         /// instructions, which only the target knows; `None`: every cycle completed so far).
+        /// Returns the control step's output.
         pub fn period(
             &mut self,
             raw: &RawFrame,
             model_cycles: Option<u32>,
             emit: &mut dyn FnMut(TargetFrame),
-        ) {
+        ) -> SafeOutput {
             // control task
             let step = self.step;
             let out = supervised_step(
@@ -130,8 +158,8 @@ mod host {
                 out,
                 instructions: 0,
             }));
-            // meter task, spawned every 10th step
-            if step.is_multiple_of(METER_DECIMATION) {
+            // meter task, spawned after every 10th sample
+            if self.cadence.tick() {
                 let seen = model_cycles.map_or(self.published.len(), |n| n as usize);
                 let model = seen
                     .checked_sub(1)
@@ -173,6 +201,7 @@ mod host {
                     break;
                 }
             }
+            out
         }
     }
 }
@@ -209,9 +238,9 @@ mod tests {
         assert_eq!((h.enc_parity, h.enc_bus), (1, 1));
     }
 
-    /// The host app answers like the image: one step report per period, a meter run every
-    /// 10th step with one margin update from the second run on, model cycles once the meter
-    /// has published a speed.
+    /// The host app answers like the image: one step report per period, a meter run after
+    /// every 10th step with one margin update each, model cycles once the meter has published
+    /// a speed.
     #[test]
     fn host_app_emits_the_frames_of_each_period_in_order() {
         use shimmy_pil::TargetFrame;
@@ -226,9 +255,19 @@ mod tests {
         let count = |p: fn(&TargetFrame) -> bool| frames.iter().filter(|f| p(f)).count();
         assert_eq!(count(|f| matches!(f, TargetFrame::Step(_))), 300);
         assert_eq!(count(|f| matches!(f, TargetFrame::MeterRun { .. })), 30);
-        assert_eq!(count(|f| matches!(f, TargetFrame::Margin(_))), 29);
+        assert_eq!(count(|f| matches!(f, TargetFrame::Margin(_))), 30);
         assert!(count(|f| matches!(f, TargetFrame::Model(_))) >= 2);
         assert!(matches!(frames[0], TargetFrame::Step(s) if s.step == 0));
+        // the first meter run follows step 9 and reports sample 9
+        let first_run = frames
+            .iter()
+            .position(|f| matches!(f, TargetFrame::MeterRun { .. }))
+            .expect("a meter run");
+        assert!(matches!(
+            frames[first_run],
+            TargetFrame::MeterRun { step: 9, .. }
+        ));
+        assert!(matches!(frames[first_run - 1], TargetFrame::Margin(m) if m.step == 9));
         assert_eq!(app.health().steps, 300);
     }
 }

@@ -1,6 +1,6 @@
 //! Random sequences of store operations (configuration writes, appends, standstill flushes, log
 //! clears, reboots) with power cuts at random bytes, on the firmware's RAM flash with small
-//! pages (so compactions and page turns happen every few operations). After every operation
+//! pages (so page turns of both queues happen every few operations). After every operation
 //! and every reboot the store must hold what a model of it says:
 //!
 //! - the configuration is the last one written, or, after a cut during a write, the one being

@@ -93,6 +93,11 @@ impl Recorder {
     /// The supervisor's fault bits at `t_ms`: every bit newly active becomes a [`FaultEvent`].
     pub fn on_faults(&mut self, t_ms: u32, active: u32, latched: u32, sink: &mut impl EventSink) {
         let raised = active & !self.active;
+        self.active = active;
+        if raised == 0 {
+            // the usual update: no fault raised, no kind to look at
+            return;
+        }
         for (i, kind) in FaultKind::ALL.iter().enumerate() {
             let bit = 1u32
                 .checked_shl(u32::try_from(i).unwrap_or(32))
@@ -105,7 +110,6 @@ impl Recorder {
                 }));
             }
         }
-        self.active = active;
     }
 }
 

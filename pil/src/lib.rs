@@ -7,7 +7,8 @@
 //! what its lower-priority tasks produced before the next step (the meter task's
 //! [`MarginFrame`]s and [`TargetFrame::MeterRun`], the background loop's [`ModelFrame`]s).
 //! The host sends the next sensor frame only after the step report, so a step never waits on
-//! the meter or the model loop.
+//! the meter or the model loop. [`HostFrame::Finish`] ends the run; the image answers with
+//! [`TargetFrame::Finished`] (the instructions it executed) and exits.
 //!
 //! Encoding: a 2-byte little-endian body length, then the postcard body (floats as their IEEE
 //! bits, so a NaN payload and the sign of a zero survive and the host can compare bit for bit).
@@ -89,6 +90,12 @@ pub enum TargetFrame {
     },
     /// A completed model cycle.
     Model(ModelFrame),
+    /// The image's answer to [`HostFrame::Finish`], its last frame.
+    Finished {
+        /// Instructions the image executed since reset (the virtual time in ns under `-icount
+        /// shift=0`: the PIL build never halts, see `firmware/src/board/pil.rs`).
+        instructions: u64,
+    },
 }
 
 /// Why a frame could not be encoded or decoded.

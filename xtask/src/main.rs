@@ -489,6 +489,7 @@ fn size() -> Result<(), String> {
     println!("{report}");
     println!("{}", elf::top_symbols(&elf, 25)?);
     println!("{}", elf::attribution(&elf, 12)?);
+    println!("{}", elf::source_table(&elf, 30)?);
     report.check_fits()?;
     report.check_budget()
 }

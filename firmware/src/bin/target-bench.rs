@@ -44,8 +44,15 @@ mod bench {
     /// integer entry checks (worst warm model cycle 264 k -> 177 k instructions) and the margin
     /// path's f64 time only on the reporting sample (plain meter push 562 -> 263) took the
     /// firmware to 49.1, inside issue 17's 5 %; the AR(10) slow meter merged since (+2,121 per
-    /// meter run) took it to 50.3, so the 5 % goal is missed by 0.03 % and stays open.
-    const CPU_LOAD_BUDGET_PERMILLE: u32 = 51;
+    /// meter run) took it to 50.3; the RLS covariance updated in place (no clear and copy of
+    /// the 14 x 14 matrix per update: meter run 37,910 -> 35,079) to 48.7. Counting what the
+    /// sum had left out (the meter task's link and store bookkeeping, the background loop's
+    /// passes and wakes, the telemetry stream) took it to 55.3; a background pass only per
+    /// meter run (`background::PassGate`), no vehicle-sized copy in `take_unsaved`, no fault
+    /// loop without a raised fault and the link's milliseconds from the step count (no f64)
+    /// brought it to 49.9, and the RLS update's checks on the values it computes (meter run
+    /// 35,079 -> 33,001) to 48.7: inside issue 17's 5 %, which this guard holds.
+    const CPU_LOAD_BUDGET_PERMILLE: u32 = 50;
 
     /// Calls of each entry; the largest count is reported (inputs vary between calls).
     const CALLS: u32 = 5;
@@ -72,7 +79,7 @@ mod bench {
             run: control_step,
         },
         Entry {
-            name: "SafeController::step alone (supervisor + ASMC)",
+            name: "SafeController::step alone (supervisor, margin ASMC)",
             budget: Budget::None,
             run: safe_step,
         },
@@ -95,6 +102,26 @@ mod bench {
             name: "link: LinkState::on_update in the meter task (max)",
             budget: Budget::None,
             run: link_update,
+        },
+        Entry {
+            name: "meter task: link + store bookkeeping per run (max)",
+            budget: Budget::None,
+            run: meter_bookkeeping,
+        },
+        Entry {
+            name: "link: a telemetry frame (stream on, 10 Hz)",
+            budget: Budget::None,
+            run: link_telemetry,
+        },
+        Entry {
+            name: "background loop: a pass per meter run, no cycle due (100 Hz)",
+            budget: Budget::None,
+            run: idle_pass,
+        },
+        Entry {
+            name: "background loop: a wake with nothing new (~1 kHz)",
+            budget: Budget::None,
+            run: idle_wake,
         },
         Entry {
             name: "link: a config-get request (handler, record, frame)",
@@ -287,6 +314,10 @@ mod bench {
     /// Results the model-refresh row derives from (stored by the entries that measure them).
     static CONTROL_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static METER_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static BOOKKEEPING_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static TELEMETRY_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static IDLE_PASS_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static IDLE_WAKE_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
 
     /// A valid margin report inside the Hopf window (the margin schedule fully armed).
     const INSIDE_WINDOW: shimmy_core::supervisor::frame::MarginStatus =
@@ -493,13 +524,183 @@ mod bench {
             link.on_sample(s.cmd_a);
             if let Some((u, _)) = d.push(&s, None) {
                 let n = measure_once(|| {
-                    link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), black_box(&h))
+                    link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), black_box(&h), k)
                 });
                 if k >= 3000 {
                     worst = worst.max(n);
                 }
             }
         }
+        worst
+    }
+
+    /// Per meter run, the meter task's work besides `DataMargin::push` (max over 0.5 s after
+    /// 3 s of warm-up): for each of the 10 samples the store's episode recorder and the link's
+    /// command bookkeeping, then the link's update and the store's episode check (`main.rs`).
+    fn meter_bookkeeping() -> u32 {
+        use shimmy_firmware::control::Health;
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
+        use shimmy_firmware::store::EpisodeRecorder;
+        let Ok(mut d) = DataMargin::new() else {
+            return u32::MAX;
+        };
+        let mut link = LinkState::new(
+            &ResetRecord::fresh().sealed(),
+            shimmy_core::vehicle::Vehicle::nominal(),
+        );
+        let mut episodes = EpisodeRecorder::new();
+        let h = Health::default();
+        let mut seed = 7;
+        let (mut run, mut worst) = (0u32, 0u32);
+        for k in 0..3500u32 {
+            let (l, r) = yaw(k, &mut seed);
+            let s = MeterSample {
+                step: k,
+                psi_l_rad: l,
+                psi_r_rad: r,
+                speed_mps: 15.0,
+                cmd_a: 0.5,
+            };
+            run += measure_once(|| {
+                episodes.sample(black_box(s.cmd_a));
+                link.on_sample(black_box(s.cmd_a));
+            });
+            if let Some((u, _)) = d.push(&s, None) {
+                let monitor = d.pipeline().monitor();
+                run += measure_once(|| {
+                    link.on_update(&u, monitor, d.speed_mps(), black_box(&h), k);
+                    black_box(episodes.update(monitor));
+                });
+                if k >= 3000 {
+                    worst = worst.max(run);
+                }
+                run = 0;
+            }
+        }
+        BOOKKEEPING_MAX.store(worst, Ordering::Relaxed);
+        worst
+    }
+
+    /// A telemetry frame of the link task while a host watches (`Device::poll_stream` after a
+    /// margin update: the report into a frame), max over 0.5 s after 3 s of warm-up.
+    fn link_telemetry() -> u32 {
+        use shimmy_firmware::control::Health;
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
+        use shimmy_link::device::{Device, REPLY_BYTES};
+        use shimmy_link::frame::{encode, MAX_FRAME};
+        use shimmy_link::wire::{Request, PROTOCOL_HEADER};
+        let Ok(mut d) = DataMargin::new() else {
+            return u32::MAX;
+        };
+        let mut link = LinkState::new(
+            &ResetRecord::fresh().sealed(),
+            shimmy_core::vehicle::Vehicle::nominal(),
+        );
+        let mut dev = Device::new();
+        let mut reply = [0u8; REPLY_BYTES];
+        let mut req = [0u8; MAX_FRAME + 1];
+        let Ok(n) = encode(PROTOCOL_HEADER, &Request::Telemetry { on: true }, &mut req) else {
+            return u32::MAX;
+        };
+        for &b in req.iter().take(n) {
+            let _ = dev.on_byte(b, &mut link, &mut reply);
+        }
+        let h = Health::default();
+        let mut seed = 7;
+        let mut worst = 0;
+        for k in 0..3500u32 {
+            let (l, r) = yaw(k, &mut seed);
+            let s = MeterSample {
+                step: k,
+                psi_l_rad: l,
+                psi_r_rad: r,
+                speed_mps: 15.0,
+                cmd_a: 0.5,
+            };
+            if let Some((u, _)) = d.push(&s, None) {
+                link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), &h, k);
+                let mut sent = false;
+                let n = measure_once(|| {
+                    sent = black_box(dev.poll_stream(&mut link, &mut reply)).is_some();
+                });
+                if !sent {
+                    return u32::MAX; // not the path we meant to measure
+                }
+                if k >= 3000 {
+                    worst = worst.max(n);
+                }
+            }
+        }
+        TELEMETRY_MAX.store(worst, Ordering::Relaxed);
+        worst
+    }
+
+    /// One pass of the background loop after a meter run with no model cycle due, as `main.rs`
+    /// runs it (`background::PassGate`, 100 Hz): the store's pass while moving (no entry, no
+    /// new fault), the check for a host-written vehicle, a model call between two cycles.
+    fn idle_pass() -> u32 {
+        use shimmy_core::params::PlantParams;
+        use shimmy_core::supervisor::faults::FaultSet;
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::monitoring::ModelTask;
+        use shimmy_firmware::store::{Motion, StoreTask};
+        let mut task = StoreTask::new(bench_store(0), FaultSet::EMPTY);
+        let mut link = LinkState::new(
+            &ResetRecord::fresh().sealed(),
+            shimmy_core::vehicle::Vehicle::nominal(),
+        );
+        let mut model = ModelTask::new(PlantParams::nominal());
+        let v = 15.0;
+        // the cold first cycle completes; the calls measured come before the next one is due
+        let mut t = 0.0;
+        let mut done = false;
+        for _ in 0..2000 {
+            t += 1e-3;
+            if model.step(t, v).is_some() {
+                done = true;
+                break;
+            }
+        }
+        if !done {
+            return u32::MAX;
+        }
+        let motion = Motion {
+            t_s: t,
+            speed_mps: v,
+            cmd_peak_a: 0.5,
+        };
+        let worst = measure(|| {
+            black_box(task.step(black_box(motion), FaultSet::EMPTY, core::iter::empty()));
+            black_box(link.take_unsaved());
+            black_box(model.step(black_box(t), v));
+        });
+        IDLE_PASS_MAX.store(worst, Ordering::Relaxed);
+        worst
+    }
+
+    /// A wake of the background loop with nothing new (the other ~1 kHz wakes): the gate's
+    /// check, which sends it back to sleep.
+    fn idle_wake() -> u32 {
+        use shimmy_core::params::PlantParams;
+        use shimmy_firmware::background::PassGate;
+        use shimmy_firmware::monitoring::ModelTask;
+        let model = ModelTask::new(PlantParams::nominal());
+        let mut gate = PassGate::new();
+        let t = 1.25;
+        gate.due(t, false);
+        let mut due = false;
+        let worst = measure(|| {
+            due |= gate.due(black_box(t), black_box(&model).tracker().busy());
+        });
+        if due {
+            return u32::MAX; // not the path we meant to measure
+        }
+        IDLE_WAKE_MAX.store(worst, Ordering::Relaxed);
         worst
     }
 
@@ -682,18 +883,28 @@ mod bench {
     }
 
     /// The whole firmware's CPU load at its rates [per mille]: control step x 1 kHz + meter run
-    /// x 100 Hz + worst warm model cycle x 10 Hz, in cycles at [`LOAD_CPI`] cycles per
+    /// with its link and store bookkeeping x 100 Hz + worst warm model cycle x 10 Hz + the
+    /// background loop's passes between cycles x 100 Hz and its wakes x 1 kHz + the link's
+    /// telemetry frames x 10 Hz
+    /// (a host watching; host requests are not counted), in cycles at [`LOAD_CPI`] cycles per
     /// instruction, over 168 MHz.
     fn cpu_load_permille() -> u32 {
         let control = u64::from(CONTROL_MAX.load(Ordering::Relaxed)) * 1000;
-        let meter = u64::from(METER_RUN_MAX.load(Ordering::Relaxed)) * 100;
+        let meter = (u64::from(METER_RUN_MAX.load(Ordering::Relaxed))
+            + u64::from(BOOKKEEPING_MAX.load(Ordering::Relaxed)))
+            * 100;
         let model = u64::from(tracker_counts().2) * 10;
-        let per_s = control + meter + model;
+        let idle = u64::from(IDLE_PASS_MAX.load(Ordering::Relaxed)) * 100
+            + u64::from(IDLE_WAKE_MAX.load(Ordering::Relaxed)) * 1000;
+        let link = u64::from(TELEMETRY_MAX.load(Ordering::Relaxed)) * 10;
+        let per_s = control + meter + model + idle + link;
         defmt::info!(
-            "cpu load: control {=u64} + meter {=u64} + model {=u64} = {=u64} instructions/s, {=u64} cycles/s at {=u64} CPI of 168 MHz",
+            "cpu load: control {=u64} + meter with bookkeeping {=u64} + model {=u64} + background passes {=u64} + telemetry {=u64} = {=u64} instructions/s, {=u64} cycles/s at {=u64} CPI of 168 MHz",
             control,
             meter,
             model,
+            idle,
+            link,
             per_s,
             per_s * LOAD_CPI,
             LOAD_CPI

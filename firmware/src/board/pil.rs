@@ -61,6 +61,9 @@ impl BoardSensors {
             Ok(HostFrame::Sensors(raw)) => crate::pil::sample_set(&raw),
             Ok(HostFrame::Finish) => {
                 defmt::info!("pil: the host ended the run");
+                send(&TargetFrame::Finished {
+                    instructions: executed(),
+                });
                 finish(Outcome::Success)
             }
             Err(e) => {
@@ -147,7 +150,89 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> (Board, LinkPort) {
         timer: ControlTimer::start(dp.TIM2, TIMER_CLOCK_HZ),
         watchdog: Watchdog::start(dp.IWDG),
     };
+    // The control steps come from `background_pass`, not from TIM2's update (see there).
+    // SAFETY: DIER = 0 masks TIM2's update interrupt; the counter keeps running.
+    unsafe { (*pac::TIM2::ptr()).dier().write(|w| w.bits(0)) };
     (board, LinkPort::start(dp.USART1, TIMER_CLOCK_HZ))
+}
+
+/// Instructions of one control period: 1 ms at QEMU's 1 GHz virtual clock, one instruction
+/// per nanosecond under `-icount shift=0`.
+const PERIOD_INSTRUCTIONS: u32 = TIMER_CLOCK_HZ / 1000;
+/// SysTick ticks per instruction: SysTick runs on the 168 MHz core clock, QEMU's virtual
+/// clock at 1 GHz (`cargo xtask bench` checks the ratio), as (numerator, denominator).
+const SYSTICK_PER_INSTRUCTION: (u32, u32) = (168, 1000);
+/// Instruction count at the entry of the latest control step.
+static STEP_ENTRY: AtomicU32 = AtomicU32::new(0);
+/// Wraps of the instruction counter seen by the control steps (one step every < 2^32
+/// instructions: a period is 10^6, a cold model cycle ~5.4 x 10^6).
+static WRAPS: AtomicU32 = AtomicU32::new(0);
+
+/// Instructions executed since reset, 64-bit.
+fn executed() -> u64 {
+    let now = instructions();
+    let wraps = WRAPS.load(Ordering::Relaxed) + u32::from(now < STEP_ENTRY.load(Ordering::Relaxed));
+    (u64::from(wraps) << 32) | u64::from(now)
+}
+
+/// The period clock of the PIL build, in place of the board's WFI until TIM2's update: called
+/// on every pass of the background loop with whether the model task has work due.
+///
+/// - Nothing due: the next control step starts now (the control task is bound to TIM2's
+///   interrupt, pended here by software); it waits for the host's frame anyway.
+/// - Work due: the step starts at the end of the period, one period of instructions after the
+///   last step's entry, so the model cycle gets the share of the CPU it would get on a 1 kHz
+///   timer: SysTick, armed here only while the model is busy, pends it.
+///
+/// Why: with `-icount sleep=off` each WFI costs no virtual time but a hand-over inside QEMU
+/// (the halted vCPU is woken by QEMU's main loop when the timer expires), which was most of
+/// the wall time of a step (README, "Processor in the loop"). TIM2's own update interrupt is
+/// off in this build ([`init`]): QEMU 7.2's STM32 timer neither keeps the period nor restarts
+/// at a counter write, so it cannot mark the period's end. Every control step still consumes
+/// one host frame and answers with one report, so lockstep and the results are unchanged.
+pub fn background_pass(busy: bool) {
+    // SAFETY: SysTick is used by nothing else in this build; these are its documented
+    // registers (ARMv7-M ARM B3.3), any value is valid.
+    let syst = unsafe { &*cortex_m::peripheral::SYST::PTR };
+    let armed = syst.csr.read() & 1 != 0;
+    if !busy {
+        // SAFETY: as above.
+        unsafe { syst.csr.write(0) };
+        next_step();
+        return;
+    }
+    if armed {
+        return;
+    }
+    let elapsed = instructions().wrapping_sub(STEP_ENTRY.load(Ordering::Relaxed));
+    let left = PERIOD_INSTRUCTIONS.saturating_sub(elapsed);
+    let ticks = left / SYSTICK_PER_INSTRUCTION.1 * SYSTICK_PER_INSTRUCTION.0;
+    if ticks == 0 {
+        next_step();
+        return;
+    }
+    // SAFETY: as above; RVR takes 24 bits (a period is 168,000 ticks), CVR is cleared by any
+    // write, CSR = ENABLE | TICKINT | CLKSOURCE (core clock).
+    unsafe {
+        syst.rvr.write(ticks.min(0x00FF_FFFF));
+        syst.cvr.write(0);
+        syst.csr.write(0b111);
+    }
+}
+
+/// Pends the control task and lets it run before the caller goes on.
+fn next_step() {
+    cortex_m::peripheral::NVIC::pend(pac::Interrupt::TIM2);
+    cortex_m::asm::dsb();
+    cortex_m::asm::isb();
+}
+
+/// The end of a period in which the model task was busy: one shot, the control step.
+#[cortex_m_rt::exception]
+fn SysTick() {
+    // SAFETY: see `background_pass`.
+    unsafe { (*cortex_m::peripheral::SYST::PTR).csr.write(0) };
+    next_step();
 }
 
 /// The instruction counter (TIM5, wrapping).
@@ -215,6 +300,10 @@ fn send(frame: &TargetFrame) {
 /// (the report's cost included) booked as busy time.
 pub fn report_step(step: u32, out: &SafeOutput, entry: u32) {
     let instructions = crate::board::pil::instructions().wrapping_sub(entry);
+    if entry < STEP_ENTRY.load(Ordering::Relaxed) {
+        WRAPS.fetch_add(1, Ordering::Relaxed);
+    }
+    STEP_ENTRY.store(entry, Ordering::Relaxed);
     send(&TargetFrame::Step(StepReport {
         step,
         out: *out,

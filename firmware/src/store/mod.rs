@@ -2,16 +2,19 @@
 //! cuts (issue 23).
 //!
 //! - Configuration: the core's vehicle record ([`Vehicle::encode_record`](shimmy_core::vehicle::Vehicle::encode_record): schema id over the
-//!   field table, every field as an f64, validated whole by [`Vehicle::decode_record`](shimmy_core::vehicle::Vehicle::decode_record)) under
-//!   key [`KEY_VEHICLE`] of a `sequential-storage` map, and the persistent boot count under
-//!   [`KEY_BOOTS`]. A map item is written whole with a CRC and the newest valid one wins, so
-//!   after a power cut at any byte of a write the board reads the old or the new record.
+//!   field table, every field as an f64, validated whole by [`Vehicle::decode_record`](shimmy_core::vehicle::Vehicle::decode_record))
+//!   behind the persistent boot count and the log's clearing mark ([`STATE_HEADER_BYTES`]): one
+//!   configuration state, appended whole to a `sequential-storage` queue whenever a part of it
+//!   changes. An item is written with a CRC and the newest valid one wins, so after a power cut
+//!   at any byte of a write the board reads the old or the new record; the page a full queue
+//!   erases never holds the newest state (two pages at least). The log's queue type, so its
+//!   code is in the image once.
 //!   [`Store::load_config`] never fails: a missing, unreadable or invalid record gives the
 //!   compiled-in [`Vehicle::nominal`](shimmy_core::vehicle::Vehicle::nominal) and says why ([`ConfigSource`]), so the caller can report
 //!   it as a fault; nothing is half-applied.
 //! - Event log: [`LogEntry`]s (shimmy episodes, latched faults, boots) in a `sequential-storage`
 //!   queue, oldest first; when it is full the oldest go first.
-//! - Erase and compaction only at standstill: all flash access goes through [`Gated`], whose
+//! - Erase only at standstill: all flash access goes through [`Gated`], whose
 //!   erase is refused unless a [`Standstill`] token opened it for one of [`Store::maintain`],
 //!   [`Store::save_config`] or [`Store::clear_log`]. An append that would need an erase (the
 //!   queue moving onto a used page) is kept in RAM ([`PENDING`] entries) and written by the
@@ -19,7 +22,7 @@
 //!   standstill can lose.
 //! - The one other place the gate opens is [`Store::boot`], before the control loop and the
 //!   watchdog start (the coil is off until then): a power cut during a standstill write can
-//!   leave a compaction half done, and `sequential-storage` finishes it (an erase) before it
+//!   leave a page turn half done, and `sequential-storage` finishes it (an erase) before it
 //!   reads again. Boot is also where the board learns its configuration, so the repair has to
 //!   happen there for "old or new, never a mix" to hold.
 //!
@@ -47,6 +50,6 @@ pub use standstill::{
 };
 pub use storage::{
     block_on, Appended, Boot, BootReport, ConfigLoad, ConfigSource, Gated, Layout, Maintenance,
-    Store, StoreError, KEY_BOOTS, KEY_CLEARING, KEY_VEHICLE, PENDING,
+    Store, StoreError, PENDING, STATE_HEADER_BYTES, STATE_MAX_BYTES,
 };
 pub use task::{Motion, Pass, StoreTask, RETRY_S};

@@ -1,4 +1,4 @@
-//! The store itself: the configuration map and the event-log queue on one gated flash (the
+//! The store itself: the configuration queue and the event-log queue on one gated flash (the
 //! module documentation of `store` says what and why).
 
 use super::flash::FlashError;
@@ -12,21 +12,19 @@ use core::pin::pin;
 use core::task::{Context, Poll, Waker};
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use sequential_storage::cache::{Cache, Uncached};
-use sequential_storage::map::{MapConfig, MapStorage};
 use sequential_storage::queue::{QueueConfig, QueueStorage};
 use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
 
-/// Map key of the vehicle record.
-pub const KEY_VEHICLE: u8 = 0;
-/// Map key of the boot count (u32, little-endian).
-pub const KEY_BOOTS: u8 = 1;
-/// Map key of the clearing mark: 1 while a log clear is under way, so a clear cut by a power
-/// loss is finished at the next boot (a half-erased log page is not left for the queue).
-pub const KEY_CLEARING: u8 = 2;
 /// Log entries kept in RAM while an append waits for a standstill erase.
 pub const PENDING: usize = 16;
-/// The map's work buffer: the largest vehicle record and its key, with room for alignment.
-const BUF_BYTES: usize = RECORD_MAX_BYTES + 8;
+/// Bytes of a configuration state before its vehicle record: the boot count (u32,
+/// little-endian) and the clearing mark (1 while a log clear is under way, so a clear cut by a
+/// power loss is finished at the next boot: a half-erased log page is not left for the queue).
+pub const STATE_HEADER_BYTES: usize = 5;
+/// Where the clearing mark is in a configuration state (the boot count is in front of it).
+const CLEARING_AT: usize = 4;
+/// The largest configuration state: the header and the largest vehicle record.
+pub const STATE_MAX_BYTES: usize = STATE_HEADER_BYTES + RECORD_MAX_BYTES;
 
 /// The store keeps no cache: every operation scans its pages (entries are rare, and a cache
 /// would have to follow every power cut).
@@ -121,19 +119,19 @@ impl<F: NorFlash<Error = FlashError>> NorFlash for Gated<F> {
     }
 }
 
-/// Where the configuration map and the event log lie in the flash (offsets, whole erase
-/// units; the map needs at least two).
+/// Where the configuration queue and the event log lie in the flash (offsets, whole erase
+/// units; the configuration needs at least two, so a page turn never erases the newest state).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {
-    /// The configuration map.
+    /// The configuration queue.
     pub config: Range<u32>,
     /// The event-log queue.
     pub log: Range<u32>,
 }
 
 impl Layout {
-    /// The first `config_pages` erase units of `page` bytes for the map, the next `log_pages`
-    /// for the log.
+    /// The first `config_pages` erase units of `page` bytes for the configuration, the next
+    /// `log_pages` for the log.
     pub const fn split(page: u32, config_pages: u32, log_pages: u32) -> Layout {
         Layout {
             config: 0..config_pages * page,
@@ -239,11 +237,10 @@ pub struct Boot<F> {
     pub report: BootReport,
 }
 
-/// The configuration map and the event log on one flash (see the module documentation).
+/// The configuration and the event log on one flash (see the module documentation).
 pub struct Store<F> {
     flash: Gated<F>,
     layout: Layout,
-    buf: [u8; BUF_BYTES],
     pending: heapless::Deque<LogEntry, PENDING>,
     lost: u32,
     boots_unsaved: Option<u32>,
@@ -254,8 +251,10 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     fn new(flash: F, layout: Layout) -> Result<Self, StoreError> {
         let fits = |r: &Range<u32>| r.end as usize <= flash.capacity();
         let apart = layout.config.end <= layout.log.start || layout.log.end <= layout.config.start;
-        if !(fits(&layout.config) && fits(&layout.log) && apart)
-            || MapConfig::<Gated<F>>::try_new(layout.config.clone()).is_err()
+        let two_pages =
+            layout.config.end.saturating_sub(layout.config.start) >= 2 * F::ERASE_SIZE as u32;
+        if !(fits(&layout.config) && fits(&layout.log) && apart && two_pages)
+            || QueueConfig::<Gated<F>>::try_new(layout.config.clone()).is_err()
             || QueueConfig::<Gated<F>>::try_new(layout.log.clone()).is_err()
         {
             return Err(StoreError::Layout);
@@ -263,7 +262,6 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         Ok(Store {
             flash: Gated::new(flash),
             layout,
-            buf: [0; BUF_BYTES],
             pending: heapless::Deque::new(),
             lost: 0,
             boots_unsaved: None,
@@ -314,9 +312,12 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         let mut store = Store::new(flash, layout)?;
         store.flash.erase_open = true;
         let config = store.load_config();
-        if let Ok(Some(&[1])) = store.fetch(KEY_CLEARING) {
-            // A clear was cut by a power loss: finish it.
-            let _ = store.clear_open();
+        let mut state = [0u8; STATE_MAX_BYTES];
+        if let Ok(n) = store.read_state(&mut state) {
+            if n > 0 && state_clearing(&state) {
+                // A clear was cut by a power loss: finish it.
+                let _ = store.clear_open();
+            }
         }
         // Reading the whole log finishes an interrupted page turn of the queue.
         let log_entries = store.read_log(|_| ()).unwrap_or(0);
@@ -338,26 +339,88 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             vehicle: Vehicle::nominal(),
             source,
         };
-        match self.fetch(KEY_VEHICLE) {
-            Ok(Some(bytes)) => match Vehicle::decode_record(bytes) {
-                Ok(vehicle) => ConfigLoad {
-                    vehicle,
-                    source: ConfigSource::Stored,
+        let mut state = [0u8; STATE_MAX_BYTES];
+        match self.read_state(&mut state) {
+            Ok(n) => match state.get(STATE_HEADER_BYTES..n) {
+                Some(record) if !record.is_empty() => match Vehicle::decode_record(record) {
+                    Ok(vehicle) => ConfigLoad {
+                        vehicle,
+                        source: ConfigSource::Stored,
+                    },
+                    Err(e) => nominal(ConfigSource::Rejected(e)),
                 },
-                Err(e) => nominal(ConfigSource::Rejected(e)),
+                _ => nominal(ConfigSource::Missing),
             },
-            Ok(None) => nominal(ConfigSource::Missing),
             Err(e) => nominal(ConfigSource::Unreadable(e)),
         }
     }
 
-    /// The newest value of `key` in the map. Every value is bytes: one instance of the map's
-    /// code in the image.
-    fn fetch(&mut self, key: u8) -> Result<Option<&[u8]>, StoreError> {
+    /// The configuration queue: the log's queue type on the other range, so its code is in
+    /// the image once.
+    fn config_queue(&mut self) -> Result<QueueStorage<&mut Gated<F>, NoCache<()>>, StoreError> {
         let config =
-            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
-        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
-        block_on(map.fetch_item::<&[u8]>(&mut self.buf, &key)).map_err(StoreError::from)
+            QueueConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
+        Ok(QueueStorage::new(
+            &mut self.flash,
+            config,
+            Cache::new_uncached(),
+        ))
+    }
+
+    /// The newest configuration state into `out`; its length, 0 when none is stored. Each
+    /// state is one queue item with its CRC: one cut by a power loss does not read back, and
+    /// the one before it is the newest.
+    fn read_state(&mut self, out: &mut [u8; STATE_MAX_BYTES]) -> Result<usize, StoreError> {
+        let mut queue = self.config_queue()?;
+        let mut iter = block_on(queue.iter())?;
+        let mut buf = [0u8; STATE_MAX_BYTES + 8];
+        let mut len = 0;
+        while let Some(item) = block_on(iter.next(&mut buf))? {
+            if let Some(dst) = out.get_mut(..item.len()) {
+                if item.len() >= STATE_HEADER_BYTES {
+                    dst.copy_from_slice(&item);
+                    len = item.len();
+                }
+            }
+        }
+        Ok(len)
+    }
+
+    /// Writes a new configuration state: the newest one with `change` applied, appended whole
+    /// (the oldest page is erased when the queue is full; the newest state is never on it).
+    /// Refused when the newest state cannot be read, so a write never drops what it could not
+    /// read. Needs the erase open (boot or a standstill token).
+    fn update_state(
+        &mut self,
+        change: impl FnOnce(&mut [u8; STATE_MAX_BYTES], usize) -> Result<usize, StoreError>,
+    ) -> Result<(), StoreError> {
+        let mut state = [0u8; STATE_MAX_BYTES];
+        // none stored: boot count 0, no clear under way, no vehicle record
+        let n = self.read_state(&mut state)?.max(STATE_HEADER_BYTES);
+        let n = change(&mut state, n)?;
+        let bytes = state.get(..n).ok_or(StoreError::Library)?;
+        let mut queue = self.config_queue()?;
+        block_on(queue.push(bytes, true)).map_err(StoreError::from)
+    }
+
+    /// Sets the boot count of the configuration state.
+    fn store_boots(&mut self, count: u32) -> Result<(), StoreError> {
+        self.update_state(|state, n| {
+            if let Some(boots) = state.first_chunk_mut() {
+                *boots = count.to_le_bytes();
+            }
+            Ok(n)
+        })
+    }
+
+    /// Sets or clears the clearing mark of the configuration state.
+    fn store_clearing(&mut self, clearing: bool) -> Result<(), StoreError> {
+        self.update_state(|state, n| {
+            if let Some(mark) = state.get_mut(CLEARING_AT) {
+                *mark = u8::from(clearing);
+            }
+            Ok(n)
+        })
     }
 
     /// Writes `vehicle` as the configuration (validated first: an invalid vehicle is refused
@@ -367,39 +430,40 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         vehicle: &Vehicle,
         token: &Standstill<'_>,
     ) -> Result<(), StoreError> {
-        let mut record = [0u8; RECORD_MAX_BYTES];
         vehicle
             .validate()
             .map_err(|e| StoreError::Record(RecordError::Invalid(e)))?;
-        let n = vehicle
-            .encode_record(&mut record)
-            .map_err(StoreError::Record)?;
-        let bytes = record.get(..n).ok_or(StoreError::Library)?;
         self.flash.open(token);
-        let result = self.store_item(KEY_VEHICLE, bytes);
+        let result = self.store_record(|record| vehicle.encode_record(record));
         self.flash.close();
         result
     }
 
-    fn store_item(&mut self, key: u8, value: &[u8]) -> Result<(), StoreError> {
-        let config =
-            MapConfig::try_new(self.layout.config.clone()).map_err(|_| StoreError::Layout)?;
-        let mut map = MapStorage::<u8, _, _>::new(&mut self.flash, config, Cache::new_uncached());
-        block_on(map.store_item(&mut self.buf, &key, &value)).map_err(StoreError::from)
+    /// Replaces the vehicle record of the configuration state with what `encode` writes into
+    /// the record bytes (its length; the state's header is kept).
+    fn store_record(
+        &mut self,
+        encode: impl FnOnce(&mut [u8]) -> Result<usize, RecordError>,
+    ) -> Result<(), StoreError> {
+        self.update_state(|state, _| {
+            let record = state
+                .get_mut(STATE_HEADER_BYTES..)
+                .ok_or(StoreError::Library)?;
+            let n = encode(record).map_err(StoreError::Record)?;
+            Ok(STATE_HEADER_BYTES + n)
+        })
     }
 
     /// Counts this boot (the persistent count) and logs it with the reset cause and the fault
     /// memory's reset count; what cannot be written now is written at the next standstill.
     fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
-        let stored = match self.fetch(KEY_BOOTS) {
-            Ok(Some(&[a, b, c, d])) => u32::from_le_bytes([a, b, c, d]),
+        let mut state = [0u8; STATE_MAX_BYTES];
+        let stored = match self.read_state(&mut state) {
+            Ok(n) if n > 0 => state_boots(&state),
             _ => 0,
         };
         let boot_count = stored.saturating_add(1);
-        if self
-            .store_item(KEY_BOOTS, &boot_count.to_le_bytes())
-            .is_err()
-        {
+        if self.store_boots(boot_count).is_err() {
             self.boots_unsaved = Some(boot_count);
         }
         let entry = BootEntry {
@@ -463,7 +527,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             done.written += 1;
         }
         if let Some(count) = self.boots_unsaved {
-            self.store_item(KEY_BOOTS, &count.to_le_bytes())?;
+            self.store_boots(count)?;
             self.boots_unsaved = None;
             done.boots_saved = true;
         }
@@ -518,11 +582,21 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
 
     /// The clear with the erase open: mark, erase, unmark (a cut in between: finished at boot).
     fn clear_open(&mut self) -> Result<(), StoreError> {
-        self.store_item(KEY_CLEARING, &[1])?;
+        self.store_clearing(true)?;
         let mut queue = self.queue()?;
         block_on(queue.erase_all()).map_err(StoreError::from)?;
-        self.store_item(KEY_CLEARING, &[0])
+        self.store_clearing(false)
     }
+}
+
+/// The clearing mark of a configuration state.
+fn state_clearing(state: &[u8; STATE_MAX_BYTES]) -> bool {
+    state.get(CLEARING_AT) == Some(&1)
+}
+
+/// The boot count of a configuration state.
+fn state_boots(state: &[u8; STATE_MAX_BYTES]) -> u32 {
+    state.first_chunk().map_or(0, |b| u32::from_le_bytes(*b))
 }
 
 #[cfg(test)]

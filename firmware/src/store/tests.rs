@@ -8,8 +8,7 @@ use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
 use shimmy_core::vehicle::FIELDS;
 
-/// Small pages so a handful of writes fill one and force the map's compaction and the queue's
-/// page turn (each with an erase) under the cut.
+/// Small pages so a handful of writes fill one and force the page turns of both queues (each with an erase) under the cut.
 const PAGE: usize = 2048;
 type Flash = RamFlash<{ 4 * PAGE }, PAGE>;
 const LAYOUT: Layout = Layout::split(PAGE as u32, 2, 2);
@@ -65,6 +64,15 @@ fn log_of(s: &mut Store<Flash>) -> Vec<LogEntry> {
     v
 }
 
+/// Stores `record` as the vehicle record, unchecked (as another firmware or a bit flip left it).
+fn store_raw(s: &mut Store<Flash>, record: &[u8]) {
+    s.store_record(|out| {
+        out[..record.len()].copy_from_slice(record);
+        Ok(record.len())
+    })
+    .unwrap();
+}
+
 #[test]
 fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let mut s = store(Flash::new());
@@ -77,7 +85,7 @@ fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let mut bytes = [0u8; RECORD_MAX_BYTES];
     let n = vehicle(3).encode_record(&mut bytes).unwrap();
     bytes[0] ^= 1;
-    s.store_item(KEY_VEHICLE, &bytes[..n]).unwrap();
+    store_raw(&mut s, &bytes[..n]);
     let l = s.load_config();
     assert!(matches!(
         l.source,
@@ -90,7 +98,7 @@ fn a_missing_or_refused_record_gives_the_defaults_and_says_why() {
     let mut bytes = [0u8; RECORD_MAX_BYTES];
     let n = vehicle(3).encode_record(&mut bytes).unwrap();
     bytes[6..14].copy_from_slice(&(-1.0f64).to_le_bytes());
-    s.store_item(KEY_VEHICLE, &bytes[..n]).unwrap();
+    store_raw(&mut s, &bytes[..n]);
     let l = s.load_config();
     assert!(matches!(
         l.source,
@@ -130,7 +138,7 @@ fn an_invalid_vehicle_is_not_saved() {
 }
 
 /// The test: a power cut at every byte of each of a run of configuration writes
-/// (several fill a page, so the map's compaction and its erases are cut too). After every cut
+/// (several fill a page, so the configuration queue's page turns and their erases are cut too). After every cut
 /// the board boots with the old or the new vehicle, never a mix, and the next write works.
 #[test]
 fn a_power_cut_at_any_byte_of_a_config_write_leaves_the_old_or_the_new_one() {
@@ -307,6 +315,28 @@ fn boots_are_counted_across_power_offs_and_logged_with_their_cause() {
             boot_count: 3
         })
     );
+}
+
+/// Every boot appends a whole configuration state (boot count, clearing mark, vehicle record),
+/// so the configuration queue turns its pages again and again: the page it erases holds only
+/// older states, and the vehicle saved once, long ago, survives with the count.
+#[test]
+fn the_vehicle_survives_many_boots_that_turn_the_configuration_pages() {
+    let mut w = standing();
+    let t = w.check(2.0).unwrap();
+    let mut s = Store::boot(Flash::new(), LAYOUT, ResetCause::PowerOn, 0)
+        .unwrap()
+        .store;
+    s.save_config(&vehicle(4), &t).unwrap();
+    let mut flash = s.into_flash();
+    // ~600 B per state, 2 KiB pages: three per page, so 30 boots turn the pages ~10 times.
+    for boot in 2..=31u32 {
+        let b = Store::boot(flash, LAYOUT, ResetCause::Software, 0).unwrap();
+        assert_eq!(b.report.entry.boot_count, boot);
+        assert_eq!(b.report.config.source, ConfigSource::Stored, "boot {boot}");
+        assert_eq!(b.report.config.vehicle, vehicle(4), "boot {boot}");
+        flash = b.store.into_flash();
+    }
 }
 
 #[test]

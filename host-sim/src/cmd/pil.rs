@@ -81,7 +81,8 @@ pub fn command(a: &PilArgs) -> Result<()> {
 
     let trace = out.join("trace.csv");
     r.write_trace_csv(&trace)?;
-    let label = "asmc (PIL)";
+    let label = format!("{} (PIL)", cfg.arm.name());
+    let label = label.as_str();
     let time_png = out.join("time.png");
     plot_runs(&time_png, &spec.name, &[(label, &r)])?;
     let margin_png = out.join("margin.png");
@@ -105,6 +106,16 @@ pub fn command(a: &PilArgs) -> Result<()> {
         r.faults.worst_mode.name(),
         r.faults.final_mode.name(),
         r.faults.lost_frames
+    );
+    // Where the wall time goes: QEMU's CPU per guest instruction against the host side's CPU.
+    let guest = run.instructions.map_or(f64::NAN, |n| n as f64);
+    println!(
+        "  QEMU: {:.2} s of CPU for {:.1} M guest instructions ({:.0} M instructions per CPU s); \
+         host side (plant, sensors, frames): {:.2} s of CPU",
+        run.qemu_cpu_s,
+        guest * 1e-6,
+        guest * 1e-6 / run.qemu_cpu_s,
+        run.host_cpu_s
     );
 
     let c = costs(&run.periods);

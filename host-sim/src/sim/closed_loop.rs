@@ -10,7 +10,10 @@
 //!    qualifier, coil current); a fault plan may rewrite the reading or lose the frame (then
 //!    the previous command is held and nothing below runs);
 //! 2. `SafeController::step` validates the raw frame and turns it into a current command
-//!    (`LoopConfig::supervised == false`: the bare `Controller`, for negative tests);
+//!    (`LoopConfig::supervised == false`: the bare `Controller`, for negative tests); the
+//!    margin-scheduled controller runs inside the firmware's application tasks
+//!    (`shimmy_firmware::pil::HostApp`: control step, meter task after every 10th sample,
+//!    model loop), so its margin report comes as on the board;
 //! 3. the mode meter takes the validated sample (its 100 Hz outputs are recorded);
 //! 4. observers (e.g. a margin pipeline or a monitor) see everything of the sample;
 //! 5. the plant advances over [t, t + dt) with the command and the scenario's inputs held.
@@ -31,7 +34,7 @@ use shimmy_core::control::{
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
-use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams, ShimmyPipeline};
+use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
@@ -41,6 +44,7 @@ use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 use shimmy_core::vehicle::Vehicle;
+use shimmy_firmware::pil::HostApp;
 
 /// The closed loop's plant integrator: adaptive Dopri5 at rtol 1e-7. The fixed-step IMEX
 /// (`Method::ImexFixed`) is as accurate at 2 steps per 1 ms period but not faster (12
@@ -115,8 +119,9 @@ pub struct LoopConfig {
     pub coil_drive: CoilDrive,
     /// The nominal coil and driver the board's drive assumes (the vehicle's).
     pub coil: CoilParams,
-    /// The margin pipeline's plant model and parameters (the vehicle the firmware believes).
-    /// It runs in the loop for the margin-scheduled arm, whose controller gets its report.
+    /// The margin path's plant model and parameters (the vehicle the firmware believes): the
+    /// firmware's meter and model tasks run them in the loop for the margin-scheduled arm,
+    /// whose controller gets their report ([`Self::margin_in_loop`]).
     pub margin_model: (PlantParams, PipelineParams),
 }
 
@@ -169,8 +174,9 @@ impl LoopConfig {
         self
     }
 
-    /// The margin pipeline runs in the loop and feeds the controller (the margin-scheduled
-    /// arm only: the other laws do not read the report, and their runs stay as they were).
+    /// The firmware's margin path runs in the loop and feeds the controller (the
+    /// margin-scheduled arm only: the other laws do not read the report, and their runs stay
+    /// as they were).
     pub fn margin_in_loop(&self) -> bool {
         self.arm == Arm::Mr(ControllerKind::MarginAsmc)
     }
@@ -533,21 +539,35 @@ fn flag_bits(o: &ControlOutput) -> u8 {
 pub trait FirmwareStep {
     /// Why a step failed (e.g. the image under QEMU hung or crashed).
     type Error;
-    /// One control period on `frame`: the supervised step's output. `margin` is the loop's own
-    /// margin pipeline's newest report (for the margin-scheduled controller); a firmware image
-    /// computes its own and ignores it.
-    fn step(&mut self, frame: &RawFrame, margin: MarginStatus) -> Result<SafeOutput, Self::Error>;
+    /// One control period on `frame`: the supervised step's output (the margin report, if the
+    /// controller reads one, is the firmware's own).
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error>;
     /// The supervisor, when it runs in this process (the fault log's counters and events).
     fn supervisor(&mut self) -> Option<&mut Supervisor>;
 }
 
-/// The core's `SafeController` in this process.
-struct InProcess(SafeController);
+/// The core's `SafeController` in this process, with a fixed margin status.
+struct InProcess(SafeController, MarginStatus);
 
 impl FirmwareStep for InProcess {
     type Error = std::convert::Infallible;
-    fn step(&mut self, frame: &RawFrame, margin: MarginStatus) -> Result<SafeOutput, Self::Error> {
-        Ok(self.0.step(frame, margin))
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
+        Ok(self.0.step(frame, self.1))
+    }
+    fn supervisor(&mut self) -> Option<&mut Supervisor> {
+        Some(self.0.supervisor_mut())
+    }
+}
+
+/// The firmware's application tasks in this process (`HostApp`: the control step, the meter
+/// task after every 10th sample, the model loop with each cycle done at once): the
+/// margin-scheduled controller reads the meter task's report as on the board.
+struct InApp(Box<HostApp>);
+
+impl FirmwareStep for InApp {
+    type Error = std::convert::Infallible;
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
+        Ok(self.0.period(frame, None, &mut |_| {}))
     }
     fn supervisor(&mut self) -> Option<&mut Supervisor> {
         Some(self.0.supervisor_mut())
@@ -585,8 +605,28 @@ pub fn run(
         Arm::NoDamper => ControllerKind::PassiveOff,
         Arm::Mr(k) => k,
     };
-    let mut fw = InProcess(SafeController::new(kind, cfg.control, cfg.supervisor));
-    run_loop(cfg, scenario, observer, &mut fw).map_err(|e| match e {
+    let safe = SafeController::new(kind, cfg.control, cfg.supervisor);
+    let (plant, pipeline) = cfg.margin_model;
+    let r = match cfg.margin_in_loop() {
+        true => match HostApp::with_parts(safe.clone(), &pipeline, plant) {
+            Ok(app) => run_loop(cfg, scenario, observer, &mut InApp(Box::new(app))),
+            // The parameters come from a validated vehicle; a configuration the meter rejects
+            // leaves the report invalid, the schedule's safe side.
+            Err(_) => run_loop(
+                cfg,
+                scenario,
+                observer,
+                &mut InProcess(safe, MarginStatus::Invalid),
+            ),
+        },
+        false => run_loop(
+            cfg,
+            scenario,
+            observer,
+            &mut InProcess(safe, MarginStatus::NotUsed),
+        ),
+    };
+    r.map_err(|e| match e {
         LoopError::Integrate(e) => e,
         LoopError::Firmware(never) => match never {},
     })
@@ -641,25 +681,6 @@ fn run_loop<F: FirmwareStep>(
     } else {
         None
     };
-    // The margin pipeline of the board (meter task + model loop) on the model vehicle: its
-    // 100 Hz report reaches the controller on the next step, as the board's control task reads
-    // the meter task's newest report (10 ms cadence, one control period of latency).
-    let mut pipeline = if cfg.margin_in_loop() {
-        let (plant, pp) = cfg.margin_model;
-        // The parameters come from a validated vehicle; a configuration the meter rejects
-        // leaves the report invalid, the schedule's safe side.
-        ShimmyPipeline::<8>::new(plant, pp).ok().map(Box::new)
-    } else {
-        None
-    };
-    let mut margin = if cfg.margin_in_loop() {
-        MarginStatus::Invalid
-    } else {
-        MarginStatus::NotUsed
-    };
-    // The board's meter task: the newest trusted speed and the core's acceleration estimate
-    // on it (`firmware::monitoring::DataMargin`).
-    let (mut v_held, mut accel) = (f32::NAN, AccelEstimator::new());
     let n = (cfg.duration_s / cfg.dt_s).round() as usize;
     let every = cfg.record_every.max(1);
     let mut res = LoopResult::default();
@@ -703,7 +724,7 @@ fn run_loop<F: FirmwareStep>(
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
             let o = safe
-                .step(&meas.raw_frame(t_us), margin)
+                .step(&meas.raw_frame(t_us))
                 .map_err(LoopError::Firmware)?;
             log_verdict(&mut res.faults, safe.supervisor(), &o, t);
             last_verdict = Some(o.verdict);
@@ -771,18 +792,6 @@ fn run_loop<F: FirmwareStep>(
                 damper_cmd: out.current_cmd_a,
             }),
         };
-        if let (Some(p), Some(o)) = (pipeline.as_mut(), &safe_out) {
-            // What the board's meter task is given: the trusted yaw and speed of the step.
-            if let Some(v) = o.validated.speed_mps.filter(|v| v.is_finite()) {
-                v_held = v;
-            }
-            let a = accel.update(t, v_held);
-            if let Some(smp) = sample {
-                if let Some(out) = p.push(&smp, v_held, a, t) {
-                    margin = MarginStatus::of_report(&out.report);
-                }
-            }
-        }
         let meter_in = sample.map_or((f64::NAN, f64::NAN, f64::NAN), |smp| {
             (
                 f64::from(smp.psi_l_rad),

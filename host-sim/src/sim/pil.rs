@@ -14,12 +14,13 @@
 //!   the software-in-the-loop side; [`compare`] checks the two runs bit for bit.
 
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
-use shimmy_core::control::{ControlParams, ControllerKind};
+use shimmy_core::control::ControlParams;
 use shimmy_core::supervisor::checks::Supervisor;
-use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
+use shimmy_core::supervisor::frame::RawFrame;
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_firmware::monitoring::CONTROLLER;
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
     body_len, decode, encode, HostFrame, StepReport, TargetFrame, HEADER_BYTES, MAX_FRAME,
@@ -43,14 +44,17 @@ const LAST_FRAMES: usize = 12;
 /// Decoded log lines shown with a hang or crash.
 const LAST_LOG_LINES: usize = 40;
 
-/// The image runs the firmware's own controller and parameters (ASMC, the nominal vehicle:
+/// The image runs the firmware's own controller and parameters
+/// (`shimmy_firmware::monitoring::CONTROLLER`, the margin-scheduled ASMC; the nominal vehicle:
 /// its controller, supervisor and model-margin plant): a loop whose firmware believes anything
 /// else (`believed`) cannot be closed by it.
 pub fn check_firmware_matches(cfg: &LoopConfig, believed: &Vehicle) -> Result<(), String> {
-    if cfg.arm != Arm::Mr(ControllerKind::Asmc) {
+    let image = Arm::Mr(CONTROLLER);
+    if cfg.arm != image {
         return Err(format!(
-            "field `controller.kind`: `{}`, but the PIL image runs `asmc`",
-            cfg.arm.name()
+            "field `controller.kind`: `{}`, but the PIL image runs `{}`",
+            cfg.arm.name(),
+            image.name()
         ));
     }
     if *believed != Vehicle::nominal()
@@ -327,6 +331,8 @@ pub struct PilFirmware {
     qemu: Qemu,
     periods: Vec<Period>,
     last: VecDeque<String>,
+    finished: Option<u64>,
+    host_cpu_at_start_s: f64,
 }
 
 /// A finished PIL run.
@@ -336,15 +342,37 @@ pub struct PilRun {
     pub periods: Vec<Period>,
     /// The image's decoded defmt log.
     pub log: Vec<String>,
+    /// Instructions the image executed from reset to the end of the run.
+    pub instructions: Option<u64>,
+    /// CPU time QEMU used (user + system), s.
+    pub qemu_cpu_s: f64,
+    /// CPU time this process used meanwhile (plant, sensors, frames; user + system), s.
+    pub host_cpu_s: f64,
+}
+
+/// CPU time (user + system) of this process (`RUSAGE_SELF`) or of its waited-for children
+/// (`RUSAGE_CHILDREN`), s.
+fn cpu_s(who: libc::c_int) -> f64 {
+    // SAFETY: an all-zero `rusage` is valid; getrusage fills it.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `u` is a valid, writable rusage.
+    if unsafe { libc::getrusage(who, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    s(u.ru_utime) + s(u.ru_stime)
 }
 
 impl PilFirmware {
     /// Starts the image `elf` (a `pil` build).
     pub fn start(elf: &Path) -> Result<Self, String> {
+        let host_cpu_at_start_s = cpu_s(libc::RUSAGE_SELF);
         Ok(PilFirmware {
             qemu: Qemu::start(elf)?,
             periods: Vec::new(),
             last: VecDeque::new(),
+            finished: None,
+            host_cpu_at_start_s,
         })
     }
 
@@ -383,6 +411,7 @@ impl PilFirmware {
     fn file(&mut self, f: TargetFrame) {
         self.remember(format!("<- {}", summary(&f)));
         match (f, self.periods.last_mut()) {
+            (TargetFrame::Finished { instructions }, _) => self.finished = Some(instructions),
             (TargetFrame::Step(step), _) => self.periods.push(Period {
                 step,
                 after: Vec::new(),
@@ -403,6 +432,9 @@ impl PilFirmware {
             .send(&HostFrame::Finish)
             .map_err(|e| self.failure(&e))?;
         let status = self.qemu.wait_exit().map_err(|e| self.failure(&e))?;
+        let host_cpu_s = cpu_s(libc::RUSAGE_SELF) - self.host_cpu_at_start_s;
+        // QEMU is this run's only child process, and it has been waited for.
+        let qemu_cpu_s = cpu_s(libc::RUSAGE_CHILDREN);
         // What the image wrote before it exited is in the pipe now.
         loop {
             match take_frame(&mut self.qemu.pending) {
@@ -421,6 +453,9 @@ impl PilFirmware {
         Ok(PilRun {
             log: self.qemu.log(),
             periods: std::mem::take(&mut self.periods),
+            instructions: self.finished,
+            qemu_cpu_s,
+            host_cpu_s,
         })
     }
 }
@@ -447,13 +482,16 @@ fn summary(f: &TargetFrame) -> String {
             "model cycle {}: zeta {}, onset {:?} m/s, {} instructions",
             m.cycle, m.margin.zeta, m.margin.v_crit_onset_mps, m.instructions
         ),
+        TargetFrame::Finished { instructions } => {
+            format!("finished after {instructions} instructions")
+        }
     }
 }
 
 impl FirmwareStep for PilFirmware {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
         self.remember(format!(
             "-> sensors t {} us: yaw {} / {} rad, {} m/s",
             frame.t_us, frame.left.angle_rad, frame.right.angle_rad, frame.speed_mps
@@ -510,7 +548,7 @@ impl<'a> SilFirmware<'a> {
 impl FirmwareStep for SilFirmware<'_> {
     type Error = String;
 
-    fn step(&mut self, frame: &RawFrame, _margin: MarginStatus) -> Result<SafeOutput, String> {
+    fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
         let k = self.periods.len();
         let model_cycles = self.pil.and_then(|p| p.get(k)).and_then(|p| {
             p.after.iter().find_map(|f| match f {
@@ -519,7 +557,8 @@ impl FirmwareStep for SilFirmware<'_> {
             })
         });
         let mut frames = Vec::new();
-        self.app
+        let _ = self
+            .app
             .period(frame, model_cycles, &mut |f| frames.push(f));
         let mut it = frames.into_iter();
         let Some(TargetFrame::Step(step)) = it.next() else {
@@ -810,15 +849,45 @@ mod tests {
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         assert_eq!(check_firmware_matches(&cfg, spec.model()), Ok(()));
         assert!(!spec.faults.is_empty() && spec.duration_s >= 10.0);
-        spec.controller = "smc".into();
-        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
-        let e = check_firmware_matches(&cfg, spec.model()).expect_err("smc");
-        assert!(e.contains("controller.kind"), "{e}");
-        spec.controller = "asmc".into();
+        for other in ["smc", "asmc"] {
+            spec.controller = other.into();
+            let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+            let e = check_firmware_matches(&cfg, spec.model()).expect_err(other);
+            assert!(
+                e.contains("controller.kind") && e.contains("margin-asmc"),
+                "{e}"
+            );
+        }
+        spec.controller = "margin-asmc".into();
         spec.model_vehicle = Some(crate::sim::vehicle_file::load("hard").expect("named set"));
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         let e = check_firmware_matches(&cfg, spec.model()).expect_err("hard");
         assert!(e.contains("[model]"), "{e}");
+    }
+
+    /// The simulator's own closed loop on the margin-scheduled arm is the firmware's
+    /// application (SIL, with each model cycle done at once): the same command on every step,
+    /// bit for bit, so the simulator's studies show what the image does.
+    #[test]
+    fn the_simulators_closed_loop_runs_the_firmware_app() {
+        use crate::sim::closed_loop::{self, run_on};
+        use crate::sim::{scenario, scenario_file};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
+        let mut spec = scenario_file::load(&path).expect("valid demo");
+        spec.duration_s = 3.0;
+        let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
+        let own = closed_loop::run(&cfg, &mut spec.scenario.clone(), None).expect("run");
+        let mut sil = SilFirmware::new(None).expect("app");
+        let app = run_on(&cfg, &mut spec.scenario.clone(), None, &mut sil).expect("run");
+        let bits = |r: &closed_loop::LoopResult| -> Vec<u64> {
+            r.series.cmd_a.iter().map(|x| x.to_bits()).collect()
+        };
+        assert_eq!(own.series.cmd_a.len(), 3000);
+        assert!(
+            own.series.cmd_a.iter().any(|&i| i > 0.1),
+            "the coil engages"
+        );
+        assert_eq!(bits(&own), bits(&app));
     }
 
     #[test]
