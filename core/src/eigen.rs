@@ -1,4 +1,5 @@
-//! Bounded eigenvalue solver for the 10x10 state matrix, modes and mode shapes.
+//! Bounded eigenvalue solver for the N x N state matrix of any model of the family
+//! ([`crate::model`]), modes and mode shapes (the car's: 10 x 10).
 //!
 //! nalgebra's `eigenvalues()` / `complex_eigenvalues()` iterate without a bound and can hang
 //! (nalgebra issues #611, #764, #1528). Here the matrix is checked for NaN/Inf, balanced
@@ -6,21 +7,28 @@
 //! Hessenberg QR iteration of `hessenberg_qr` with a bound on its sweeps; a failure to converge
 //! is an error, never a hang or a panic. Everything is fixed-size (stack only) and `no_std`.
 
-use nalgebra::{Complex, SMatrix, SVector};
+use nalgebra::Complex;
 
 mod hessenberg_qr;
 
-use crate::plant::{
-    A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, N_STATES, PHI, PSI_L, PSI_R, THETA_SW,
-};
+use crate::model::LinearModel;
+pub use crate::model::{ComplexVector, Matrix, ModeShape, ModeShapeInfo};
+use crate::plant::N_STATES;
 
-/// State matrix of the linear plant.
-pub type StateMatrix = SMatrix<f64, N_STATES, N_STATES>;
-/// Eigenvalues of a state matrix, in the solver's order (conjugate pairs adjacent, +Im first).
-pub type Eigenvalues = [Complex<f64>; N_STATES];
+/// State matrix of the car's linear plant.
+pub type StateMatrix = Matrix<N_STATES>;
+/// Eigenvalues of an N x N state matrix, in the solver's order (conjugate pairs adjacent, +Im
+/// first).
+pub type EigenvaluesOf<const N: usize> = [Complex<f64>; N];
+/// Eigenvalues of the car's state matrix.
+pub type Eigenvalues = EigenvaluesOf<N_STATES>;
 
-/// Default bound on the QR iterations (LAPACK allows 30 per eigenvalue).
-pub const DEFAULT_MAX_NITER: usize = 30 * N_STATES;
+/// Default bound on the QR iterations of an N x N solve (LAPACK allows 30 per eigenvalue).
+pub const fn default_max_niter(n: usize) -> usize {
+    30 * n
+}
+/// Default bound on the QR iterations of the car's solve.
+pub const DEFAULT_MAX_NITER: usize = default_max_niter(N_STATES);
 
 /// Why an eigen-solve failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -54,7 +62,7 @@ pub enum EigenError {
 /// f32: ~20x fewer instructions on the M4 than soft-float f64. Balancing is what makes this
 /// accurate enough (`docs/margin-estimator.md`: unscaled f32 loses ~0.04 in zeta); the
 /// tracker's critical speeds still meet 0.05 km/h (tests/tests/margin_model.rs).
-pub trait SolveFloat: nalgebra::RealField + Copy + sealed::Sealed {
+pub trait SolveFloat: nalgebra::RealField + Copy + crate::sqrt::Sqrt + sealed::Sealed {
     /// Name for reports ("f32", "f64").
     const NAME: &'static str;
     /// Machine epsilon: the QR deflation threshold.
@@ -105,14 +113,16 @@ impl SolveFloat for f32 {
 }
 
 /// Eigenvalues of `a` in f64 with the default iteration bound and eps = f64::EPSILON.
-pub fn eigenvalues(a: &StateMatrix) -> Result<Eigenvalues, EigenError> {
-    eigenvalues_of::<f64>(a)
+pub fn eigenvalues<const N: usize>(a: &Matrix<N>) -> Result<EigenvaluesOf<N>, EigenError> {
+    eigenvalues_of::<f64, N>(a)
 }
 
 /// Eigenvalues of `a` solved in `T` (default iteration bound, eps = the type's machine
 /// epsilon), widened to f64.
-pub fn eigenvalues_of<T: SolveFloat>(a: &StateMatrix) -> Result<Eigenvalues, EigenError> {
-    eigenvalues_bounded::<T>(a, T::EPS, DEFAULT_MAX_NITER)
+pub fn eigenvalues_of<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
+) -> Result<EigenvaluesOf<N>, EigenError> {
+    eigenvalues_bounded::<T, N>(a, T::EPS, default_max_niter(N))
 }
 
 /// Eigenvalues of `a` in `T`: finiteness check, balancing, bounded Hessenberg QR iteration.
@@ -120,11 +130,11 @@ pub fn eigenvalues_of<T: SolveFloat>(a: &StateMatrix) -> Result<Eigenvalues, Eig
 /// Work is bounded: balancing converges in a bounded number of sweeps for finite entries below
 /// `T::MAX_ABS_ENTRY` (each accepted rescaling shrinks the row+column norm sum by >= 5 %), and
 /// the QR iteration stops after `max_niter` iterations with [`EigenError::NotConverged`].
-pub fn eigenvalues_bounded<T: SolveFloat>(
-    a: &StateMatrix,
+pub fn eigenvalues_bounded<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     eps: T,
     max_niter: usize,
-) -> Result<Eigenvalues, EigenError> {
+) -> Result<EigenvaluesOf<N>, EigenError> {
     if max_niter == 0 {
         return Err(EigenError::ZeroIterationBound);
     }
@@ -138,13 +148,13 @@ pub fn eigenvalues_bounded<T: SolveFloat>(
     let mut m = a.map(T::of_f64);
     // Power-of-two diagonal similarity: exact in any float type.
     let _scaling = nalgebra::linalg::balancing::balance_parlett_reinsch(&mut m);
-    let vals = hessenberg_qr::eigenvalues::<T, N_STATES>(
+    let vals = hessenberg_qr::eigenvalues::<T, N>(
         core::array::from_fn(|i| core::array::from_fn(|j| m[(i, j)])),
         eps,
         max_niter,
     )
     .ok_or(EigenError::NotConverged)?;
-    let mut out = [Complex::new(0.0, 0.0); N_STATES];
+    let mut out = [Complex::new(0.0, 0.0); N];
     for (o, v) in out.iter_mut().zip(vals.iter()) {
         let (re, im) = (v.re.to_f64(), v.im.to_f64());
         if !(re.is_finite() && im.is_finite()) {
@@ -158,7 +168,7 @@ pub fn eigenvalues_bounded<T: SolveFloat>(
 /// max |a_ij|, or NaN/inf when an entry is: the integer maximum of the bit patterns without
 /// the sign, which order like the magnitudes (NaN above inf above every finite value). One
 /// pass of integer compares, not 100 soft-float ones on the M4.
-fn abs_max(a: &StateMatrix) -> f64 {
+fn abs_max<const N: usize>(a: &Matrix<N>) -> f64 {
     let bits = a.iter().map(|v| v.to_bits() & !(1u64 << 63)).max();
     f64::from_bits(bits.unwrap_or(0))
 }
@@ -212,13 +222,15 @@ pub fn is_oscillatory(s: Complex<f64>) -> bool {
 }
 
 /// Largest real part over all eigenvalues, 1/s.
-pub fn max_real_part(vals: &Eigenvalues) -> f64 {
+pub fn max_real_part<const N: usize>(vals: &EigenvaluesOf<N>) -> f64 {
     vals.iter()
         .fold(f64::NEG_INFINITY, |m, v| if v.re > m { v.re } else { m })
 }
 
 /// The oscillatory mode with the largest real part (the one that crosses at a Hopf point).
-pub fn critical_oscillatory_mode(vals: &Eigenvalues) -> Result<Mode, EigenError> {
+pub fn critical_oscillatory_mode<const N: usize>(
+    vals: &EigenvaluesOf<N>,
+) -> Result<Mode, EigenError> {
     vals.iter()
         .filter(|v| v.im > 0.0 && is_oscillatory(**v))
         .fold(None::<Complex<f64>>, |best, v| match best {
@@ -230,7 +242,7 @@ pub fn critical_oscillatory_mode(vals: &Eigenvalues) -> Result<Mode, EigenError>
 }
 
 /// The oscillatory mode with the smallest damping ratio.
-pub fn least_damped_mode(vals: &Eigenvalues) -> Result<Mode, EigenError> {
+pub fn least_damped_mode<const N: usize>(vals: &EigenvaluesOf<N>) -> Result<Mode, EigenError> {
     vals.iter()
         .filter(|v| v.im > 0.0 && is_oscillatory(**v))
         .map(|v| Mode::from_eigenvalue(*v))
@@ -241,50 +253,56 @@ pub fn least_damped_mode(vals: &Eigenvalues) -> Result<Mode, EigenError> {
         .ok_or(EigenError::NoMode)
 }
 
-/// Complex state vector (eigenvector).
-pub type CVector = SVector<Complex<f64>, N_STATES>;
+/// Complex state vector (eigenvector) of the car.
+pub type CVector = ComplexVector<N_STATES>;
 
 /// Right eigenvector of `a` for eigenvalue `lambda` by inverse iteration with a complex LU of
 /// (A - mu I), mu = lambda slightly perturbed (so the factor is not exactly singular). Three
 /// fixed iterations; normalised to unit 2-norm with the largest entry real and positive.
-pub fn eigenvector(a: &StateMatrix, lambda: Complex<f64>) -> Result<CVector, EigenError> {
-    eigenvector_of::<f64>(a, lambda)
+pub fn eigenvector<const N: usize>(
+    a: &Matrix<N>,
+    lambda: Complex<f64>,
+) -> Result<ComplexVector<N>, EigenError> {
+    eigenvector_of::<f64, N>(a, lambda)
 }
 
 /// Left eigenvector w of `a` for `lambda` (w^H A = lambda w^H): conj(w) is a right eigenvector
 /// of A^T for the same lambda; same method as [`eigenvector`].
-pub fn left_eigenvector(a: &StateMatrix, lambda: Complex<f64>) -> Result<CVector, EigenError> {
-    left_eigenvector_of::<f64>(a, lambda)
+pub fn left_eigenvector<const N: usize>(
+    a: &Matrix<N>,
+    lambda: Complex<f64>,
+) -> Result<ComplexVector<N>, EigenError> {
+    left_eigenvector_of::<f64, N>(a, lambda)
 }
 
 /// [`eigenvector`] with the LU and the iteration in `T`.
-pub fn eigenvector_of<T: SolveFloat>(
-    a: &StateMatrix,
+pub fn eigenvector_of<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     lambda: Complex<f64>,
-) -> Result<CVector, EigenError> {
-    inverse_iteration::<T>(a, lambda, false)
+) -> Result<ComplexVector<N>, EigenError> {
+    inverse_iteration::<T, N>(a, lambda, false)
 }
 
 /// [`left_eigenvector`] with the LU and the iteration in `T`.
-pub fn left_eigenvector_of<T: SolveFloat>(
-    a: &StateMatrix,
+pub fn left_eigenvector_of<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     lambda: Complex<f64>,
-) -> Result<CVector, EigenError> {
-    inverse_iteration::<T>(a, lambda, true)
+) -> Result<ComplexVector<N>, EigenError> {
+    inverse_iteration::<T, N>(a, lambda, true)
 }
 
-fn inverse_iteration<T: SolveFloat>(
-    a: &StateMatrix,
+fn inverse_iteration<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     lambda: Complex<f64>,
     left: bool,
-) -> Result<CVector, EigenError> {
+) -> Result<ComplexVector<N>, EigenError> {
     let amax = abs_max(a);
     if !amax.is_finite() || !(lambda.re.is_finite() && lambda.im.is_finite()) {
         return Err(EigenError::NonFinite);
     }
     let scale = amax.max(1.0);
     let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
-    let v = iterate_shifted::<T>(a, mu, left)?;
+    let v = iterate_shifted::<T, N>(a, mu, left)?;
     Ok(phase_normalised(v))
 }
 
@@ -297,27 +315,27 @@ fn inverse_iteration<T: SolveFloat>(
 /// uses them, the eigenvalue derivative and the mode shape, does not depend on it; rotating
 /// them costs ~13 k soft-float instructions each on the M4); half the LUs of
 /// [`eigenvector_of`] + [`left_eigenvector_of`].
-pub fn eigenvectors_of<T: SolveFloat>(
-    a: &StateMatrix,
+pub fn eigenvectors_of<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     lambda: Complex<f64>,
-) -> Result<(CVector, CVector), EigenError> {
+) -> Result<(ComplexVector<N>, ComplexVector<N>), EigenError> {
     let amax = abs_max(a);
     if !amax.is_finite() || !(lambda.re.is_finite() && lambda.im.is_finite()) {
         return Err(EigenError::NonFinite);
     }
     let scale = amax.max(1.0);
     let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
-    let lu = shifted_lu::<T>(a, mu)?;
+    let lu = shifted_lu::<T, N>(a, mu)?;
     let t = T::of_f64;
-    let start: [Complex<T>; N_STATES] =
+    let start: [Complex<T>; N] =
         core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
     let (mut v, mut w) = (start, start);
     for _ in 0..2 {
         v = unit_array(lu.solve(&v))?;
         w = unit_array(lu.solve_adjoint(&w))?;
     }
-    let wide = |x: [Complex<T>; N_STATES]| {
-        CVector::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
+    let wide = |x: [Complex<T>; N]| {
+        ComplexVector::<N>::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
     };
     Ok((wide(v), wide(w)))
 }
@@ -329,7 +347,7 @@ fn unit_array<T: SolveFloat, const N: usize>(
     let n2 = x
         .iter()
         .fold(T::zero(), |acc, c| acc + c.re * c.re + c.im * c.im);
-    let n = n2.sqrt();
+    let n = n2.sqrt_rounded();
     if !(n.to_f64().is_finite() && n > T::zero()) {
         return Err(EigenError::Singular);
     }
@@ -442,7 +460,7 @@ impl<T: SolveFloat, const N: usize> ComplexLu<T, N> {
 /// Rotates `v` so that its largest entry is real and positive. The largest entry by |c|^2 and
 /// one square root: `hypot` per entry in soft-float f64 cost ~4 k instructions each on the M4
 /// (`cargo xtask bench`, eigenvector rows).
-fn phase_normalised(v: CVector) -> CVector {
+fn phase_normalised<const N: usize>(v: ComplexVector<N>) -> ComplexVector<N> {
     let (imax, _) = v.iter().enumerate().fold((0, -1.0), |(bi, bn), (i, c)| {
         let n = c.norm_sqr();
         if n > bn {
@@ -463,15 +481,15 @@ fn phase_normalised(v: CVector) -> CVector {
 
 /// Three steps of inverse iteration with (A - mu I) factored in `T` (its adjoint when `left`:
 /// (A - lambda I)^H w = 0 is the left eigenvector); the result is widened to f64.
-fn iterate_shifted<T: SolveFloat>(
-    a: &StateMatrix,
+fn iterate_shifted<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     mu: Complex<f64>,
     left: bool,
-) -> Result<CVector, EigenError> {
-    let lu = shifted_lu::<T>(a, mu)?;
+) -> Result<ComplexVector<N>, EigenError> {
+    let lu = shifted_lu::<T, N>(a, mu)?;
     let t = T::of_f64;
     // A fixed start vector with varied entries (not orthogonal to any eigenvector in practice).
-    let mut v: [Complex<T>; N_STATES] =
+    let mut v: [Complex<T>; N] =
         core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
     for _ in 0..3 {
         v = unit_array(if left {
@@ -480,17 +498,17 @@ fn iterate_shifted<T: SolveFloat>(
             lu.solve(&v)
         })?;
     }
-    Ok(CVector::from_fn(|i, _| {
+    Ok(ComplexVector::<N>::from_fn(|i, _| {
         Complex::new(v[i].re.to_f64(), v[i].im.to_f64())
     }))
 }
 
 /// The LU of (A - mu I) in `T`.
 #[inline(never)]
-fn shifted_lu<T: SolveFloat>(
-    a: &StateMatrix,
+fn shifted_lu<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     mu: Complex<f64>,
-) -> Result<ComplexLu<T, N_STATES>, EigenError> {
+) -> Result<ComplexLu<T, N>, EigenError> {
     let t = T::of_f64;
     let mu_t = Complex::new(t(mu.re), t(mu.im));
     ComplexLu::factor(core::array::from_fn(|i| {
@@ -505,27 +523,162 @@ fn shifted_lu<T: SolveFloat>(
     }))
 }
 
-/// Size of the bordered Newton system of [`refine_eigenpair`]: the eigenvector and the
-/// eigenvalue.
-const NB: usize = N_STATES + 1;
+/// An (N+1)-vector as N entries and one more: the bordered Newton system of
+/// [`refine_eigenpair`] has one row and column more than A, and stable Rust cannot write
+/// `[_; N + 1]` for a const generic N. A row of the bordered matrix is an `Ext` of entries, the
+/// matrix an `Ext` of rows.
+#[derive(Clone, Copy)]
+struct Ext<E, const N: usize> {
+    head: [E; N],
+    tail: E,
+}
 
-/// An eigenpair with its left eigenvector, from [`refine_eigenpair`] (f64).
+impl<E: Copy, const N: usize> Ext<E, N> {
+    fn from_fn(mut f: impl FnMut(usize) -> E) -> Self {
+        Self {
+            head: core::array::from_fn(&mut f),
+            tail: f(N),
+        }
+    }
+
+    fn at(&self, i: usize) -> &E {
+        match self.head.get(i) {
+            Some(e) => e,
+            None => &self.tail,
+        }
+    }
+
+    fn get(&self, i: usize) -> E {
+        *self.at(i)
+    }
+
+    fn at_mut(&mut self, i: usize) -> &mut E {
+        match self.head.get_mut(i) {
+            Some(e) => e,
+            None => &mut self.tail,
+        }
+    }
+
+    fn swap(&mut self, i: usize, j: usize) {
+        let (a, b) = (self.get(i), self.get(j));
+        *self.at_mut(i) = b;
+        *self.at_mut(j) = a;
+    }
+}
+
+/// The complex LU with partial pivoting of the (N+1) x (N+1) bordered matrix: the same
+/// operations, in the same order, as [`ComplexLu`] of that size (the car's Newton steps are
+/// bit-identical to the former 11 x 11 arrays).
+struct BorderedLu<T, const N: usize> {
+    m: Ext<Ext<Complex<T>, N>, N>,
+    perm: Ext<usize, N>,
+}
+
+impl<T: SolveFloat, const N: usize> BorderedLu<T, N> {
+    #[inline(never)] // one copy per size, not one per caller (flash)
+    fn factor(mut m: Ext<Ext<Complex<T>, N>, N>) -> Result<Self, EigenError> {
+        let mut perm = Ext::<usize, N>::from_fn(|i| i);
+        let norm1 = |c: Complex<T>| c.re.abs() + c.im.abs();
+        for k in 0..=N {
+            let mut p = k;
+            let mut best = norm1(m.at(k).get(k));
+            for i in k + 1..=N {
+                let n = norm1(m.at(i).get(k));
+                if n > best {
+                    best = n;
+                    p = i;
+                }
+            }
+            if !(best > T::zero() && best.to_f64().is_finite()) {
+                return Err(EigenError::Singular);
+            }
+            m.swap(k, p);
+            perm.swap(k, p);
+            // 1 / pivot, scaled by its 1-norm so that |pivot|^2 cannot overflow
+            let d = m.at(k).get(k);
+            let (dr, di) = (d.re / best, d.im / best);
+            let q = best * (dr * dr + di * di);
+            let inv = Complex::new(dr / q, -di / q);
+            let pivot_row = m.get(k);
+            for i in k + 1..=N {
+                let row = m.at_mut(i);
+                let f = row.get(k) * inv;
+                *row.at_mut(k) = f;
+                for j in k + 1..=N {
+                    *row.at_mut(j) -= f * pivot_row.get(j);
+                }
+            }
+        }
+        Ok(Self { m, perm })
+    }
+
+    /// x with M x = b.
+    #[inline(never)]
+    fn solve(&self, b: &Ext<Complex<T>, N>) -> Ext<Complex<T>, N> {
+        let mut y = Ext::<Complex<T>, N>::from_fn(|i| b.get(self.perm.get(i)));
+        for i in 0..=N {
+            let row = self.m.at(i);
+            let mut acc = y.get(i);
+            for j in 0..i {
+                acc -= row.get(j) * y.get(j);
+            }
+            *y.at_mut(i) = acc;
+        }
+        for i in (0..=N).rev() {
+            let row = self.m.at(i);
+            let mut acc = y.get(i);
+            for j in i + 1..=N {
+                acc -= row.get(j) * y.get(j);
+            }
+            *y.at_mut(i) = acc / row.get(i);
+        }
+        y
+    }
+
+    /// x with M^H x = b (as [`ComplexLu`]'s adjoint solve).
+    #[inline(never)]
+    fn solve_adjoint(&self, b: &Ext<Complex<T>, N>) -> Ext<Complex<T>, N> {
+        let mut t = *b;
+        for i in 0..=N {
+            let mut acc = t.get(i);
+            for j in 0..i {
+                acc -= self.m.at(j).get(i).conj() * t.get(j);
+            }
+            *t.at_mut(i) = acc / self.m.at(i).get(i).conj();
+        }
+        for i in (0..=N).rev() {
+            let mut acc = t.get(i);
+            for j in i + 1..=N {
+                acc -= self.m.at(j).get(i).conj() * t.get(j);
+            }
+            *t.at_mut(i) = acc;
+        }
+        let mut x = t;
+        for i in 0..=N {
+            *x.at_mut(self.perm.get(i)) = t.get(i);
+        }
+        x
+    }
+}
+
+/// An eigenpair with its left eigenvector, from [`refine_eigenpair`] (f64); N states (the
+/// car's 10 by default).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Eigenpair {
+pub struct Eigenpair<const N: usize = N_STATES> {
     /// The eigenvalue.
     pub lambda: Complex<f64>,
     /// Right eigenvector (A v = lambda v), scaled so that c^H v = 1 for the start vector c.
-    pub right: CVector,
+    pub right: ComplexVector<N>,
     /// Left eigenvector (w^H A = lambda w^H), arbitrary scale.
-    pub left: CVector,
+    pub left: ComplexVector<N>,
     /// Newton iterations used (each one complex LU of the bordered system).
     pub iterations: u8,
 }
 
-impl Eigenpair {
+impl<const N: usize> Eigenpair<N> {
     /// d lambda / dp = w^H (dA/dp) v / (w^H v) for a simple eigenvalue (first-order
     /// perturbation); `None` when w^H v vanishes (defective or not converged).
-    pub fn derivative(&self, da: &StateMatrix) -> Option<Complex<f64>> {
+    pub fn derivative(&self, da: &Matrix<N>) -> Option<Complex<f64>> {
         let num = self
             .left
             .iter()
@@ -555,12 +708,12 @@ impl Eigenpair {
 /// At most `max_iter` iterations; converged when the eigenvalue correction is below 1e-10
 /// |lambda| (+1e-10 absolute). Errors: non-finite input, a singular J (lambda not simple or
 /// the start orthogonal to its eigenvector), no convergence within the bound.
-pub fn refine_eigenpair<T: SolveFloat>(
-    a: &StateMatrix,
+pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
     lambda0: Complex<f64>,
-    v0: &CVector,
+    v0: &ComplexVector<N>,
     max_iter: u8,
-) -> Result<Eigenpair, EigenError> {
+) -> Result<Eigenpair<N>, EigenError> {
     let amax = abs_max(a);
     if amax.is_nan()
         || amax > T::MAX_ABS_ENTRY
@@ -582,8 +735,8 @@ pub fn refine_eigenpair<T: SolveFloat>(
         let r = real_times(a, &v) - v * lambda;
         let rb = (c.adjoint() * v)[(0, 0)] - Complex::new(1.0, 0.0);
         let lam = tc(lambda);
-        let lu = ComplexLu::<T, NB>::factor(core::array::from_fn(|row| {
-            core::array::from_fn(|col| match (row < N_STATES, col < N_STATES) {
+        let lu = BorderedLu::<T, N>::factor(Ext::from_fn(|row| {
+            Ext::from_fn(|col| match (row < N, col < N) {
                 (true, true) if row == col => Complex::new(t(a[(row, col)]), T::zero()) - lam,
                 (true, true) => Complex::new(t(a[(row, col)]), T::zero()),
                 (true, false) => -tc(v[row]),
@@ -591,18 +744,19 @@ pub fn refine_eigenpair<T: SolveFloat>(
                 (false, false) => Complex::new(T::zero(), T::zero()),
             })
         }))?;
-        let rhs: [Complex<T>; NB] =
-            core::array::from_fn(|row| if row < N_STATES { -tc(r[row]) } else { -tc(rb) });
+        let rhs = Ext::<Complex<T>, N>::from_fn(|row| if row < N { -tc(r[row]) } else { -tc(rb) });
         let x = lu.solve(&rhs);
         let wide = |z: Complex<T>| Complex::new(z.re.to_f64(), z.im.to_f64());
-        if x.iter()
+        if x.head
+            .iter()
+            .chain(core::iter::once(&x.tail))
             .any(|z| !(z.re.to_f64().is_finite() && z.im.to_f64().is_finite()))
         {
             return Err(EigenError::Singular);
         }
-        let dl = wide(x[N_STATES]);
-        for row in 0..N_STATES {
-            v[row] += wide(x[row]);
+        let dl = wide(x.tail);
+        for (vi, xi) in v.iter_mut().zip(x.head.iter()) {
+            *vi += wide(*xi);
         }
         lambda += dl;
         if !(lambda.re.is_finite() && lambda.im.is_finite()) {
@@ -610,10 +764,15 @@ pub fn refine_eigenpair<T: SolveFloat>(
         }
         if cabs(dl) <= 1e-10 * (cabs(lambda) + 1.0) {
             // left eigenvector: J^H y = e_n through the factors of P J = L U
-            let mut e = [Complex::new(T::zero(), T::zero()); NB];
-            e[N_STATES] = Complex::new(T::one(), T::zero());
+            let e = Ext::<Complex<T>, N>::from_fn(|i| {
+                if i < N {
+                    Complex::new(T::zero(), T::zero())
+                } else {
+                    Complex::new(T::one(), T::zero())
+                }
+            });
             let y = lu.solve_adjoint(&e);
-            let left = CVector::from_fn(|i, _| wide(y[i]));
+            let left = ComplexVector::<N>::from_fn(|i, _| wide(y.get(i)));
             if left.iter().any(|c| !(c.re.is_finite() && c.im.is_finite())) {
                 return Err(EigenError::NonFiniteResult);
             }
@@ -630,8 +789,8 @@ pub fn refine_eigenpair<T: SolveFloat>(
 
 /// A x for real A and complex x, skipping A's zeros (A(V) is about half zeros, dA/dV almost
 /// all): soft-float f64 on the M4, so the skipped work matters.
-fn real_times(a: &StateMatrix, x: &CVector) -> CVector {
-    let mut y = CVector::zeros();
+fn real_times<const N: usize>(a: &Matrix<N>, x: &ComplexVector<N>) -> ComplexVector<N> {
+    let mut y = ComplexVector::<N>::zeros();
     for (i, yi) in y.iter_mut().enumerate() {
         for (j, xj) in x.iter().enumerate() {
             let aij = a[(i, j)];
@@ -648,136 +807,28 @@ fn cabs(c: Complex<f64>) -> f64 {
     libm::hypot(c.re, c.im)
 }
 
-/// Which motion dominates a mode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ModeShape {
-    /// Both wheels yaw together (|psi_L + psi_R| > |psi_L - psi_R|): the shimmy mode.
-    InPhaseWheelYaw,
-    /// The wheels yaw against each other (track-rod mode).
-    AntiPhaseWheelYaw,
-    /// Axle roll (tramp) dominates.
-    Tramp,
-    /// The steering wheel dominates.
-    SteeringWheel,
-    /// The lagged slip angles dominate (tyre relaxation mode).
-    TyreLag,
-}
-
-impl ModeShape {
-    /// Short label for tables and CSV.
-    pub const fn name(self) -> &'static str {
-        match self {
-            ModeShape::InPhaseWheelYaw => "in-phase-wheel-yaw",
-            ModeShape::AntiPhaseWheelYaw => "anti-phase-wheel-yaw",
-            ModeShape::Tramp => "tramp",
-            ModeShape::SteeringWheel => "steering-wheel",
-            ModeShape::TyreLag => "tyre-lag",
-        }
-    }
-}
-
-/// A mode's shape: the dominant motion and the numbers it was decided on.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ModeShapeInfo {
-    /// Dominant motion.
-    pub shape: ModeShape,
-    /// Share of the modal kinetic energy in wheel yaw (both wheels).
-    pub wheel_energy_frac: f64,
-    /// Share of the modal kinetic energy in axle roll.
-    pub tramp_energy_frac: f64,
-    /// Share of the modal kinetic energy in the steering wheel.
-    pub steering_wheel_energy_frac: f64,
-    /// |theta_sw| / (i_s max(|psi_L|, |psi_R|)): steering-wheel swing relative to the
-    /// kinematic (rigid-link) value.
-    pub steering_wheel_ratio: f64,
-    /// Phase of psi_R relative to psi_L, rad (0 = in phase, +-pi = anti-phase).
-    pub wheel_phase_rad: f64,
-    /// max(|a_L|, |a_R|) / max(|psi_L|, |psi_R|, |phi|, |theta_sw|/i_s).
-    pub tyre_ratio: f64,
-}
-
-/// Classifies the mode with eigenvector `v` (of A) using the modal kinetic energy
-/// 0.5 M_jj |dq_j|^2 per degree of freedom (inertias `i_k`, `i_phi`, `j_sw`) and the size of the
-/// lagged slip angles relative to the displacements (steering wheel referred through `i_s`).
+/// The car's mode classification ([`crate::plant::classify`]), kept here for its callers.
 pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeShapeInfo {
-    let e_wheel = i_k * (v[DPSI_L].norm_sqr() + v[DPSI_R].norm_sqr());
-    let e_phi = i_phi * v[DPHI].norm_sqr();
-    let e_sw = j_sw * v[DTHETA_SW].norm_sqr();
-    let e_tot = e_wheel + e_phi + e_sw;
-    let (fw, fp, fs) = if e_tot > 0.0 {
-        (e_wheel / e_tot, e_phi / e_tot, e_sw / e_tot)
-    } else {
-        (0.0, 0.0, 0.0)
-    };
-    // magnitudes as the square root of the largest |c|^2 (one sqrt, not a hypot per entry)
-    let wheel_amp = libm::sqrt(v[PSI_L].norm_sqr().max(v[PSI_R].norm_sqr()));
-    let disp = libm::sqrt(
-        v[PSI_L]
-            .norm_sqr()
-            .max(v[PSI_R].norm_sqr())
-            .max(v[PHI].norm_sqr())
-            .max(v[THETA_SW].norm_sqr() / (i_s * i_s)),
-    );
-    let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
-    let tyre_ratio = if disp > 0.0 {
-        tyre / disp
-    } else {
-        f64::INFINITY
-    };
-    let steering_wheel_ratio = if wheel_amp > 0.0 {
-        libm::sqrt(v[THETA_SW].norm_sqr()) / (i_s * wheel_amp)
-    } else {
-        f64::INFINITY
-    };
-    let rel = v[PSI_R] * v[PSI_L].conj();
-    // In f32 (scaled into its range): ample for a phase, and the firmware links no f64 atan.
-    let m = libm::fabs(rel.re).max(libm::fabs(rel.im));
-    let wheel_phase_rad = if m > 0.0 {
-        libm::atan2f((rel.im / m) as f32, (rel.re / m) as f32) as f64
-    } else {
-        0.0
-    };
-    let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
-        ModeShape::TyreLag
-    } else if fw >= fp && fw >= fs {
-        if (v[PSI_L] + v[PSI_R]).norm_sqr() >= (v[PSI_L] - v[PSI_R]).norm_sqr() {
-            ModeShape::InPhaseWheelYaw
-        } else {
-            ModeShape::AntiPhaseWheelYaw
-        }
-    } else if fp >= fs {
-        ModeShape::Tramp
-    } else {
-        ModeShape::SteeringWheel
-    };
-    ModeShapeInfo {
-        shape,
-        wheel_energy_frac: fw,
-        tramp_energy_frac: fp,
-        steering_wheel_energy_frac: fs,
-        steering_wheel_ratio,
-        wheel_phase_rad,
-        tyre_ratio,
-    }
+    crate::plant::classify(v, i_k, i_phi, j_sw, i_s)
 }
 
-/// Eigenvector of `lambda` of `a` and its classification, with the plant's inertias.
-pub fn mode_shape(
-    p: &crate::params::PlantParams,
-    a: &StateMatrix,
+/// Eigenvector of `lambda` of `a` and its classification by the model `m`.
+pub fn mode_shape<M: LinearModel<N>, const N: usize>(
+    m: &M,
+    a: &Matrix<N>,
     lambda: Complex<f64>,
 ) -> Result<ModeShapeInfo, EigenError> {
-    mode_shape_of::<f64>(p, a, lambda)
+    mode_shape_of::<f64, M, N>(m, a, lambda)
 }
 
 /// [`mode_shape`] with the eigenvector computed in `T`.
-pub fn mode_shape_of<T: SolveFloat>(
-    p: &crate::params::PlantParams,
-    a: &StateMatrix,
+pub fn mode_shape_of<T: SolveFloat, M: LinearModel<N>, const N: usize>(
+    m: &M,
+    a: &Matrix<N>,
     lambda: Complex<f64>,
 ) -> Result<ModeShapeInfo, EigenError> {
-    let v = eigenvector_of::<T>(a, lambda)?;
-    Ok(classify(&v, p.i_k, p.i_phi, p.j_sw, p.i_s))
+    let v = eigenvector_of::<T, N>(a, lambda)?;
+    Ok(m.classify(&v))
 }
 
 #[cfg(test)]
@@ -801,11 +852,11 @@ mod tests {
     fn too_few_iterations_is_an_error() {
         let a = linearise(&ParamSet::Nominal.params(), 20.0, 0.0);
         assert_eq!(
-            eigenvalues_bounded::<f64>(&a, f64::EPSILON, 0),
+            eigenvalues_bounded::<f64, _>(&a, f64::EPSILON, 0),
             Err(EigenError::ZeroIterationBound)
         );
         assert_eq!(
-            eigenvalues_bounded::<f64>(&a, f64::EPSILON, 2),
+            eigenvalues_bounded::<f64, _>(&a, f64::EPSILON, 2),
             Err(EigenError::NotConverged)
         );
         assert!(eigenvalues(&a).is_ok());
@@ -858,7 +909,7 @@ mod tests {
             for v_new in [8.05, 8.5, 10.0] {
                 let a = linearise(&p, v_new, 0.0);
                 let exact = nearest(&eigenvalues(&a).unwrap(), l0);
-                let ep = refine_eigenpair::<T>(&a, l0, &v0, 6).unwrap();
+                let ep = refine_eigenpair::<T, _>(&a, l0, &v0, 6).unwrap();
                 let err = (ep.lambda - exact).norm() / exact.norm();
                 assert!(err < 1e-11, "{} V={v_new}: rel error {err:e}", T::NAME);
                 let ac = a.map(|x| Complex::new(x, 0.0));
@@ -892,7 +943,7 @@ mod tests {
         for v_mps in [3.0, 12.0, 30.0] {
             let a = linearise(&p, v_mps, 0.0);
             for l in eigenvalues(&a).unwrap() {
-                let (r, w) = eigenvectors_of::<f64>(&a, l).unwrap();
+                let (r, w) = eigenvectors_of::<f64, _>(&a, l).unwrap();
                 let e = eigenvector(&a, l).unwrap();
                 assert!((along(&r, &e) - 1.0).abs() < 1e-8, "V={v_mps} {l}");
                 let e = left_eigenvector(&a, l).unwrap();
@@ -911,20 +962,75 @@ mod tests {
         let v = eigenvector(&a, l).unwrap();
         // one iteration from a start 5 % off cannot meet the 1e-10 correction bound
         assert_eq!(
-            refine_eigenpair::<f64>(&a, l * 1.05, &v, 1),
+            refine_eigenpair::<f64, _>(&a, l * 1.05, &v, 1),
             Err(EigenError::NotConverged)
         );
-        assert!(refine_eigenpair::<f64>(&a, l * 1.05, &v, 8).is_ok());
+        assert!(refine_eigenpair::<f64, _>(&a, l * 1.05, &v, 8).is_ok());
         assert_eq!(
-            refine_eigenpair::<f64>(&a, l, &CVector::zeros(), 8),
+            refine_eigenpair::<f64, _>(&a, l, &CVector::zeros(), 8),
             Err(EigenError::Singular)
         );
         let mut bad = a;
         bad[(2, 3)] = f64::NAN;
         assert_eq!(
-            refine_eigenpair::<f32>(&bad, l, &v, 8),
+            refine_eigenpair::<f32, _>(&bad, l, &v, 8),
             Err(EigenError::NonFinite)
         );
+    }
+
+    /// The bordered LU over `Ext` rows does the square LU's operations in its order: factors
+    /// and both solves of an (N+1) x (N+1) bordered matrix equal, bit for bit, those of
+    /// [`ComplexLu`] on the same matrix as plain arrays (the former 11 x 11 path of
+    /// `refine_eigenpair`), in both precisions; so the car's Newton steps are unchanged.
+    #[test]
+    fn bordered_lu_is_bit_identical_to_the_square_lu() {
+        fn check<T: SolveFloat>() {
+            const N: usize = N_STATES;
+            let p = ParamSet::Nominal.params();
+            let a = linearise(&p, 12.0, 300.0);
+            let l = least_damped_mode(&eigenvalues(&a).unwrap())
+                .unwrap()
+                .eigenvalue();
+            let v = eigenvector(&a, l).unwrap();
+            let t = T::of_f64;
+            let tc = |z: Complex<f64>| Complex::new(t(z.re), t(z.im));
+            let entry = |row: usize, col: usize| match (row < N, col < N) {
+                (true, true) if row == col => Complex::new(t(a[(row, col)]), T::zero()) - tc(l),
+                (true, true) => Complex::new(t(a[(row, col)]), T::zero()),
+                (true, false) => -tc(v[row]),
+                (false, true) => tc(v[col].conj()),
+                (false, false) => Complex::new(T::zero(), T::zero()),
+            };
+            let square = ComplexLu::<T, { N + 1 }>::factor(core::array::from_fn(|r| {
+                core::array::from_fn(|c| entry(r, c))
+            }))
+            .unwrap();
+            let bordered =
+                BorderedLu::<T, N>::factor(Ext::from_fn(|r| Ext::from_fn(|c| entry(r, c))))
+                    .unwrap();
+            let bits = |z: Complex<T>| (z.re.to_f64().to_bits(), z.im.to_f64().to_bits());
+            for r in 0..=N {
+                assert_eq!(square.perm[r], bordered.perm.get(r));
+                for c in 0..=N {
+                    assert_eq!(
+                        bits(square.m[r][c]),
+                        bits(bordered.m.at(r).get(c)),
+                        "{r} {c}"
+                    );
+                }
+            }
+            let b: [Complex<T>; N + 1] =
+                core::array::from_fn(|i| Complex::new(t(1.0 + 0.3 * i as f64), t(-0.2 * i as f64)));
+            let eb = Ext::<Complex<T>, N>::from_fn(|i| b[i]);
+            let (x, y) = (square.solve(&b), bordered.solve(&eb));
+            let (xa, ya) = (square.solve_adjoint(&b), bordered.solve_adjoint(&eb));
+            for i in 0..=N {
+                assert_eq!(bits(x[i]), bits(y.get(i)), "solve {i}");
+                assert_eq!(bits(xa[i]), bits(ya.get(i)), "adjoint solve {i}");
+            }
+        }
+        check::<f64>();
+        check::<f32>();
     }
 
     #[test]

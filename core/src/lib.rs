@@ -1,10 +1,14 @@
 //! shimmy-core: the `no_std`, heap-free code shared by the firmware and the host simulator
 //! (`docs/architecture.md`). The modules, lowest layer first (each uses only those above it):
 //!
+//! - [`sqrt`]: the correctly rounded f32 square root on the FPU (libm's off the target);
 //! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
-//! - [`plant`]: the plant linearised at a forward speed (state matrix A(V), dA/dV);
+//! - [`model`]: the vehicle-model family: the trait a linear steering model with N states
+//!   implements (A(V), dA/dV, damper input, measured output, mode shapes);
+//! - [`plant`]: the car's plant linearised at a forward speed (state matrix A(V), dA/dV);
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
-//! - [`stability`]: stability over speed: Hopf crossings and critical speeds;
+//! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
+//! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -41,10 +45,13 @@ pub mod eigen;
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 pub mod estimator;
+pub mod model;
 pub mod mr_damper;
 pub mod params;
 pub mod plant;
+pub mod sqrt;
 pub mod stability;
+pub mod truck;
 // Control path: panic-free by lint (tests may unwrap/index).
 #[cfg_attr(
     not(test),

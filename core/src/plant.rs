@@ -21,6 +21,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
 use crate::params::PlantParams;
 
 /// Number of states of the linear model.
@@ -199,6 +200,117 @@ pub fn damper_stroke_m(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
 /// Damper stroke rate v_d = (l_t/2)(dpsi_L + dpsi_R) in m/s of a state.
 pub fn damper_stroke_rate_mps(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f64 {
     (p.l_t / 2.0) * (x[DPSI_L] + x[DPSI_R])
+}
+
+/// The car is the family's first member: the free functions above, behind the trait.
+impl LinearModel<N_STATES> for PlantParams {
+    const NAME: &'static str = "car-4dof";
+    const STATE_NAMES: [&'static str; N_STATES] = STATE_NAMES;
+
+    fn linearise(&self, v_mps: f64, c_damper_nspm: f64) -> Matrix<N_STATES> {
+        linearise(self, v_mps, c_damper_nspm)
+    }
+
+    fn dlinearise_dv(&self) -> Matrix<N_STATES> {
+        dlinearise_dv(self)
+    }
+
+    fn damper_force_input(&self) -> SVector<f64, N_STATES> {
+        damper_force_input(self)
+    }
+
+    fn wheel_yaw_output(&self) -> SVector<f64, N_STATES> {
+        // the mode meter's signal: the in-phase yaw of both encoders, (psi_L + psi_R) / 2
+        let mut c = SVector::<f64, N_STATES>::zeros();
+        c[PSI_L] = 0.5;
+        c[PSI_R] = 0.5;
+        c
+    }
+
+    fn classify(&self, v: &ComplexVector<N_STATES>) -> ModeShapeInfo {
+        classify(v, self.i_k, self.i_phi, self.j_sw, self.i_s)
+    }
+}
+
+/// Classifies the mode with eigenvector `v` (of A) using the modal kinetic energy
+/// 0.5 M_jj |dq_j|^2 per degree of freedom (inertias `i_k`, `i_phi`, `j_sw`) and the size of the
+/// lagged slip angles relative to the displacements (steering wheel referred through `i_s`).
+pub fn classify(
+    v: &ComplexVector<N_STATES>,
+    i_k: f64,
+    i_phi: f64,
+    j_sw: f64,
+    i_s: f64,
+) -> ModeShapeInfo {
+    let e_wheel = i_k * (v[DPSI_L].norm_sqr() + v[DPSI_R].norm_sqr());
+    let e_phi = i_phi * v[DPHI].norm_sqr();
+    let e_sw = j_sw * v[DTHETA_SW].norm_sqr();
+    let e_tot = e_wheel + e_phi + e_sw;
+    let (fw, fp, fs) = if e_tot > 0.0 {
+        (e_wheel / e_tot, e_phi / e_tot, e_sw / e_tot)
+    } else {
+        (0.0, 0.0, 0.0)
+    };
+    // magnitudes as the square root of the largest |c|^2 (one sqrt, not a hypot per entry)
+    let wheel_amp = libm::sqrt(v[PSI_L].norm_sqr().max(v[PSI_R].norm_sqr()));
+    let disp = libm::sqrt(
+        v[PSI_L]
+            .norm_sqr()
+            .max(v[PSI_R].norm_sqr())
+            .max(v[PHI].norm_sqr())
+            .max(v[THETA_SW].norm_sqr() / (i_s * i_s)),
+    );
+    let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
+    let tyre_ratio = if disp > 0.0 {
+        tyre / disp
+    } else {
+        f64::INFINITY
+    };
+    let steering_wheel_ratio = if wheel_amp > 0.0 {
+        libm::sqrt(v[THETA_SW].norm_sqr()) / (i_s * wheel_amp)
+    } else {
+        f64::INFINITY
+    };
+    let wheel_phase_rad = wheel_phase_rad(v[PSI_L], v[PSI_R]);
+    let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
+        ModeShape::TyreLag
+    } else if fw >= fp && fw >= fs {
+        wheel_yaw_shape(v[PSI_L], v[PSI_R])
+    } else if fp >= fs {
+        ModeShape::Tramp
+    } else {
+        ModeShape::SteeringWheel
+    };
+    ModeShapeInfo {
+        shape,
+        wheel_energy_frac: fw,
+        tramp_energy_frac: fp,
+        steering_wheel_energy_frac: fs,
+        steering_wheel_ratio,
+        wheel_phase_rad,
+        tyre_ratio,
+    }
+}
+
+/// Phase of the right wheel's yaw `psi_r` relative to the left one's `psi_l`, rad. In f32
+/// (scaled into its range): ample for a phase, and the firmware links no f64 atan.
+pub fn wheel_phase_rad(psi_l: nalgebra::Complex<f64>, psi_r: nalgebra::Complex<f64>) -> f64 {
+    let rel = psi_r * psi_l.conj();
+    let m = libm::fabs(rel.re).max(libm::fabs(rel.im));
+    if m > 0.0 {
+        libm::atan2f((rel.im / m) as f32, (rel.re / m) as f32) as f64
+    } else {
+        0.0
+    }
+}
+
+/// In-phase (the shimmy mode) or anti-phase wheel yaw, from the two wheels' components.
+pub fn wheel_yaw_shape(psi_l: nalgebra::Complex<f64>, psi_r: nalgebra::Complex<f64>) -> ModeShape {
+    if (psi_l + psi_r).norm_sqr() >= (psi_l - psi_r).norm_sqr() {
+        ModeShape::InPhaseWheelYaw
+    } else {
+        ModeShape::AntiPhaseWheelYaw
+    }
 }
 
 #[cfg(test)]

@@ -4,17 +4,17 @@
 //! eigenvalues are excluded: a Hopf point is a complex pair crossing the imaginary axis). A
 //! crossing is bracketed on a speed grid and refined with Brent's method to a speed tolerance
 //! (default 1e-5 m/s). Nothing here allocates; all work is bounded by explicit evaluation
-//! budgets. The Hopf window is computed, never typed in.
+//! budgets. The Hopf window is computed, never typed in. Every function works for any model of
+//! the family ([`LinearModel`]); the car's [`crate::params::PlantParams`] is one.
 
 use heapless::Vec;
 use nalgebra::Complex;
 
 use crate::eigen::{
-    self, critical_oscillatory_mode, least_damped_mode, EigenError, Eigenvalues, Mode, ModeShape,
-    ModeShapeInfo,
+    self, critical_oscillatory_mode, least_damped_mode, EigenError, EigenvaluesOf, Matrix, Mode,
+    ModeShape, ModeShapeInfo,
 };
-use crate::params::PlantParams;
-use crate::plant::{dlinearise_dv, linearise};
+use crate::model::LinearModel;
 
 /// Capacity of a crossing list.
 pub const MAX_CROSSINGS: usize = 8;
@@ -94,17 +94,17 @@ pub struct HopfCrossing {
 pub type Crossings = Vec<HopfCrossing, MAX_CROSSINGS>;
 
 /// Eigenvalues of A(V) with a viscous damper `c_damper_nspm`.
-pub fn eigenvalues_at(
-    p: &PlantParams,
+pub fn eigenvalues_at<M: LinearModel<N>, const N: usize>(
+    p: &M,
     v_mps: f64,
     c_damper_nspm: f64,
-) -> Result<Eigenvalues, EigenError> {
-    eigen::eigenvalues(&linearise(p, v_mps, c_damper_nspm))
+) -> Result<EigenvaluesOf<N>, EigenError> {
+    eigen::eigenvalues(&p.linearise(v_mps, c_damper_nspm))
 }
 
 /// Growth rate g(V) = max Re lambda over the oscillatory eigenvalues in 1/s, and that mode.
-pub fn critical_mode_at(
-    p: &PlantParams,
+pub fn critical_mode_at<M: LinearModel<N>, const N: usize>(
+    p: &M,
     v_mps: f64,
     c_damper_nspm: f64,
 ) -> Result<Mode, EigenError> {
@@ -125,20 +125,20 @@ pub enum ModeSelect {
 }
 
 /// The selected mode of A and its eigenvalue (+Im member).
-pub fn select_mode(
-    p: &PlantParams,
-    a: &crate::eigen::StateMatrix,
-    vals: &Eigenvalues,
+pub fn select_mode<M: LinearModel<N>, const N: usize>(
+    p: &M,
+    a: &Matrix<N>,
+    vals: &EigenvaluesOf<N>,
     select: ModeSelect,
 ) -> Result<Mode, EigenError> {
-    select_mode_of::<f64>(p, a, vals, select)
+    select_mode_of::<f64, M, N>(p, a, vals, select)
 }
 
 /// [`select_mode`] with the mode-shape eigenvectors computed in `T`.
-pub fn select_mode_of<T: eigen::SolveFloat>(
-    p: &PlantParams,
-    a: &crate::eigen::StateMatrix,
-    vals: &Eigenvalues,
+pub fn select_mode_of<T: eigen::SolveFloat, M: LinearModel<N>, const N: usize>(
+    p: &M,
+    a: &Matrix<N>,
+    vals: &EigenvaluesOf<N>,
     select: ModeSelect,
 ) -> Result<Mode, EigenError> {
     match select {
@@ -150,7 +150,7 @@ pub fn select_mode_of<T: eigen::SolveFloat>(
                 .iter()
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
             {
-                let shape = eigen::mode_shape_of::<T>(p, a, *l)?;
+                let shape = eigen::mode_shape_of::<T, M, N>(p, a, *l)?;
                 if shape.shape == ModeShape::InPhaseWheelYaw {
                     let m = Mode::from_eigenvalue(*l);
                     if best.is_none_or(|b| m.zeta < b.zeta) {
@@ -164,13 +164,13 @@ pub fn select_mode_of<T: eigen::SolveFloat>(
 }
 
 /// The selected mode of A(V) with a viscous damper `c_damper_nspm`.
-pub fn mode_at(
-    p: &PlantParams,
+pub fn mode_at<M: LinearModel<N>, const N: usize>(
+    p: &M,
     v_mps: f64,
     c_damper_nspm: f64,
     select: ModeSelect,
 ) -> Result<Mode, EigenError> {
-    let a = linearise(p, v_mps, c_damper_nspm);
+    let a = p.linearise(v_mps, c_damper_nspm);
     let vals = eigen::eigenvalues(&a)?;
     select_mode(p, &a, &vals, select)
 }
@@ -191,12 +191,12 @@ pub struct ModeSummary {
 }
 
 /// Modes at one speed, with the least-damped mode's shape (one eigen-solve + one complex LU).
-pub fn mode_summary(
-    p: &PlantParams,
+pub fn mode_summary<M: LinearModel<N>, const N: usize>(
+    p: &M,
     v_mps: f64,
     c_damper_nspm: f64,
 ) -> Result<ModeSummary, EigenError> {
-    let a = linearise(p, v_mps, c_damper_nspm);
+    let a = p.linearise(v_mps, c_damper_nspm);
     let vals = eigen::eigenvalues(&a)?;
     let least = least_damped_mode(&vals)?;
     Ok(ModeSummary {
@@ -212,19 +212,19 @@ pub fn mode_summary(
 /// first-order eigenvalue perturbation dlambda = w^H (dA/dV) v / (w^H v) with the right and left
 /// eigenvectors v, w (A is affine in V, so dA/dV is exact). Returns (mode, dzeta/dV in s/m,
 /// dlambda/dV in 1/m).
-pub fn dzeta_dv(
-    p: &PlantParams,
+pub fn dzeta_dv<M: LinearModel<N>, const N: usize>(
+    p: &M,
     v_mps: f64,
     c_damper_nspm: f64,
     select: ModeSelect,
 ) -> Result<(Mode, f64, Complex<f64>), EigenError> {
-    let a = linearise(p, v_mps, c_damper_nspm);
+    let a = p.linearise(v_mps, c_damper_nspm);
     let vals = eigen::eigenvalues(&a)?;
     let mode = select_mode(p, &a, &vals, select)?;
     let lambda = mode.eigenvalue();
     let v = eigen::eigenvector(&a, lambda)?;
     let w = eigen::left_eigenvector(&a, lambda)?;
-    let da = dlinearise_dv(p).map(|x| Complex::new(x, 0.0));
+    let da = p.dlinearise_dv().map(|x| Complex::new(x, 0.0));
     let num = (w.adjoint() * da * v)[(0, 0)];
     let den = (w.adjoint() * v)[(0, 0)];
     if den.re == 0.0 && den.im == 0.0 {
@@ -364,15 +364,15 @@ pub fn brent<E>(
     }
 }
 
-fn g(p: &PlantParams, c: f64, v: f64) -> Result<f64, EigenError> {
+fn g<M: LinearModel<N>, const N: usize>(p: &M, c: f64, v: f64) -> Result<f64, EigenError> {
     Ok(critical_mode_at(p, v, c)?.re)
 }
 
 /// All Hopf crossings of the straight-running equilibrium in [v_min, v_max] (m/s): g(V) is
 /// sampled every `step_mps`, each sign change is refined with Brent to `tol_mps`. Two crossings
 /// closer than one grid step can be missed (documented limitation; use a finer step).
-pub fn hopf_crossings(
-    p: &PlantParams,
+pub fn hopf_crossings<M: LinearModel<N>, const N: usize>(
+    p: &M,
     c_damper_nspm: f64,
     v_min_mps: f64,
     v_max_mps: f64,
@@ -413,7 +413,7 @@ pub fn hopf_crossings(
             } else {
                 CrossingKind::Offset
             };
-            let a = linearise(p, root.x, c_damper_nspm);
+            let a = p.linearise(root.x, c_damper_nspm);
             let vals = eigen::eigenvalues(&a)?;
             let mode = critical_oscillatory_mode(&vals)?;
             let shape = eigen::mode_shape(p, &a, mode.eigenvalue())?;
@@ -451,15 +451,15 @@ pub struct CriticalSpeed {
 }
 
 /// The Hopf crossing nearest to `hint` (or to `v_now_mps` without a hint), with at most
-/// `max_evals` eigen-solves (one solve = `linearise` + balanced bounded Schur of a 10x10).
+/// `max_evals` eigen-solves (one solve = `linearise` + balanced bounded Schur of an N x N).
 ///
 /// Warm start: pass the previous answer as `hint`; the search then probes hint +- 0.05 m/s,
 /// widening the step by 2x per probe pair, and refines the first bracket with Brent to
 /// [`DEFAULT_TOL_MPS`]. If the budget runs out during refinement the best estimate is returned
 /// with `converged = false`; if no bracket is found, [`StabilityError::NotFound`].
 /// No allocation; work is bounded by `max_evals`.
-pub fn critical_speed_near(
-    p: &PlantParams,
+pub fn critical_speed_near<M: LinearModel<N>, const N: usize>(
+    p: &M,
     c_damper_nspm: f64,
     v_now_mps: f64,
     hint_mps: Option<f64>,
@@ -548,7 +548,7 @@ pub fn critical_speed_near(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet};
+    use crate::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 
     fn ab(c: Complex<f64>) -> f64 {
         c.re.hypot(c.im)

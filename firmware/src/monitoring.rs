@@ -259,18 +259,48 @@ pub fn model_config() -> ModelMarginConfig {
 /// linked into the image.
 pub type ModelFloat = f32;
 
+/// The vehicle model of the image's model task, chosen at compile time: the car (default) or,
+/// with the cargo feature `model-truck`, the mining truck (`docs/mining-truck.md`).
+#[cfg(not(feature = "model-truck"))]
+pub type ImageModel = PlantParams;
+/// The vehicle model of the image's model task (`model-truck`: the mining truck).
+#[cfg(feature = "model-truck")]
+pub type ImageModel = shimmy_core::truck::TruckParams;
+/// States of [`ImageModel`].
+#[cfg(not(feature = "model-truck"))]
+pub const IMAGE_MODEL_STATES: usize = shimmy_core::plant::N_STATES;
+/// States of [`ImageModel`].
+#[cfg(feature = "model-truck")]
+pub const IMAGE_MODEL_STATES: usize = shimmy_core::truck::N_STATES;
+
+/// The image's model from the booted vehicle's plant: the car's plant itself.
+#[cfg(not(feature = "model-truck"))]
+fn image_model(plant: PlantParams) -> ImageModel {
+    plant
+}
+
+/// The image's model: the full truck's named set (its parameters are not part of the vehicle
+/// record yet, so the booted car plant does not configure it).
+#[cfg(feature = "model-truck")]
+fn image_model(_plant: PlantParams) -> ImageModel {
+    shimmy_core::truck::TruckSet::Full.params()
+}
+
+/// The tracker type of the image.
+pub type ImageTracker = ModelMarginTracker<ModelFloat, ImageModel, IMAGE_MODEL_STATES>;
+
 /// The background model task: the core's incremental [`ModelMarginTracker`] on the linearised
 /// plant *without* the MR damper (c = 0: the conservative envelope, the damper only adds
-/// damping).
+/// damping), for the image's [`ImageModel`].
 pub struct ModelTask {
-    tracker: ModelMarginTracker<ModelFloat>,
+    tracker: ImageTracker,
 }
 
 impl ModelTask {
-    /// The tracker for `params` with [`model_config`].
+    /// The tracker for `params` (through [`ImageModel`]) with [`model_config`].
     pub fn new(params: PlantParams) -> Self {
         ModelTask {
-            tracker: ModelMarginTracker::in_precision(params, model_config()),
+            tracker: ImageTracker::in_precision(image_model(params), model_config()),
         }
     }
 
@@ -281,7 +311,7 @@ impl ModelTask {
     }
 
     /// The tracker (counters, latest point).
-    pub fn tracker(&self) -> &ModelMarginTracker<ModelFloat> {
+    pub fn tracker(&self) -> &ImageTracker {
         &self.tracker
     }
 }

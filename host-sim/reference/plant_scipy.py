@@ -7,10 +7,16 @@ numpy.linalg.eigvals for the eigenvalue sweep) and (2) a second implementation w
 and eigenvalues the Rust results must match.
 
 usage: plant_scipy.py CASE.toml RESULT.json
+       plant_scipy.py truck CASE.toml RESULT.txt
 CASE.toml holds [plant] (parameter names as in core/src/params.rs), [damper] (Spencer model,
 already scaled), [case] (speed, current, initial yaw, duration, sample times, sweep speeds) and
 optionally [ramp] (the demo's drive with a simple current law instead of the controller, for the
 closed-loop speed comparison; see rhs_ramp).
+
+The `truck` form is the mining dump truck of docs/mining-truck.md, written from that document:
+CASE.toml holds [truck] (the physical inputs: masses, inertias, tyre, strut gas charge, steering
+cylinders, loads; names as in core/src/truck.rs, the strut's with an `hps_` prefix) and
+[case] speeds_mps; RESULT.txt gets one line `speed re im` per eigenvalue (numpy.linalg.eigvals).
 """
 import json
 import sys
@@ -114,7 +120,85 @@ def linear_a(p, v):
     return a
 
 
+G0 = 9.80665
+
+
+def truck_operating_point(t):
+    """Wheel load, cornering stiffness, strut stiffness and roll stiffness/damping of the truck
+    (docs/mining-truck.md, "Loads" and "Hydro-pneumatic strut")."""
+    f_z = 0.5 * (t["front_empty_kg"] + t["payload_front_share"] * t["payload_kg"]) * G0
+    strut_load = f_z - 0.5 * t["m_axle"] * G0
+    area, n = t["hps_area_m2"], t["hps_n"]
+    p_static = strut_load / area
+    if p_static <= t["hps_p0_pa"]:
+        sys.exit("strut topped out")
+    # p V^n = p0 V0^n
+    v_static = t["hps_v0_m3"] * (t["hps_p0_pa"] / p_static) ** (1.0 / n)
+    k_strut = n * p_static * area**2 / v_static
+    half_b, half_s = t["track"] / 2.0, t["strut_spacing"] / 2.0
+    k_phi = 2.0 * t["k_tz"] * half_b**2 + 2.0 * k_strut * half_s**2
+    c_phi = 2.0 * t["c_strut"] * half_s**2
+    return f_z, t["c_a_per_fz"] * f_z, k_phi, c_phi
+
+
+def truck_linear_a(t, v):
+    """A(V) of the truck without damper: q = [psi_L, psi_R, phi, theta_c, y], x = [q, q', a_L, a_R],
+    M q'' + C q' + K q = G a and sigma a_i' = V (psi_i - a_i) + e psi_i' - h_r phi' - y'."""
+    _, ca, k_phi, c_phi = truck_operating_point(t)
+    h = t["i_p"] * v / t["r"]
+    trail = t["e"] + t["t_p"]
+    m = np.diag([t["i_k"], t["i_k"], t["i_phi"], t["j_c"], t["m_axle"]])
+    k = np.array([
+        [t["k_tr"] + t["k_d"], -t["k_tr"], 0.0, -t["k_d"], 0.0],
+        [-t["k_tr"], t["k_tr"], 0.0, 0.0, 0.0],
+        [0.0, 0.0, k_phi, 0.0, 0.0],
+        [-t["k_d"], 0.0, 0.0, t["k_d"] + t["k_h"], 0.0],
+        [0.0, 0.0, 0.0, 0.0, t["k_y"]],
+    ])
+    c = np.array([
+        [t["c_k"], 0.0, h, 0.0, 0.0],
+        [0.0, t["c_k"], h, 0.0, 0.0],
+        [-h, -h, c_phi, 0.0, 0.0],
+        [0.0, 0.0, 0.0, t["c_h"], 0.0],
+        [0.0, 0.0, 0.0, 0.0, t["c_y"]],
+    ])
+    g = np.array([
+        [-trail * ca, 0.0],
+        [0.0, -trail * ca],
+        [t["h_r"] * ca, t["h_r"] * ca],
+        [0.0, 0.0],
+        [ca, ca],
+    ])
+    m_inv = np.linalg.inv(m)
+    a = np.zeros((12, 12))
+    a[0:5, 5:10] = np.eye(5)
+    a[5:10, 0:5] = -m_inv @ k
+    a[5:10, 5:10] = -m_inv @ c
+    a[5:10, 10:12] = m_inv @ g
+    s = t["sigma"]
+    for row, wheel in ((10, 0), (11, 1)):
+        a[row, wheel] = v / s
+        a[row, 5 + wheel] = t["e"] / s
+        a[row, 7] = -t["h_r"] / s
+        a[row, 9] = -1.0 / s
+        a[row, row] = -v / s
+    return a
+
+
+def truck_main(case_path, out_path):
+    with open(case_path, "rb") as f:
+        cfg = tomllib.load(f)
+    t = cfg["truck"]
+    with open(out_path, "w") as out:
+        for v in cfg["case"]["speeds_mps"]:
+            for lam in np.linalg.eigvals(truck_linear_a(t, v)):
+                out.write(f"{float(v)!r} {float(lam.real)!r} {float(lam.imag)!r}\n")
+
+
 def main():
+    if sys.argv[1] == "truck":
+        truck_main(sys.argv[2], sys.argv[3])
+        return
     case_path, out_path = sys.argv[1], sys.argv[2]
     with open(case_path, "rb") as f:
         cfg = tomllib.load(f)

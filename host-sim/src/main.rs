@@ -33,6 +33,9 @@ enum Command {
     /// Eigenvalues of the linearised plant vs speed: least-damped mode table, Hopf crossings,
     /// CSV and PNG (optionally with the MR damper as an equivalent viscous damper).
     Stability(cmd::stability::StabilityArgs),
+    /// The mining truck's struts: the initial gas volumes that keep it free of shimmy at a
+    /// load and speed, and the Hopf-window maps over gas volume and payload (CSV, PNG).
+    GasCharge(cmd::gas_charge::GasChargeArgs),
     /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
     Sensitivity(cmd::sensitivity::SensitivityArgs),
     /// Speed and agreement against an independent NumPy/SciPy implementation of the plant
@@ -79,6 +82,7 @@ fn main() -> Result<()> {
         Some(Command::Params { params }) => cmd::params::command(&params),
         Some(Command::Bifurcation(a)) => cmd::bifurcation::command(&a),
         Some(Command::Stability(a)) => cmd::stability::command(&a),
+        Some(Command::GasCharge(a)) => cmd::gas_charge::command(&a),
         Some(Command::Sensitivity(a)) => cmd::sensitivity::command(&a),
         Some(Command::ReferenceBench(a)) => cmd::reference_bench::command(&a),
         Some(Command::Sweep(a)) if a.controllers.is_empty() => cmd::sweep::eigen::command(&a),

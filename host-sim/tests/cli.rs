@@ -171,6 +171,32 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--percent", "0 < value <= 90 %"],
         ),
         (
+            &["gas-charge", "--v0-max-l", "500"],
+            &["--v0-max-l", "0.1 <= value <= 200 l"],
+        ),
+        (
+            &["gas-charge", "--v0-min-l", "30", "--v0-max-l", "10"],
+            &["--v0-min-l 30", "--v0-max-l 10"],
+        ),
+        (
+            &["gas-charge", "--vehicle", "nominal"],
+            &["--vehicle `nominal`", "mining-truck-5dof"],
+        ),
+        (
+            &[
+                "stability",
+                "--vehicle",
+                "truck-full",
+                "--damper-current-a",
+                "0.5",
+            ],
+            &["--damper-current-a", "mining-truck-5dof"],
+        ),
+        (
+            &["bifurcation", "--vehicle", "truck-full"],
+            &["truck-full", "mining-truck-5dof", "car-4dof"],
+        ),
+        (
             &["bifurcation", "--damper-current-a", "NaN"],
             &["--damper-current-a", amps],
         ),
@@ -301,4 +327,53 @@ fn other_commands_reject_bad_numbers_before_running() {
     for (args, expect) in cases {
         rejected(args, expect);
     }
+}
+
+/// `gas-charge` exits non-zero when no charge in the range keeps the truck free of shimmy (the
+/// full truck at 30 km/h needs more than 5 l), with its table and files still written, and zero
+/// with the least charge when one does.
+#[test]
+fn gas_charge_fails_without_a_stable_charge_and_answers_with_one() {
+    let dir = temp_dir();
+    let o = run_in(
+        &dir,
+        &[
+            "gas-charge",
+            "--v0-min-l",
+            "1",
+            "--v0-max-l",
+            "5",
+            "--map-v-max-kmh",
+            "3",
+            "--out",
+            "o",
+        ],
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("no initial gas volume in 1 .. 5 l"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(dir.join("o/gas-charge.csv").is_file() && dir.join("o/hopf-map.png").is_file());
+    let o = run_in(
+        &dir,
+        &[
+            "gas-charge",
+            "--v0-min-l",
+            "30",
+            "--v0-max-l",
+            "45",
+            "--step-l",
+            "5",
+            "--map-v-max-kmh",
+            "3",
+            "--out",
+            "o",
+        ],
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.contains("least gas charge: 37.2"), "{out}");
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -87,7 +87,7 @@ impl MrModel {
     #[inline]
     fn smooth(&self, v_mps: f32) -> f32 {
         let x = v_mps / self.v0_mps;
-        x / libm::sqrtf(1.0 + x * x)
+        x / crate::sqrt::sqrtf(1.0 + x * x)
     }
 
     /// Model force in N at coil current `current_a` and stroke rate `v_mps`.

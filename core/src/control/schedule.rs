@@ -227,7 +227,7 @@ impl ScheduleParams {
 pub fn band_amplitude_rad(psi_rad: f32, rate_radps: f32, band_hz: f32) -> f32 {
     let w = 2.0 * core::f32::consts::PI * band_hz;
     let r = rate_radps / w;
-    libm::sqrtf(psi_rad * psi_rad + r * r)
+    crate::sqrt::sqrtf(psi_rad * psi_rad + r * r)
 }
 
 /// The amplitude's band-pass passes `band_hz` / this to this x `band_hz` (first-order edges).

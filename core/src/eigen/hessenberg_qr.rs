@@ -7,6 +7,7 @@
 //! solve of the 10x10 state matrix takes less than half the instructions (`cargo xtask bench`,
 //! eigen update row) and less code. On fixed arrays, no heap, bounded work.
 
+use crate::sqrt::Sqrt;
 use nalgebra::{Complex, RealField};
 
 /// Sweeps without a deflation after which one exceptional shift breaks a possible cycle of
@@ -18,7 +19,7 @@ const EXCEPTIONAL_EVERY: usize = 10;
 /// `max_niter` QR sweeps did not converge. `eps` is the relative deflation threshold.
 /// (Generic over nalgebra's `RealField`, not the solver's `SolveFloat`: this file imports
 /// nothing from the module that uses it.)
-pub fn eigenvalues<T: RealField + Copy, const N: usize>(
+pub fn eigenvalues<T: RealField + Copy + Sqrt, const N: usize>(
     mut h: [[T; N]; N],
     eps: T,
     max_niter: usize,
@@ -82,8 +83,8 @@ pub fn eigenvalues<T: RealField + Copy, const N: usize>(
 /// A Householder reflector P = I - beta u u^T with P x = alpha e1 for x = (x0, x1, x2), as
 /// (u, beta, alpha); `None` when x = 0. u0 = x0 - alpha with alpha of the opposite sign of x0
 /// (no cancellation), and beta = 2 / |u|^2 = -1 / (alpha u0).
-fn reflector<T: RealField + Copy>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)> {
-    let norm = (x0 * x0 + x1 * x1 + x2 * x2).sqrt();
+fn reflector<T: RealField + Copy + Sqrt>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)> {
+    let norm = (x0 * x0 + x1 * x1 + x2 * x2).sqrt_rounded();
     if norm == T::zero() {
         return None;
     }
@@ -95,14 +96,14 @@ fn reflector<T: RealField + Copy>(x0: T, x1: T, x2: T) -> Option<([T; 3], T, T)>
 /// Reduces `h` to upper Hessenberg form by a similarity with Householder reflectors (n - 2 of
 /// them, each zeroing one column below the subdiagonal).
 #[allow(clippy::needless_range_loop)] // i and j index rows, columns and the reflector alike
-fn reduce_to_hessenberg<T: RealField + Copy, const N: usize>(h: &mut [[T; N]; N]) {
+fn reduce_to_hessenberg<T: RealField + Copy + Sqrt, const N: usize>(h: &mut [[T; N]; N]) {
     for k in 0..N.saturating_sub(2) {
         let tail2 = (k + 2..N).fold(T::zero(), |s, i| s + h[i][k] * h[i][k]);
         if tail2 == T::zero() {
             continue; // already Hessenberg in this column
         }
         let x0 = h[k + 1][k];
-        let norm = (x0 * x0 + tail2).sqrt();
+        let norm = (x0 * x0 + tail2).sqrt_rounded();
         let alpha = if x0 > T::zero() { -norm } else { norm };
         let mut u = [T::zero(); N];
         u[k + 1] = x0 - alpha;
@@ -135,7 +136,7 @@ fn reduce_to_hessenberg<T: RealField + Copy, const N: usize>(h: &mut [[T; N]; N]
 /// the shifts are the eigenvalues of its trailing 2x2 (or an exceptional pair), the bulge is
 /// chased down with 3-element reflectors, and only the block itself is updated.
 #[allow(clippy::needless_range_loop)] // j indexes the same column of two or three rows
-fn francis_sweep<T: RealField + Copy, const N: usize>(
+fn francis_sweep<T: RealField + Copy + Sqrt, const N: usize>(
     h: &mut [[T; N]; N],
     lo: usize,
     n: usize,
@@ -214,12 +215,12 @@ fn francis_sweep<T: RealField + Copy, const N: usize>(
 
 /// The eigenvalues of [[a, b], [c, d]]: a real pair without cancellation, or a complex pair
 /// with +Im first.
-fn two_by_two<T: RealField + Copy>(a: T, b: T, c: T, d: T) -> (Complex<T>, Complex<T>) {
+fn two_by_two<T: RealField + Copy + Sqrt>(a: T, b: T, c: T, d: T) -> (Complex<T>, Complex<T>) {
     let half: T = nalgebra::convert(0.5);
     let p = half * (a - d);
     let disc = p * p + b * c;
     if disc >= T::zero() {
-        let r = disc.sqrt();
+        let r = disc.sqrt_rounded();
         let z = if p >= T::zero() { p + r } else { p - r };
         let second = if z == T::zero() { d } else { d - b * c / z };
         (
@@ -227,7 +228,7 @@ fn two_by_two<T: RealField + Copy>(a: T, b: T, c: T, d: T) -> (Complex<T>, Compl
             Complex::new(second, T::zero()),
         )
     } else {
-        let im = (-disc).sqrt();
+        let im = (-disc).sqrt_rounded();
         (Complex::new(d + p, im), Complex::new(d + p, -im))
     }
 }

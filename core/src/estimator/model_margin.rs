@@ -40,9 +40,10 @@ use core::marker::PhantomData;
 
 use nalgebra::Complex;
 
-use crate::eigen::{self, Eigenpair, Mode, ModeShape, SolveFloat};
+use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, ModeShape, SolveFloat};
+use crate::model::LinearModel;
 use crate::params::PlantParams;
-use crate::plant::{dlinearise_dv, linearise};
+use crate::plant::N_STATES;
 use crate::stability::{self, CrossingKind, ModeSelect, V_SEARCH_MAX_MPS, V_SEARCH_MIN_MPS};
 
 /// Most Hopf crossings the tracker keeps (the nominal window has two; a scan that finds more
@@ -370,10 +371,15 @@ struct ShimmyTrack {
 /// The incremental model-margin state machine. Call [`ModelMarginTracker::step`] every control
 /// tick; it returns `Some` when a cycle completes. `T` is the float type of the eigen-solves and
 /// eigenvector LUs (f64 by default; the firmware uses f32, f64 being software on the M4): a type
-/// parameter, so an image links only the precision it runs.
+/// parameter, so an image links only the precision it runs. `M` is the vehicle model with `N`
+/// states (the car's [`PlantParams`] by default).
 #[derive(Clone, Debug)]
-pub struct ModelMarginTracker<T: SolveFloat = f64> {
-    p: PlantParams,
+pub struct ModelMarginTracker<
+    T: SolveFloat = f64,
+    M: LinearModel<N> = PlantParams,
+    const N: usize = N_STATES,
+> {
+    p: M,
     cfg: ModelMarginConfig,
     phase: Phase,
     work: ModelPoint,
@@ -408,16 +414,16 @@ const EMPTY_MODE: Mode = Mode {
     omega_n: 0.0,
 };
 
-impl ModelMarginTracker<f64> {
+impl<M: LinearModel<N>, const N: usize> ModelMarginTracker<f64, M, N> {
     /// A tracker for the plant `p` solving in f64 (the host's reference precision).
-    pub fn new(p: PlantParams, cfg: ModelMarginConfig) -> Self {
+    pub fn new(p: M, cfg: ModelMarginConfig) -> Self {
         Self::in_precision(p, cfg)
     }
 }
 
-impl<T: SolveFloat> ModelMarginTracker<T> {
+impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, N> {
     /// A tracker for the plant `p` solving in `T`.
-    pub fn in_precision(p: PlantParams, cfg: ModelMarginConfig) -> Self {
+    pub fn in_precision(p: M, cfg: ModelMarginConfig) -> Self {
         Self {
             p,
             cfg,
@@ -511,16 +517,16 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
 
     /// One bounded eigen-solve of `a`, counted (the only place that solves, so the per-call
     /// count is exact).
-    fn solve(&mut self, a: &eigen::StateMatrix) -> Result<eigen::Eigenvalues, eigen::EigenError> {
+    fn solve(&mut self, a: &Matrix<N>) -> Result<EigenvaluesOf<N>, eigen::EigenError> {
         self.solves_last_call = self.solves_last_call.saturating_add(1);
         self.total_eigen_solves = self.total_eigen_solves.saturating_add(1);
         self.work.eigen_solves = self.work.eigen_solves.saturating_add(1);
-        eigen::eigenvalues_of::<T>(a)
+        eigen::eigenvalues_of::<T, N>(a)
     }
 
     /// The critical oscillatory eigenvalue at `v` (its Re is g(v)): one eigen-solve.
     fn g(&mut self, v: f64) -> Option<Complex<f64>> {
-        let a = linearise(&self.p, v, self.work.c_damper_nspm);
+        let a = self.p.linearise(v, self.work.c_damper_nspm);
         match self
             .solve(&a)
             .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
@@ -534,9 +540,9 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
     }
 
     /// Newton on the eigenpair of A(v) near `lambda`, from its inverse-iteration vector.
-    fn eigenpair(&mut self, a: &eigen::StateMatrix, lambda: Complex<f64>) -> Option<Eigenpair> {
-        let r = eigen::eigenvector_of::<T>(a, lambda)
-            .and_then(|v0| eigen::refine_eigenpair::<T>(a, lambda, &v0, EIGEN_NEWTON_ITERS));
+    fn eigenpair(&mut self, a: &Matrix<N>, lambda: Complex<f64>) -> Option<Eigenpair<N>> {
+        let r = eigen::eigenvector_of::<T, N>(a, lambda)
+            .and_then(|v0| eigen::refine_eigenpair::<T, N>(a, lambda, &v0, EIGEN_NEWTON_ITERS));
         match r {
             Ok(ep) => {
                 self.work.newton_iterations = self
@@ -633,7 +639,7 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
     /// then the shimmy step on the same A in the same call (one eigen-solve plus LUs).
     fn modes(&mut self) {
         let v = self.work.speed_mps;
-        let a = linearise(&self.p, v, self.work.c_damper_nspm);
+        let a = self.p.linearise(v, self.work.c_damper_nspm);
         let vals = match self.solve(&a) {
             Ok(vals) => vals,
             Err(_) => {
@@ -676,12 +682,12 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
     }
 
     /// Cold: the shimmy mode by mode shape over all oscillatory pairs (one LU each).
-    fn select_shimmy(&mut self, a: &eigen::StateMatrix, vals: &eigen::Eigenvalues) {
-        let (l, found) = match stability::select_mode_of::<T>(&self.p, a, vals, ModeSelect::Shimmy)
-        {
-            Ok(m) => (m.eigenvalue(), true),
-            Err(_) => (self.work.critical.eigenvalue(), false),
-        };
+    fn select_shimmy(&mut self, a: &Matrix<N>, vals: &EigenvaluesOf<N>) {
+        let (l, found) =
+            match stability::select_mode_of::<T, M, N>(&self.p, a, vals, ModeSelect::Shimmy) {
+                Ok(m) => (m.eigenvalue(), true),
+                Err(_) => (self.work.critical.eigenvalue(), false),
+            };
         self.shimmy_start = l;
         self.shimmy_from_track = false;
         self.work.shimmy_found = found;
@@ -689,10 +695,10 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
 
     /// The shimmy mode's right and left eigenvectors (one LU), its shape check (tracked start)
     /// and d zeta/dV.
-    fn shimmy(&mut self, a: &eigen::StateMatrix) {
+    fn shimmy(&mut self, a: &Matrix<N>) {
         let v = self.work.speed_mps;
         let lambda = self.shimmy_start;
-        let ep = match eigen::eigenvectors_of::<T>(a, lambda) {
+        let ep = match eigen::eigenvectors_of::<T, N>(a, lambda) {
             Ok((right, left)) => Some(Eigenpair {
                 lambda,
                 right,
@@ -704,10 +710,8 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
                 None
             }
         };
-        let shape_ok = ep.is_some_and(|ep| {
-            eigen::classify(&ep.right, self.p.i_k, self.p.i_phi, self.p.j_sw, self.p.i_s).shape
-                == ModeShape::InPhaseWheelYaw
-        });
+        let shape_ok =
+            ep.is_some_and(|ep| self.p.classify(&ep.right).shape == ModeShape::InPhaseWheelYaw);
         if self.shimmy_from_track && !shape_ok {
             // lost the branch: the next call solves again and selects by shape
             self.shimmy_track = None;
@@ -715,7 +719,7 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             return;
         }
         let slope = ep.and_then(|ep| {
-            let dl = ep.derivative(&dlinearise_dv(&self.p))?;
+            let dl = ep.derivative(&self.p.dlinearise_dv())?;
             let m = Mode::from_eigenvalue(ep.lambda);
             let wn = m.omega_n;
             if wn <= 0.0 {
@@ -774,9 +778,9 @@ impl<T: SolveFloat> ModelMarginTracker<T> {
             // same plant, same crossing: nothing to do
             return self.next_track(index);
         }
-        let a = linearise(&self.p, k.speed_mps, self.work.c_damper_nspm);
+        let a = self.p.linearise(k.speed_mps, self.work.c_damper_nspm);
         let step = self.eigenpair(&a, k.lambda).and_then(|ep| {
-            let ds = ep.derivative(&dlinearise_dv(&self.p))?;
+            let ds = ep.derivative(&self.p.dlinearise_dv())?;
             let dv = -ep.lambda.re / ds.re;
             dv.is_finite().then_some((ep.lambda, ds, dv))
         });

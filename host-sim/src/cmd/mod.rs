@@ -9,6 +9,7 @@ pub mod compare;
 pub mod demo;
 pub mod device;
 pub mod faults;
+pub mod gas_charge;
 pub mod margin;
 pub mod meter_accuracy;
 pub mod mismatch;

@@ -7,17 +7,20 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use shimmy_core::eigen::ModeShape;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
+use shimmy_core::truck::{TruckParams, TRUCK_FIELDS};
 
 use crate::out::table::opt;
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SensitivityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
+    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Relative change applied down and up in %: above 0, at most 90.
@@ -52,6 +55,10 @@ pub const SENSITIVITY_PARAMS: [Param; 15] = [
     Param::KPhi,
     Param::IPhi,
 ];
+
+/// The truck's fields left out of its sensitivity study: the simulator tyre's friction and
+/// shape and the damper lever do not enter the linear model without a damper.
+pub const TRUCK_FIELDS_WITHOUT_EFFECT: [&str; 3] = ["mu", "c_s", "l_t"];
 
 /// A crossing as the sensitivity table shows it: speed km/h, kind, frequency Hz, mode shape.
 pub type CrossingRow = (f64, stability::CrossingKind, f64, ModeShape);
@@ -95,7 +102,7 @@ impl Window {
 }
 
 /// Every Hopf crossing of `p` (no damper) in 1..250 km/h.
-pub fn window_of(p: &PlantParams) -> Result<Window> {
+pub fn window_of<M: LinearModel<N>, const N: usize>(p: &M) -> Result<Window> {
     let xs = stability::hopf_crossings(
         p,
         0.0,
@@ -123,8 +130,42 @@ pub fn window_of(p: &PlantParams) -> Result<Window> {
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
-    let p = vehicle_file::load(&args.vehicle)?.plant;
-    let w0 = window_of(&p)?;
+    // one variant per parameter: (name, unit, base value, the window at a factor, or None
+    // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
+    type Variant = Box<dyn Fn(f64) -> Result<Option<Window>>>;
+    let (w0, variants): (Window, Vec<(&str, &str, f64, Variant)>) =
+        match vehicle_file::load_model(&args.vehicle)? {
+            ModelVehicle::Car(v) => {
+                let p = v.plant;
+                let vs = SENSITIVITY_PARAMS
+                    .iter()
+                    .map(|&q| {
+                        let f: Variant = Box::new(move |k| window_of(&p.scaled(q, k)).map(Some));
+                        (q.name(), q.unit(), p.get(q), f)
+                    })
+                    .collect();
+                (window_of(&p)?, vs)
+            }
+            ModelVehicle::Truck(t) => {
+                let vs = TRUCK_FIELDS
+                    .iter()
+                    .filter(|f| !TRUCK_FIELDS_WITHOUT_EFFECT.contains(&f.name))
+                    .map(|f| {
+                        let base = t.get(f.name).unwrap_or(f64::NAN);
+                        let name = f.name;
+                        let w: Variant = Box::new(move |k| {
+                            let mut v: TruckParams = t;
+                            if v.set(name, base * k).is_err() || v.validate().is_err() {
+                                return Ok(None);
+                            }
+                            window_of(&v).map(Some)
+                        });
+                        (f.name, f.unit, base, w)
+                    })
+                    .collect();
+                (window_of(&t)?, vs)
+            }
+        };
     let (on0, off0, f0) = (w0.onset_kmh, w0.offset_kmh, w0.onset_freq_hz);
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
@@ -152,19 +193,23 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
     )?;
     let mut further = Vec::new();
     let k = args.percent / 100.0;
-    for q in SENSITIVITY_PARAMS {
+    for (name, unit, base, window) in &variants {
         let mut res = Vec::new();
         for factor in [1.0 - k, 1.0 + k] {
-            let w = window_of(&p.scaled(q, factor))?;
+            let Some(w) = window(factor)? else {
+                println!("{name} x{factor}: not a valid vehicle (outside its range, or struts that cannot carry the load)");
+                res.push((None, None, None));
+                continue;
+            };
             if w.others().next().is_some() {
-                further.push(format!("{} x{factor}: {}", q.name(), w.others_text()));
+                further.push(format!("{name} x{factor}: {}", w.others_text()));
             }
             writeln!(
                 f,
                 "{},{},{},{},{},{},{},{},{},{},{},\"{}\"",
-                q.name(),
-                q.unit(),
-                p.get(q),
+                name,
+                unit,
+                base,
                 factor,
                 w.onset_kmh.map_or(String::new(), |x| format!("{x:.6}")),
                 w.offset_kmh.map_or(String::new(), |x| format!("{x:.6}")),
@@ -184,7 +229,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         };
         println!(
             "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
-            q.name(),
+            name,
             opt(res[0].0, 2),
             opt(res[0].1, 2),
             opt(res[0].2, 2),
@@ -201,7 +246,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         println!(
             "crossings beyond the first onset/offset pair ({} of {} variants):",
             further.len(),
-            2 * SENSITIVITY_PARAMS.len()
+            2 * variants.len()
         );
         for l in &further {
             println!("  {l}");

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 use shimmy_core::eigen::ModeShape;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_TOL_MPS};
 
 use crate::model::damper_equiv::damper_equivalent;
@@ -17,8 +18,9 @@ use crate::sim::vehicle_file;
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
+    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
@@ -49,7 +51,13 @@ pub const REF_AMPLITUDE_DEG: Range = Range::above(0.0, 20.0, "deg");
 /// Speed grid step: 0.01 to 50 km/h.
 pub const STEP_KMH: Range = Range::closed(0.01, 50.0, "km/h");
 
-fn sweep(p: &PlantParams, c: f64, v_min: f64, v_max: f64, step: f64) -> Result<Vec<ModeSummary>> {
+fn sweep<M: LinearModel<N>, const N: usize>(
+    p: &M,
+    c: f64,
+    v_min: f64,
+    v_max: f64,
+    step: f64,
+) -> Result<Vec<ModeSummary>> {
     let n = ((v_max - v_min) / step).round() as usize;
     (0..=n)
         .map(|i| {
@@ -71,7 +79,19 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    let vehicle = vehicle_file::load(&args.vehicle)?;
+    let vehicle = match vehicle_file::load_model(&args.vehicle)? {
+        vehicle_file::ModelVehicle::Car(v) => v,
+        vehicle_file::ModelVehicle::Truck(t) => {
+            anyhow::ensure!(
+                args.damper_current_a.is_none(),
+                "--damper-current-a: the {} model has no MR damper configured; leave it out",
+                shimmy_core::truck::TruckParams::NAME
+            );
+            println!("stability of straight running: vehicle `{}`", args.vehicle);
+            println!("damper: none (F_d = 0)");
+            return report(&t, 0.0, args);
+        }
+    };
     let p = vehicle.plant;
     if let Some(i) = args.damper_current_a {
         arg_range::check_current("--damper-current-a", i, &vehicle)?;
@@ -104,9 +124,15 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
             args.ref_amplitude_deg
         ),
     }
-    let rows = sweep(&p, c, args.v_min_kmh, args.v_max_kmh, args.step_kmh)?;
+    report(&p, c, args)
+}
+
+/// The sweep, the crossings, the table and the files for any model of the family.
+fn report<M: LinearModel<N>, const N: usize>(p: &M, c: f64, args: &StabilityArgs) -> Result<()> {
+    let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
+    let rows = sweep(p, c, args.v_min_kmh, args.v_max_kmh, args.step_kmh)?;
     let crossings = stability::hopf_crossings(
-        &p,
+        p,
         c,
         v_min,
         v_max,
@@ -134,8 +160,8 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         if (kmh / 5.0 - (kmh / 5.0).round()).abs() > 1e-6 {
             continue;
         }
-        let crit_shape = shape_of_critical(&p, r.v_mps, c);
-        let shimmy = stability::mode_at(&p, r.v_mps, c, ModeSelect::Shimmy).ok();
+        let crit_shape = shape_of_critical(p, r.v_mps, c);
+        let shimmy = stability::mode_at(p, r.v_mps, c, ModeSelect::Shimmy).ok();
         println!(
             "{:>7.1} | {:>10.4} | {:>9.4} {:>8.3} {:<20} | {:>9.4} {:>8.3} {:<20} | {:>11} {:>8}",
             kmh,
@@ -155,7 +181,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
 
     fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let csv = args.out.join("stability.csv");
-    write_sweep_csv(&csv, &p, c, &rows)?;
+    write_sweep_csv(&csv, p, c, &rows)?;
     let ccsv = args.out.join("crossings.csv");
     write_crossings_csv(&ccsv, &crossings)?;
     let png = args.out.join("stability.png");
@@ -169,8 +195,8 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     Ok(())
 }
 
-fn shape_of_critical(p: &PlantParams, v: f64, c: f64) -> ModeShape {
-    let a = shimmy_core::plant::linearise(p, v, c);
+fn shape_of_critical<M: LinearModel<N>, const N: usize>(p: &M, v: f64, c: f64) -> ModeShape {
+    let a = p.linearise(v, c);
     shimmy_core::eigen::eigenvalues(&a)
         .ok()
         .and_then(|vals| shimmy_core::eigen::critical_oscillatory_mode(&vals).ok())
@@ -224,7 +250,12 @@ fn print_crossings(crossings: &Crossings, v_min_kmh: f64, v_max_kmh: f64) {
     }
 }
 
-fn write_sweep_csv(path: &Path, p: &PlantParams, c: f64, rows: &[ModeSummary]) -> Result<()> {
+fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
+    path: &Path,
+    p: &M,
+    c: f64,
+    rows: &[ModeSummary],
+) -> Result<()> {
     let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     writeln!(
         f,

@@ -11,3 +11,4 @@ pub mod faults;
 pub mod integrator;
 pub mod plant;
 pub mod sensors;
+pub mod truck_plant;

@@ -20,4 +20,5 @@ pub mod scenario;
 pub mod scenario_file;
 pub mod sim_device;
 pub mod standard;
+pub mod truck_study;
 pub mod vehicle_file;

@@ -15,15 +15,154 @@
 //! [thresholds]
 //! ```
 //!
+//! A file names its vehicle model with `model` (default `car-4dof`, so every earlier file stays
+//! valid). A `model = "mining-truck-5dof"` file (`docs/mining-truck.md`) has `base` =
+//! `truck-empty` or `truck-full` (default `truck-full`) and one section, `[truck]`, with the
+//! fields of `shimmy_core::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
+//! work wherever a vehicle is asked for by [`load_model`].
+//!
 //! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
 //! sections they leave out take their defaults. Every value goes through the core's one
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
 use anyhow::{bail, Context, Result};
-use shimmy_core::params::ParamSet;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{ParamSet, PlantParams};
+use shimmy_core::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
 use std::path::{Path, PathBuf};
+
+/// A vehicle of any model of the family, as a vehicle file or a set name gives it (read once
+/// per command: the size difference of the variants does not matter).
+#[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)]
+pub enum ModelVehicle {
+    /// The 4-DOF car (`car-4dof`): the whole vehicle (plant, damper, sensors, gains).
+    Car(Vehicle),
+    /// The mining dump truck (`mining-truck-5dof`): its linear model's parameters.
+    Truck(TruckParams),
+}
+
+/// The model names a vehicle file's `model` key takes.
+pub const MODEL_NAMES: [&str; 2] = [PlantParams::NAME, TruckParams::NAME];
+
+/// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
+pub fn load_model(spec: &str) -> Result<ModelVehicle> {
+    if let Some(set) = TruckSet::from_name(spec) {
+        return Ok(ModelVehicle::Truck(set.params()));
+    }
+    if ParamSet::from_name(spec).is_some() {
+        return load(spec).map(ModelVehicle::Car);
+    }
+    let path = Path::new(spec);
+    if !path.is_file() {
+        bail!(
+            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {})",
+            path.display(),
+            set_names(),
+            truck_set_names()
+        );
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading vehicle file {}", path.display()))?;
+    parse_model(&text).with_context(|| format!("in vehicle file {}", path.display()))
+}
+
+/// Parses a vehicle file of any model (its `model` key, default `car-4dof`).
+pub fn parse_model(text: &str) -> Result<ModelVehicle> {
+    let table: toml::Table = toml::from_str(text)?;
+    match model_of(&table)? {
+        m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
+        _ => parse(text).map(ModelVehicle::Car),
+    }
+}
+
+/// The `model` key of a vehicle file, checked (absent: the car).
+fn model_of(table: &toml::Table) -> Result<&str> {
+    match table.get("model") {
+        None => Ok(PlantParams::NAME),
+        Some(toml::Value::String(s)) if MODEL_NAMES.contains(&s.as_str()) => Ok(s.as_str()),
+        Some(toml::Value::String(s)) => bail!(
+            "field `model`: unknown model `{s}`, allowed: {}",
+            MODEL_NAMES.join(", ")
+        ),
+        Some(other) => bail!(
+            "field `model`: expected a model name ({}), found {}",
+            MODEL_NAMES.join(", "),
+            other.type_str()
+        ),
+    }
+}
+
+/// A `mining-truck-5dof` file: `base` (a truck set) and the `[truck]` section.
+fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
+    let base = match table.get("base") {
+        None => TruckSet::Full.name(),
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = TruckSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}` for model {}, allowed: {}",
+            TruckParams::NAME,
+            truck_set_names()
+        );
+    };
+    let mut t = set.params();
+    for (key, value) in table {
+        match key.as_str() {
+            "model" | "base" => continue,
+            "truck" => {}
+            _ => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, truck",
+                TruckParams::NAME
+            ),
+        }
+        let Some(entries) = value.as_table() else {
+            bail!(
+                "field `truck`: expected a section of numbers, found {}",
+                value.type_str()
+            );
+        };
+        for (name, value) in entries {
+            let x = match value {
+                toml::Value::Float(x) => *x,
+                toml::Value::Integer(i) => *i as f64,
+                other => bail!(
+                    "field `truck.{name}`: expected a number, found {}",
+                    other.type_str()
+                ),
+            };
+            match t.set(name, x) {
+                Ok(()) => {}
+                Err(TruckFieldError::Unknown) => bail!(
+                    "field `truck.{name}`: no such field, allowed: {}",
+                    TRUCK_FIELDS
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Err(e) => bail!("{}", e.to_string().replacen("field `", "field `truck.", 1)),
+            }
+        }
+    }
+    t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
+    Ok(t)
+}
+
+/// The truck's named sets, for messages.
+pub fn truck_set_names() -> String {
+    TruckSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// The older name of the `[plant]` section (parameter files).
 const PLANT_ALIAS: &str = "overrides";
@@ -38,6 +177,9 @@ pub fn load(spec: &str) -> Result<Vehicle> {
 pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
     if let Some(set) = ParamSet::from_name(spec) {
         return Ok(Vehicle::from_set(set));
+    }
+    if TruckSet::from_name(spec).is_some() {
+        bail!("{}", car_only(&format!("vehicle `{spec}`")));
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
         PathBuf::from(spec)
@@ -58,7 +200,12 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
 
 /// Parses the TOML text of a vehicle file.
 pub fn parse(text: &str) -> Result<Vehicle> {
-    let table: toml::Table = toml::from_str(text)?;
+    let mut table: toml::Table = toml::from_str(text)?;
+    let model = model_of(&table)?;
+    if model != PlantParams::NAME {
+        bail!("{}", car_only("this vehicle file"));
+    }
+    table.remove("model");
     if table.is_empty() {
         bail!(
             "empty vehicle file: give at least `base` (one of {}) or one section ({})",
@@ -119,6 +266,16 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     }
     v.validate()?;
     Ok(v)
+}
+
+/// The message of a car-only command given another model.
+fn car_only(what: &str) -> String {
+    format!(
+        "{what} is a {} model; this command needs the {} (the truck runs through \
+         `stability`, `sensitivity` and `gas-charge`)",
+        TruckParams::NAME,
+        PlantParams::NAME
+    )
 }
 
 /// Writes `v` as a vehicle file: every field of every section with its value, so that
@@ -217,6 +374,64 @@ fn format_default(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `model` picks the model (the car by default), a truck file sets `[truck]` fields by
+    /// name, and bad models, sections, fields, values and charges are rejected naming them.
+    #[test]
+    fn the_model_key_selects_the_vehicle_model() {
+        let car = |text: &str| match parse_model(text).unwrap() {
+            ModelVehicle::Car(v) => v,
+            ModelVehicle::Truck(_) => panic!("a car file read as a truck"),
+        };
+        assert_eq!(
+            car("base = \"hard\"\n"),
+            car("model = \"car-4dof\"\nbase = \"hard\"\n")
+        );
+        let ModelVehicle::Truck(t) = parse_model(
+            "model = \"mining-truck-5dof\"\nbase = \"truck-empty\"\n[truck]\nhps_v0_m3 = 0.0145\npayload_kg = 100000\n",
+        )
+        .unwrap() else {
+            panic!("a truck file read as a car")
+        };
+        assert_eq!(
+            t,
+            TruckSet::Empty
+                .params()
+                .with_gas_volume(0.0145)
+                .with_payload(1e5)
+        );
+        let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
+        let e = err("model = \"bus\"\n");
+        assert!(
+            e.contains("field `model`") && e.contains("car-4dof, mining-truck-5dof"),
+            "{e}"
+        );
+        let e = err("model = \"mining-truck-5dof\"\n[truck]\nhps_v0_m3 = 5.0\n");
+        assert!(
+            e.contains("field `truck.hps_v0_m3`") && e.contains("0.2"),
+            "{e}"
+        );
+        let e = err("model = \"mining-truck-5dof\"\n[truck]\nk_dd = 5.0\n");
+        assert!(e.contains("field `truck.k_dd`: no such field"), "{e}");
+        let e = err("model = \"mining-truck-5dof\"\n[plant]\nk_d = 5.0\n");
+        assert!(e.contains("field `plant`: no such section"), "{e}");
+        let e = err("model = \"mining-truck-5dof\"\n[truck]\nhps_p0_pa = 2.0e7\n");
+        assert!(e.contains("topped out"), "{e}");
+        // the car-only loader says which model it got
+        let e = format!("{:#}", load("truck-full").unwrap_err());
+        assert!(
+            e.contains("mining-truck-5dof") && e.contains("car-4dof"),
+            "{e}"
+        );
+        assert!(matches!(
+            load_model("truck-full").unwrap(),
+            ModelVehicle::Truck(_)
+        ));
+        assert!(matches!(
+            load_model("nominal").unwrap(),
+            ModelVehicle::Car(_)
+        ));
+    }
 
     #[test]
     fn a_written_vehicle_file_reads_back_identical() {

@@ -91,7 +91,7 @@ impl Real for f32 {
     }
     #[inline]
     fn sqrt(self) -> Self {
-        libm::sqrtf(self)
+        crate::sqrt::sqrtf(self)
     }
     #[inline]
     fn abs(self) -> Self {

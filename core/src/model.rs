@@ -1,0 +1,102 @@
+//! The vehicle-model family: what the eigen solver, the stability analysis and the model-margin
+//! tracker need of a linear steering model with `N` states (`docs/architecture.md`, "Vehicle
+//! models").
+//!
+//! A member gives its state matrix A(V, c) about straight running at forward speed V with a
+//! viscous steering damper c, the (constant) speed derivative dA/dV, the damper's input column,
+//! the measured output row (the wheel yaw the mode meter sees) and the classification of a mode
+//! by its shape (which pair is the shimmy mode). Everything else (eigenvalues, Hopf crossings,
+//! sensitivities, the incremental margin) is written once, generic over the member, with the
+//! state count a const generic so that every buffer stays on the stack.
+//!
+//! Members: the 4-DOF car-class solid axle ([`crate::params::PlantParams`], 10 states) and the
+//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states).
+
+use nalgebra::{Complex, SMatrix, SVector};
+
+/// A real N x N matrix (a state matrix or its speed derivative).
+pub type Matrix<const N: usize> = SMatrix<f64, N, N>;
+/// A complex state vector (an eigenvector) of a model with N states.
+pub type ComplexVector<const N: usize> = SVector<Complex<f64>, N>;
+
+/// A linear steering model with `N` states, linearised about straight running.
+///
+/// Contract: A is affine in the speed, `linearise(v) = linearise(0) + v dlinearise_dv()` (tyre
+/// lag and gyroscopic terms are linear in V), which the tracker's Newton steps and the
+/// sensitivities rely on; every member's tests check it.
+pub trait LinearModel<const N: usize> {
+    /// The model's name in vehicle files and reports (e.g. `car-4dof`).
+    const NAME: &'static str;
+    /// Short names of the states, for tables and CSV headers.
+    const STATE_NAMES: [&'static str; N];
+
+    /// State matrix A(V) at forward speed `v_mps` with a viscous steering damper of coefficient
+    /// `c_damper_nspm` in N s/m (0 = no damper force).
+    fn linearise(&self, v_mps: f64, c_damper_nspm: f64) -> Matrix<N>;
+
+    /// dA/dV, 1/m per entry unit: the (constant) speed derivative of [`Self::linearise`].
+    fn dlinearise_dv(&self) -> Matrix<N>;
+
+    /// Column of dx/dt per unit damper force F_d in N (positive resisting a positive stroke
+    /// rate).
+    fn damper_force_input(&self) -> SVector<f64, N>;
+
+    /// The measured output row: the wheel yaw the sensors see, rad, as `y = row . x`.
+    fn wheel_yaw_output(&self) -> SVector<f64, N>;
+
+    /// The shape of the mode with right eigenvector `v`: which motion dominates, by modal
+    /// kinetic energy; [`ModeShape::InPhaseWheelYaw`] marks the shimmy mode.
+    fn classify(&self, v: &ComplexVector<N>) -> ModeShapeInfo;
+}
+
+/// Which motion dominates a mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModeShape {
+    /// Both wheels yaw together (|psi_L + psi_R| > |psi_L - psi_R|): the shimmy mode.
+    InPhaseWheelYaw,
+    /// The wheels yaw against each other (track-rod mode).
+    AntiPhaseWheelYaw,
+    /// Axle roll (tramp) dominates.
+    Tramp,
+    /// The steering wheel (the car) or the steering linkage (the truck) dominates.
+    SteeringWheel,
+    /// The lagged slip angles dominate (tyre relaxation mode).
+    TyreLag,
+    /// The axle's lateral motion dominates (models with that degree of freedom).
+    AxleLateral,
+}
+
+impl ModeShape {
+    /// Short label for tables and CSV.
+    pub const fn name(self) -> &'static str {
+        match self {
+            ModeShape::InPhaseWheelYaw => "in-phase-wheel-yaw",
+            ModeShape::AntiPhaseWheelYaw => "anti-phase-wheel-yaw",
+            ModeShape::Tramp => "tramp",
+            ModeShape::SteeringWheel => "steering-wheel",
+            ModeShape::TyreLag => "tyre-lag",
+            ModeShape::AxleLateral => "axle-lateral",
+        }
+    }
+}
+
+/// A mode's shape: the dominant motion and the numbers it was decided on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModeShapeInfo {
+    /// Dominant motion.
+    pub shape: ModeShape,
+    /// Share of the modal kinetic energy in wheel yaw (both wheels).
+    pub wheel_energy_frac: f64,
+    /// Share of the modal kinetic energy in axle roll.
+    pub tramp_energy_frac: f64,
+    /// Share of the modal kinetic energy in the steering wheel (the truck: steering linkage).
+    pub steering_wheel_energy_frac: f64,
+    /// |theta_sw| / (i_s max(|psi_L|, |psi_R|)): steering-wheel (linkage) swing relative to
+    /// the kinematic (rigid-link) value.
+    pub steering_wheel_ratio: f64,
+    /// Phase of psi_R relative to psi_L, rad (0 = in phase, +-pi = anti-phase).
+    pub wheel_phase_rad: f64,
+    /// max(|a_L|, |a_R|) / the largest displacement amplitude (angles, or lengths over the
+    /// model's reference length).
+    pub tyre_ratio: f64,
+}
