@@ -35,10 +35,14 @@ pub struct PipelineParams {
 impl PipelineParams {
     /// Fusion for the pipeline (`DataMarginUse::WhenModelInconsistent`, policy and failure
     /// modes in `docs/margin-estimator.md`): the model margin while data and model agree, the
-    /// model corrected by the measured damping offset when they do not. The offset is judged
-    /// against the meter's reported sigma, which is the fit's covariance (one-sigma coverage
-    /// 60-77 % on the plant where it is unbiased, `shimmy-sim meter-accuracy`): mismatch above
-    /// 2.5 sigma, agreement below 1 sigma (hysteresis), each held 3 s; a mismatch also counts
+    /// model corrected by the measured damping offset when they do not. The averaged offset is
+    /// judged against its own sigma (the meter's reported sigma, the fit's covariance with
+    /// one-sigma coverage 62-75 % on the plant, reduced by the averaging over the meter's
+    /// correlation time): mismatch above 2.5 sigma, agreement below 1 sigma (hysteresis),
+    /// each held 3 s, the first one not before one meter memory after the first estimate;
+    /// with no decision 15 s after it the smaller of the model and corrected margins counts
+    /// (a meter reading 1-2 sigmas off otherwise left a right model unconfirmed and the
+    /// warning off, `shimmy-sim mismatch --seed 3`); a mismatch also counts
     /// once held over 0.25 m/s of speed change (0.9 s at 1 km/h/s: the time hold alone cost
     /// 3 km/h of lead, `shimmy-sim mismatch`). The offset is averaged over 1 m/s of speed
     /// change (at most 30 s): at constant speed the meter's 10 s memory then spans three
@@ -50,6 +54,7 @@ impl PipelineParams {
             offset_tau_max_s: 30.0,
             offset_speed_window_mps: 1.0,
             mismatch_hold_speed_mps: 0.25,
+            first_decision_timeout_s: 15.0,
             data_margin: DataMarginUse::WhenModelInconsistent,
             ..FusionParams::default()
         }

@@ -109,12 +109,13 @@ pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
     writeln!(
         f,
         "t_s,speed_kmh,zeta_true,freq_true_hz,margin_true_kmh,zeta_model,zeta_data,sigma_zeta_data,\
-         zeta_fast,data_valid,fast_valid,freq_data_hz,margin_kmh,ttc_s,level,amplitude_deg,yaw_deg"
+         zeta_fast,data_valid,fast_valid,freq_data_hz,margin_kmh,ttc_s,level,amplitude_deg,yaw_deg,\
+         model_consistent,zeta_offset,zeta_correction"
     )?;
     for r in rows {
         writeln!(
             f,
-            "{:.3},{:.4},{:.5},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{},{},{:.4},{:.4},{:.3},{},{:.5},{:.5}",
+            "{:.3},{:.4},{:.5},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{},{},{:.4},{:.4},{:.3},{},{:.5},{:.5},{},{:.5},{:.5}",
             r.t_s,
             r.speed_kmh,
             r.zeta_true,
@@ -131,7 +132,10 @@ pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
             r.ttc_s,
             level_num(r.level),
             r.amplitude_deg,
-            r.yaw_deg
+            r.yaw_deg,
+            u8::from(r.model_consistent),
+            r.zeta_offset,
+            r.zeta_correction
         )?;
     }
     Ok(())

@@ -127,6 +127,10 @@ pub struct MarginRow {
     pub level: Level,
     /// Data and model agree (the fusion's consistency flag).
     pub model_consistent: bool,
+    /// The fusion's measured damping offset (data minus window-averaged model).
+    pub zeta_offset: f64,
+    /// The part of it applied to the model margin.
+    pub zeta_correction: f64,
     /// Yaw envelope amplitude, deg.
     pub amplitude_deg: f64,
     /// Mean wheel yaw, deg.
@@ -316,6 +320,8 @@ pub fn run_with_progress(
             ttc_s: r.time_to_critical_s.map_or(f64::NAN, f64::from),
             level: o.level,
             model_consistent: r.model_consistent,
+            zeta_offset: r.zeta_offset as f64,
+            zeta_correction: r.zeta_correction as f64,
             amplitude_deg: (o.meter.amplitude_rad as f64).to_degrees(),
             yaw_deg: (0.5 * (x[idx::PSI_L] + x[idx::PSI_R])).to_degrees(),
         });
