@@ -122,21 +122,7 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
                 TruckParams::NAME
             ),
         }
-        let Some(entries) = value.as_table() else {
-            bail!(
-                "field `truck`: expected a section of numbers, found {}",
-                value.type_str()
-            );
-        };
-        for (name, value) in entries {
-            let x = match value {
-                toml::Value::Float(x) => *x,
-                toml::Value::Integer(i) => *i as f64,
-                other => bail!(
-                    "field `truck.{name}`: expected a number, found {}",
-                    other.type_str()
-                ),
-            };
+        for (name, x) in section_numbers(key, value)? {
             match t.set(name, x) {
                 Ok(()) => {}
                 Err(TruckFieldError::Unknown) => bail!(
@@ -153,6 +139,28 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
     }
     t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
     Ok(t)
+}
+
+/// The entries of section `key` as numbers (integers read as f64), or an error naming the
+/// section or the entry that is not a number.
+fn section_numbers<'a>(key: &str, value: &'a toml::Value) -> Result<Vec<(&'a str, f64)>> {
+    let Some(entries) = value.as_table() else {
+        bail!(
+            "field `{key}`: expected a section of numbers, found {}",
+            value.type_str()
+        );
+    };
+    entries
+        .iter()
+        .map(|(name, value)| match value {
+            toml::Value::Float(x) => Ok((name.as_str(), *x)),
+            toml::Value::Integer(i) => Ok((name.as_str(), *i as f64)),
+            other => bail!(
+                "field `{key}.{name}`: expected a number, found {}",
+                other.type_str()
+            ),
+        })
+        .collect()
 }
 
 /// The truck's named sets, for messages.
@@ -246,21 +254,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
                 SECTIONS.join(", ")
             );
         }
-        let Some(entries) = value.as_table() else {
-            bail!(
-                "field `{key}`: expected a section of numbers, found {}",
-                value.type_str()
-            );
-        };
-        for (name, value) in entries {
-            let x = match value {
-                toml::Value::Float(x) => *x,
-                toml::Value::Integer(i) => *i as f64,
-                other => bail!(
-                    "field `{key}.{name}`: expected a number, found {}",
-                    other.type_str()
-                ),
-            };
+        for (name, x) in section_numbers(key, value)? {
             set_field(&mut v, section, key, name, x)?;
         }
     }
