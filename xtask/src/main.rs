@@ -271,7 +271,7 @@ fn test() -> Result<(), String> {
                 ))
             },
         ),
-        ("fuzz safe_step: build, then 60 s in the background", || {
+        ("fuzz safe_step: build, then 30 s in the background", || {
             let run = fuzz::start_in_background()?;
             *FUZZ_RUN.lock().map_err(|_| "fuzz handle lock poisoned")? = Some(run);
             Ok(format!(
