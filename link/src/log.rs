@@ -161,6 +161,26 @@ impl<const N: usize> RamLog<N> {
         self.entries.iter().nth(usize::from(i)).copied()
     }
 
+    /// Entries and dropped count as a host reads them: the kept entries, then the episode
+    /// still `open` (if any) as one more.
+    pub fn len_with_open(&self, open: Option<ShimmyEvent>) -> (u16, u32) {
+        let (kept, dropped) = self.len();
+        (kept.saturating_add(u16::from(open.is_some())), dropped)
+    }
+
+    /// Entry `i` as a host reads it: the kept entries, oldest first, then the episode still
+    /// `open` (if any).
+    pub fn get_with_open(&self, i: u16, open: Option<ShimmyEvent>) -> Option<LogEntry> {
+        let (kept, _) = self.len();
+        if i < kept {
+            self.get(i)
+        } else if i == kept {
+            open.map(LogEntry::Shimmy)
+        } else {
+            None
+        }
+    }
+
     /// Empties the log; returns how many entries it held.
     pub fn clear(&mut self) -> u16 {
         let n = self.len().0;
@@ -206,6 +226,32 @@ mod tests {
         assert_eq!(log.get(3), None);
         assert_eq!(log.clear(), 3);
         assert_eq!(log.len(), (0, 0));
+    }
+
+    #[test]
+    fn the_open_episode_is_read_as_the_last_entry() {
+        let mut log = RamLog::<3>::new();
+        log.append(fault(1));
+        let open = ShimmyEvent {
+            start_s: 2.0,
+            speed_mps: 9.0,
+            freq_hz: 6.0,
+            peak_amplitude_rad: 0.01,
+            duration_s: 0.5,
+            level: 2,
+            open: true,
+            peak_current_a: 1.0,
+            mean_current_a: 0.5,
+        };
+        assert_eq!(log.len_with_open(None), (1, 0));
+        assert_eq!(log.get_with_open(1, None), None);
+        assert_eq!(log.len_with_open(Some(open)), (2, 0));
+        assert_eq!(log.get_with_open(0, Some(open)), Some(fault(1)));
+        assert_eq!(
+            log.get_with_open(1, Some(open)),
+            Some(LogEntry::Shimmy(open))
+        );
+        assert_eq!(log.get_with_open(2, Some(open)), None);
     }
 
     #[test]

@@ -69,18 +69,10 @@ impl Backend for SimBackend {
         self.standstill
     }
     fn log_len(&self) -> (u16, u32) {
-        let (kept, dropped) = self.log.len();
-        (kept + u16::from(self.open.is_some()), dropped)
+        self.log.len_with_open(self.open)
     }
     fn log_entry(&self, i: u16) -> Option<LogEntry> {
-        let (kept, _) = self.log.len();
-        if i < kept {
-            self.log.get(i)
-        } else if i == kept {
-            self.open.map(LogEntry::Shimmy)
-        } else {
-            None
-        }
+        self.log.get_with_open(i, self.open)
     }
     fn clear_log(&mut self) -> u16 {
         self.log.clear()
