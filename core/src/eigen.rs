@@ -61,7 +61,7 @@ pub enum EigenError {
 /// f32: A is formed in f64, rounded to f32, balanced (exact power-of-two scaling) and solved in
 /// f32: ~20x fewer instructions on the M4 than soft-float f64. Balancing is what makes this
 /// accurate enough (`docs/margin-estimator.md`: unscaled f32 loses ~0.04 in zeta); the
-/// tracker's critical speeds still meet 0.05 km/h (tests/tests/margin_model.rs).
+/// tracker's critical speeds still meet 0.05 km/h (tests/tests/cross_crate/margin_model.rs).
 pub trait SolveFloat: nalgebra::RealField + Copy + crate::sqrt::Sqrt + sealed::Sealed {
     /// Name for reports ("f32", "f64").
     const NAME: &'static str;

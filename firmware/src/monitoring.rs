@@ -254,7 +254,7 @@ pub fn model_config() -> ModelMarginConfig {
 }
 
 /// Float type of the tracker's eigen-solves and eigenvectors: f32 on the FPU (balanced; the
-/// critical speeds still meet 0.05 km/h, `tests/tests/margin_model.rs`). f64 is software
+/// critical speeds still meet 0.05 km/h, `tests/tests/cross_crate/margin_model.rs`). f64 is software
 /// floating point on the M4 (~20x the instructions); as a type parameter, only the f32 code is
 /// linked into the image.
 pub type ModelFloat = f32;

@@ -2,7 +2,7 @@
 //! path (the encoder angle tracker, [`crate::control::supervised_step`]-equivalent frame
 //! building, the core's `SafeController` (supervisor + ASMC + limiter), the core's data
 //! pipeline (mode meter + fusion + monitor) and the model-margin tracker) and digests every
-//! output as bit patterns. The host test (`tests/tests/conformance.rs`) and the on-target
+//! output as bit patterns. The host test (`tests/tests/cross_crate/conformance.rs`) and the on-target
 //! program (`src/bin/conformance.rs`, under QEMU) run this same function on the same trace;
 //! `cargo xtask test` fails unless every channel's digest is identical.
 //!

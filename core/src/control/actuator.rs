@@ -18,7 +18,7 @@ use embedded_hal::pwm::SetDutyCycle;
 
 /// Fail-safe coil current, A: the coil rating. The supervisor commands it (or floors the command at
 /// it) when the inputs cannot be trusted; the controller's default fallback current is the same.
-/// Computed by `tests/tests/failsafe_current.rs` (describing function of the Spencer damper +
+/// Computed by `tests/tests/cross_crate/failsafe_current.rs` (describing function of the Spencer damper +
 /// `hopf_crossings` over 0.1 m/s-150 km/h): the nominal family (nominal, +-20 % C_a/sigma/e) needs
 /// c_eq >= 1.2 x 1367 N s/m, i.e. I_min = 1.13 A at the 0.5 deg reference amplitude (asserted:
 /// constant >= 1.25 I_min) and 1.73 A at 1 deg; at 2-3 deg and for the hard family (c_eq >= 1.2 x

@@ -3,7 +3,7 @@
 use crate::control::actuator::FAILSAFE_CURRENT_A;
 
 /// Below this (trusted) speed 0 A is safe: 80 % of the lowest Hopf onset of every analysed
-/// variant without damper (checked by `tests/tests/failsafe_current.rs`), m/s.
+/// variant without damper (checked by `tests/tests/cross_crate/failsafe_current.rs`), m/s.
 pub const ZERO_CURRENT_SAFE_BELOW_MPS: f32 = 1.0;
 
 /// Supervisor thresholds. `Default` is the documented design point.

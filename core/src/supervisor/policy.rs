@@ -3,7 +3,7 @@
 //! * **FailSafe** (controller output ignored, fixed current): no trustworthy wheel yaw (both
 //!   encoders faulted, or they disagree), timing fault, coil fault. The current is
 //!   [`FAILSAFE_CURRENT_A`] (stabilises every analysed plant variant at every speed, see
-//!   `tests/tests/failsafe_current.rs`), or 0 A when the speed is trusted (no speed fault
+//!   `tests/tests/cross_crate/failsafe_current.rs`), or 0 A when the speed is trusted (no speed fault
 //!   active, so not a held or implausibly low reading) and below
 //!   [`ZERO_CURRENT_SAFE_BELOW_MPS`] (below the lowest Hopf onset: no shimmy possible, parking
 //!   stays light). A coil fault commands 0 A (driving current into a short only heats it; an

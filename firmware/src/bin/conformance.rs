@@ -2,7 +2,7 @@
 //! (`tests/fixtures/conformance-trace.bin`, recorded from the host simulator) through
 //! [`shimmy_firmware::replay::replay`] on the Cortex-M4F (under QEMU) and prints each output
 //! channel's digest. `cargo xtask test` compares them with the host's digests (written by
-//! `tests/tests/conformance.rs`) and fails on any difference.
+//! `tests/tests/cross_crate/conformance.rs`) and fails on any difference.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]

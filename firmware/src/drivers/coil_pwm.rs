@@ -17,7 +17,7 @@
 //! - As soon as the driver is constructed, and whenever the control loop has no valid command
 //!   (a NaN), it drives [`FAILSAFE_CURRENT_A`]: the supervisor's fail-safe current, chosen from
 //!   the stability analysis (`shimmy_core::control::actuator::FAILSAFE_CURRENT_A`, checked by
-//!   `tests/tests/failsafe_current.rs`).
+//!   `tests/tests/cross_crate/failsafe_current.rs`).
 //! - [`CoilDriver::off`] (duty 0, integrator cleared) when the supervisor reports the coil
 //!   open or shorted: driving current into a short only heats it.
 

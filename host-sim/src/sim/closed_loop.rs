@@ -49,7 +49,7 @@ use shimmy_firmware::pil::HostApp;
 /// The closed loop's plant integrator: adaptive Dopri5 at rtol 1e-7. The fixed-step IMEX
 /// (`Method::ImexFixed`) is as accurate at 2 steps per 1 ms period but not faster (12
 /// right-hand-side calls per period plus the stage solves), and at 1 step per period it leaves
-/// the golden band of the demo (`cargo test -p shimmy-sim --test golden -- --nocapture`; speeds:
+/// the golden band of the demo (`cargo test -p shimmy-sim --test sim golden:: -- --nocapture`; speeds:
 /// `cargo bench -p shimmy-sim --bench plant -- closed_loop`).
 pub const CLOSED_LOOP_METHOD: Method = Method::Dopri5 { rtol: 1e-7 };
 

@@ -11,7 +11,7 @@
 //!
 //! The tyres stay linear in it: in a developed limit cycle (a few degrees) the Magic Formula
 //! saturates, the run's damping is zero and the line stays below it; the line holds where the
-//! tyres are linear (`host-sim/tests/reference_line.rs`: within 5 % of the measured growth at
+//! tyres are linear (`host-sim/tests/sim/reference_line.rs`: within 5 % of the measured growth at
 //! 0.1-0.7 deg).
 //!
 //! The mode is the shimmy mode tracked by its shape (`ModeSelect::Shimmy`: the least-damped

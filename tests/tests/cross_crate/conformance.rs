@@ -6,7 +6,7 @@
 //!    an initial yaw kick; 6 s at 1 kHz; encoder angles quantised to 14 bit like the AS5047P,
 //!    speed as f32). This test re-records it and checks that the committed file is that trace
 //!    (within one encoder count, see [`trace_matches_the_simulator`]). Regenerate with
-//!    `SHIMMY_BLESS=1 cargo test -p shimmy-tests --test conformance`.
+//!    `SHIMMY_BLESS=1 cargo test -p shimmy-tests --test cross_crate conformance::`.
 //! 2. [`host_digest`] replays the committed trace through `shimmy_firmware::replay::replay`
 //!    (the core's `SafeController` (supervisor + ASMC + limiter) with injected encoder faults,
 //!    the core's `DataPipeline` (mode meter, fusion, monitor) and the `ModelMarginTracker` with

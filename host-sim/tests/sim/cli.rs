@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::process::Output;
 
-mod common;
+use crate::common;
 
 use common::run_in;
 
@@ -141,7 +141,7 @@ fn faults_tiny_valid_run_exits_zero() {
 #[test]
 fn other_commands_reject_bad_numbers_before_running() {
     // Parsing allows up to the largest coil rating a vehicle file may give; the vehicle's own
-    // rating (the nominal 2 A here) is checked once it is loaded (tests/vehicle.rs has more).
+    // rating (the nominal 2 A here) is checked once it is loaded (vehicle.rs here has more).
     let amps = "0 <= value <= 10 A";
     let rated = "0 <= value <= 2 A";
     let speed = "1 <= value <= 250 km/h";

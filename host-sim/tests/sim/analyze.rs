@@ -3,7 +3,7 @@
 //! input, and close to them (and to the plant's true damping) when the log comes at another
 //! rate with jitter and gaps; fed at the wrong rate, the estimate is wrong (the negative).
 
-mod common;
+use crate::common;
 
 use common::{run_in, temp_dir};
 use shimmy_sim::sim::analyze::{analyze, Analysis, AnalyzeOptions};

@@ -5,7 +5,7 @@
 //! meter of `shimmy-core` at 1 kHz), decimated to 50 Hz. Re-bless it after an intended change
 //! of the plant, sensors, controller, estimator or demo with
 //!
-//!     SHIMMY_BLESS=1 cargo test -p shimmy-sim --test golden
+//!     SHIMMY_BLESS=1 cargo test -p shimmy-sim --test sim golden::
 //!
 //! and commit the new file with a note of what changed and why.
 //!
@@ -52,7 +52,7 @@ fn columns(r: &TraceRow) -> [f64; 7] {
 
 fn to_csv(trace: &[TraceRow]) -> String {
     let mut s = format!(
-        "# shimmy demo, ASMC arm, decimated to 50 Hz; re-bless: SHIMMY_BLESS=1 cargo test -p shimmy-sim --test golden\n{HEADER}\n"
+        "# shimmy demo, ASMC arm, decimated to 50 Hz; re-bless: SHIMMY_BLESS=1 cargo test -p shimmy-sim --test sim golden::\n{HEADER}\n"
     );
     for r in trace {
         let c = columns(r);
@@ -133,7 +133,7 @@ fn demo_asmc_trace_matches_the_golden_reference() {
     }
     let reference = parse(&std::fs::read_to_string(&path).unwrap_or_else(|e| {
         panic!(
-            "{}: {e}; create it with SHIMMY_BLESS=1 cargo test -p shimmy-sim --test golden",
+            "{}: {e}; create it with SHIMMY_BLESS=1 cargo test -p shimmy-sim --test sim golden::",
             path.display()
         )
     }));

@@ -1,0 +1,18 @@
+//! The simulator's integration tests, one test binary (`cargo test -p shimmy-sim --test sim`;
+//! one file's tests: `cargo test -p shimmy-sim --test sim golden::`). Each file used to be a
+//! binary of its own that linked the whole simulator; one binary compiles and links once.
+
+mod common;
+
+mod analyze;
+mod cli;
+mod closed_loop;
+mod device_link;
+mod faults;
+mod golden;
+mod markdown_tables;
+mod meter_accuracy;
+mod plant_time_domain;
+mod reference_line;
+mod truck_time_domain;
+mod vehicle;
