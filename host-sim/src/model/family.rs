@@ -82,9 +82,10 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     fn host_app_model(&self) -> Option<PlantParams>;
 
     /// Factor on the kingpin yaw torques of a scenario's disturbances (road noise, imbalance,
-    /// potholes, kicks), which scenario files give for the car: the ratio of this model's
-    /// kingpin yaw inertia to that of the car's `nominal` set, so that a disturbance gives the
-    /// same angular acceleration of the wheel (1 for the car).
+    /// potholes, kicks), which scenario files give for the car: the road acts through the
+    /// tyre's lateral force at its trail, so the factor is the ratio of this model's tyre yaw
+    /// stiffness `(e + t_p) C_a` to that of the car's `nominal` set (the same slip disturbance;
+    /// 1 for the car).
     fn yaw_torque_scale(&self) -> f64;
 
     /// The parameters a sweep can vary (with [`Self::param`], [`Self::with_param`]): name and
@@ -201,10 +202,11 @@ impl SimPlant for Simulator {
     }
 }
 
-/// The kingpin yaw inertia the scenario files' disturbances are written for: the car's
-/// `nominal` set.
-fn reference_yaw_inertia_kgm2() -> f64 {
-    ParamSet::Nominal.params().i_k
+/// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the
+/// car's `nominal` set), N m/rad.
+fn reference_tyre_yaw_stiffness() -> f64 {
+    let p = ParamSet::Nominal.params();
+    (p.e + p.t_p) * p.c_a
 }
 
 impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
@@ -326,7 +328,7 @@ impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     }
 
     fn yaw_torque_scale(&self) -> f64 {
-        self.i_k / reference_yaw_inertia_kgm2()
+        (self.e + self.t_p) * self.point_or_tyres_only().c_a / reference_tyre_yaw_stiffness()
     }
 
     fn host_app_model(&self) -> Option<PlantParams> {
