@@ -146,7 +146,8 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
                     .collect();
                 (window_of(&p)?, vs)
             }
-            ModelVehicle::Truck(t) => {
+            ModelVehicle::Truck(tv) => {
+                let t = tv.model;
                 let vs = TRUCK_FIELDS
                     .iter()
                     .filter(|f| !TRUCK_FIELDS_WITHOUT_EFFECT.contains(&f.name))

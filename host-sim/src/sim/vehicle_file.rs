@@ -26,6 +26,7 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
+use crate::model::family::{truck_parts, FamilyVehicle, SimModel};
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
@@ -40,8 +41,47 @@ use std::path::{Path, PathBuf};
 pub enum ModelVehicle {
     /// The 4-DOF car (`car-4dof`): the whole vehicle (plant, damper, sensors, gains).
     Car(Vehicle),
-    /// The mining dump truck (`mining-truck-5dof`): its linear model's parameters.
-    Truck(TruckParams),
+    /// The mining dump truck (`mining-truck-5dof`): its model's parameters, damper, sensors,
+    /// gains and thresholds.
+    Truck(FamilyVehicle<TruckParams>),
+}
+
+impl ModelVehicle {
+    /// The model's name (`car-4dof`, `mining-truck-5dof`).
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            ModelVehicle::Car(_) => PlantParams::NAME,
+            ModelVehicle::Truck(_) => TruckParams::NAME,
+        }
+    }
+}
+
+/// A model of the family whose vehicle a vehicle file (or a set name) gives: what a command
+/// generic over the model loads `--vehicle` with.
+pub trait FileModel<const N: usize>: SimModel<N> {
+    /// The vehicle `spec` (a set name or a file, relative to `dir`), or an error naming the
+    /// model it has when that is another.
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<Self::Vehicle>;
+}
+
+impl FileModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<Vehicle> {
+        load_relative(spec, dir)
+    }
+}
+
+impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TruckParams>> {
+        match load_model_relative(spec, dir)? {
+            ModelVehicle::Truck(t) => Ok(t),
+            ModelVehicle::Car(_) => bail!(
+                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
+                 the believed vehicle are of one model)",
+                PlantParams::NAME,
+                TruckParams::NAME
+            ),
+        }
+    }
 }
 
 /// The model names a vehicle file's `model` key takes.
@@ -49,13 +89,27 @@ pub const MODEL_NAMES: [&str; 2] = [PlantParams::NAME, TruckParams::NAME];
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
+    load_model_relative(spec, Path::new(""))
+}
+
+/// [`load_model`] with a relative path taken relative to `dir`. Set names win over files of the
+/// same name.
+pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     if let Some(set) = TruckSet::from_name(spec) {
-        return Ok(ModelVehicle::Truck(set.params()));
+        return Ok(ModelVehicle::Truck(FamilyVehicle {
+            model: set.params(),
+            parts: truck_parts()?,
+        }));
     }
     if ParamSet::from_name(spec).is_some() {
         return load(spec).map(ModelVehicle::Car);
     }
-    let path = Path::new(spec);
+    let path: PathBuf = if Path::new(spec).is_absolute() {
+        PathBuf::from(spec)
+    } else {
+        dir.join(spec)
+    };
+    let path = path.as_path();
     if !path.is_file() {
         bail!(
             "vehicle `{spec}`: no such file ({}) and not a named set ({}, {})",
@@ -95,8 +149,10 @@ fn model_of(table: &toml::Table) -> Result<&str> {
     }
 }
 
-/// A `mining-truck-5dof` file: `base` (a truck set) and the `[truck]` section.
-fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
+/// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
+/// sections of every model (`[damper]`, `[damper_model]`, `[sensors]`, `[controller]`,
+/// `[thresholds]`, from [`truck_parts`]).
+fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
     let base = match table.get("base") {
         None => TruckSet::Full.name(),
         Some(toml::Value::String(s)) => s.as_str(),
@@ -113,13 +169,21 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
         );
     };
     let mut t = set.params();
+    let mut parts = truck_parts()?;
     for (key, value) in table {
         match key.as_str() {
             "model" | "base" => continue,
             "truck" => {}
+            k if k != "plant" && SECTIONS.contains(&k) => {
+                for (name, x) in section_numbers(key, value)? {
+                    set_field(&mut parts, k, k, name, x)?;
+                }
+                continue;
+            }
             _ => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, truck",
-                TruckParams::NAME
+                "field `{key}`: no such section for model {}, allowed: model, base, truck, {}",
+                TruckParams::NAME,
+                SECTIONS[1..].join(", ")
             ),
         }
         for (name, x) in section_numbers(key, value)? {
@@ -138,7 +202,8 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
         }
     }
     t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
-    Ok(t)
+    parts.validate()?;
+    Ok(FamilyVehicle { model: t, parts })
 }
 
 /// The entries of section `key` as numbers (integers read as f64), or an error naming the
@@ -262,11 +327,15 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     Ok(v)
 }
 
+/// The commands that run a truck vehicle, for messages.
+pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
+     sweep (eigenvalue maps), margin, faults and run";
+
 /// The message of a car-only command given another model.
 fn car_only(what: &str) -> String {
     format!(
-        "{what} is a {} model; this command needs the {} (the truck runs through \
-         `stability`, `sensitivity` and `gas-charge`)",
+        "{what} is a {} model; this command runs the {} only so far (the truck runs \
+         through {TRUCK_COMMANDS})",
         TruckParams::NAME,
         PlantParams::NAME
     )
@@ -381,7 +450,7 @@ mod tests {
             car("base = \"hard\"\n"),
             car("model = \"car-4dof\"\nbase = \"hard\"\n")
         );
-        let ModelVehicle::Truck(t) = parse_model(
+        let ModelVehicle::Truck(FamilyVehicle { model: t, .. }) = parse_model(
             "model = \"mining-truck-5dof\"\nbase = \"truck-empty\"\n[truck]\nhps_v0_m3 = 0.0145\npayload_kg = 100000\n",
         )
         .unwrap() else {
