@@ -29,6 +29,9 @@ pub trait LinearModel<const N: usize> {
     const NAME: &'static str;
     /// Short names of the states, for tables and CSV headers.
     const STATE_NAMES: [&'static str; N];
+    /// Mechanical degrees of freedom (the states less the velocities and the tyre-lag states),
+    /// for tables (`shimmy-sim vehicles`).
+    const DOF: usize;
 
     /// State matrix A(V) at forward speed `v_mps` with a viscous steering damper of coefficient
     /// `c_damper_nspm` in N s/m (0 = no damper force).

@@ -206,6 +206,7 @@ pub fn damper_stroke_rate_mps(p: &PlantParams, x: &SVector<f64, N_STATES>) -> f6
 impl LinearModel<N_STATES> for PlantParams {
     const NAME: &'static str = "car-4dof";
     const STATE_NAMES: [&'static str; N_STATES] = STATE_NAMES;
+    const DOF: usize = 4;
 
     fn linearise(&self, v_mps: f64, c_damper_nspm: f64) -> Matrix<N_STATES> {
         linearise(self, v_mps, c_damper_nspm)

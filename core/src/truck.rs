@@ -723,6 +723,7 @@ fn check(f: &TruckField, value: f64) -> Result<(), TruckFieldError> {
 impl LinearModel<N_STATES> for TruckParams {
     const NAME: &'static str = "mining-truck-5dof";
     const STATE_NAMES: [&'static str; N_STATES] = STATE_NAMES;
+    const DOF: usize = 5;
 
     /// Rows 0..5 `q' = dq`; rows 5..10 `M^-1 (-K q - C dq + G a)`; rows 10..12 the tyre lag.
     fn linearise(&self, v_mps: f64, c_damper_nspm: f64) -> Matrix<N_STATES> {

@@ -38,6 +38,9 @@ enum Command {
     GasCharge(cmd::gas_charge::GasChargeArgs),
     /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
     Sensitivity(cmd::sensitivity::SensitivityArgs),
+    /// Every vehicle model of the family at its named sets: degrees of freedom, Hopf windows,
+    /// frequency, limit-cycle amplitude, the margin estimator's warning lead (Markdown, CSV).
+    Vehicles(cmd::vehicles::VehiclesArgs),
     /// Speed and agreement against an independent NumPy/SciPy implementation of the plant
     /// (needs python3 with numpy and scipy).
     ReferenceBench(cmd::reference_bench::ReferenceBenchArgs),
@@ -84,6 +87,7 @@ fn main() -> Result<()> {
         Some(Command::Stability(a)) => cmd::stability::command(&a),
         Some(Command::GasCharge(a)) => cmd::gas_charge::command(&a),
         Some(Command::Sensitivity(a)) => cmd::sensitivity::command(&a),
+        Some(Command::Vehicles(a)) => cmd::vehicles::command(&a),
         Some(Command::ReferenceBench(a)) => cmd::reference_bench::command(&a),
         Some(Command::Sweep(a)) if a.controllers.is_empty() => cmd::sweep::eigen::command(&a),
         Some(Command::Sweep(a)) => cmd::sweep::time_domain::command(&a).map(|_| ()),

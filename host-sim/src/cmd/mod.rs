@@ -21,3 +21,4 @@ pub mod run;
 pub mod sensitivity;
 pub mod stability;
 pub mod sweep;
+pub mod vehicles;
