@@ -57,19 +57,12 @@ impl ControlTimer {
     }
 
     /// True if an update event is pending (a period boundary passed since the last clear).
-    /// The `pil` build: always false without a register read, since TIM2's update is off there
-    /// and UIF never sets (`board/pil.rs`); under `-icount` every device access ends QEMU's
-    /// translated block and runs the access again on its own, a cost per control step.
     pub fn update_pending(&self) -> bool {
-        !cfg!(feature = "pil") && self.tim.sr().read().bits() & 1 != 0
+        self.tim.sr().read().bits() & 1 != 0
     }
 
-    /// Clears the update flag (at the start of the control step; the `pil` build has none to
-    /// clear, see [`Self::update_pending`]).
+    /// Clears the update flag (at the start of the control step).
     pub fn clear_update(&self) {
-        if cfg!(feature = "pil") {
-            return;
-        }
         // SAFETY: writing 0 to UIF clears it; the other SR bits are rc_w0 and written 1 (kept).
         unsafe {
             self.tim.sr().write(|w| w.bits(!1u32 & 0xFFFF));
@@ -109,12 +102,8 @@ impl Watchdog {
         w
     }
 
-    /// Reloads the counter (the `pil` build: nothing, QEMU's stm32f405 has no IWDG model and a
-    /// write there is a device access per step, see [`ControlTimer::update_pending`]).
+    /// Reloads the counter.
     pub fn feed(&self) {
-        if cfg!(feature = "pil") {
-            return;
-        }
         // SAFETY: 0xAAAA is the reload key.
         unsafe {
             self.iwdg.kr().write(|w| w.bits(0xAAAA));

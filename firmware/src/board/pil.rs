@@ -21,7 +21,7 @@ use crate::periph::{ControlTimer, LinkPort, Watchdog};
 use crate::runtime::{finish, Outcome};
 use crate::sensors::SampleSet;
 use core::convert::Infallible;
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m_semihosting::{nr, syscall};
 use shimmy_core::estimator::fusion::MarginReport;
 use shimmy_core::estimator::model_margin::ModelPoint;
@@ -151,14 +151,8 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> (Board, LinkPort) {
         watchdog: Watchdog::start(dp.IWDG),
     };
     // The control steps come from `background_pass`, not from TIM2's update (see there).
-    // SAFETY: DIER = 0 masks TIM2's update interrupt; the counter keeps running. SR = 0
-    // clears an update flag set before (the control step neither reads nor clears it in this
-    // build: `ControlTimer::update_pending`).
-    unsafe {
-        let t = &*pac::TIM2::ptr();
-        t.dier().write(|w| w.bits(0));
-        t.sr().write(|w| w.bits(0));
-    }
+    // SAFETY: DIER = 0 masks TIM2's update interrupt; the counter keeps running.
+    unsafe { (*pac::TIM2::ptr()).dier().write(|w| w.bits(0)) };
     (board, LinkPort::start(dp.USART1, TIMER_CLOCK_HZ))
 }
 
@@ -196,21 +190,14 @@ fn executed() -> u64 {
 /// off in this build ([`init`]): QEMU 7.2's STM32 timer neither keeps the period nor restarts
 /// at a counter write, so it cannot mark the period's end. Every control step still consumes
 /// one host frame and answers with one report, so lockstep and the results are unchanged.
-///
-/// SysTick's state is kept in [`SYSTICK_ARMED`], not read back: under `-icount` each access
-/// to a device register ends QEMU's translated block and re-executes the access alone (a
-/// step with nothing due touches no SysTick register).
 pub fn background_pass(busy: bool) {
     // SAFETY: SysTick is used by nothing else in this build; these are its documented
     // registers (ARMv7-M ARM B3.3), any value is valid.
     let syst = unsafe { &*cortex_m::peripheral::SYST::PTR };
-    let armed = SYSTICK_ARMED.load(Ordering::Relaxed);
+    let armed = syst.csr.read() & 1 != 0;
     if !busy {
-        if armed {
-            SYSTICK_ARMED.store(false, Ordering::Relaxed);
-            // SAFETY: as above.
-            unsafe { syst.csr.write(0) };
-        }
+        // SAFETY: as above.
+        unsafe { syst.csr.write(0) };
         next_step();
         return;
     }
@@ -231,12 +218,7 @@ pub fn background_pass(busy: bool) {
         syst.cvr.write(0);
         syst.csr.write(0b111);
     }
-    SYSTICK_ARMED.store(true, Ordering::Relaxed);
 }
-
-/// Whether SysTick is counting down to the end of the period (set by [`background_pass`],
-/// cleared when it fires or is stopped).
-static SYSTICK_ARMED: AtomicBool = AtomicBool::new(false);
 
 /// Pends the control task and lets it run before the caller goes on.
 fn next_step() {
@@ -250,7 +232,6 @@ fn next_step() {
 fn SysTick() {
     // SAFETY: see `background_pass`.
     unsafe { (*cortex_m::peripheral::SYST::PTR).csr.write(0) };
-    SYSTICK_ARMED.store(false, Ordering::Relaxed);
     next_step();
 }
 
