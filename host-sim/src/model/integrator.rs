@@ -118,6 +118,13 @@ impl<const N: usize> Dopri5<N> {
         self.h
     }
 
+    /// Sets the derivative [`integrate_fsal`](Self::integrate_fsal) reuses at the start of the
+    /// next call: only valid when it is `f` at exactly that call's `y` (the caller evaluated it
+    /// there, e.g. for the forces at the start of a period).
+    pub fn set_start_derivative(&mut self, k: [f64; N]) {
+        self.k_last = k;
+    }
+
     /// Integrates `y` from `t0` to `t0 + dt` with `f(t, y, dy)`. The step size is adapted to the
     /// tolerances and carried over to the next call.
     pub fn integrate<F>(
@@ -644,12 +651,16 @@ impl<const N: usize> ArkFixed<N> {
 
     /// Integrates `y` from `t0` over `dt` in `substeps` equal steps (the system is autonomous
     /// over the call). Fails if a stage solve fails or the state stops being finite.
+    ///
+    /// `start`: the right-hand side at `y` when the caller has it (evaluated there with the
+    /// same system), which saves the first step's first evaluation.
     pub fn integrate<S: ImexSystem<N>>(
         &mut self,
         sys: &S,
         t0: f64,
         y: &mut [f64; N],
         dt: f64,
+        mut start: Option<[f64; N]>,
     ) -> Result<(), IntegrateError> {
         let split = Split::of(sys);
         let n = self.substeps.max(1);
@@ -659,8 +670,13 @@ impl<const N: usize> ArkFixed<N> {
         let mut diag = [1.0; N];
         for step in 0..n {
             let t = t0 + f64::from(step) * h;
-            sys.rhs(y, &mut k[0]);
-            self.stats.evaluations += 1;
+            match start.take() {
+                Some(k0) => k[0] = k0,
+                None => {
+                    sys.rhs(y, &mut k[0]);
+                    self.stats.evaluations += 1;
+                }
+            }
             let solved = ark_step(
                 sys,
                 &mut self.stats,

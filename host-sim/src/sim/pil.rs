@@ -330,7 +330,7 @@ impl Drop for Qemu {
 pub struct PilFirmware {
     qemu: Qemu,
     periods: Vec<Period>,
-    last: VecDeque<String>,
+    last: VecDeque<Seen>,
     finished: Option<u64>,
     host_cpu_at_start_s: f64,
 }
@@ -376,7 +376,7 @@ impl PilFirmware {
         })
     }
 
-    fn remember(&mut self, what: String) {
+    fn remember(&mut self, what: Seen) {
         if self.last.len() == LAST_FRAMES {
             self.last.pop_front();
         }
@@ -390,7 +390,7 @@ impl PilFirmware {
             self.periods.len()
         );
         for f in &self.last {
-            s.push_str(&format!("    {f}\n"));
+            s.push_str(&format!("    {}\n", f.line()));
         }
         let log = self.qemu.log();
         s.push_str(&format!(
@@ -409,7 +409,7 @@ impl PilFirmware {
     }
 
     fn file(&mut self, f: TargetFrame) {
-        self.remember(format!("<- {}", summary(&f)));
+        self.remember(Seen::Received(f));
         match (f, self.periods.last_mut()) {
             (TargetFrame::Finished { instructions }, _) => self.finished = Some(instructions),
             (TargetFrame::Step(step), _) => self.periods.push(Period {
@@ -419,9 +419,7 @@ impl PilFirmware {
             (other, Some(p)) => p.after.push(other),
             // Before the first step nothing else can come: the meter and model tasks start
             // from the first step's data.
-            (other, None) => {
-                self.remember(format!("(unexpected before the first step: {other:?})"))
-            }
+            (other, None) => self.remember(Seen::Unexpected(other)),
         }
     }
 
@@ -460,6 +458,28 @@ impl PilFirmware {
     }
 }
 
+/// A frame of the link kept for the diagnosis of a failure (formatted only then: a line per
+/// frame and step cost more host time than the plant).
+#[derive(Clone, Copy, Debug)]
+enum Seen {
+    Sent(RawFrame),
+    Received(TargetFrame),
+    Unexpected(TargetFrame),
+}
+
+impl Seen {
+    fn line(&self) -> String {
+        match self {
+            Seen::Sent(frame) => format!(
+                "-> sensors t {} us: yaw {} / {} rad, {} m/s",
+                frame.t_us, frame.left.angle_rad, frame.right.angle_rad, frame.speed_mps
+            ),
+            Seen::Received(f) => format!("<- {}", summary(f)),
+            Seen::Unexpected(f) => format!("(unexpected before the first step: {f:?})"),
+        }
+    }
+}
+
 /// One line per frame for the diagnosis.
 fn summary(f: &TargetFrame) -> String {
     match f {
@@ -492,10 +512,7 @@ impl FirmwareStep for PilFirmware {
     type Error = String;
 
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
-        self.remember(format!(
-            "-> sensors t {} us: yaw {} / {} rad, {} m/s",
-            frame.t_us, frame.left.angle_rad, frame.right.angle_rad, frame.speed_mps
-        ));
+        self.remember(Seen::Sent(*frame));
         self.qemu
             .send(&HostFrame::Sensors(*frame))
             .map_err(|e| self.failure(&e))?;
