@@ -2,6 +2,8 @@
 //! (`docs/architecture.md`). The modules, lowest layer first (each uses only those above it):
 //!
 //! - [`sqrt`]: the correctly rounded f32 square root on the FPU (libm's off the target);
+//! - [`trig`]: f32 sine, cosine and tangent with libm's bits up to 2^28 pi/2 (no huge-argument
+//!   reduction linked);
 //! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
 //! - [`model`]: the vehicle-model family: the trait a linear steering model with N states
 //!   implements (A(V), dA/dV, damper input, measured output, mode shapes);
@@ -51,6 +53,7 @@ pub mod params;
 pub mod plant;
 pub mod sqrt;
 pub mod stability;
+pub mod trig;
 pub mod truck;
 // Control path: panic-free by lint (tests may unwrap/index).
 #[cfg_attr(

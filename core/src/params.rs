@@ -344,7 +344,7 @@ impl PlantParams {
         }
     }
 
-    fn field_mut(&mut self, p: Param) -> &mut f64 {
+    pub(crate) fn field_mut(&mut self, p: Param) -> &mut f64 {
         match p {
             Param::IK => &mut self.i_k,
             Param::IP => &mut self.i_p,

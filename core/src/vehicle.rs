@@ -208,21 +208,24 @@ impl Vehicle {
     pub fn set(&mut self, section: &str, name: &str, value: f64) -> Result<(), SetError> {
         let field = find_field(section, name).ok_or(SetError::UnknownField)?;
         field.check(value).map_err(SetError::Invalid)?;
-        (field.set)(self, value);
+        (field.slot)(self).write(value);
         Ok(())
     }
 
-    /// The value of `field`.
+    /// The value of `field` (read through a copy: the table has one accessor per field, which
+    /// needs `&mut`; [`Vehicle::validate`] and [`Vehicle::encode_record`] copy once for all).
     pub fn get(&self, field: &Field) -> f64 {
-        (field.get)(self)
+        let mut v = *self;
+        (field.slot)(&mut v).read()
     }
 
     /// Checks every field against its range, then the rules that tie fields together
     /// (hysteresis order of the thresholds, K_min <= K_init <= K_max, one coil rating).
     /// Returns the first offender.
     pub fn validate(&self) -> Result<(), VehicleError> {
+        let mut v = *self;
         for field in FIELDS {
-            field.check(self.get(field))?;
+            field.check((field.slot)(&mut v).read())?;
         }
         match RULES.iter().find(|r| !(r.holds)(self)) {
             Some(rule) => Err(VehicleError {
@@ -265,8 +268,43 @@ pub struct Field {
     /// firmware image checks names and ranges without ~4 KB of descriptions).
     #[cfg(feature = "field-docs")]
     pub doc: &'static str,
-    get: fn(&Vehicle) -> f64,
-    set: fn(&mut Vehicle, f64),
+    /// Where the value lives in a vehicle: one accessor per field, not a getter and a setter
+    /// (those were ~3.2 KB of the firmware image for 87 fields; `cargo xtask size`).
+    slot: fn(&mut Vehicle) -> Slot<'_>,
+}
+
+/// Where a field's value is kept, and its type.
+enum Slot<'a> {
+    F64(&'a mut f64),
+    F32(&'a mut f32),
+    /// Whole numbers (the range check runs before a write).
+    U8(&'a mut u8),
+    /// The coil rating: the Spencer model's u_max and the firmware model's i_max_a together.
+    Rating(&'a mut DamperSpec),
+}
+
+impl Slot<'_> {
+    fn read(&self) -> f64 {
+        match self {
+            Slot::F64(x) => **x,
+            Slot::F32(x) => f64::from(**x),
+            Slot::U8(x) => f64::from(**x),
+            Slot::Rating(d) => d.spencer.u_max,
+        }
+    }
+
+    fn write(self, x: f64) {
+        match self {
+            Slot::F64(p) => *p = x,
+            Slot::F32(p) => *p = x as f32,
+            // Only written after the range check (whole numbers within u8).
+            Slot::U8(p) => *p = x as u8,
+            Slot::Rating(d) => {
+                d.spencer.u_max = x;
+                d.model.i_max_a = x as f32;
+            }
+        }
+    }
 }
 
 impl Field {
@@ -484,37 +522,26 @@ const RULES: &[Rule] = &[
     },
 ];
 
-/// Conversion of a stored scalar to and from the table's f64.
-trait Scalar: Copy {
-    fn to_f64(self) -> f64;
-    fn from_f64(x: f64) -> Self;
+/// The [`Slot`] of a stored scalar.
+trait Place {
+    fn slot(&mut self) -> Slot<'_>;
 }
 
-impl Scalar for f64 {
-    fn to_f64(self) -> f64 {
-        self
-    }
-    fn from_f64(x: f64) -> Self {
-        x
+impl Place for f64 {
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::F64(self)
     }
 }
 
-impl Scalar for f32 {
-    fn to_f64(self) -> f64 {
-        f64::from(self)
-    }
-    fn from_f64(x: f64) -> Self {
-        x as f32
+impl Place for f32 {
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::F32(self)
     }
 }
 
-impl Scalar for u8 {
-    fn to_f64(self) -> f64 {
-        f64::from(self)
-    }
-    fn from_f64(x: f64) -> Self {
-        // Only called after the range check (whole numbers within u8).
-        x as u8
+impl Place for u8 {
+    fn slot(&mut self) -> Slot<'_> {
+        Slot::U8(self)
     }
 }
 
@@ -529,8 +556,7 @@ macro_rules! plant_field {
             integer: false,
             #[cfg(feature = "field-docs")]
             doc: $doc,
-            get: |v| v.plant.get(Param::$p),
-            set: |v, x| v.plant = v.plant.with(Param::$p, x),
+            slot: |v| Slot::F64(v.plant.field_mut(Param::$p)),
         }
     };
 }
@@ -555,8 +581,7 @@ macro_rules! field {
             integer: $int,
             #[cfg(feature = "field-docs")]
             doc: $doc,
-            get: |$v| Scalar::to_f64($place),
-            set: |$v, x| $place = Scalar::from_f64(x),
+            slot: |$v| Place::slot(&mut $place),
         }
     };
 }
@@ -599,11 +624,7 @@ pub static FIELDS: &[Field] = &[
         #[cfg(feature = "field-docs")]
         doc: "coil rating: the Spencer model's u_max, the firmware model's and the controller's \
               current limit and the fail-safe current",
-        get: |v| v.damper.spencer.u_max,
-        set: |v, x| {
-            v.damper.spencer.u_max = x;
-            v.damper.model.i_max_a = x as f32;
-        },
+        slot: |v| Slot::Rating(&mut v.damper),
     },
     field!(
         "damper",
@@ -1261,8 +1282,9 @@ impl Vehicle {
         schema.copy_from_slice(&record_schema().to_le_bytes());
         // FIELDS.len() <= RECORD_MAX_FIELDS (a test), so the count fits a u16.
         count.copy_from_slice(&(FIELDS.len() as u16).to_le_bytes());
+        let mut v = *self;
         for (chunk, field) in values.as_chunks_mut::<8>().0.iter_mut().zip(FIELDS) {
-            chunk.copy_from_slice(&self.get(field).to_le_bytes());
+            chunk.copy_from_slice(&(field.slot)(&mut v).read().to_le_bytes());
         }
         Ok(need)
     }
@@ -1299,7 +1321,7 @@ impl Vehicle {
         for (chunk, field) in values.as_chunks::<8>().0.iter().zip(FIELDS) {
             let value = f64::from_le_bytes(*chunk);
             field.check(value).map_err(RecordError::Invalid)?;
-            (field.set)(&mut vehicle, value);
+            (field.slot)(&mut vehicle).write(value);
         }
         vehicle.validate().map_err(RecordError::Invalid)?;
         Ok(vehicle)

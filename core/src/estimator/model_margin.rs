@@ -978,9 +978,22 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                     .iter()
                     .position(|k| k.speed_mps > r)
                     .unwrap_or(self.known.len());
-                if self.known.insert(at, known).is_err() {
+                if self.known.is_full() {
                     return self.scan_cut();
                 }
+                // Rebuilt, not `Vec::insert`: its overlapping shift links `memmove` (1.4 KB of
+                // flash; `cargo xtask size`).
+                let mut merged = heapless::Vec::<Known, MAX_CROSSINGS>::new();
+                for (i, k) in self.known.iter().enumerate() {
+                    if i == at {
+                        let _ = merged.push(known);
+                    }
+                    let _ = merged.push(*k);
+                }
+                if at >= self.known.len() {
+                    let _ = merged.push(known);
+                }
+                self.known = merged;
                 let (x, gx) = brent.end(up);
                 Some(Search::Probe {
                     x,

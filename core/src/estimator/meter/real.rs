@@ -2,7 +2,8 @@
 //! `f64` as the reference twin (the long-run test runs both on the same input).
 //!
 //! All transcendental functions go through `libm` explicitly so host and target compute the
-//! same bits.
+//! same bits (f32 sine, cosine and tangent through [`crate::trig`]: libm's bits without its
+//! reduction of huge arguments).
 
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -37,15 +38,15 @@ pub trait Real:
     fn sqrt(self) -> Self;
     /// Absolute value.
     fn abs(self) -> Self;
-    /// Sine (libm).
+    /// Sine (libm; f32: [`crate::trig`]).
     fn sin(self) -> Self;
-    /// Cosine (libm).
+    /// Cosine (libm; f32: [`crate::trig`]).
     fn cos(self) -> Self;
     /// Natural logarithm (libm).
     fn ln(self) -> Self;
     /// Four-quadrant arctangent of `self / x` (libm).
     fn atan2(self, x: Self) -> Self;
-    /// Tangent (libm).
+    /// Tangent (libm; f32: [`crate::trig`]).
     fn tan(self) -> Self;
     /// Exponential (libm).
     fn exp(self) -> Self;
@@ -99,11 +100,11 @@ impl Real for f32 {
     }
     #[inline]
     fn sin(self) -> Self {
-        libm::sinf(self)
+        crate::trig::sinf(self)
     }
     #[inline]
     fn cos(self) -> Self {
-        libm::cosf(self)
+        crate::trig::cosf(self)
     }
     #[inline]
     fn ln(self) -> Self {
@@ -119,7 +120,7 @@ impl Real for f32 {
     }
     #[inline]
     fn tan(self) -> Self {
-        libm::tanf(self)
+        crate::trig::tanf(self)
     }
     #[inline]
     fn exp(self) -> Self {
