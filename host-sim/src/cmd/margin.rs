@@ -21,8 +21,6 @@ use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run_with_progress, MarginRow, MarginRun, MarginScenario};
 use crate::sim::vehicle_file::{self, ModelVehicle};
 
-/// Ramp rate: 0.01 to 50 km/h per s.
-pub const RATE_KMH_PER_S: Range = Range::closed(0.01, 50.0, "km/h/s");
 /// Lead-in before the ramp: 0 to 600 s.
 pub const SETTLE_S: Range = Range::closed(0.0, 600.0, "s");
 /// Road-noise and imbalance torques: 0 to 200 N m.
@@ -48,7 +46,7 @@ pub struct MarginArgs {
     #[arg(long, default_value_t = 40.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub ramp_to_kmh: f64,
     /// Ramp rate, km/h per s: 0.01 to 50 (settle plus ramp at most 3600 s).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(RATE_KMH_PER_S))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(arg_range::RATE_KMH_PER_S))]
     pub rate_kmh_per_s: f64,
     /// Constant-speed lead-in before the ramp (estimator warm-up), s: 0 to 600.
     #[arg(long, default_value_t = 30.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(SETTLE_S))]
@@ -252,7 +250,7 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
 pub fn check(a: &MarginArgs) -> Result<()> {
     arg_range::SPEED_KMH.check("--ramp-from-kmh", a.ramp_from_kmh)?;
     arg_range::SPEED_KMH.check("--ramp-to-kmh", a.ramp_to_kmh)?;
-    RATE_KMH_PER_S.check("--rate-kmh-per-s", a.rate_kmh_per_s)?;
+    arg_range::RATE_KMH_PER_S.check("--rate-kmh-per-s", a.rate_kmh_per_s)?;
     SETTLE_S.check("--settle-s", a.settle_s)?;
     TORQUE_NM.check("--noise-nm", a.noise_nm)?;
     TORQUE_NM.check("--imbalance-nm", a.imbalance_nm)?;

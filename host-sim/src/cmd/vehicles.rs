@@ -19,7 +19,6 @@ use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
-use crate::cmd::margin::RATE_KMH_PER_S;
 use crate::model::family::SimModel;
 use crate::sim::arg_range;
 use crate::sim::margin_run::{run, MarginScenario};
@@ -47,7 +46,7 @@ pub struct VehiclesArgs {
     #[arg(long, default_value = DEFAULT_SETS, value_delimiter = ',')]
     pub vehicles: Vec<String>,
     /// Ramp rate of the lead-time run, km/h per s: 0.01 to 50.
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(RATE_KMH_PER_S))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(arg_range::RATE_KMH_PER_S))]
     pub rate_kmh_per_s: f64,
     /// Road-noise seed of the lead-time run.
     #[arg(long, default_value_t = 1)]

@@ -113,6 +113,9 @@ pub fn check_current(option: &str, i: f64, vehicle: &Vehicle) -> Result<f64> {
     Ok(i)
 }
 
+/// Speed-ramp rate (`margin`, `vehicles`): 0.01 to 50 km/h per s.
+pub const RATE_KMH_PER_S: Range = Range::closed(0.01, 50.0, "km/h/s");
+
 /// Forward speed: 1 to 250 km/h.
 pub const SPEED_KMH: Range = Range::closed(1.0, 250.0, "km/h");
 
