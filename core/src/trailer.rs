@@ -277,7 +277,7 @@ pub enum TrailerFieldError {
     },
     /// The centre of gravity is too far behind the axle for a single-axle trailer on a ball.
     #[error(
-        "field `a` = {a} m: the centre of gravity must lie ahead of 1.5 l = {max} m (at most a \
+        "field `a` = {a} m: the centre of gravity must lie ahead of 1.5 l = {max:.3} m (at most a \
          tail load of half the mass on the hitch)"
     )]
     TailHeavy {

@@ -20,4 +20,5 @@ pub mod report;
 pub mod run;
 pub mod sensitivity;
 pub mod stability;
+pub mod sway_damping;
 pub mod sweep;

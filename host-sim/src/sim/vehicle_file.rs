@@ -19,7 +19,9 @@
 //! valid). A `model = "mining-truck-5dof"` file (`docs/mining-truck.md`) has `base` =
 //! `truck-empty` or `truck-full` (default `truck-full`) and one section, `[truck]`, with the
 //! fields of `shimmy_core::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
-//! work wherever a vehicle is asked for by [`load_model`].
+//! work wherever a vehicle is asked for by [`load_model`]. A `model = "trailer-2dof"` file
+//! (`docs/trailer.md`) has `base = "trailer"` (the default) and one section, `[trailer]`, with the
+//! fields of `shimmy_core::trailer::TRAILER_FIELDS`; the named set `trailer` works there too.
 //!
 //! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
 //! sections they leave out take their defaults. Every value goes through the core's one
@@ -29,6 +31,7 @@
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
+use shimmy_core::trailer::{TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS};
 use shimmy_core::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
 use std::path::{Path, PathBuf};
@@ -42,15 +45,20 @@ pub enum ModelVehicle {
     Car(Vehicle),
     /// The mining dump truck (`mining-truck-5dof`): its linear model's parameters.
     Truck(TruckParams),
+    /// The trailer on a compliant hitch (`trailer-2dof`): its linear model's parameters.
+    Trailer(TrailerParams),
 }
 
 /// The model names a vehicle file's `model` key takes.
-pub const MODEL_NAMES: [&str; 2] = [PlantParams::NAME, TruckParams::NAME];
+pub const MODEL_NAMES: [&str; 3] = [PlantParams::NAME, TruckParams::NAME, TrailerParams::NAME];
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
     if let Some(set) = TruckSet::from_name(spec) {
         return Ok(ModelVehicle::Truck(set.params()));
+    }
+    if let Some(set) = TrailerSet::from_name(spec) {
+        return Ok(ModelVehicle::Trailer(set.params()));
     }
     if ParamSet::from_name(spec).is_some() {
         return load(spec).map(ModelVehicle::Car);
@@ -58,10 +66,11 @@ pub fn load_model(spec: &str) -> Result<ModelVehicle> {
     let path = Path::new(spec);
     if !path.is_file() {
         bail!(
-            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {})",
+            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {})",
             path.display(),
             set_names(),
-            truck_set_names()
+            truck_set_names(),
+            trailer_set_names()
         );
     }
     let text = std::fs::read_to_string(path)
@@ -74,6 +83,7 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
+        m if m == TrailerParams::NAME => parse_trailer(&table).map(ModelVehicle::Trailer),
         _ => parse(text).map(ModelVehicle::Car),
     }
 }
@@ -141,6 +151,69 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
     Ok(t)
 }
 
+/// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
+fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
+    let base = match table.get("base") {
+        None => TrailerSet::Caravan.name(),
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = TrailerSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}` for model {}, allowed: {}",
+            TrailerParams::NAME,
+            trailer_set_names()
+        );
+    };
+    let mut t = set.params();
+    for (key, value) in table {
+        match key.as_str() {
+            "model" | "base" => continue,
+            "trailer" => {}
+            _ => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, trailer",
+                TrailerParams::NAME
+            ),
+        }
+        for (name, x) in section_numbers(key, value)? {
+            match t.set(name, x) {
+                Ok(()) => {}
+                Err(TrailerFieldError::Unknown) => bail!(
+                    "field `trailer.{name}`: no such field, allowed: {}",
+                    TRAILER_FIELDS
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Err(e) => bail!(
+                    "{}",
+                    e.to_string().replacen("field `", "field `trailer.", 1)
+                ),
+            }
+        }
+    }
+    t.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "{}",
+            e.to_string().replacen("field `", "field `trailer.", 1)
+        )
+    })?;
+    Ok(t)
+}
+
+/// The trailer's named sets, for messages.
+pub fn trailer_set_names() -> String {
+    TrailerSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The entries of section `key` as numbers (integers read as f64), or an error naming the
 /// section or the entry that is not a number.
 fn section_numbers<'a>(key: &str, value: &'a toml::Value) -> Result<Vec<(&'a str, f64)>> {
@@ -187,7 +260,16 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
         return Ok(Vehicle::from_set(set));
     }
     if TruckSet::from_name(spec).is_some() {
-        bail!("{}", car_only(&format!("vehicle `{spec}`")));
+        bail!(
+            "{}",
+            car_only(&format!("vehicle `{spec}`"), TruckParams::NAME)
+        );
+    }
+    if TrailerSet::from_name(spec).is_some() {
+        bail!(
+            "{}",
+            car_only(&format!("vehicle `{spec}`"), TrailerParams::NAME)
+        );
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
         PathBuf::from(spec)
@@ -211,7 +293,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     let mut table: toml::Table = toml::from_str(text)?;
     let model = model_of(&table)?;
     if model != PlantParams::NAME {
-        bail!("{}", car_only("this vehicle file"));
+        bail!("{}", car_only("this vehicle file", model));
     }
     table.remove("model");
     if table.is_empty() {
@@ -263,11 +345,11 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 }
 
 /// The message of a car-only command given another model.
-fn car_only(what: &str) -> String {
+fn car_only(what: &str, model: &str) -> String {
     format!(
-        "{what} is a {} model; this command needs the {} (the truck runs through \
-         `stability`, `sensitivity` and `gas-charge`)",
-        TruckParams::NAME,
+        "{what} is a {model} model; this command needs the {} (the truck runs through \
+         `stability`, `sensitivity` and `gas-charge`; the trailer through `stability`, \
+         `sensitivity` and `sway-damping`)",
         PlantParams::NAME
     )
 }
@@ -375,7 +457,7 @@ mod tests {
     fn the_model_key_selects_the_vehicle_model() {
         let car = |text: &str| match parse_model(text).unwrap() {
             ModelVehicle::Car(v) => v,
-            ModelVehicle::Truck(_) => panic!("a car file read as a truck"),
+            _ => panic!("a car file read as another model"),
         };
         assert_eq!(
             car("base = \"hard\"\n"),
@@ -424,6 +506,41 @@ mod tests {
         assert!(matches!(
             load_model("nominal").unwrap(),
             ModelVehicle::Car(_)
+        ));
+    }
+
+    /// A trailer file sets `[trailer]` fields by name over the `trailer` set; bad sections,
+    /// fields, values and a tail-heavy centre of gravity are rejected naming them.
+    #[test]
+    fn a_trailer_file_reads_its_section() {
+        let ModelVehicle::Trailer(t) =
+            parse_model("model = \"trailer-2dof\"\n[trailer]\nk_y = 7000\nsigma = 0.5\n").unwrap()
+        else {
+            panic!("a trailer file read as another model")
+        };
+        let mut want = TrailerSet::Caravan.params();
+        want.k_y = 7000.0;
+        want.sigma = 0.5;
+        assert_eq!(t, want);
+        let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
+        let e = err("model = \"trailer-2dof\"\n[trailer]\nk_y = -1.0\n");
+        assert!(
+            e.contains("field `trailer.k_y`") && e.contains("100000000"),
+            "{e}"
+        );
+        let e = err("model = \"trailer-2dof\"\n[trailer]\nky = 1.0\n");
+        assert!(e.contains("field `trailer.ky`: no such field"), "{e}");
+        let e = err("model = \"trailer-2dof\"\n[truck]\nk_y = 1.0\n");
+        assert!(e.contains("field `truck`: no such section"), "{e}");
+        let e = err("model = \"trailer-2dof\"\nbase = \"truck-full\"\n");
+        assert!(e.contains("field `base`") && e.contains("trailer"), "{e}");
+        let e = err("model = \"trailer-2dof\"\n[trailer]\na = 7.0\n");
+        assert!(e.contains("field `trailer.a`") && e.contains("6.45"), "{e}");
+        let e = format!("{:#}", load("trailer").unwrap_err());
+        assert!(e.contains("trailer-2dof") && e.contains("car-4dof"), "{e}");
+        assert!(matches!(
+            load_model("trailer").unwrap(),
+            ModelVehicle::Trailer(_)
         ));
     }
 
