@@ -176,8 +176,8 @@ fn trailer_case(t: &TrailerParams, speeds_mps: &[f64], c_damper: f64) -> String 
 /// The trailer's eigenvalues against the NumPy implementation written from `docs/trailer.md`
 /// (mass, damping and stiffness matrices and the lag row built there, M inverted numerically):
 /// every eigenvalue matched to the nearest of the other side within 1e-9 relative, for the
-/// named set without and with the sway damper, a soft and a stiff hitch, a short relaxation
-/// length and a tail-heavy load, from 5 to 200 km/h.
+/// named set with the sway damper, a soft hitch on tyres of short relaxation length and a stiff
+/// hitch with a tail-heavy load and a damper, from 5 to 200 km/h.
 #[test]
 fn trailer_eigenvalues_match_the_scipy_implementation() {
     let dir = std::env::temp_dir().join(format!("shimmy-scipy-trailer-{}", std::process::id()));
@@ -190,18 +190,21 @@ fn trailer_eigenvalues_match_the_scipy_implementation() {
         .map(|i| kmh_to_mps(5.0 + 195.0 * f64::from(i) / 13.0))
         .collect();
     let base = TrailerSet::Caravan.params();
-    let with = |name: &str, x: f64| {
+    let with = |fields: &[(&str, f64)]| {
         let mut t = base;
-        t.set(name, x).unwrap();
+        for (name, x) in fields {
+            t.set(name, *x).unwrap();
+        }
         t
     };
+    // three python runs (each one's start-up dominates the test's time)
     let cases = [
-        (base, 0.0),
         (base, base.damper_of_zeta(0.05)),
-        (with("k_y", 0.3 * base.k_y), 0.0),
-        (with("k_y", 40.0 * base.k_y), 2.0e4),
-        (with("sigma", 0.05), 0.0),
-        (with("a", 1.1 * base.l), 1.0e4),
+        (with(&[("k_y", 0.3 * base.k_y), ("sigma", 0.05)]), 0.0),
+        (
+            with(&[("k_y", 40.0 * base.k_y), ("a", 1.1 * base.l)]),
+            2.0e4,
+        ),
     ];
     let mut worst = 0.0_f64;
     for (n, (t, c)) in cases.iter().enumerate() {
