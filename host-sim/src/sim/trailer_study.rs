@@ -154,13 +154,13 @@ mod tests {
         let map = dh_map(&t, &energy, &st).unwrap();
         let z = |e: usize, s: usize| map[e * st.len() + s].zeta_needed.unwrap();
         let mut peaks = Vec::new();
-        for e in 0..energy.len() {
+        for (e, energy_term) in energy.iter().enumerate() {
             let peak = (0..st.len())
                 .max_by(|&a, &b| z(e, a).total_cmp(&z(e, b)))
                 .unwrap();
             assert!(peak < st.len() - 2 && z(e, peak) > 0.0, "{map:?}");
             for s in peak + 1..st.len() {
-                assert!(z(e, s) <= z(e, s - 1), "energy {}: {map:?}", energy[e]);
+                assert!(z(e, s) <= z(e, s - 1), "energy {energy_term}: {map:?}");
             }
             assert_eq!(z(e, st.len() - 1), 0.0, "{map:?}");
             peaks.push(z(e, peak));
