@@ -11,6 +11,7 @@
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
 //! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
 //! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
+//! - [`trailer`]: trailer sway (2 DOF on a laterally compliant hitch) as a model of the family;
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -53,6 +54,7 @@ pub mod params;
 pub mod plant;
 pub mod sqrt;
 pub mod stability;
+pub mod trailer;
 pub mod trig;
 pub mod truck;
 // Control path: panic-free by lint (tests may unwrap/index).

@@ -10,7 +10,8 @@
 //! state count a const generic so that every buffer stays on the stack.
 //!
 //! Members: the 4-DOF car-class solid axle ([`crate::params::PlantParams`], 10 states) and the
-//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states).
+//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states), the 2-DOF trailer on a
+//! compliant hitch ([`crate::trailer::TrailerParams`], 5 states).
 
 use nalgebra::{Complex, SMatrix, SVector};
 
@@ -48,7 +49,7 @@ pub trait LinearModel<const N: usize> {
     fn wheel_yaw_output(&self) -> SVector<f64, N>;
 
     /// The shape of the mode with right eigenvector `v`: which motion dominates, by modal
-    /// kinetic energy; [`ModeShape::InPhaseWheelYaw`] marks the shimmy mode.
+    /// kinetic energy; [`ModeShape::is_shimmy`] marks the shimmy mode (the trailer's: sway).
     fn classify(&self, v: &ComplexVector<N>) -> ModeShapeInfo;
 }
 
@@ -67,6 +68,10 @@ pub enum ModeShape {
     TyreLag,
     /// The axle's lateral motion dominates (models with that degree of freedom).
     AxleLateral,
+    /// The trailer's yaw about the hitch dominates: the sway mode (`trailer-2dof`).
+    Sway,
+    /// The hitch's lateral motion on its springing dominates (`trailer-2dof`).
+    HitchLateral,
 }
 
 impl ModeShape {
@@ -79,7 +84,16 @@ impl ModeShape {
             ModeShape::SteeringWheel => "steering-wheel",
             ModeShape::TyreLag => "tyre-lag",
             ModeShape::AxleLateral => "axle-lateral",
+            ModeShape::Sway => "trailer-sway",
+            ModeShape::HitchLateral => "hitch-lateral",
         }
+    }
+
+    /// Whether this is the mode the margin is about, the one the mode meter sees: the car's
+    /// and the truck's shimmy ([`ModeShape::InPhaseWheelYaw`]), the trailer's sway
+    /// ([`ModeShape::Sway`]).
+    pub const fn is_shimmy(self) -> bool {
+        matches!(self, ModeShape::InPhaseWheelYaw | ModeShape::Sway)
     }
 }
 

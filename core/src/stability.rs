@@ -119,8 +119,9 @@ pub enum ModeSelect {
     LeastDamped,
     /// The oscillatory mode with the largest real part (the one that crosses at a Hopf point).
     Critical,
-    /// The least-damped oscillatory mode whose shape is in-phase wheel yaw (the shimmy mode the
-    /// data-driven mode meter sees). Costs one complex LU per oscillatory pair.
+    /// The least-damped oscillatory mode whose shape is the shimmy mode ([`ModeShape::is_shimmy`]:
+    /// in-phase wheel yaw, the trailer's sway), the one the data-driven mode meter sees. Costs
+    /// one complex LU per oscillatory pair.
     Shimmy,
 }
 
@@ -151,7 +152,7 @@ pub fn select_mode_of<T: eigen::SolveFloat, M: LinearModel<N>, const N: usize>(
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
             {
                 let shape = eigen::mode_shape_of::<T, M, N>(p, a, *l)?;
-                if shape.shape == ModeShape::InPhaseWheelYaw {
+                if shape.shape.is_shimmy() {
                     let m = Mode::from_eigenvalue(*l);
                     if best.is_none_or(|b| m.zeta < b.zeta) {
                         best = Some(m);

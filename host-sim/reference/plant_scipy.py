@@ -8,6 +8,7 @@ and eigenvalues the Rust results must match.
 
 usage: plant_scipy.py CASE.toml RESULT.json
        plant_scipy.py truck CASE.toml RESULT.txt
+       plant_scipy.py trailer CASE.toml RESULT.txt
 CASE.toml holds [plant] (parameter names as in core/src/params.rs), [damper] (Spencer model,
 already scaled), [case] (speed, current, initial yaw, duration, sample times, sweep speeds) and
 optionally [ramp] (the demo's drive with a simple current law instead of the controller, for the
@@ -17,6 +18,11 @@ The `truck` form is the mining dump truck of docs/mining-truck.md, written from 
 CASE.toml holds [truck] (the physical inputs: masses, inertias, tyre, strut gas charge, steering
 cylinders, loads; names as in core/src/truck.rs, the strut's with an `hps_` prefix) and
 [case] speeds_mps; RESULT.txt gets one line `speed re im` per eigenvalue (numpy.linalg.eigvals).
+
+The `trailer` form is the 2-DOF trailer on a compliant hitch of docs/trailer.md, written from
+that document: CASE.toml holds [trailer] (names as in core/src/trailer.rs) and [case] speeds_mps
+and damper_nspm (the sway damper's coefficient); RESULT.txt gets one line `speed re im` per
+eigenvalue.
 """
 import json
 import sys
@@ -195,9 +201,47 @@ def truck_main(case_path, out_path):
                 out.write(f"{float(v)!r} {float(lam.real)!r} {float(lam.imag)!r}\n")
 
 
+def trailer_linear_a(t, v, c_damper):
+    """A(V) of the trailer: q = [y, psi], x = [q, q', alpha],
+    M q'' + D q' + K q = G alpha with the CG's lateral position y - a psi, and
+    sigma alpha' = V (psi - alpha) - (y' - l psi') (docs/trailer.md, "Equations")."""
+    m, a, l = t["m"], t["a"], t["l"]
+    f_z = m * G0 * a / l
+    ca = t["c_a_per_fz"] * f_z
+    mass = np.array([[m, -m * a], [-m * a, t["i_z"] + m * a**2]])
+    damping = np.diag([t["c_y"], c_damper * t["l_d"] ** 2])
+    stiffness = np.diag([t["k_y"], 0.0])
+    g = np.array([ca, -l * ca])
+    m_inv = np.linalg.inv(mass)
+    x = np.zeros((5, 5))
+    x[0:2, 2:4] = np.eye(2)
+    x[2:4, 0:2] = -m_inv @ stiffness
+    x[2:4, 2:4] = -m_inv @ damping
+    x[2:4, 4] = m_inv @ g
+    s = t["sigma"]
+    x[4, 1] = v / s
+    x[4, 2] = -1.0 / s
+    x[4, 3] = l / s
+    x[4, 4] = -v / s
+    return x
+
+
+def trailer_main(case_path, out_path):
+    with open(case_path, "rb") as f:
+        cfg = tomllib.load(f)
+    t, c = cfg["trailer"], cfg["case"]["damper_nspm"]
+    with open(out_path, "w") as out:
+        for v in cfg["case"]["speeds_mps"]:
+            for lam in np.linalg.eigvals(trailer_linear_a(t, v, c)):
+                out.write(f"{float(v)!r} {float(lam.real)!r} {float(lam.imag)!r}\n")
+
+
 def main():
     if sys.argv[1] == "truck":
         truck_main(sys.argv[2], sys.argv[3])
+        return
+    if sys.argv[1] == "trailer":
+        trailer_main(sys.argv[2], sys.argv[3])
         return
     case_path, out_path = sys.argv[1], sys.argv[2]
     with open(case_path, "rb") as f:

@@ -36,6 +36,10 @@ enum Command {
     /// The mining truck's struts: the initial gas volumes that keep it free of shimmy at a
     /// load and speed, and the Hopf-window maps over gas volume and payload (CSV, PNG).
     GasCharge(cmd::gas_charge::GasChargeArgs),
+    /// The trailer's sway damper: the damper it needs over speed (stable, and a damping-ratio
+    /// target), and Diboll & Hagen's map of the damping ratio needed over the Strouhal number
+    /// (CSV, PNG).
+    SwayDamping(cmd::sway_damping::SwayDampingArgs),
     /// How the Hopf onset/offset speeds and frequency move with +-20 % on each parameter.
     Sensitivity(cmd::sensitivity::SensitivityArgs),
     /// Every vehicle model of the family at its named sets: degrees of freedom, Hopf windows,
@@ -86,6 +90,7 @@ fn main() -> Result<()> {
         Some(Command::Bifurcation(a)) => cmd::bifurcation::command(&a),
         Some(Command::Stability(a)) => cmd::stability::command(&a),
         Some(Command::GasCharge(a)) => cmd::gas_charge::command(&a),
+        Some(Command::SwayDamping(a)) => cmd::sway_damping::command(&a),
         Some(Command::Sensitivity(a)) => cmd::sensitivity::command(&a),
         Some(Command::Vehicles(a)) => cmd::vehicles::command(&a),
         Some(Command::ReferenceBench(a)) => cmd::reference_bench::command(&a),

@@ -40,7 +40,7 @@ use core::marker::PhantomData;
 
 use nalgebra::Complex;
 
-use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, ModeShape, SolveFloat};
+use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, SolveFloat};
 use crate::model::LinearModel;
 use crate::params::PlantParams;
 use crate::plant::N_STATES;
@@ -710,8 +710,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                 None
             }
         };
-        let shape_ok =
-            ep.is_some_and(|ep| self.p.classify(&ep.right).shape == ModeShape::InPhaseWheelYaw);
+        let shape_ok = ep.is_some_and(|ep| self.p.classify(&ep.right).shape.is_shimmy());
         if self.shimmy_from_track && !shape_ok {
             // lost the branch: the next call solves again and selects by shape
             self.shimmy_track = None;

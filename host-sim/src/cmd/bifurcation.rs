@@ -378,6 +378,7 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => command_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => command_on(a, &t.model, &t.parts),
+        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("bifurcation")),
     }
 }
 

@@ -840,6 +840,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
     match vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
         ModelVehicle::Truck(t) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, t),
+        ModelVehicle::Trailer(_) => Err(vehicle_file::not_on_trailer("faults")),
     }
 }
 

@@ -20,5 +20,6 @@ pub mod report;
 pub mod run;
 pub mod sensitivity;
 pub mod stability;
+pub mod sway_damping;
 pub mod sweep;
 pub mod vehicles;

@@ -20,8 +20,8 @@ use crate::sim::vehicle_file;
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
     /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
-    /// vehicle files). `--params` is the older name.
+    /// truck-full; the trailer's trailer) or a vehicle file (TOML, see docs/vehicle-file.md;
+    /// parameter files are vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
@@ -83,6 +83,17 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     match vehicle_file::load_model(&args.vehicle)? {
         vehicle_file::ModelVehicle::Car(v) => with_damper(&v.plant, &v, args),
         vehicle_file::ModelVehicle::Truck(t) => with_damper(&t.model, &t.parts, args),
+        vehicle_file::ModelVehicle::Trailer(t) => {
+            anyhow::ensure!(
+                args.damper_current_a.is_none(),
+                "--damper-current-a: the {} model has no MR damper configured; leave it out \
+                 (`sway-damping` gives the sway damper it needs)",
+                shimmy_core::trailer::TrailerParams::NAME
+            );
+            println!("stability of straight running: vehicle `{}`", args.vehicle);
+            println!("damper: none (F_d = 0)");
+            report(&t, 0.0, args)
+        }
     }
 }
 

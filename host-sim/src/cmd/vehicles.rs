@@ -20,13 +20,14 @@ use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
 use crate::model::family::SimModel;
+use crate::model::trailer_plant::final_yaw_amplitude_rad;
 use crate::sim::arg_range;
 use crate::sim::margin_run::{run, MarginScenario};
 use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
 use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// The named sets of the table by default: one or more per model of the family.
-pub const DEFAULT_SETS: &str = "nominal,hard,truck-full,truck-empty";
+pub const DEFAULT_SETS: &str = "nominal,hard,truck-full,truck-empty,trailer";
 
 /// Speed range of the crossing scan, km/h.
 const SCAN_KMH: (f64, f64) = (1.0, 150.0);
@@ -117,18 +118,50 @@ pub fn row(name: &str, v: &ModelVehicle, a: &VehiclesArgs) -> Result<VehicleRow>
     match v {
         ModelVehicle::Car(v) => row_on(name, &v.plant, v, a),
         ModelVehicle::Truck(t) => row_on(name, &t.model, &t.parts, a),
+        ModelVehicle::Trailer(t) => {
+            // No SimModel yet (no MR damper, no mode meter for 0.6 Hz sway: docs/trailer.md):
+            // its own nonlinear plant for the cycle, no lead.
+            let mut r = linear_row(name, t)?;
+            r.limit_cycle = r.limit_cycle_speed().map(|(v_kmh, f)| {
+                let (duration_s, window_s) = cycle_run(f);
+                let amp = final_yaw_amplitude_rad(
+                    t,
+                    kmh_to_mps(v_kmh),
+                    0.0,
+                    LC_START_DEG.to_radians(),
+                    duration_s,
+                    window_s,
+                );
+                (
+                    v_kmh,
+                    (amp > 0.1 * LC_START_DEG.to_radians()).then(|| amp.to_degrees()),
+                )
+            });
+            Ok(r)
+        }
     }
 }
 
-fn row_on<M: SimModel<N>, const N: usize>(
-    name: &str,
-    model: &M,
-    parts: &Vehicle,
-    a: &VehiclesArgs,
-) -> Result<VehicleRow> {
-    let linear = model.linear();
+/// Duration and measuring window of a limit-cycle run for a mode at `f` Hz, s.
+fn cycle_run(f_hz: f64) -> (f64, f64) {
+    ((120.0 / f_hz).max(40.0), (10.0 / f_hz).max(4.0))
+}
+
+impl VehicleRow {
+    /// The speed of the limit-cycle run, km/h, and the onset frequency, Hz: a quarter into the
+    /// first window (into the first half of the onset speed when it is open), far enough from
+    /// the onset for the cycle to settle within the run.
+    fn limit_cycle_speed(&self) -> Option<(f64, f64)> {
+        let (on, off) = *self.windows.first()?;
+        let end = off.unwrap_or((1.5 * on).min(SCAN_KMH.1));
+        Some((on + 0.25 * (end - on), self.onset_freq_hz?))
+    }
+}
+
+/// The row's linear part (windows, frequency) of any linear model; no cycle, no lead.
+fn linear_row<M: LinearModel<N>, const N: usize>(name: &str, linear: &M) -> Result<VehicleRow> {
     let crossings = stability::hopf_crossings(
-        &linear,
+        linear,
         0.0,
         kmh_to_mps(SCAN_KMH.0),
         kmh_to_mps(SCAN_KMH.1),
@@ -159,56 +192,55 @@ fn row_on<M: SimModel<N>, const N: usize>(
         }
     }
     windows.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let windows: Vec<(f64, Option<f64>)> = windows.iter().map(|w| (w.1, w.2)).collect();
-    let first_onset = windows.first().map(|w| w.0);
-    let limit_cycle = match (windows.first(), onset_freq_hz) {
-        (Some(&(on, off)), Some(f)) => {
-            // A quarter into the window (into the first half of the onset speed when it is open):
-            // far enough from the onset for the cycle to settle within the run.
-            let end = off.unwrap_or((1.5 * on).min(SCAN_KMH.1));
-            let v_kmh = on + 0.25 * (end - on);
-            let duration_s = (120.0 / f).max(40.0);
-            let window_s = (10.0 / f).max(4.0);
-            let r = run_speed(
-                model,
-                DamperSetting::Off,
-                kmh_to_mps(v_kmh),
-                LC_START_DEG.to_radians(),
-                duration_s,
-                window_s,
-            )
-            .with_context(|| format!("limit-cycle run at {v_kmh:.1} km/h"))?;
-            let amp = (r.trend != Trend::Decaying).then(|| r.amp_end_rad.to_degrees());
-            Some((v_kmh, amp))
-        }
-        _ => None,
-    };
-    let lead = match first_onset {
-        Some(on) => {
-            let mut sc = MarginScenario::ramp(
-                *model,
-                RAMP_FROM_FRACTION * on,
-                on + RAMP_PAST_ONSET_KMH,
-                a.rate_kmh_per_s,
-                SETTLE_S,
-            );
-            sc.seed = a.seed;
-            run(&sc, parts.pipeline_params(), 0)
-                .context("margin run")?
-                .lead()
-        }
-        None => None,
-    };
     Ok(VehicleRow {
         vehicle: name.to_string(),
-        model: M::Linear::NAME,
-        dof: M::Linear::DOF,
+        model: M::NAME,
+        dof: M::DOF,
         states: N,
-        windows,
+        windows: windows.iter().map(|w| (w.1, w.2)).collect(),
         onset_freq_hz,
-        limit_cycle,
-        lead,
+        limit_cycle: None,
+        lead: None,
     })
+}
+
+/// The whole row of a model of the family: the linear part, the nonlinear plant's cycle, the
+/// estimator's lead on a ramp through the onset.
+fn row_on<M: SimModel<N>, const N: usize>(
+    name: &str,
+    model: &M,
+    parts: &Vehicle,
+    a: &VehiclesArgs,
+) -> Result<VehicleRow> {
+    let mut r = linear_row(name, &model.linear())?;
+    if let Some((v_kmh, f)) = r.limit_cycle_speed() {
+        let (duration_s, window_s) = cycle_run(f);
+        let run = run_speed(
+            model,
+            DamperSetting::Off,
+            kmh_to_mps(v_kmh),
+            LC_START_DEG.to_radians(),
+            duration_s,
+            window_s,
+        )
+        .with_context(|| format!("limit-cycle run at {v_kmh:.1} km/h"))?;
+        let amp = (run.trend != Trend::Decaying).then(|| run.amp_end_rad.to_degrees());
+        r.limit_cycle = Some((v_kmh, amp));
+    }
+    if let Some(&(on, _)) = r.windows.first() {
+        let mut sc = MarginScenario::ramp(
+            *model,
+            RAMP_FROM_FRACTION * on,
+            on + RAMP_PAST_ONSET_KMH,
+            a.rate_kmh_per_s,
+            SETTLE_S,
+        );
+        sc.seed = a.seed;
+        r.lead = run(&sc, parts.pipeline_params(), 0)
+            .context("margin run")?
+            .lead();
+    }
+    Ok(r)
 }
 
 /// CSV of `header` and `rows` (cells with a comma or a quote quoted, backticks dropped).

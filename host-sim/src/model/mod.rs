@@ -12,4 +12,5 @@ pub mod faults;
 pub mod integrator;
 pub mod plant;
 pub mod sensors;
+pub mod trailer_plant;
 pub mod truck_plant;

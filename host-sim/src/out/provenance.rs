@@ -116,14 +116,18 @@ impl Provenance {
         Ok(self)
     }
 
-    /// [`Self::vehicle`] for a vehicle of any model: a truck's record is the SHA-256 of its
-    /// parameters (model and shared sections) as the simulator holds them.
+    /// [`Self::vehicle`] for a vehicle of any model: another model's record is the SHA-256 of
+    /// its parameters (model and shared sections) as the simulator holds them.
     pub fn model_vehicle(mut self, role: &str, spec: &str, v: &ModelVehicle) -> Result<Self> {
-        let t = match v {
+        // A model's record: whether `spec` is one of its sets, and its parameters as held.
+        let (named, record) = match v {
             ModelVehicle::Car(car) => return self.vehicle(role, spec, car),
-            ModelVehicle::Truck(t) => t,
+            ModelVehicle::Truck(t) => (TruckSet::from_name(spec).is_some(), format!("{t:?}")),
+            ModelVehicle::Trailer(t) => (
+                shimmy_core::trailer::TrailerSet::from_name(spec).is_some(),
+                format!("{t:?}"),
+            ),
         };
-        let named = TruckSet::from_name(spec).is_some();
         if !named {
             self = self.file(&format!("{role} file"), Path::new(spec))?;
         }
@@ -134,7 +138,7 @@ impl Provenance {
             } else {
                 format!("resolved from {spec}")
             },
-            sha256: sha256_hex(format!("{t:?}").as_bytes()),
+            sha256: sha256_hex(record.as_bytes()),
         });
         Ok(self)
     }

@@ -20,5 +20,6 @@ pub mod scenario;
 pub mod scenario_file;
 pub mod sim_device;
 pub mod standard;
+pub mod trailer_study;
 pub mod truck_study;
 pub mod vehicle_file;

@@ -322,6 +322,11 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVe
                 .map_err(|e| anyhow::anyhow!("truck: {e}"))
                 .with_context(|| format!("field `{key}.overrides`"))?;
         }
+        ModelVehicle::Trailer(_) => {
+            return Err(
+                vehicle_file::not_on_trailer("run").context(format!("field `{key}.vehicle`"))
+            )
+        }
     }
     Ok(v)
 }
@@ -355,7 +360,7 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
             let m = match m {
                 None => None,
                 Some(ModelVehicle::Truck(m)) => Some(m),
-                Some(ModelVehicle::Car(_)) => bail!(
+                Some(ModelVehicle::Car(_) | ModelVehicle::Trailer(_)) => bail!(
                     "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
                      of the plant's model",
                     PlantParams::NAME,
@@ -370,6 +375,9 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
                 );
             }
             build(&f, p, m, default_name, duration_s).map(AnyScenario::Truck)
+        }
+        (ModelVehicle::Trailer(_), _) | (_, Some(ModelVehicle::Trailer(_))) => {
+            Err(vehicle_file::not_on_trailer("run"))
         }
         (ModelVehicle::Car(_), Some(ModelVehicle::Truck(_))) => bail!(
             "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is of the \

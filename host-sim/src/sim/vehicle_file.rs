@@ -19,7 +19,9 @@
 //! valid). A `model = "mining-truck-5dof"` file (`docs/mining-truck.md`) has `base` =
 //! `truck-empty` or `truck-full` (default `truck-full`) and one section, `[truck]`, with the
 //! fields of `shimmy_core::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
-//! work wherever a vehicle is asked for by [`load_model`].
+//! work wherever a vehicle is asked for by [`load_model`]. A `model = "trailer-2dof"` file
+//! (`docs/trailer.md`) has `base = "trailer"` (the default) and one section, `[trailer]`, with the
+//! fields of `shimmy_core::trailer::TRAILER_FIELDS`; the named set `trailer` works there too.
 //!
 //! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
 //! sections they leave out take their defaults. Every value goes through the core's one
@@ -30,6 +32,7 @@ use crate::model::family::{truck_parts, FamilyVehicle, SimModel};
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
+use shimmy_core::trailer::{TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS};
 use shimmy_core::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
 use std::path::{Path, PathBuf};
@@ -44,14 +47,17 @@ pub enum ModelVehicle {
     /// The mining dump truck (`mining-truck-5dof`): its model's parameters, damper, sensors,
     /// gains and thresholds.
     Truck(FamilyVehicle<TruckParams>),
+    /// The trailer on a compliant hitch (`trailer-2dof`): its linear model's parameters.
+    Trailer(TrailerParams),
 }
 
 impl ModelVehicle {
-    /// The model's name (`car-4dof`, `mining-truck-5dof`).
+    /// The model's name (`car-4dof`, `mining-truck-5dof`, `trailer-2dof`).
     pub fn model_name(&self) -> &'static str {
         match self {
             ModelVehicle::Car(_) => PlantParams::NAME,
             ModelVehicle::Truck(_) => TruckParams::NAME,
+            ModelVehicle::Trailer(_) => TrailerParams::NAME,
         }
     }
 }
@@ -74,10 +80,10 @@ impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TruckParams>> {
         match load_model_relative(spec, dir)? {
             ModelVehicle::Truck(t) => Ok(t),
-            ModelVehicle::Car(_) => bail!(
+            other => bail!(
                 "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
                  the believed vehicle are of one model)",
-                PlantParams::NAME,
+                other.model_name(),
                 TruckParams::NAME
             ),
         }
@@ -85,7 +91,7 @@ impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
 }
 
 /// The model names a vehicle file's `model` key takes.
-pub const MODEL_NAMES: [&str; 2] = [PlantParams::NAME, TruckParams::NAME];
+pub const MODEL_NAMES: [&str; 3] = [PlantParams::NAME, TruckParams::NAME, TrailerParams::NAME];
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
@@ -101,6 +107,9 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
             parts: truck_parts()?,
         }));
     }
+    if let Some(set) = TrailerSet::from_name(spec) {
+        return Ok(ModelVehicle::Trailer(set.params()));
+    }
     if ParamSet::from_name(spec).is_some() {
         return load(spec).map(ModelVehicle::Car);
     }
@@ -112,10 +121,11 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     let path = path.as_path();
     if !path.is_file() {
         bail!(
-            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {})",
+            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {})",
             path.display(),
             set_names(),
-            truck_set_names()
+            truck_set_names(),
+            trailer_set_names()
         );
     }
     let text = std::fs::read_to_string(path)
@@ -128,6 +138,7 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
+        m if m == TrailerParams::NAME => parse_trailer(&table).map(ModelVehicle::Trailer),
         _ => parse(text).map(ModelVehicle::Car),
     }
 }
@@ -206,6 +217,69 @@ fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
     Ok(FamilyVehicle { model: t, parts })
 }
 
+/// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
+fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
+    let base = match table.get("base") {
+        None => TrailerSet::Caravan.name(),
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = TrailerSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}` for model {}, allowed: {}",
+            TrailerParams::NAME,
+            trailer_set_names()
+        );
+    };
+    let mut t = set.params();
+    for (key, value) in table {
+        match key.as_str() {
+            "model" | "base" => continue,
+            "trailer" => {}
+            _ => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, trailer",
+                TrailerParams::NAME
+            ),
+        }
+        for (name, x) in section_numbers(key, value)? {
+            match t.set(name, x) {
+                Ok(()) => {}
+                Err(TrailerFieldError::Unknown) => bail!(
+                    "field `trailer.{name}`: no such field, allowed: {}",
+                    TRAILER_FIELDS
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Err(e) => bail!(
+                    "{}",
+                    e.to_string().replacen("field `", "field `trailer.", 1)
+                ),
+            }
+        }
+    }
+    t.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "{}",
+            e.to_string().replacen("field `", "field `trailer.", 1)
+        )
+    })?;
+    Ok(t)
+}
+
+/// The trailer's named sets, for messages.
+pub fn trailer_set_names() -> String {
+    TrailerSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The entries of section `key` as numbers (integers read as f64), or an error naming the
 /// section or the entry that is not a number.
 fn section_numbers<'a>(key: &str, value: &'a toml::Value) -> Result<Vec<(&'a str, f64)>> {
@@ -252,7 +326,16 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
         return Ok(Vehicle::from_set(set));
     }
     if TruckSet::from_name(spec).is_some() {
-        bail!("{}", car_only(&format!("vehicle `{spec}`")));
+        bail!(
+            "{}",
+            car_only(&format!("vehicle `{spec}`"), TruckParams::NAME)
+        );
+    }
+    if TrailerSet::from_name(spec).is_some() {
+        bail!(
+            "{}",
+            car_only(&format!("vehicle `{spec}`"), TrailerParams::NAME)
+        );
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
         PathBuf::from(spec)
@@ -276,7 +359,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     let mut table: toml::Table = toml::from_str(text)?;
     let model = model_of(&table)?;
     if model != PlantParams::NAME {
-        bail!("{}", car_only("this vehicle file"));
+        bail!("{}", car_only("this vehicle file", model));
     }
     table.remove("model");
     if table.is_empty() {
@@ -331,12 +414,31 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
      sweep (eigenvalue maps), margin, faults and run";
 
+/// The commands that run a trailer vehicle, for messages.
+pub const TRAILER_COMMANDS: &str = "params, stability, sensitivity and sway-damping";
+
+/// The error of a command that runs on every model of the family but the trailer, which does not
+/// have a nonlinear plant with the MR damper yet (`docs/trailer.md`).
+pub fn not_on_trailer(command: &str) -> anyhow::Error {
+    let others: Vec<&str> = MODEL_NAMES
+        .iter()
+        .copied()
+        .filter(|m| *m != TrailerParams::NAME)
+        .collect();
+    anyhow::anyhow!(
+        "`{command}` runs the {} models, not the {} yet (the trailer runs through \
+         {TRAILER_COMMANDS})",
+        others.join(", "),
+        TrailerParams::NAME
+    )
+}
+
 /// The message of a car-only command given another model.
-fn car_only(what: &str) -> String {
+fn car_only(what: &str, model: &str) -> String {
     format!(
-        "{what} is a {} model; this command runs the {} only so far (the truck runs \
-         through {TRUCK_COMMANDS})",
-        TruckParams::NAME,
+        "{what} is a {model} model; this command runs the {} only so far (the truck runs \
+         through {TRUCK_COMMANDS}; the trailer through `stability`, `sensitivity` and \
+         `sway-damping`)",
         PlantParams::NAME
     )
 }
@@ -444,7 +546,7 @@ mod tests {
     fn the_model_key_selects_the_vehicle_model() {
         let car = |text: &str| match parse_model(text).unwrap() {
             ModelVehicle::Car(v) => v,
-            ModelVehicle::Truck(_) => panic!("a car file read as a truck"),
+            _ => panic!("a car file read as another model"),
         };
         assert_eq!(
             car("base = \"hard\"\n"),
@@ -493,6 +595,41 @@ mod tests {
         assert!(matches!(
             load_model("nominal").unwrap(),
             ModelVehicle::Car(_)
+        ));
+    }
+
+    /// A trailer file sets `[trailer]` fields by name over the `trailer` set; bad sections,
+    /// fields, values and a tail-heavy centre of gravity are rejected naming them.
+    #[test]
+    fn a_trailer_file_reads_its_section() {
+        let ModelVehicle::Trailer(t) =
+            parse_model("model = \"trailer-2dof\"\n[trailer]\nk_y = 7000\nsigma = 0.5\n").unwrap()
+        else {
+            panic!("a trailer file read as another model")
+        };
+        let mut want = TrailerSet::Caravan.params();
+        want.k_y = 7000.0;
+        want.sigma = 0.5;
+        assert_eq!(t, want);
+        let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
+        let e = err("model = \"trailer-2dof\"\n[trailer]\nk_y = -1.0\n");
+        assert!(
+            e.contains("field `trailer.k_y`") && e.contains("100000000"),
+            "{e}"
+        );
+        let e = err("model = \"trailer-2dof\"\n[trailer]\nky = 1.0\n");
+        assert!(e.contains("field `trailer.ky`: no such field"), "{e}");
+        let e = err("model = \"trailer-2dof\"\n[truck]\nk_y = 1.0\n");
+        assert!(e.contains("field `truck`: no such section"), "{e}");
+        let e = err("model = \"trailer-2dof\"\nbase = \"truck-full\"\n");
+        assert!(e.contains("field `base`") && e.contains("trailer"), "{e}");
+        let e = err("model = \"trailer-2dof\"\n[trailer]\na = 7.0\n");
+        assert!(e.contains("field `trailer.a`") && e.contains("6.45"), "{e}");
+        let e = format!("{:#}", load("trailer").unwrap_err());
+        assert!(e.contains("trailer-2dof") && e.contains("car-4dof"), "{e}");
+        assert!(matches!(
+            load_model("trailer").unwrap(),
+            ModelVehicle::Trailer(_)
         ));
     }
 

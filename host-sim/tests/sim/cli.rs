@@ -183,6 +183,22 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--vehicle `nominal`", "mining-truck-5dof"],
         ),
         (
+            &["sway-damping", "--zeta", "0.9"],
+            &["--zeta", "0.001 <= value <= 0.5"],
+        ),
+        (
+            &["sway-damping", "--v-min-kmh", "150", "--v-max-kmh", "100"],
+            &["--v-min-kmh 150", "--v-max-kmh 100"],
+        ),
+        (
+            &["sway-damping", "--vehicle", "nominal"],
+            &["--vehicle `nominal`", "trailer-2dof"],
+        ),
+        (
+            &["bifurcation", "--vehicle", "trailer"],
+            &["trailer", "trailer-2dof", "car-4dof"],
+        ),
+        (
             // the truck's damper has the car's coil: rated 2 A
             &[
                 "stability",

@@ -49,6 +49,7 @@ pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => compute_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => compute_on(a, &t.model, &t.parts),
+        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("sweep")),
     }
 }
 
