@@ -26,7 +26,8 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
-use crate::model::family::{truck_parts, FamilyVehicle, SimModel};
+use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::members::truck_parts;
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
