@@ -10,6 +10,7 @@ pub mod disturbance;
 pub mod family;
 pub mod faults;
 pub mod integrator;
+pub mod members;
 pub mod plant;
 pub mod sensors;
 pub mod trailer_plant;

@@ -1038,7 +1038,7 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
         assert!(msg.contains("field `model.vehicle`"), "{msg}");
         // overrides of a truck plant are its [truck] fields by name
         let AnyScenario::Truck(s) = parse_any_in(
-            &format!("{truck}").replace(
+            &truck.replace(
                 "\"truck-full\"",
                 "\"truck-full\"\noverrides = { hps_v0_m3 = 0.02 }",
             ),

@@ -28,7 +28,8 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
-use crate::model::family::{truck_parts, FamilyVehicle, SimModel};
+use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::members::truck_parts;
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
@@ -412,7 +413,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 
 /// The commands that run a truck vehicle, for messages.
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
-     sweep (eigenvalue maps), margin, faults and run";
+     sweep, margin, faults and run";
 
 /// The commands that run a trailer vehicle, for messages.
 pub const TRAILER_COMMANDS: &str = "params, stability, sensitivity and sway-damping";

@@ -456,7 +456,11 @@ fn a_truck_on_a_car_only_command_is_rejected_naming_the_models() {
     for cmd in ["compare", "report", "mismatch", "meter-accuracy"] {
         rejected(
             &[cmd, "--vehicle", "truck-full"],
-            &["mining-truck-5dof", "car-4dof", "margin, faults and run"],
+            &[
+                "mining-truck-5dof",
+                "car-4dof",
+                "sweep, margin, faults and run",
+            ],
         );
     }
     let dir = temp_dir();
