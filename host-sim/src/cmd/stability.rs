@@ -19,7 +19,7 @@ use crate::sim::vehicle_file;
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
     /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// truck-full; the dual-axle truck's dual-axle) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
     /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
@@ -89,6 +89,16 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
             );
             println!("stability of straight running: vehicle `{}`", args.vehicle);
             println!("damper: none (F_d = 0)");
+            return report(&t, 0.0, args);
+        }
+        vehicle_file::ModelVehicle::DualAxle(t) => {
+            anyhow::ensure!(
+                args.damper_current_a.is_none(),
+                "--damper-current-a: the {} model has no MR damper configured; leave it out",
+                shimmy_core::dual_axle::DualAxleParams::NAME
+            );
+            println!("stability of straight running: vehicle `{}`", args.vehicle);
+            println!("damper: none (F_d = 0); kingpin friction: not in the linear model");
             return report(&t, 0.0, args);
         }
     };

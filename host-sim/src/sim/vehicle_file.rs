@@ -21,12 +21,18 @@
 //! fields of `shimmy_core::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
 //! work wherever a vehicle is asked for by [`load_model`].
 //!
+//! A `model = "dual-axle-truck-8dof"` file (`docs/dual-axle-truck.md`) has `base = "dual-axle"`
+//! (the default) and one section, `[dual_axle]`, with the fields of
+//! `shimmy_core::dual_axle::DUAL_AXLE_FIELDS`; the named set `dual-axle` works wherever
+//! [`load_model`] asks for a vehicle.
+//!
 //! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
 //! sections they leave out take their defaults. Every value goes through the core's one
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
 use anyhow::{bail, Context, Result};
+use shimmy_core::dual_axle::{DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
 use shimmy_core::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
@@ -42,15 +48,20 @@ pub enum ModelVehicle {
     Car(Vehicle),
     /// The mining dump truck (`mining-truck-5dof`): its linear model's parameters.
     Truck(TruckParams),
+    /// The dual-front-axle heavy truck (`dual-axle-truck-8dof`): its model's parameters.
+    DualAxle(DualAxleParams),
 }
 
 /// The model names a vehicle file's `model` key takes.
-pub const MODEL_NAMES: [&str; 2] = [PlantParams::NAME, TruckParams::NAME];
+pub const MODEL_NAMES: [&str; 3] = [PlantParams::NAME, TruckParams::NAME, DualAxleParams::NAME];
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
     if let Some(set) = TruckSet::from_name(spec) {
         return Ok(ModelVehicle::Truck(set.params()));
+    }
+    if let Some(set) = DualAxleSet::from_name(spec) {
+        return Ok(ModelVehicle::DualAxle(set.params()));
     }
     if ParamSet::from_name(spec).is_some() {
         return load(spec).map(ModelVehicle::Car);
@@ -58,10 +69,11 @@ pub fn load_model(spec: &str) -> Result<ModelVehicle> {
     let path = Path::new(spec);
     if !path.is_file() {
         bail!(
-            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {})",
+            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {})",
             path.display(),
             set_names(),
-            truck_set_names()
+            truck_set_names(),
+            dual_axle_set_names()
         );
     }
     let text = std::fs::read_to_string(path)
@@ -74,6 +86,7 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
+        m if m == DualAxleParams::NAME => parse_dual_axle(&table).map(ModelVehicle::DualAxle),
         _ => parse(text).map(ModelVehicle::Car),
     }
 }
@@ -141,6 +154,65 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
     Ok(t)
 }
 
+/// A `dual-axle-truck-8dof` file: `base` (a dual-axle set) and the `[dual_axle]` section.
+fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
+    let base = match table.get("base") {
+        None => DualAxleSet::Rated.name(),
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = DualAxleSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}` for model {}, allowed: {}",
+            DualAxleParams::NAME,
+            dual_axle_set_names()
+        );
+    };
+    let mut t = set.params();
+    for (key, value) in table {
+        match key.as_str() {
+            "model" | "base" => continue,
+            "dual_axle" => {}
+            _ => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, dual_axle",
+                DualAxleParams::NAME
+            ),
+        }
+        for (name, x) in section_numbers(key, value)? {
+            match t.set(name, x) {
+                Ok(()) => {}
+                Err(DualAxleFieldError::Unknown) => bail!(
+                    "field `dual_axle.{name}`: no such field, allowed: {}",
+                    DUAL_AXLE_FIELDS
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Err(e) => bail!(
+                    "{}",
+                    e.to_string().replacen("field `", "field `dual_axle.", 1)
+                ),
+            }
+        }
+    }
+    t.validate()
+        .map_err(|e| anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle.")))?;
+    Ok(t)
+}
+
+/// The dual-axle truck's named sets, for messages.
+pub fn dual_axle_set_names() -> String {
+    DualAxleSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The entries of section `key` as numbers (integers read as f64), or an error naming the
 /// section or the entry that is not a number.
 fn section_numbers<'a>(key: &str, value: &'a toml::Value) -> Result<Vec<(&'a str, f64)>> {
@@ -186,7 +258,7 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
     if let Some(set) = ParamSet::from_name(spec) {
         return Ok(Vehicle::from_set(set));
     }
-    if TruckSet::from_name(spec).is_some() {
+    if TruckSet::from_name(spec).is_some() || DualAxleSet::from_name(spec).is_some() {
         bail!("{}", car_only(&format!("vehicle `{spec}`")));
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
@@ -265,9 +337,11 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 /// The message of a car-only command given another model.
 fn car_only(what: &str) -> String {
     format!(
-        "{what} is a {} model; this command needs the {} (the truck runs through \
-         `stability`, `sensitivity` and `gas-charge`)",
+        "{what} is a {} or {} model; this command needs the {} (the mining truck runs \
+         through `stability`, `sensitivity` and `gas-charge`, the dual-axle truck through \
+         `stability`, `sensitivity` and `bifurcation`)",
         TruckParams::NAME,
+        DualAxleParams::NAME,
         PlantParams::NAME
     )
 }
@@ -375,7 +449,7 @@ mod tests {
     fn the_model_key_selects_the_vehicle_model() {
         let car = |text: &str| match parse_model(text).unwrap() {
             ModelVehicle::Car(v) => v,
-            ModelVehicle::Truck(_) => panic!("a car file read as a truck"),
+            _ => panic!("a car file read as a truck"),
         };
         assert_eq!(
             car("base = \"hard\"\n"),
@@ -425,6 +499,39 @@ mod tests {
             load_model("nominal").unwrap(),
             ModelVehicle::Car(_)
         ));
+    }
+
+    /// A dual-axle file sets `[dual_axle]` fields by name on its base; bad sections, fields,
+    /// values and axle order are rejected naming them.
+    #[test]
+    fn a_dual_axle_file_reads_its_section() {
+        let ModelVehicle::DualAxle(t) = parse_model(
+            "model = \"dual-axle-truck-8dof\"\nbase = \"dual-axle\"\n[dual_axle]\nk_t = 2.0e5\nm_f = 80\n",
+        )
+        .unwrap() else {
+            panic!("a dual-axle file read as another model")
+        };
+        let mut want = DualAxleSet::Rated.params();
+        want.k_t = 2.0e5;
+        want.m_f = 80.0;
+        assert_eq!(t, want);
+        let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
+        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_t = -1.0\n");
+        assert!(e.contains("field `dual_axle.k_t`") && e.contains("1000"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_tt = 5.0\n");
+        assert!(e.contains("field `dual_axle.k_tt`: no such field"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\n[truck]\nk_d = 5.0\n");
+        assert!(e.contains("field `truck`: no such section"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\nbase = \"truck-full\"\n");
+        assert!(e.contains("field `base`") && e.contains("dual-axle"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\naxle_spacing = 4.9\nwheelbase = 4.0\n");
+        assert!(e.contains("field `dual_axle.axle_spacing`"), "{e}");
+        assert!(matches!(
+            load_model("dual-axle").unwrap(),
+            ModelVehicle::DualAxle(_)
+        ));
+        let e = format!("{:#}", load("dual-axle").unwrap_err());
+        assert!(e.contains("dual-axle-truck-8dof") && e.contains("car-4dof"), "{e}");
     }
 
     #[test]
