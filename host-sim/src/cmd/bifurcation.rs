@@ -427,7 +427,9 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
         eps_radps: a.friction_eps_radps,
     };
     let n = ((a.v_max_kmh - a.v_min_kmh) / a.step_kmh + 1e-9).floor() as usize + 1;
-    let speeds: Vec<f64> = (0..n).map(|k| a.v_min_kmh + k as f64 * a.step_kmh).collect();
+    let speeds: Vec<f64> = (0..n)
+        .map(|k| a.v_min_kmh + k as f64 * a.step_kmh)
+        .collect();
     let t0 = std::time::Instant::now();
     let rows = study::sweep(t, &runs, &speeds)?;
     println!(
@@ -469,7 +471,8 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
     let lin = study::linear_onset_kmh(t, lo, hi)?;
     let on_small = study::friction_onset_kmh(t, &runs, a.small_deg, lo, hi, 0.25)?;
     let on_large = study::friction_onset_kmh(t, &runs, a.large_deg, lo, hi, 0.25)?;
-    let text = |x: Option<f64>| x.map_or("none in the range".to_string(), |v| format!("{v:.2} km/h"));
+    let text =
+        |x: Option<f64>| x.map_or("none in the range".to_string(), |v| format!("{v:.2} km/h"));
     println!("linear (friction-free) Hopf onset: {}", text(lin));
     println!(
         "with friction: shimmy from the {} deg start from {}, from the {} deg start from {} \
@@ -488,6 +491,15 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
     }
     if let Some((l, h)) = grid(&|r| r.large.shimmies()) {
         println!("limit cycles with friction (large start) from {l} to {h} km/h (grid points)");
+    }
+    let v_ref = DUAL_AXLE_REF_KMH.clamp(lo, hi);
+    let threshold = study::threshold_start_deg(t, &runs, v_ref, a.small_deg, a.large_deg, 0.01)?;
+    if let Some(d) = threshold {
+        println!(
+            "at {v_ref} km/h with friction: starts below {d:.2} deg return to the straight run, \
+             larger ones end in the limit cycle (an unstable cycle of about this size separates \
+             the two; bisection to 0.01 deg)"
+        );
     }
     let csv = a.out.join("bifurcation.csv");
     let mut w = std::io::BufWriter::new(std::fs::File::create(&csv)?);
@@ -528,7 +540,7 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
         let mut f = std::io::BufWriter::new(std::fs::File::create(&path)?);
         writeln!(
             f,
-            "param,what,factor,linear_onset_kmh,friction_onset_kmh,amp_ref_deg,ref_kmh,agrees_with_paper"
+            "param,what,factor,linear_onset_kmh,friction_onset_kmh,amp_ref_deg,ref_kmh,agrees_linear_onset,agrees_friction_onset,agrees_amplitude"
         )?;
         for r in &dirs {
             let agrees = study::agrees_with_paper(&dirs, r.name);
@@ -539,23 +551,23 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
                 text(r.linear_onset_kmh),
                 text(r.friction_onset_kmh),
                 r.amp_ref_deg,
-                match agrees {
-                    Some(true) => "agrees with the paper",
-                    Some(false) => "DIFFERS from the paper",
-                    None => "",
-                }
+                agrees.map_or(String::new(), |g| g.text())
             );
             writeln!(
                 f,
-                "{},{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{},{},{}",
                 r.name,
                 r.what,
                 r.factor,
-                r.linear_onset_kmh.map_or(String::new(), |x| format!("{x:.4}")),
-                r.friction_onset_kmh.map_or(String::new(), |x| format!("{x:.4}")),
+                r.linear_onset_kmh
+                    .map_or(String::new(), |x| format!("{x:.4}")),
+                r.friction_onset_kmh
+                    .map_or(String::new(), |x| format!("{x:.4}")),
                 r.amp_ref_deg,
                 DUAL_AXLE_REF_KMH,
-                agrees.map_or(String::new(), |b| b.to_string())
+                agrees.map_or(String::new(), |g| g.linear_onset.to_string()),
+                agrees.map_or(String::new(), |g| g.friction_onset.to_string()),
+                agrees.map_or(String::new(), |g| g.amplitude.to_string())
             )?;
         }
         f.flush()?;
@@ -588,7 +600,10 @@ fn plot_dual(
         * 1.1;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("Dual-axle truck: wheel-yaw amplitude vs speed (`{}`)", a.vehicle),
+            format!(
+                "Dual-axle truck: wheel-yaw amplitude vs speed (`{}`)",
+                a.vehicle
+            ),
             ("sans-serif", 22),
         )
         .margin(15)
@@ -598,31 +613,58 @@ fn plot_dual(
     chart
         .configure_mesh()
         .x_desc("speed V [km/h]")
-        .y_desc(format!("peak |(psi_1L+psi_1R)/2| over last {} s [deg]", a.window_s))
+        .y_desc(format!(
+            "peak |(psi_1L+psi_1R)/2| over last {} s [deg]",
+            a.window_s
+        ))
         .draw()?;
     type Pick = fn(&crate::sim::dual_axle_study::DualBifurcationRow) -> f64;
     let series: [(String, RGBColor, Pick); 3] = [
-        (format!("no friction, start {} deg", a.small_deg), GREEN, |r| r.free.amp_end_rad),
-        (format!("friction, start {} deg", a.small_deg), BLUE, |r| r.small.amp_end_rad),
-        (format!("friction, start {} deg", a.large_deg), RED, |r| r.large.amp_end_rad),
+        (
+            format!("no friction, start {} deg", a.small_deg),
+            GREEN,
+            |r| r.free.amp_end_rad,
+        ),
+        (format!("friction, start {} deg", a.small_deg), BLUE, |r| {
+            r.small.amp_end_rad
+        }),
+        (format!("friction, start {} deg", a.large_deg), RED, |r| {
+            r.large.amp_end_rad
+        }),
     ];
     for (label, color, pick) in series {
-        let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.v_kmh, pick(r).to_degrees())).collect();
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| (r.v_kmh, pick(r).to_degrees()))
+            .collect();
         chart
             .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
             .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 3, color.filled())))?;
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart.draw_series(
+            pts.iter()
+                .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
+        )?;
     }
-    for (v, color, name) in [
-        (linear_onset_kmh, BLACK, "linear Hopf onset"),
-        (friction_onset_kmh, MAGENTA, "friction onset (large start)"),
+    for (v, color, name, y) in [
+        (linear_onset_kmh, BLACK, "linear Hopf onset", 0.95),
+        (
+            friction_onset_kmh,
+            MAGENTA,
+            "friction onset (large start)",
+            0.88,
+        ),
     ] {
         if let Some(v) = v {
-            chart.draw_series(LineSeries::new([(v, 0.0), (v, y_max)], color.stroke_width(1)))?;
+            chart.draw_series(LineSeries::new(
+                [(v, 0.0), (v, y_max)],
+                color.stroke_width(1),
+            ))?;
             chart.draw_series(std::iter::once(Text::new(
                 format!("{name} {v:.1} km/h"),
-                (v, 0.95 * y_max),
+                (v, y * y_max),
                 ("sans-serif", 14),
             )))?;
         }

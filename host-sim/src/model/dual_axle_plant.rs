@@ -61,7 +61,8 @@ impl DualAxleSim {
             eps_radps > 0.0 && eps_radps.is_finite(),
             "friction smoothing eps = {eps_radps} rad/s must be above 0"
         );
-        t.validate().map_err(|e| anyhow::anyhow!("dual-axle: {e}"))?;
+        t.validate()
+            .map_err(|e| anyhow::anyhow!("dual-axle: {e}"))?;
         let m_f = if friction { t.m_f } else { 0.0 };
         let fastest = eigenvalues(&t.linearise(v_max_mps, 0.0))
             .map_err(|e| anyhow::anyhow!("eigenvalues at {v_max_mps} m/s: {e:?}"))?
@@ -127,9 +128,8 @@ impl DualAxleSim {
     /// 1R, 2L, 2R; road disturbances) held over it.
     pub fn sample(&mut self, v_mps: f64, tq_nm: [f64; 4]) {
         let h = SAMPLE_S / self.substeps as f64;
-        let mut f = |_t: f64, y: &[f64; N_STATES], dy: &mut [f64; N_STATES]| {
-            self.rhs(y, v_mps, &tq_nm, dy)
-        };
+        let mut f =
+            |_t: f64, y: &[f64; N_STATES], dy: &mut [f64; N_STATES]| self.rhs(y, v_mps, &tq_nm, dy);
         let mut x = self.x;
         for _ in 0..self.substeps {
             rk4_step(&mut f, self.time_s, &mut x, h);
@@ -271,7 +271,12 @@ mod tests {
         assert_eq!(off.friction_nm(1.0), 0.0);
         // the step follows the friction's slope: halving eps doubles the substeps
         let fine = DualAxleSim::new(&t, [0.0; N_STATES], true, 0.0025, 20.0).unwrap();
-        assert!(fine.substeps() >= 2 * sim.substeps(), "{} {}", fine.substeps(), sim.substeps());
+        assert!(
+            fine.substeps() >= 2 * sim.substeps(),
+            "{} {}",
+            fine.substeps(),
+            sim.substeps()
+        );
     }
 
     fn onset_mps(t: &DualAxleParams) -> f64 {
@@ -299,7 +304,10 @@ mod tests {
                 mps_to_kmh(v)
             );
             assert_eq!(g > 0.0, dv_kmh > 0.0, "{dv_kmh} km/h: growth {g}");
-            assert!((g - re).abs() < 0.05 * re.abs() + 5e-3, "envelope {g} vs eigenvalue {re}");
+            assert!(
+                (g - re).abs() < 0.05 * re.abs() + 5e-3,
+                "envelope {g} vs eigenvalue {re}"
+            );
         }
     }
 
@@ -326,7 +334,9 @@ mod tests {
         assert!(ruled >= 5, "{ruled}");
         let (_, fine) = run(Some(2 * ruled));
         let (_, coarse) = run(Some(1));
-        let dist = |a: &[f64; N_STATES]| (a[PSI_1L] - fine[PSI_1L]).abs() + (a[PSI_1R] - fine[PSI_1R]).abs();
+        let dist = |a: &[f64; N_STATES]| {
+            (a[PSI_1L] - fine[PSI_1L]).abs() + (a[PSI_1R] - fine[PSI_1R]).abs()
+        };
         println!(
             "{ruled} substeps: |psi - psi(2x substeps)| = {:e} rad; one step per ms: {:e} rad",
             dist(&x),

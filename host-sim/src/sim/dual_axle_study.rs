@@ -34,7 +34,13 @@ pub struct CycleRuns {
 }
 
 impl CycleRuns {
-    fn run(&self, t: &DualAxleParams, v_kmh: f64, deg: f64, friction: bool) -> Result<CycleSummary> {
+    fn run(
+        &self,
+        t: &DualAxleParams,
+        v_kmh: f64,
+        deg: f64,
+        friction: bool,
+    ) -> Result<CycleSummary> {
         run_cycle(
             t,
             kmh_to_mps(v_kmh),
@@ -64,9 +70,19 @@ pub struct DualBifurcationRow {
 }
 
 /// The grid's runs, in parallel (three per speed).
-pub fn sweep(t: &DualAxleParams, runs: &CycleRuns, speeds_kmh: &[f64]) -> Result<Vec<DualBifurcationRow>> {
+pub fn sweep(
+    t: &DualAxleParams,
+    runs: &CycleRuns,
+    speeds_kmh: &[f64],
+) -> Result<Vec<DualBifurcationRow>> {
     let jobs: Vec<(usize, f64, bool)> = (0..speeds_kmh.len())
-        .flat_map(|i| [(i, runs.small_deg, false), (i, runs.small_deg, true), (i, runs.large_deg, true)])
+        .flat_map(|i| {
+            [
+                (i, runs.small_deg, false),
+                (i, runs.small_deg, true),
+                (i, runs.large_deg, true),
+            ]
+        })
         .collect();
     let out: Vec<CycleSummary> = jobs
         .par_iter()
@@ -192,17 +208,28 @@ pub fn directions(
                 what,
                 factor,
                 linear_onset_kmh: linear_onset_kmh(&u, 1.0, 250.0)?,
-                friction_onset_kmh: friction_onset_kmh(&u, runs, runs.large_deg, lo_kmh, hi_kmh, 0.25)?,
-                amp_ref_deg: runs.run(&u, v_ref_kmh, runs.large_deg, true)?.amp_end_rad.to_degrees(),
+                friction_onset_kmh: friction_onset_kmh(
+                    &u,
+                    runs,
+                    runs.large_deg,
+                    lo_kmh,
+                    hi_kmh,
+                    0.25,
+                )?,
+                amp_ref_deg: runs
+                    .run(&u, v_ref_kmh, runs.large_deg, true)?
+                    .amp_end_rad
+                    .to_degrees(),
             })
         })
         .collect()
 }
 
-/// Whether the -/+ pair of `name` moves as the paper says: the direction that reduces shimmy
-/// raises both onsets (absent = above the range, counted highest) and does not grow the
-/// reference amplitude. `None` when the rows are missing.
-pub fn agrees_with_paper(rows: &[DirectionRow], name: &str) -> Option<bool> {
+/// Whether the -/+ pair of `name` moves as the paper says, measure by measure: the direction
+/// that should reduce shimmy raises the linear onset, raises the friction onset (absent =
+/// above the range, counted highest) and does not grow the reference amplitude. `None` when
+/// the rows are missing.
+pub fn agrees_with_paper(rows: &[DirectionRow], name: &str) -> Option<Agreement> {
     let sign = PAPER_DIRECTIONS.iter().find(|d| d.0 == name)?.2;
     let lo = rows.iter().find(|r| r.name == name && r.factor < 1.0)?;
     let hi = rows.iter().find(|r| r.name == name && r.factor > 1.0)?;
@@ -212,7 +239,63 @@ pub fn agrees_with_paper(rows: &[DirectionRow], name: &str) -> Option<bool> {
     let lin_ok = key(more.linear_onset_kmh) >= key(less.linear_onset_kmh);
     let fr_ok = key(more.friction_onset_kmh) >= key(less.friction_onset_kmh);
     let amp_ok = more.amp_ref_deg <= less.amp_ref_deg + 1e-9;
-    Some(lin_ok && fr_ok && amp_ok)
+    Some(Agreement {
+        linear_onset: lin_ok,
+        friction_onset: fr_ok,
+        amplitude: amp_ok,
+    })
+}
+
+/// The paper's direction, measure by measure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Agreement {
+    /// The linear onset moves as the paper's direction says (equal counts: no effect).
+    pub linear_onset: bool,
+    /// The friction onset (large start) does.
+    pub friction_onset: bool,
+    /// The limit-cycle amplitude at the reference speed does.
+    pub amplitude: bool,
+}
+
+impl Agreement {
+    /// `onset yes, friction onset yes, amplitude NO` style text.
+    pub fn text(&self) -> String {
+        let w = |b: bool| if b { "agrees" } else { "DIFFERS" };
+        format!(
+            "linear onset {}, friction onset {}, amplitude {}",
+            w(self.linear_onset),
+            w(self.friction_onset),
+            w(self.amplitude)
+        )
+    }
+}
+
+/// The smallest in-phase start (deg, bisection to `tol_deg` between `lo_deg` and `hi_deg`)
+/// that ends in shimmy at `v_kmh` with friction on: the size of the unstable limit cycle that
+/// separates the straight run's basin from the stable cycle's. `None` unless `lo_deg` decays
+/// and `hi_deg` shimmies.
+pub fn threshold_start_deg(
+    t: &DualAxleParams,
+    runs: &CycleRuns,
+    v_kmh: f64,
+    lo_deg: f64,
+    hi_deg: f64,
+    tol_deg: f64,
+) -> Result<Option<f64>> {
+    if runs.run(t, v_kmh, lo_deg, true)?.shimmies() || !runs.run(t, v_kmh, hi_deg, true)?.shimmies()
+    {
+        return Ok(None);
+    }
+    let (mut lo, mut hi) = (lo_deg, hi_deg);
+    while hi - lo > tol_deg {
+        let mid = 0.5 * (lo + hi);
+        if runs.run(t, v_kmh, mid, true)?.shimmies() {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Ok(Some(0.5 * (lo + hi)))
 }
 
 #[cfg(test)]
@@ -230,7 +313,6 @@ mod tests {
     /// less than 1 km/h.
     #[test]
     fn halving_the_friction_smoothing_leaves_cycle_and_onset() {
-        
         let t = DualAxleSet::Rated.params();
         let runs = |eps: f64| CycleRuns {
             small_deg: 0.05,
@@ -240,8 +322,16 @@ mod tests {
             eps_radps: eps,
         };
         let amp = |eps: f64| {
-            run_cycle(&t, kmh_to_mps(90.0), 3.0_f64.to_radians(), true, eps, 20.0, 2.0)
-                .unwrap()
+            run_cycle(
+                &t,
+                kmh_to_mps(90.0),
+                3.0_f64.to_radians(),
+                true,
+                eps,
+                20.0,
+                2.0,
+            )
+            .unwrap()
         };
         let (a1, a2) = (amp(0.01), amp(0.005));
         assert!(a1.shimmies() && a2.shimmies(), "{a1:?} {a2:?}");

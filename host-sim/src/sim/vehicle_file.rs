@@ -199,8 +199,9 @@ fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
             }
         }
     }
-    t.validate()
-        .map_err(|e| anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle.")))?;
+    t.validate().map_err(|e| {
+        anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
+    })?;
     Ok(t)
 }
 
@@ -517,21 +518,29 @@ mod tests {
         assert_eq!(t, want);
         let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
         let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_t = -1.0\n");
-        assert!(e.contains("field `dual_axle.k_t`") && e.contains("1000"), "{e}");
+        assert!(
+            e.contains("field `dual_axle.k_t`") && e.contains("1000"),
+            "{e}"
+        );
         let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_tt = 5.0\n");
         assert!(e.contains("field `dual_axle.k_tt`: no such field"), "{e}");
         let e = err("model = \"dual-axle-truck-8dof\"\n[truck]\nk_d = 5.0\n");
         assert!(e.contains("field `truck`: no such section"), "{e}");
         let e = err("model = \"dual-axle-truck-8dof\"\nbase = \"truck-full\"\n");
         assert!(e.contains("field `base`") && e.contains("dual-axle"), "{e}");
-        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\naxle_spacing = 4.9\nwheelbase = 4.0\n");
+        let e = err(
+            "model = \"dual-axle-truck-8dof\"\n[dual_axle]\naxle_spacing = 4.9\nwheelbase = 4.0\n",
+        );
         assert!(e.contains("field `dual_axle.axle_spacing`"), "{e}");
         assert!(matches!(
             load_model("dual-axle").unwrap(),
             ModelVehicle::DualAxle(_)
         ));
         let e = format!("{:#}", load("dual-axle").unwrap_err());
-        assert!(e.contains("dual-axle-truck-8dof") && e.contains("car-4dof"), "{e}");
+        assert!(
+            e.contains("dual-axle-truck-8dof") && e.contains("car-4dof"),
+            "{e}"
+        );
     }
 
     #[test]
