@@ -502,7 +502,12 @@ impl LinearModel<N_STATES> for DualAxleParams {
         for w in PSI_1L..=PSI_2R {
             a[(N_DOF + w, N_DOF + w)] = -self.c_k * ik;
         }
-        for (i, j) in [(PSI_1L, PSI_1L), (PSI_1L, PSI_1R), (PSI_1R, PSI_1L), (PSI_1R, PSI_1R)] {
+        for (i, j) in [
+            (PSI_1L, PSI_1L),
+            (PSI_1L, PSI_1R),
+            (PSI_1R, PSI_1L),
+            (PSI_1R, PSI_1R),
+        ] {
             a[(N_DOF + i, N_DOF + j)] -= cd * ik;
         }
         a[(N_DOF + PHI_1, N_DOF + PHI_1)] = -op.c_phi * iphi;
@@ -578,7 +583,9 @@ impl LinearModel<N_STATES> for DualAxleParams {
         };
         let wheel2 = v[l].norm_sqr().max(v[r].norm_sqr());
         let disp2 = (0..N_DOF).map(|i| v[i].norm_sqr()).fold(0.0, f64::max);
-        let tyre2 = (A_1L..N_STATES).map(|i| v[i].norm_sqr()).fold(0.0, f64::max);
+        let tyre2 = (A_1L..N_STATES)
+            .map(|i| v[i].norm_sqr())
+            .fold(0.0, f64::max);
         let tyre_ratio = if disp2 > 0.0 {
             libm::sqrt(tyre2 / disp2)
         } else {

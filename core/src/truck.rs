@@ -413,8 +413,9 @@ impl TruckParams {
     }
 
     /// The operating point, or (struts topped or bottomed out) a zero roll spring from them:
-    /// [`LinearModel`] is infallible, so callers validate with [`Self::operating_point`] first.
-    fn point_or_tyres_only(&self) -> TruckOperatingPoint {
+    /// [`LinearModel`] is infallible, so callers validate with [`Self::operating_point`] first
+    /// (the simulator's nonlinear plant uses the same point).
+    pub fn point_or_tyres_only(&self) -> TruckOperatingPoint {
         self.operating_point().unwrap_or_else(|_| {
             let f_z = self.wheel_load_n();
             let half_track = 0.5 * self.track;

@@ -17,6 +17,7 @@ use super::meter::mode_meter::{
 };
 use super::model_margin::{ModelMargin, ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use super::monitor::{Level, Monitor, MonitorInput, MonitorParams};
+use crate::model::LinearModel;
 use crate::params::PlantParams;
 
 /// Every tunable of the pipeline in one place.
@@ -280,19 +281,31 @@ impl<const N: usize> DataPipeline<N> {
 }
 
 /// Mode meter + incremental model margin + fusion + monitor with an event log of `N` entries:
-/// a [`DataPipeline`] fed by a [`ModelMarginTracker`] stepped on every call.
+/// a [`DataPipeline`] fed by a [`ModelMarginTracker`] stepped on every call, on the vehicle
+/// model `M` with `S` states (the car's by default).
 #[derive(Clone, Debug)]
-pub struct ShimmyPipeline<const N: usize> {
+pub struct ShimmyPipeline<
+    const N: usize,
+    M: LinearModel<S> = PlantParams,
+    const S: usize = { crate::plant::N_STATES },
+> {
     params: PipelineParams,
     data: DataPipeline<N>,
-    model: ModelMarginTracker,
+    model: ModelMarginTracker<f64, M, S>,
     model_margin: Option<ModelMargin>,
     c_damper_nspm: f32,
 }
 
 impl<const N: usize> ShimmyPipeline<N> {
-    /// A pipeline for the plant `plant` (the model side linearises it).
+    /// A pipeline for the car's plant `plant` (the model side linearises it).
     pub fn new(plant: PlantParams, params: PipelineParams) -> Result<Self, ConfigError> {
+        Self::for_model(plant, params)
+    }
+}
+
+impl<const N: usize, M: LinearModel<S>, const S: usize> ShimmyPipeline<N, M, S> {
+    /// A pipeline whose model side tracks the vehicle model `plant`.
+    pub fn for_model(plant: M, params: PipelineParams) -> Result<Self, ConfigError> {
         Ok(Self {
             data: DataPipeline::new(&params)?,
             model: ModelMarginTracker::new(plant, params.model),
@@ -360,7 +373,7 @@ impl<const N: usize> ShimmyPipeline<N> {
     }
 
     /// The model-margin tracker.
-    pub fn model(&self) -> &ModelMarginTracker {
+    pub fn model(&self) -> &ModelMarginTracker<f64, M, S> {
         &self.model
     }
 

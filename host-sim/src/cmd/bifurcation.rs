@@ -3,9 +3,11 @@
 //! measure the settled oscillation amplitude (peak |psi_L| over the last window) and whether it
 //! still grows or decays; table, CSV and PNG.
 
+use crate::model::family::SimModel;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
 use crate::sim::reference::shimmy_mode_with_damper;
+use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -13,11 +15,14 @@ use shimmy_core::params::{kmh_to_mps, PlantParams};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Options of the `bifurcation` command.
+/// Options of the `bifurcation` command, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct BifurcationOptions {
+pub struct BifurcationOptions<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// Parameter set.
-    pub params: PlantParams,
+    pub params: M,
     /// Name of the parameter set (for titles).
     pub params_name: String,
     /// Damper setting.
@@ -56,7 +61,10 @@ pub struct BifurcationRow {
 }
 
 /// Runs the study in parallel over speeds (both starts per speed).
-pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRow>> {
+pub fn sweep<M: SimModel<N>, const N: usize>(
+    o: &BifurcationOptions<M, N>,
+    progress: bool,
+) -> Result<Vec<BifurcationRow>> {
     anyhow::ensure!(
         o.step_kmh > 0.0 && o.v_max_kmh >= o.v_min_kmh,
         "bad speed grid"
@@ -136,7 +144,7 @@ pub fn sweep(o: &BifurcationOptions, progress: bool) -> Result<Vec<BifurcationRo
 }
 
 /// The `bifurcation` command: sweep, table, CSV, PNG.
-pub fn run(o: &BifurcationOptions) -> Result<()> {
+pub fn run<M: SimModel<N>, const N: usize>(o: &BifurcationOptions<M, N>) -> Result<()> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let t0 = std::time::Instant::now();
     let rows = sweep(o, true)?;
@@ -230,7 +238,12 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
     Ok(())
 }
 
-fn plot(path: &Path, rows: &[BifurcationRow], o: &BifurcationOptions, damper: &str) -> Result<()> {
+fn plot<M: SimModel<N>, const N: usize>(
+    path: &Path,
+    rows: &[BifurcationRow],
+    o: &BifurcationOptions<M, N>,
+    damper: &str,
+) -> Result<()> {
     use plotters::prelude::*;
     let root = BitMapBackend::new(path, (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -378,28 +391,37 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.window_s
     );
     EPS_RADPS.check("--friction-eps-radps", a.friction_eps_radps)?;
-    if let crate::sim::vehicle_file::ModelVehicle::DualAxle(t) =
-        crate::sim::vehicle_file::load_model(&a.vehicle)?
-    {
-        anyhow::ensure!(
-            a.damper_current_a.is_none(),
-            "--damper-current-a: the {} model has no MR damper configured; leave it out",
-            <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
-                { shimmy_core::dual_axle::N_STATES },
-            >>::NAME
-        );
-        return dual_axle(&t, a);
+    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => command_on(a, &v.plant, &v),
+        ModelVehicle::Truck(t) => command_on(a, &t.model, &t.parts),
+        ModelVehicle::DualAxle(t) => {
+            anyhow::ensure!(
+                a.damper_current_a.is_none(),
+                "--damper-current-a: the {} model has no MR damper configured; leave it out",
+                <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                    { shimmy_core::dual_axle::N_STATES },
+                >>::NAME
+            );
+            dual_axle(&t.model, a)
+        }
     }
-    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+}
+
+/// The command on the vehicle model `model` with the damper of `parts`.
+fn command_on<M: SimModel<N>, const N: usize>(
+    a: &BifurcationArgs,
+    model: &M,
+    parts: &shimmy_core::vehicle::Vehicle,
+) -> Result<()> {
     let damper = match a.damper_current_a {
         None => DamperSetting::Off,
         Some(i) => DamperSetting::Mr {
-            damper: vehicle.damper.spencer,
-            current_a: arg_range::check_current("--damper-current-a", i, &vehicle)?,
+            damper: parts.damper.spencer,
+            current_a: arg_range::check_current("--damper-current-a", i, parts)?,
         },
     };
     run(&BifurcationOptions {
-        params: vehicle.plant,
+        params: *model,
         params_name: a.vehicle.clone(),
         damper,
         v_min_kmh: a.v_min_kmh,

@@ -10,30 +10,33 @@
 
 use crate::model::coil_drive::CoilDrive;
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
+use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, FileModel, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::ControllerKind;
+use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::supervisor::checks::SupervisorEvent;
 use shimmy_core::supervisor::policy::Mode;
+use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Peak wheel yaw after the fault below which shimmy counts as suppressed: 0.5 deg.
 pub const SUPPRESSED_BELOW_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
 /// The Hopf window of `plant` without damper, km/h (onset to offset between 1 and 70 m/s, as
 /// `shimmy-sim stability` finds it); `None` if it has none.
-pub fn window_kmh(plant: &PlantParams) -> Option<(f64, f64)> {
+pub fn window_kmh<M: LinearModel<N>, const N: usize>(plant: &M) -> Option<(f64, f64)> {
     let c = stability::hopf_crossings(plant, 0.0, 1.0, 70.0, 0.25, 1e-3).ok()?;
     let on = c.iter().find(|x| x.kind == CrossingKind::Onset)?;
     let off = c
@@ -91,7 +94,7 @@ fn ending(c: Case, lasts_s: f64) -> Case {
 impl Case {
     /// The campaign set-up for this case: a quiet road if it asks for one, at least its
     /// duration, its fault end.
-    pub fn setup(&self, setup: &Setup) -> Setup {
+    pub fn setup<M: SimModel<N>, const N: usize>(&self, setup: &Setup<M, N>) -> Setup<M, N> {
         let quiet = if self.quiet { 0.0 } else { 1.0 };
         Setup {
             kick_nm: quiet * setup.kick_nm,
@@ -304,13 +307,15 @@ pub fn standard_cases() -> Vec<Case> {
     ]
 }
 
-/// The disturbance and timing of a campaign run.
+/// The disturbance and timing of a campaign run, on the vehicle model `M` (the car by default;
+/// the kick and noise torques are the car's, scaled by `SimModel::yaw_torque_scale` in the
+/// loop).
 #[derive(Clone, Copy, Debug)]
-pub struct Setup {
+pub struct Setup<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }> {
     /// The true vehicle (plant, damper, sensors).
-    pub plant: Vehicle,
+    pub plant: M::Vehicle,
     /// The vehicle the firmware believes (controller model and gains); `None`: `plant`.
-    pub model_vehicle: Option<Vehicle>,
+    pub model_vehicle: Option<M::Vehicle>,
     /// Fault injection time, s.
     pub fault_s: f64,
     /// Yaw kick (half-sine torque on both wheels) time, s.
@@ -335,8 +340,15 @@ impl Default for Setup {
     /// Nominal plant; fault at 1.0 s, a 100 N m x 20 ms kick at 1.1 s; 5 N m road noise
     /// (20 Hz corner, half common); 5 s; the board's closed-loop coil drive.
     fn default() -> Self {
+        Setup::on(Vehicle::nominal())
+    }
+}
+
+impl<M: SimModel<N>, const N: usize> Setup<M, N> {
+    /// [`Setup::default`]'s disturbance and timing on the vehicle `plant`.
+    pub fn on(plant: M::Vehicle) -> Self {
         Setup {
-            plant: Vehicle::nominal(),
+            plant,
             model_vehicle: None,
             fault_s: 1.0,
             kick_s: 1.1,
@@ -415,14 +427,15 @@ impl CaseResult {
 }
 
 /// The closed-loop configuration and scenario of one run.
-pub fn build(
-    setup: &Setup,
+pub fn build<M: SimModel<N>, const N: usize>(
+    setup: &Setup<M, N>,
     arm: Arm,
     faults: &[FaultMode],
     speed_kmh: f64,
-) -> (LoopConfig, Scenario) {
+) -> (LoopConfig<M, N>, Scenario) {
     let model = setup.model_vehicle.as_ref().unwrap_or(&setup.plant);
-    let mut cfg = LoopConfig::new(&setup.plant, arm, setup.duration_s).with_model(model);
+    let mut cfg = LoopConfig::for_vehicle(&M::family_vehicle(&setup.plant), arm, setup.duration_s)
+        .with_model_vehicle(&M::family_vehicle(model));
     cfg.sensors.seed = setup.seed;
     cfg.estimator = false;
     cfg.record_every = 50;
@@ -446,8 +459,8 @@ pub fn build(
 }
 
 /// Runs one case at one speed (`supervised == false`: the bare controller, no supervisor).
-pub fn run_case(
-    setup: &Setup,
+pub fn run_case<M: SimModel<N>, const N: usize>(
+    setup: &Setup<M, N>,
     arm: Arm,
     c: &Case,
     speed_kmh: f64,
@@ -458,12 +471,12 @@ pub fn run_case(
 
 /// [`run_case`] with the loop configuration changed by `tweak` (e.g. other supervisor
 /// thresholds, to show what a check prevents).
-pub fn run_case_with(
-    setup: &Setup,
+pub fn run_case_with<M: SimModel<N>, const N: usize>(
+    setup: &Setup<M, N>,
     arm: Arm,
     c: &Case,
     speed_kmh: f64,
-    tweak: impl FnOnce(&mut LoopConfig),
+    tweak: impl FnOnce(&mut LoopConfig<M, N>),
 ) -> Result<(CaseResult, LoopResult)> {
     let setup = &c.setup(setup);
     let (mut cfg, mut sc) = build(setup, arm, &c.faults, speed_kmh);
@@ -511,7 +524,7 @@ pub fn run_case_with(
         case: c.name.clone(),
         arm: arm.name().to_string(),
         speed_kmh,
-        in_window: window_kmh(&setup.plant.plant)
+        in_window: window_kmh(&M::family_vehicle(&setup.plant).model.linear())
             .is_some_and(|(on, off)| (on..=off).contains(&speed_kmh)),
         injected: !c.faults.is_empty(),
         detect_ms: first.map(|t| (t - setup.fault_s) * 1e3),
@@ -542,7 +555,11 @@ pub fn run_case_with(
 }
 
 /// Runs every (case, speed) pair in parallel, plus a no-damper healthy reference per speed.
-pub fn campaign(setup: &Setup, cases: &[Case], speeds_kmh: &[f64]) -> Result<Vec<CaseResult>> {
+pub fn campaign<M: SimModel<N>, const N: usize>(
+    setup: &Setup<M, N>,
+    cases: &[Case],
+    speeds_kmh: &[f64],
+) -> Result<Vec<CaseResult>> {
     let mut jobs: Vec<(Arm, &Case, f64)> = Vec::new();
     let reference = case(
         "healthy (no damper)",
@@ -812,15 +829,26 @@ pub fn verdict(bad: &[String]) -> Result<()> {
 /// The command. Every option is checked before anything runs; the table and files are
 /// written either way, then the command fails if any check failed.
 pub fn command(a: &FaultsArgs) -> Result<()> {
+    match vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
+        ModelVehicle::Truck(t) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, t),
+        ModelVehicle::DualAxle(t) => command_on::<
+            shimmy_core::dual_axle::DualAxleParams,
+            { shimmy_core::dual_axle::N_STATES },
+        >(a, t),
+    }
+}
+
+/// The command on the vehicle `plant` of the model `M`.
+fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle) -> Result<()> {
     let cases = a.cases()?;
     let setup = Setup {
-        plant: vehicle_file::load(&a.vehicle)?,
         model_vehicle: match &a.model_vehicle {
-            Some(m) => Some(vehicle_file::load(m).context("--model-vehicle")?),
+            Some(m) => Some(M::load_vehicle(m, Path::new("")).context("--model-vehicle")?),
             None => None,
         },
         duration_s: a.duration_s,
-        ..Setup::default()
+        ..Setup::<M, N>::on(plant)
     };
     let wall = std::time::Instant::now();
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;

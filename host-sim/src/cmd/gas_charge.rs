@@ -60,7 +60,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
         args.v0_max_l
     );
     let t = match vehicle_file::load_model(&args.vehicle)? {
-        ModelVehicle::Truck(t) => t,
+        ModelVehicle::Truck(t) => t.model,
         ModelVehicle::Car(_) | ModelVehicle::DualAxle(_) => bail!(
             "--vehicle `{}`: gas-charge needs a {} vehicle (truck-empty, truck-full or a file with that model)",
             args.vehicle,

@@ -8,17 +8,18 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use plotters::prelude::*;
 use shimmy_core::estimator::monitor::Level;
 
 use crate::model::disturbance::SpeedProfile;
+use crate::model::family::SimModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run_with_progress, MarginRow, MarginRun, MarginScenario};
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// Ramp rate: 0.01 to 50 km/h per s.
 pub const RATE_KMH_PER_S: Range = Range::closed(0.01, 50.0, "km/h/s");
@@ -86,12 +87,15 @@ fn level_num(l: Level) -> u8 {
 /// beside them): the plant's linear onset, the model's onset, the first warning and its lead,
 /// and for a constant drive its duration and the number of warning onsets. Absent values are
 /// `null`.
-pub fn summary_json(sc: &MarginScenario, run: &MarginRun) -> serde_json::Value {
+pub fn summary_json<M: SimModel<N>, const N: usize>(
+    sc: &MarginScenario<M, N>,
+    run: &MarginRun,
+) -> serde_json::Value {
     let lead = run.lead();
     let constant = matches!(sc.speed, SpeedProfile::Constant(_));
     serde_json::json!({
         "plant_onset_kmh": run.onset_kmh,
-        "model_onset_kmh": sc.model.as_ref().and_then(onset_kmh),
+        "model_onset_kmh": sc.model.as_ref().and_then(|m| onset_kmh(&m.linear())),
         "first_warning_kmh": run.first_warning.map(|(_, v, _)| v),
         "first_warning_s": run.first_warning.map(|(t, _, _)| t),
         "first_warning_level": run.first_warning.map(|(_, _, l)| format!("{l:?}")),
@@ -268,12 +272,45 @@ pub fn check(a: &MarginArgs) -> Result<()> {
 /// `shimmy-sim margin`.
 pub fn command(a: &MarginArgs) -> Result<()> {
     check(a)?;
-    let vehicle = vehicle_file::load(&a.vehicle)?;
+    let vehicle = vehicle_file::load_model(&a.vehicle)?;
     let model = match &a.model_vehicle {
-        Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
-        None => vehicle,
+        Some(m) => vehicle_file::load_model(m).context("--model-vehicle")?,
+        None => vehicle.clone(),
     };
-    let p = vehicle.plant;
+    let mut provenance =
+        Provenance::of_this_process().model_vehicle("vehicle", &a.vehicle, &vehicle)?;
+    if let Some(m) = &a.model_vehicle {
+        provenance = provenance.model_vehicle("model vehicle", m, &model)?;
+    }
+    match (&vehicle, &model) {
+        (ModelVehicle::Car(v), ModelVehicle::Car(m)) => {
+            run_on(a, v.plant, m.plant, m.pipeline_params(), provenance)
+        }
+        (ModelVehicle::Truck(v), ModelVehicle::Truck(m)) => {
+            run_on(a, v.model, m.model, m.pipeline_params(), provenance)
+        }
+        (ModelVehicle::DualAxle(v), ModelVehicle::DualAxle(m)) => {
+            run_on(a, v.model, m.model, m.pipeline_params(), provenance)
+        }
+        _ => bail!(
+            "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's model is \
+             of the vehicle's model",
+            a.model_vehicle.as_deref().unwrap_or_default(),
+            model.model_name(),
+            a.vehicle,
+            vehicle.model_name()
+        ),
+    }
+}
+
+/// The run on the plant `p` with the pipeline's model `model` (of the same vehicle model).
+fn run_on<M: SimModel<N>, const N: usize>(
+    a: &MarginArgs,
+    p: M,
+    model: M,
+    pipeline: shimmy_core::estimator::pipeline::PipelineParams,
+    provenance: Provenance,
+) -> Result<()> {
     let mut sc = match a.constant_kmh {
         Some(v) => MarginScenario::constant(p, v, a.duration_s),
         None => MarginScenario::ramp(
@@ -287,25 +324,22 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     sc.noise_nm = a.noise_nm;
     sc.imbalance_nm = a.imbalance_nm;
     sc.seed = a.seed;
-    sc.model = Some(model.plant);
-    let mut provenance = Provenance::of_this_process().vehicle("vehicle", &a.vehicle, &vehicle)?;
-    if let Some(m) = &a.model_vehicle {
-        provenance = provenance.vehicle("model vehicle", m, &model)?;
-    }
+    sc.model = Some(model);
     let provenance = provenance.seed("road noise", sc.seed);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
     let bar = progress::bar(0, "1 ms steps");
-    let run = run_with_progress(&sc, model.pipeline_params(), 10, &mut |done, total| {
+    let run = run_with_progress(&sc, pipeline, 10, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
     println!(
-        "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m, seed {}",
+        "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m (x {:.4} on this model), seed {}",
         a.vehicle,
         a.model_vehicle.as_deref().unwrap_or(&a.vehicle),
         sc.noise_nm,
         sc.imbalance_nm,
+        p.yaw_torque_scale(),
         sc.seed
     );
     println!(

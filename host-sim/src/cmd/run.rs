@@ -3,11 +3,13 @@
 //! current, adaptive gain) and a margin plot (the mode meter's damping estimate over time next to
 //! the true eigenvalue of the plant's shimmy mode at the same speed).
 
+use crate::model::family::SimModel;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop::LoopResult;
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file;
+use crate::sim::scenario_file::{self, AnyScenario};
+use crate::sim::vehicle_file::FileModel;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::f64::consts::PI;
@@ -43,7 +45,7 @@ pub struct RunArgs {
 
 /// The output folder of a run: `--out`, else the file's `output.dir`, else `out/<name>` with
 /// the name sanitised.
-pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
+pub fn out_dir<M: SimModel<N>, const N: usize>(a: &RunArgs, spec: &ScenarioSpec<M, N>) -> PathBuf {
     a.out
         .clone()
         .or_else(|| spec.out_dir.clone())
@@ -52,7 +54,17 @@ pub fn out_dir(a: &RunArgs, spec: &ScenarioSpec) -> PathBuf {
 
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
-    let mut spec = scenario_file::load(&a.scenario)?;
+    match scenario_file::load_any(&a.scenario)? {
+        AnyScenario::Car(spec) => run_spec(a, spec),
+        AnyScenario::Truck(spec) => run_spec(a, spec),
+    }
+}
+
+/// The command on the scenario `spec` of any vehicle model.
+fn run_spec<M: FileModel<N>, const N: usize>(
+    a: &RunArgs,
+    mut spec: ScenarioSpec<M, N>,
+) -> Result<()> {
     let controller = match &a.controller {
         Some(c) => match controller_name(c) {
             Some(name) => Some((name, a.on_current_a)),
@@ -92,7 +104,11 @@ pub fn command(a: &RunArgs) -> Result<()> {
         Some(s) => println!("  2 % settling          {s:>9.3} s"),
         None => println!("  2 % settling                  - (does not settle)"),
     }
-    println!("  peak steering wheel   {:>9.3} deg", m.peak_sw_rad * deg);
+    println!(
+        "  peak steering {:<7} {:>9.3} deg",
+        M::STEERING,
+        m.peak_sw_rad * deg
+    );
     println!(
         "  RMS / peak current    {:>9.3} / {:.3} A",
         m.rms_current_a, m.peak_current_a
@@ -121,7 +137,7 @@ pub fn command(a: &RunArgs) -> Result<()> {
 }
 
 /// The injected faults and what the supervisor did about them.
-fn print_faults(spec: &ScenarioSpec, r: &LoopResult) {
+fn print_faults<M: SimModel<N>, const N: usize>(spec: &ScenarioSpec<M, N>, r: &LoopResult) {
     let log = &r.faults;
     println!("  injected faults:");
     for f in &spec.faults {

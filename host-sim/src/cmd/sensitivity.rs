@@ -152,7 +152,8 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
                     .collect();
                 (window_of(&p)?, vs)
             }
-            ModelVehicle::Truck(t) => {
+            ModelVehicle::Truck(tv) => {
+                let t = tv.model;
                 let vs = TRUCK_FIELDS
                     .iter()
                     .filter(|f| !TRUCK_FIELDS_WITHOUT_EFFECT.contains(&f.name))
@@ -171,7 +172,8 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
                     .collect();
                 (window_of(&t)?, vs)
             }
-            ModelVehicle::DualAxle(t) => {
+            ModelVehicle::DualAxle(tv) => {
+                let t = tv.model;
                 let vs = DUAL_AXLE_FIELDS
                     .iter()
                     .filter(|f| !DUAL_AXLE_FIELDS_WITHOUT_EFFECT.contains(&f.name))

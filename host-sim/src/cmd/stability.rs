@@ -4,6 +4,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::model::family::SimModel;
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 use shimmy_core::eigen::ModeShape;
@@ -79,40 +80,30 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    let vehicle = match vehicle_file::load_model(&args.vehicle)? {
-        vehicle_file::ModelVehicle::Car(v) => v,
-        vehicle_file::ModelVehicle::Truck(t) => {
-            anyhow::ensure!(
-                args.damper_current_a.is_none(),
-                "--damper-current-a: the {} model has no MR damper configured; leave it out",
-                shimmy_core::truck::TruckParams::NAME
-            );
-            println!("stability of straight running: vehicle `{}`", args.vehicle);
-            println!("damper: none (F_d = 0)");
-            return report(&t, 0.0, args);
-        }
-        vehicle_file::ModelVehicle::DualAxle(t) => {
-            anyhow::ensure!(
-                args.damper_current_a.is_none(),
-                "--damper-current-a: the {} model has no MR damper configured; leave it out",
-                shimmy_core::dual_axle::DualAxleParams::NAME
-            );
-            println!("stability of straight running: vehicle `{}`", args.vehicle);
-            println!("damper: none (F_d = 0); kingpin friction: not in the linear model");
-            return report(&t, 0.0, args);
-        }
-    };
-    let p = vehicle.plant;
+    match vehicle_file::load_model(&args.vehicle)? {
+        vehicle_file::ModelVehicle::Car(v) => with_damper(&v.plant, &v, args),
+        vehicle_file::ModelVehicle::Truck(t) => with_damper(&t.model, &t.parts, args),
+        vehicle_file::ModelVehicle::DualAxle(t) => with_damper(&t.model, &t.parts, args),
+    }
+}
+
+/// The damper setting of `--damper-current-a` on the vehicle model `p` (the damper of
+/// `parts`), then the report.
+fn with_damper<M: SimModel<N>, const N: usize>(
+    p: &M,
+    parts: &shimmy_core::vehicle::Vehicle,
+    args: &StabilityArgs,
+) -> Result<()> {
     if let Some(i) = args.damper_current_a {
-        arg_range::check_current("--damper-current-a", i, &vehicle)?;
+        arg_range::check_current("--damper-current-a", i, parts)?;
     }
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let (c, damper) = match args.damper_current_a {
         None => (0.0, None),
         Some(i) => {
             let d = damper_equivalent(
-                &p,
-                &vehicle.damper.spencer,
+                p,
+                &parts.damper.spencer,
                 i,
                 args.ref_amplitude_deg,
                 v_min,
@@ -134,7 +125,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
             args.ref_amplitude_deg
         ),
     }
-    report(&p, c, args)
+    report(&p.linear(), c, args)
 }
 
 /// The sweep, the crossings, the table and the files for any model of the family.

@@ -13,9 +13,9 @@
 //! stroke amplitude `X = (l_t/2)(psi0 + psi0) = l_t psi0` (the damper stroke definition of the
 //! reference plant). The default is psi0 = 0.5 deg, a small but developed shimmy.
 
+use super::family::SimModel;
 use shimmy_core::eigen::EigenError;
 use shimmy_core::mr_damper::{rates, SpencerParams, SpencerState};
-use shimmy_core::params::PlantParams;
 use shimmy_core::stability::{self, ModeSelect};
 
 /// Default reference wheel-yaw amplitude, rad (0.5 deg).
@@ -122,15 +122,16 @@ pub struct DamperEquivalent {
 /// frequency of the shimmy (in-phase wheel-yaw) mode at the speed where the damper-free growth
 /// rate of the critical mode is largest in [v_min, v_max]; the frequency is updated once with
 /// the damper in place (a two-pass fixed point: the mode frequency moves little with c).
-pub fn damper_equivalent(
-    p: &PlantParams,
+pub fn damper_equivalent<M: SimModel<N>, const N: usize>(
+    model: &M,
     sp: &SpencerParams,
     current_a: f64,
     ref_amp_deg: f64,
     v_min_mps: f64,
     v_max_mps: f64,
 ) -> Result<DamperEquivalent, EigenError> {
-    let amp = stroke_amplitude_m(p.l_t, ref_amp_deg.to_radians());
+    let amp = stroke_amplitude_m(model.steering_arm_m(), ref_amp_deg.to_radians());
+    let p = &model.linear();
     let n = 100;
     let mut v_ref = v_min_mps;
     let mut g_best = f64::NEG_INFINITY;

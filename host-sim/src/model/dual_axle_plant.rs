@@ -16,7 +16,7 @@
 //! inside RK4's stability region, radius ~2.8).
 
 use shimmy_core::dual_axle::{
-    DualAxleOperatingPoint, DualAxleParams, N_DOF, N_STATES, PSI_1L, PSI_1R, WHEELS,
+    DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, WHEELS,
 };
 use shimmy_core::eigen::eigenvalues;
 use shimmy_core::model::{LinearModel, Matrix};
@@ -114,13 +114,9 @@ impl DualAxleSim {
         for &(i, j, a) in &self.da {
             dx[i] += v * a * x[j];
         }
-        let t = &self.t;
-        let lever = t.e + t.t_p;
-        for (k, (wheel, roll, slip, axle)) in WHEELS.into_iter().enumerate() {
-            let extra = self.tyre_force_n(axle, x[slip]) - self.op.c_a[axle] * x[slip];
-            let (dw, dr) = (N_DOF + wheel, N_DOF + roll);
-            dx[dw] += (-lever * extra + self.friction_nm(x[dw]) + tq[k]) / t.i_k;
-            dx[dr] += t.h_r * extra / t.i_phi;
+        add_nonlinear(&self.t, &self.op, self.m_f, self.eps, x, dx);
+        for (k, (wheel, _, _, _)) in WHEELS.into_iter().enumerate() {
+            dx[N_DOF + wheel] += tq[k] / self.t.i_k;
         }
     }
 
@@ -141,6 +137,27 @@ impl DualAxleSim {
     /// Axle 1's in-phase wheel yaw `(psi_1L + psi_1R) / 2`, rad (what its encoders measure).
     pub fn wheel_yaw_rad(&self) -> f64 {
         0.5 * (self.x[PSI_1L] + self.x[PSI_1R])
+    }
+}
+
+/// The tyres' saturation (as its departure from `C_a a`) and the kingpin friction
+/// `-m_f tanh(psi' / eps)`, added to the linear model's `dx` (the first [`N_STATES`] entries).
+fn add_nonlinear(
+    t: &DualAxleParams,
+    op: &DualAxleOperatingPoint,
+    m_f: f64,
+    eps: f64,
+    x: &[f64],
+    dx: &mut [f64],
+) {
+    let lever = t.e + t.t_p;
+    for (wheel, roll, slip, axle) in WHEELS {
+        let d = t.mu * op.f_z[axle];
+        let b = op.c_a[axle] / (t.c_s * d);
+        let extra = d * (t.c_s * (b * x[slip]).atan()).sin() - op.c_a[axle] * x[slip];
+        let (dw, dr) = (N_DOF + wheel, N_DOF + roll);
+        dx[dw] += (-lever * extra - m_f * (x[dw] / eps).tanh()) / t.i_k;
+        dx[dr] += t.h_r * extra / t.i_phi;
     }
 }
 
@@ -345,4 +362,265 @@ mod tests {
         assert!(dist(&x) < 3e-6, "{}", dist(&x));
         assert!(dist(&coarse) > 3e-5, "{}", dist(&coarse));
     }
+}
+
+/// States of [`DualAxlePlant`]: the linear model's 20, then the MR damper's filtered coil
+/// input `u`, internal displacement `y` and Bouc-Wen `z` (as the car's and the truck's).
+pub const N_SIM: usize = N_STATES + 3;
+const U: usize = N_STATES;
+
+/// Names of [`DualAxlePlant`]'s states.
+pub const SIM_STATE_NAMES: [&str; N_SIM] = {
+    let mut n = [""; N_SIM];
+    let mut i = 0;
+    while i < N_STATES {
+        n[i] = shimmy_core::dual_axle::STATE_NAMES[i];
+        i += 1;
+    }
+    n[U] = "u_V";
+    n[U + 1] = "damper_y_m";
+    n[U + 2] = "damper_z_m";
+    n
+};
+
+/// The dual-axle truck as the family's nonlinear plant (`model::family::SimPlant`): the
+/// model of [`DualAxleSim`] (tyre saturation and kingpin friction at `DEFAULT_EPS_RADPS`) with
+/// a damper across axle 1's track rod (none, viscous or the MR damper's Spencer model) and the
+/// scenario's yaw torques on axle 1's wheels, integrated by Dopri5 (the MR damper's Bouc-Wen
+/// state is stiff, as on the truck).
+#[derive(Clone, Debug)]
+pub struct DualAxlePlant {
+    t: DualAxleParams,
+    op: DualAxleOperatingPoint,
+    damper: super::plant::Damper,
+    a0: Matrix<N_STATES>,
+    da: Matrix<N_STATES>,
+    v: f64,
+    x: [f64; N_SIM],
+    t_s: f64,
+    dopri: super::integrator::Dopri5<N_SIM>,
+}
+
+impl DualAxlePlant {
+    /// The truck `t` at rest with `damper`, at relative tolerance `rtol`.
+    pub fn new(t: &DualAxleParams, damper: super::plant::Damper, rtol: f64) -> Self {
+        let mut atol = [0.0; N_SIM];
+        for (i, a) in atol.iter_mut().enumerate() {
+            // the car's scales: angles 1e-3 rad, rates 1e-1 rad/s, coil 1 V, damper 1e-4 m
+            let scale = match i {
+                0..N_DOF | A_1L_..N_STATES => 1e-3,
+                N_DOF..A_1L_ => 1e-1,
+                U => 1.0,
+                _ => 1e-4,
+            };
+            *a = rtol * scale;
+        }
+        Self {
+            t: *t,
+            op: t.operating_point(),
+            damper,
+            a0: t.linearise(0.0, 0.0),
+            da: t.dlinearise_dv(),
+            v: 0.0,
+            x: [0.0; N_SIM],
+            t_s: 0.0,
+            dopri: super::integrator::Dopri5::new(rtol, atol),
+        }
+    }
+
+    /// Right-hand side under held inputs; returns the damper force, N.
+    fn rhs(&self, x: &[f64; N_SIM], u: &super::plant::Inputs, dx: &mut [f64; N_SIM]) -> f64 {
+        use super::plant::Damper;
+        let a = self.a0 + self.da * u.speed_mps;
+        let lin = a * nalgebra::SVector::<f64, N_STATES>::from_column_slice(&x[..N_STATES]);
+        dx[..N_STATES].copy_from_slice(lin.as_slice());
+        add_nonlinear(
+            &self.t,
+            &self.op,
+            self.t.m_f,
+            DEFAULT_EPS_RADPS,
+            &x[..N_STATES],
+            &mut dx[..N_STATES],
+        );
+        let half = 0.5 * self.t.l_t;
+        let (xd, vd) = (
+            half * (x[PSI_1L] + x[PSI_1R]),
+            half * (x[N_DOF + PSI_1L] + x[N_DOF + PSI_1R]),
+        );
+        let f_d = match &self.damper {
+            Damper::None => {
+                dx[U..].fill(0.0);
+                0.0
+            }
+            Damper::Viscous(c) => {
+                dx[U..].fill(0.0);
+                c * vd
+            }
+            Damper::Mr(sp) => {
+                let st = shimmy_core::mr_damper::SpencerState {
+                    u: x[U],
+                    y: x[U + 1],
+                    z: x[U + 2],
+                };
+                let r = shimmy_core::mr_damper::rates(sp, &st, xd, vd, u.current_cmd_a);
+                dx[U] = r.du;
+                dx[U + 1] = r.dy;
+                dx[U + 2] = r.dz;
+                r.force_n
+            }
+        };
+        for (i, wheel) in [PSI_1L, PSI_1R].into_iter().enumerate() {
+            dx[N_DOF + wheel] += (u.yaw_torque_nm[i] - half * f_d) / self.t.i_k;
+        }
+        f_d
+    }
+}
+
+impl super::family::SimPlant for DualAxlePlant {
+    fn set_wheel_yaw(&mut self, psi_l_rad: f64, psi_r_rad: f64) {
+        self.x = [0.0; N_SIM];
+        self.x[PSI_1L] = psi_l_rad;
+        self.x[PSI_1R] = psi_r_rad;
+    }
+
+    fn set_state(&mut self, x: &[f64]) {
+        self.x.copy_from_slice(x);
+    }
+
+    fn advance(
+        &mut self,
+        dt_s: f64,
+        inputs: &super::plant::Inputs,
+    ) -> Result<(), super::integrator::IntegrateError> {
+        self.v = inputs.speed_mps;
+        let me = &*self;
+        let (t_s, mut x) = (me.t_s, me.x);
+        let mut dopri = me.dopri.clone();
+        let mut f = |_t: f64, y: &[f64; N_SIM], dy: &mut [f64; N_SIM]| {
+            me.rhs(y, inputs, dy);
+        };
+        dopri.integrate_fsal(&mut f, t_s, &mut x, dt_s, false)?;
+        self.dopri = dopri;
+        self.x = x;
+        self.t_s += dt_s;
+        Ok(())
+    }
+
+    fn wheel_yaw_rad(&self) -> [f64; 2] {
+        [self.x[PSI_1L], self.x[PSI_1R]]
+    }
+
+    fn steering_angle_rad(&self) -> f64 {
+        self.x[shimmy_core::dual_axle::THETA_G]
+    }
+
+    fn coil_input_a(&self) -> f64 {
+        match self.damper {
+            super::plant::Damper::Mr(_) => self.x[U],
+            _ => 0.0,
+        }
+    }
+
+    fn damper_force_n(&self, inputs: &super::plant::Inputs) -> f64 {
+        let mut dx = [0.0; N_SIM];
+        self.rhs(&self.x, inputs, &mut dx)
+    }
+
+    fn state(&self) -> &[f64] {
+        &self.x
+    }
+
+    fn state_names(&self) -> &'static [&'static str] {
+        &SIM_STATE_NAMES
+    }
+
+    fn time_s(&self) -> f64 {
+        self.t_s
+    }
+}
+
+impl super::family::SimModel<N_STATES> for DualAxleParams {
+    type Linear = DualAxleParams;
+    type Plant = DualAxlePlant;
+    type State = [f64; N_SIM];
+    type Vehicle = super::family::FamilyVehicle<DualAxleParams>;
+    const STEERING: &'static str = "pitman arm";
+
+    fn family_vehicle(v: &Self::Vehicle) -> super::family::FamilyVehicle<Self> {
+        *v
+    }
+
+    fn parts_mut(v: &mut Self::Vehicle) -> &mut shimmy_core::vehicle::Vehicle {
+        &mut v.parts
+    }
+
+    fn linear(&self) -> Self {
+        *self
+    }
+
+    fn plant(&self, damper: super::plant::Damper, method: super::plant::Method) -> DualAxlePlant {
+        use super::plant::Method;
+        let rtol = match method {
+            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
+        };
+        DualAxlePlant::new(self, damper, rtol)
+    }
+
+    fn rolling_radius_m(&self) -> f64 {
+        self.r
+    }
+
+    fn steering_arm_m(&self) -> f64 {
+        self.l_t
+    }
+
+    fn nominal_plant(&self) -> shimmy_core::control::smc::NominalPlant {
+        shimmy_core::control::smc::NominalPlant {
+            i_k_kgm2: self.i_k as f32,
+            c_k_nms_per_rad: self.c_k as f32,
+            l_t_m: self.l_t as f32,
+        }
+    }
+
+    fn host_app_model(&self) -> Option<shimmy_core::params::PlantParams> {
+        None
+    }
+
+    fn yaw_torque_scale(&self) -> f64 {
+        self.i_k / shimmy_core::params::ParamSet::Nominal.params().i_k
+    }
+
+    fn params() -> Vec<super::family::ParamInfo> {
+        shimmy_core::dual_axle::DUAL_AXLE_FIELDS
+            .iter()
+            .map(|f| super::family::ParamInfo {
+                name: f.name,
+                unit: f.unit,
+            })
+            .collect()
+    }
+
+    fn param(&self, name: &str) -> Option<f64> {
+        self.get(name)
+    }
+
+    fn with_param(&self, name: &str, value: f64) -> anyhow::Result<Self> {
+        let mut t = *self;
+        match t.set(name, value) {
+            Ok(()) => Ok(t),
+            Err(shimmy_core::dual_axle::DualAxleFieldError::Unknown) => anyhow::bail!(
+                "parameter `{name}`: no such parameter of {}, allowed: {}",
+                <DualAxleParams as LinearModel<N_STATES>>::NAME,
+                super::family::param_names::<Self, N_STATES>()
+            ),
+            Err(e) => anyhow::bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
+        }
+    }
+}
+
+/// The shared sections (damper, sensors, gains, thresholds) of a dual-axle vehicle: the car's
+/// reference set's, unsized for this truck (its damper is not configured: `docs/dual-axle-truck.md`).
+pub fn dual_axle_parts() -> shimmy_core::vehicle::Vehicle {
+    shimmy_core::vehicle::Vehicle::from_set(shimmy_core::params::ParamSet::Nominal)
 }

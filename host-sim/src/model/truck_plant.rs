@@ -14,11 +14,15 @@
 
 use nalgebra::SVector;
 use shimmy_core::model::{LinearModel, Matrix};
+use shimmy_core::mr_damper::{self, SpencerState};
 use shimmy_core::truck::{
-    TruckOperatingPoint, TruckParams, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI,
+    TruckOperatingPoint, TruckParams, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI, PSI_L,
+    PSI_R, THETA_C, Y,
 };
 
-use super::integrator::rk4_step;
+use super::family::SimPlant;
+use super::integrator::{rk4_step, Dopri5, IntegrateError};
+use super::plant::{Damper, Inputs};
 
 /// Integration step, s.
 pub const DT_S: f64 = 1e-3;
@@ -53,39 +57,19 @@ impl TruckSim {
 
     /// The tyre's lateral force at lagged slip `a`, N.
     pub fn tyre_force_n(&self, a: f64) -> f64 {
-        let d = self.t.mu * self.op.f_z;
-        let b = self.op.c_a / (self.t.c_s * d);
-        d * (self.t.c_s * (b * a).atan()).sin()
+        tyre_force_n(&self.t, &self.op, a)
     }
 
     /// The struts' roll moment on the axle at roll `phi`, N m (restoring), from the gas law.
     pub fn strut_roll_moment_nm(&self, phi: f64) -> f64 {
-        let half_s = 0.5 * self.t.strut_spacing;
-        let x_s = self.op.strut.stroke_m;
-        let (f_l, f_r) = (
-            self.t.hps.force_n(x_s + half_s * phi),
-            self.t.hps.force_n(x_s - half_s * phi),
-        );
-        -half_s * (f_l - f_r)
+        strut_roll_moment_nm(&self.t, &self.op, phi)
     }
 
     fn rhs(&self, x: &[f64; N_STATES], dx: &mut [f64; N_STATES]) {
         let xv = SVector::<f64, N_STATES>::from_column_slice(x);
         let lin = self.a * xv;
         dx.copy_from_slice(lin.as_slice());
-        let t = &self.t;
-        let lever = t.e + t.t_p;
-        // tyres: nonlinear force minus the linear C_a a already in A
-        for (slip, wheel) in [(A_L, DPSI_L), (A_R, DPSI_R)] {
-            let extra = self.tyre_force_n(x[slip]) - self.op.c_a * x[slip];
-            dx[wheel] -= lever * extra / t.i_k;
-            dx[DPHI] += t.h_r * extra / t.i_phi;
-            dx[DY] += extra / t.m_axle;
-        }
-        // struts: the gas law's moment minus the linear strut part of K_phi in A
-        let half_s = 0.5 * t.strut_spacing;
-        let linear_struts = -2.0 * self.op.strut.stiffness_npm * half_s * half_s * x[PHI];
-        dx[DPHI] += (self.strut_roll_moment_nm(x[PHI]) - linear_struts) / t.i_phi;
+        add_nonlinear(&self.t, &self.op, x, dx);
     }
 
     /// Advances by `duration_s` in steps of [`DT_S`], calling `each(time, state)` after every
@@ -100,6 +84,250 @@ impl TruckSim {
             self.time_s += DT_S;
             each(self.time_s, &self.x);
         }
+    }
+}
+
+/// The tyre's lateral force at lagged slip `a`, N: the Magic Formula with slope C_a at 0.
+fn tyre_force_n(t: &TruckParams, op: &TruckOperatingPoint, a: f64) -> f64 {
+    let d = t.mu * op.f_z;
+    let b = op.c_a / (t.c_s * d);
+    d * (t.c_s * (b * a).atan()).sin()
+}
+
+/// The struts' roll moment on the axle at roll `phi`, N m (restoring), from the gas law.
+fn strut_roll_moment_nm(t: &TruckParams, op: &TruckOperatingPoint, phi: f64) -> f64 {
+    let half_s = 0.5 * t.strut_spacing;
+    let x_s = op.strut.stroke_m;
+    let (f_l, f_r) = (
+        t.hps.force_n(x_s + half_s * phi),
+        t.hps.force_n(x_s - half_s * phi),
+    );
+    -half_s * (f_l - f_r)
+}
+
+/// Adds the two nonlinear elements to `dx` (which holds the linear model's `A x`): each as its
+/// departure from its linearisation.
+fn add_nonlinear(t: &TruckParams, op: &TruckOperatingPoint, x: &[f64], dx: &mut [f64]) {
+    let lever = t.e + t.t_p;
+    // tyres: nonlinear force minus the linear C_a a already in A
+    for (slip, wheel) in [(A_L, DPSI_L), (A_R, DPSI_R)] {
+        let extra = tyre_force_n(t, op, x[slip]) - op.c_a * x[slip];
+        dx[wheel] -= lever * extra / t.i_k;
+        dx[DPHI] += t.h_r * extra / t.i_phi;
+        dx[DY] += extra / t.m_axle;
+    }
+    // struts: the gas law's moment minus the linear strut part of K_phi in A
+    let half_s = 0.5 * t.strut_spacing;
+    let linear_struts = -2.0 * op.strut.stiffness_npm * half_s * half_s * x[PHI];
+    dx[DPHI] += (strut_roll_moment_nm(t, op, x[PHI]) - linear_struts) / t.i_phi;
+}
+
+/// States of [`TruckPlant`]: the linear model's 12, then the MR damper's `(u, y, z)` as in the
+/// car's plant (`crate::model::plant::idx::U`).
+pub const N_SIM: usize = N_STATES + 3;
+/// Damper filtered coil input u, V (1 V per A).
+pub const U: usize = N_STATES;
+/// Damper internal displacement y, m.
+pub const DAMPER_Y: usize = N_STATES + 1;
+/// Damper Bouc-Wen variable z, m.
+pub const DAMPER_Z: usize = N_STATES + 2;
+
+/// Names of the [`TruckPlant`] states, for CSV headers.
+pub const SIM_STATE_NAMES: [&str; N_SIM] = [
+    "psi_l_rad",
+    "psi_r_rad",
+    "phi_rad",
+    "theta_c_rad",
+    "y_m",
+    "dpsi_l_radps",
+    "dpsi_r_radps",
+    "dphi_radps",
+    "dtheta_c_radps",
+    "dy_mps",
+    "a_l_rad",
+    "a_r_rad",
+    "damper_u_v",
+    "damper_y_m",
+    "damper_z_m",
+];
+
+/// The truck with its steering damper in the simulator's loop: the nonlinear truck of
+/// [`TruckSim`] with the speed, the coil current and external kingpin yaw torques as held
+/// inputs ([`Inputs`]) and a damper on the track rod (none, the Spencer MR damper with its coil
+/// lag, or a viscous one), integrated by the car's adaptive Dopri5 across control periods (the
+/// Bouc-Wen variable is stiff). The damper acts as in the linear model's input column:
+/// stroke `x_d = (l_t/2)(psi_L + psi_R)`, moment `-(l_t/2) F_d` on each wheel. The driver
+/// torque is not used: a hydrostatic steering has no mechanical path from the steering wheel
+/// to the linkage (the closed valve holds it, `docs/mining-truck.md`).
+#[derive(Clone, Debug)]
+pub struct TruckPlant {
+    dynamics: Dynamics,
+    a0: Matrix<N_STATES>,
+    da: Matrix<N_STATES>,
+    v_a: f64,
+    x: [f64; N_SIM],
+    t_s: f64,
+    dopri: Dopri5<N_SIM>,
+    last_inputs: Option<Inputs>,
+}
+
+impl TruckPlant {
+    /// The truck `t` at rest with `damper`, integrated at relative tolerance `rtol`, at the
+    /// operating point of its linear model (`TruckParams::point_or_tyres_only`: a vehicle file's
+    /// truck is validated, its struts carry the load).
+    pub fn new(t: &TruckParams, damper: Damper, rtol: f64) -> Self {
+        let mut atol = [0.0; N_SIM];
+        for (i, a) in atol.iter_mut().enumerate() {
+            // the car's scales (`plant::default_atol`); the axle's lateral motion in m on the
+            // scale of its slip contribution (sigma x 1e-3 rad)
+            let scale = match i {
+                PSI_L..=THETA_C | A_L | A_R => 1e-3,
+                Y => 1e-3 * t.sigma,
+                DPSI_L..=DY => 1e-1,
+                U => 1.0,
+                _ => 1e-4,
+            };
+            *a = rtol * scale;
+        }
+        Self {
+            dynamics: Dynamics {
+                t: *t,
+                op: t.point_or_tyres_only(),
+                damper,
+                a: t.linearise(0.0, 0.0),
+            },
+            a0: t.linearise(0.0, 0.0),
+            da: t.dlinearise_dv(),
+            v_a: 0.0,
+            x: [0.0; N_SIM],
+            t_s: 0.0,
+            dopri: Dopri5::new(rtol, atol),
+            last_inputs: None,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &TruckParams {
+        &self.dynamics.t
+    }
+}
+
+/// The right-hand side's parts of a [`TruckPlant`] (apart from the integrator's state).
+#[derive(Clone, Debug)]
+struct Dynamics {
+    t: TruckParams,
+    op: TruckOperatingPoint,
+    damper: Damper,
+    /// A(V) at the speed of the current period.
+    a: Matrix<N_STATES>,
+}
+
+impl Dynamics {
+    /// Damper stroke (m) and stroke rate (m/s).
+    fn stroke(&self, x: &[f64; N_SIM]) -> (f64, f64) {
+        let half = 0.5 * self.t.l_t;
+        (half * (x[PSI_L] + x[PSI_R]), half * (x[DPSI_L] + x[DPSI_R]))
+    }
+
+    /// Right-hand side under held inputs; returns the damper force, N.
+    fn rhs(&self, x: &[f64; N_SIM], u: &Inputs, dx: &mut [f64; N_SIM]) -> f64 {
+        let xv = SVector::<f64, N_STATES>::from_column_slice(&x[..N_STATES]);
+        let lin = self.a * xv;
+        dx[..N_STATES].copy_from_slice(lin.as_slice());
+        add_nonlinear(&self.t, &self.op, &x[..N_STATES], &mut dx[..N_STATES]);
+        let f_d = match &self.damper {
+            Damper::None => {
+                dx[U..].fill(0.0);
+                0.0
+            }
+            Damper::Viscous(c) => {
+                dx[U..].fill(0.0);
+                c * self.stroke(x).1
+            }
+            Damper::Mr(sp) => {
+                let (xd, vd) = self.stroke(x);
+                let st = SpencerState {
+                    u: x[U],
+                    y: x[DAMPER_Y],
+                    z: x[DAMPER_Z],
+                };
+                let r = mr_damper::rates(sp, &st, xd, vd, u.current_cmd_a);
+                dx[U] = r.du;
+                dx[DAMPER_Y] = r.dy;
+                dx[DAMPER_Z] = r.dz;
+                r.force_n
+            }
+        };
+        let half_lt = 0.5 * self.t.l_t;
+        for (i, wheel) in [DPSI_L, DPSI_R].into_iter().enumerate() {
+            dx[wheel] += (u.yaw_torque_nm[i] - half_lt * f_d) / self.t.i_k;
+        }
+        f_d
+    }
+}
+
+impl SimPlant for TruckPlant {
+    fn set_wheel_yaw(&mut self, psi_l_rad: f64, psi_r_rad: f64) {
+        self.x = [0.0; N_SIM];
+        self.x[PSI_L] = psi_l_rad;
+        self.x[PSI_R] = psi_r_rad;
+        self.last_inputs = None;
+    }
+
+    fn set_state(&mut self, x: &[f64]) {
+        self.x.copy_from_slice(x);
+        self.last_inputs = None;
+    }
+
+    fn advance(&mut self, dt_s: f64, inputs: &Inputs) -> Result<(), IntegrateError> {
+        if inputs.speed_mps != self.v_a {
+            self.dynamics.a = self.a0 + self.da * inputs.speed_mps;
+            self.v_a = inputs.speed_mps;
+            self.last_inputs = None;
+        }
+        let reuse = self.last_inputs.as_ref() == Some(inputs);
+        self.last_inputs = None;
+        let d = &self.dynamics;
+        let mut f = |_t: f64, y: &[f64; N_SIM], dy: &mut [f64; N_SIM]| {
+            d.rhs(y, inputs, dy);
+        };
+        self.dopri
+            .integrate_fsal(&mut f, self.t_s, &mut self.x, dt_s, reuse)?;
+        self.t_s += dt_s;
+        self.last_inputs = Some(*inputs);
+        Ok(())
+    }
+
+    fn wheel_yaw_rad(&self) -> [f64; 2] {
+        [self.x[PSI_L], self.x[PSI_R]]
+    }
+
+    fn steering_angle_rad(&self) -> f64 {
+        self.x[THETA_C]
+    }
+
+    fn coil_input_a(&self) -> f64 {
+        match self.dynamics.damper {
+            Damper::Mr(_) => self.x[U],
+            _ => 0.0,
+        }
+    }
+
+    fn damper_force_n(&self, inputs: &Inputs) -> f64 {
+        let mut dx = [0.0; N_SIM];
+        self.dynamics.rhs(&self.x, inputs, &mut dx)
+    }
+
+    fn state(&self) -> &[f64] {
+        &self.x
+    }
+
+    fn state_names(&self) -> &'static [&'static str] {
+        &SIM_STATE_NAMES
+    }
+
+    fn time_s(&self) -> f64 {
+        self.t_s
     }
 }
 

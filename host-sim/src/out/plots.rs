@@ -1,6 +1,7 @@
 //! The run plots several commands share: time histories of closed-loop runs ([`plot_runs`]) and
 //! the mode meter's damping estimate against the plant's eigenvalue as it runs ([`plot_margin`]).
 
+use crate::model::family::SimModel;
 use crate::out::plot_util::{self, COLORS};
 use crate::sim::closed_loop::{LoopConfig, LoopResult, TraceRow};
 use crate::sim::reference::{reference_line, REFERENCE_LABEL};
@@ -78,10 +79,10 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
 /// reference line (same colour): the damping ratio of the plant's shimmy mode as the run goes,
 /// linearised with the damper's equivalent viscous coefficient at the run's current and
 /// amplitude ([`crate::sim::reference`]). The caption says so.
-pub fn plot_margin(
+pub fn plot_margin<M: SimModel<N>, const N: usize>(
     path: &Path,
     title: &str,
-    runs: &[(&str, &LoopConfig, &LoopResult)],
+    runs: &[(&str, &LoopConfig<M, N>, &LoopResult)],
 ) -> Result<()> {
     let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
     root.fill(&WHITE)?;

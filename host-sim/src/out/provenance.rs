@@ -4,10 +4,12 @@
 //! resolved vehicle's byte record, and the seeds. Written as a Markdown table into every report
 //! and as an object into its JSON summary.
 
+use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use sha2::{Digest, Sha256};
 use shimmy_core::params::ParamSet;
+use shimmy_core::truck::TruckSet;
 use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
 use std::path::Path;
 
@@ -110,6 +112,32 @@ impl Provenance {
                 format!("resolved from {spec}")
             },
             sha256: vehicle_record_sha256(v)?,
+        });
+        Ok(self)
+    }
+
+    /// [`Self::vehicle`] for a vehicle of any model: a truck's record is the SHA-256 of its
+    /// parameters (model and shared sections) as the simulator holds them.
+    pub fn model_vehicle(mut self, role: &str, spec: &str, v: &ModelVehicle) -> Result<Self> {
+        let (record, named) = match v {
+            ModelVehicle::Car(car) => return self.vehicle(role, spec, car),
+            ModelVehicle::Truck(t) => (format!("{t:?}"), TruckSet::from_name(spec).is_some()),
+            ModelVehicle::DualAxle(t) => (
+                format!("{t:?}"),
+                shimmy_core::dual_axle::DualAxleSet::from_name(spec).is_some(),
+            ),
+        };
+        if !named {
+            self = self.file(&format!("{role} file"), Path::new(spec))?;
+        }
+        self.inputs.push(Input {
+            role: format!("{role} record"),
+            source: if named {
+                format!("built-in set `{spec}`")
+            } else {
+                format!("resolved from {spec}")
+            },
+            sha256: sha256_hex(record.as_bytes()),
         });
         Ok(self)
     }

@@ -23,9 +23,10 @@
 
 use crate::model::coil_drive::{BoardDrive, CoilDrive};
 use crate::model::disturbance::Scenario;
+use crate::model::family::{FamilyVehicle, SimModel, SimPlant};
 use crate::model::faults::{FaultPlan, FaultSpec};
 use crate::model::integrator::IntegrateError;
-use crate::model::plant::{idx, Damper, Inputs, Method, Plant, Simulator, State};
+use crate::model::plant::{Damper, Inputs, Method};
 use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::actuator::CoilParams;
 use shimmy_core::control::{
@@ -80,11 +81,15 @@ impl Arm {
     }
 }
 
-/// Configuration of one closed-loop run.
+/// Configuration of one closed-loop run on the vehicle model `M` (the car by default; any
+/// member of the family, `crate::model::family`).
 #[derive(Clone, Debug)]
-pub struct LoopConfig {
+pub struct LoopConfig<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// The true plant (the controller knows only `control.nominal`).
-    pub plant: PlantParams,
+    pub plant: M,
     /// The true damper (the controller knows only `control.mr`); `Arm::NoDamper` removes it.
     pub damper: SpencerParams,
     /// Damper and controller.
@@ -106,8 +111,8 @@ pub struct LoopConfig {
     pub method: Method,
     /// Coil resistance for the energy metric, Ohm.
     pub coil_resistance_ohm: f64,
-    /// Initial plant state.
-    pub x0: State,
+    /// Initial plant state (the model's layout; the wheel yaw angles first).
+    pub x0: M::State,
     /// Injected faults (none by default).
     pub faults: Vec<FaultSpec>,
     /// Supervisor thresholds.
@@ -122,7 +127,7 @@ pub struct LoopConfig {
     /// The margin path's plant model and parameters (the vehicle the firmware believes): the
     /// firmware's meter and model tasks run them in the loop for the margin-scheduled arm,
     /// whose controller gets their report ([`Self::margin_in_loop`]).
-    pub margin_model: (PlantParams, PipelineParams),
+    pub margin_model: (M, PipelineParams),
 }
 
 /// The supervisor thresholds `p` for `arm`: unchanged, except that the passive-off reference
@@ -141,36 +146,50 @@ impl LoopConfig {
     /// another vehicle): 1 kHz, trace at 200 Hz, meter on, plant at rest, the plant on
     /// [`CLOSED_LOOP_METHOD`].
     pub fn new(vehicle: &Vehicle, arm: Arm, duration_s: f64) -> Self {
-        LoopConfig {
-            plant: vehicle.plant,
-            damper: vehicle.damper.spencer,
-            arm,
-            control: vehicle.control_params(),
-            sensors: SensorConfig::from_vehicle(&vehicle.sensors),
-            dt_s: 1e-3,
-            duration_s,
-            record_every: 5,
-            estimator: true,
-            method: CLOSED_LOOP_METHOD,
-            coil_resistance_ohm: f64::from(vehicle.damper.coil.r_coil_ohm),
-            x0: [0.0; crate::model::plant::N_STATE],
-            faults: Vec::new(),
-            supervisor: reference_supervisor(arm, vehicle.supervisor_params()),
-            supervised: true,
-            coil_drive: CoilDrive::Ideal,
-            coil: vehicle.damper.coil,
-            margin_model: (vehicle.plant, vehicle.pipeline_params()),
-        }
+        Self::for_vehicle(&FamilyVehicle::car(*vehicle), arm, duration_s)
     }
 
     /// The same loop with a firmware that believes `model` (the controller's plant and damper
     /// model, gains and limits; the supervisor's fail-safe current and coil full scale); the
     /// simulated plant, damper and sensors stay.
     #[must_use]
-    pub fn with_model(mut self, model: &Vehicle) -> Self {
+    pub fn with_model(self, model: &Vehicle) -> Self {
+        self.with_model_vehicle(&FamilyVehicle::car(*model))
+    }
+}
+
+impl<M: SimModel<N>, const N: usize> LoopConfig<M, N> {
+    /// [`LoopConfig::new`] for a vehicle of any model of the family.
+    pub fn for_vehicle(vehicle: &FamilyVehicle<M>, arm: Arm, duration_s: f64) -> Self {
+        let parts = &vehicle.parts;
+        LoopConfig {
+            plant: vehicle.model,
+            damper: parts.damper.spencer,
+            arm,
+            control: vehicle.control_params(),
+            sensors: SensorConfig::from_vehicle(&parts.sensors),
+            dt_s: 1e-3,
+            duration_s,
+            record_every: 5,
+            estimator: true,
+            method: CLOSED_LOOP_METHOD,
+            coil_resistance_ohm: f64::from(parts.damper.coil.r_coil_ohm),
+            x0: M::State::default(),
+            faults: Vec::new(),
+            supervisor: reference_supervisor(arm, vehicle.supervisor_params()),
+            supervised: true,
+            coil_drive: CoilDrive::Ideal,
+            coil: parts.damper.coil,
+            margin_model: (vehicle.model, vehicle.pipeline_params()),
+        }
+    }
+
+    /// [`LoopConfig::with_model`] for a vehicle of any model of the family.
+    #[must_use]
+    pub fn with_model_vehicle(mut self, model: &FamilyVehicle<M>) -> Self {
         self.control = model.control_params();
         self.supervisor = reference_supervisor(self.arm, model.supervisor_params());
-        self.margin_model = (model.plant, model.pipeline_params());
+        self.margin_model = (model.model, model.pipeline_params());
         self
     }
 
@@ -189,8 +208,8 @@ pub struct SampleRecord<'a> {
     pub k: u64,
     /// Time, s.
     pub t_s: f64,
-    /// True plant state at t.
-    pub state: &'a State,
+    /// True plant state at t (the model's layout, [`SimPlant::state`]).
+    pub state: &'a [f64],
     /// Plant inputs held over [t, t + dt).
     pub inputs: &'a Inputs,
     /// What the firmware read.
@@ -482,7 +501,11 @@ pub struct LoopResult {
 
 impl LoopResult {
     /// Metrics with the disturbance at `t_dist_s`.
-    pub fn metrics(&self, cfg: &LoopConfig, t_dist_s: Option<f64>) -> RunMetrics {
+    pub fn metrics<M: SimModel<N>, const N: usize>(
+        &self,
+        cfg: &LoopConfig<M, N>,
+        t_dist_s: Option<f64>,
+    ) -> RunMetrics {
         metrics(&self.series, cfg.dt_s, cfg.coil_resistance_ohm, t_dist_s)
     }
 
@@ -596,8 +619,8 @@ impl<E: std::fmt::Display + std::fmt::Debug> std::error::Error for LoopError<E> 
 
 /// Runs the closed loop over `scenario` (its `current_a` is ignored: the controller sets the
 /// current). `observer` sees every sample.
-pub fn run(
-    cfg: &LoopConfig,
+pub fn run<M: SimModel<N>, const N: usize>(
+    cfg: &LoopConfig<M, N>,
     scenario: &mut Scenario,
     observer: Option<&mut dyn LoopObserver>,
 ) -> Result<LoopResult, IntegrateError> {
@@ -606,9 +629,15 @@ pub fn run(
         Arm::Mr(k) => k,
     };
     let safe = SafeController::new(kind, cfg.control, cfg.supervisor);
-    let (plant, pipeline) = cfg.margin_model;
-    let r = match cfg.margin_in_loop() {
-        true => match HostApp::with_parts(safe.clone(), &pipeline, plant) {
+    let (model, pipeline) = cfg.margin_model;
+    // The host build of the firmware's application runs the car's model task; another model
+    // has no margin report in the loop (its commands reject the margin-scheduled arm).
+    let app = model
+        .host_app_model()
+        .filter(|_| cfg.margin_in_loop())
+        .map(|plant| HostApp::with_parts(safe.clone(), &pipeline, plant));
+    let r = match app {
+        Some(app) => match app {
             Ok(app) => run_loop(cfg, scenario, observer, &mut InApp(Box::new(app))),
             // The parameters come from a validated vehicle; a configuration the meter rejects
             // leaves the report invalid, the schedule's safe side.
@@ -619,11 +648,18 @@ pub fn run(
                 &mut InProcess(safe, MarginStatus::Invalid),
             ),
         },
-        false => run_loop(
+        None => run_loop(
             cfg,
             scenario,
             observer,
-            &mut InProcess(safe, MarginStatus::NotUsed),
+            &mut InProcess(
+                safe,
+                if cfg.margin_in_loop() {
+                    MarginStatus::Invalid
+                } else {
+                    MarginStatus::NotUsed
+                },
+            ),
         ),
     };
     r.map_err(|e| match e {
@@ -634,8 +670,8 @@ pub fn run(
 
 /// [`run`] with the supervised step in `fw` (the controller, gains and supervisor thresholds
 /// are then `fw`'s own, and `cfg.supervised` is taken as true).
-pub fn run_on<F: FirmwareStep>(
-    cfg: &LoopConfig,
+pub fn run_on<M: SimModel<N>, const N: usize, F: FirmwareStep>(
+    cfg: &LoopConfig<M, N>,
     scenario: &mut Scenario,
     observer: Option<&mut dyn LoopObserver>,
     fw: &mut F,
@@ -647,8 +683,8 @@ pub fn run_on<F: FirmwareStep>(
     run_loop(&cfg, scenario, observer, fw)
 }
 
-fn run_loop<F: FirmwareStep>(
-    cfg: &LoopConfig,
+fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
+    cfg: &LoopConfig<M, N>,
     scenario: &mut Scenario,
     mut observer: Option<&mut dyn LoopObserver>,
     safe: &mut F,
@@ -658,8 +694,10 @@ fn run_loop<F: FirmwareStep>(
         Arm::NoDamper => (Damper::None, ControllerKind::PassiveOff),
         Arm::Mr(k) => (Damper::Mr(cfg.damper), k),
     };
-    let plant = Plant::new(cfg.plant, damper);
-    let mut sim = Simulator::with_method(plant, cfg.x0, cfg.method);
+    let mut sim = cfg.plant.plant(damper, cfg.method);
+    sim.set_state(cfg.x0.as_ref());
+    // the scenario's kingpin yaw torques are the car's (`SimModel::yaw_torque_scale`)
+    let torque_scale = cfg.plant.yaw_torque_scale();
     let mut ctl = Controller::new(kind, cfg.control);
     let mut last_verdict = None;
     let mut sensors = Sensors::new(cfg.sensors);
@@ -691,12 +729,13 @@ fn run_loop<F: FirmwareStep>(
     s.coil_a.reserve(n);
     s.force_n.reserve(n);
     let (mut zeta, mut freq) = (f64::NAN, f64::NAN);
-    let radius = cfg.plant.r as f32;
+    let radius = cfg.plant.rolling_radius_m() as f32;
     for k in 0..n {
         let t = k as f64 * cfg.dt_s;
-        let x = *sim.state();
+        let [psi_l, psi_r] = sim.wheel_yaw_rad();
+        let steering = sim.steering_angle_rad();
         let coil_state = sensors.coil_state(t);
-        let coil = if no_damper { 0.0 } else { x[idx::U] };
+        let coil = if no_damper { 0.0 } else { sim.coil_input_a() };
         // What the shunt sees: the coil current, or with a shorted coil the driver's current
         // through the short (no L/R lag), `ratio` x the command held over the last period.
         let coil_meas = match coil_state {
@@ -704,11 +743,14 @@ fn run_loop<F: FirmwareStep>(
             _ => coil,
         };
         let mut inputs = scenario.inputs(t, cfg.dt_s);
+        for tq in &mut inputs.yaw_torque_nm {
+            *tq *= torque_scale;
+        }
         let mut meas = sensors.sample(
             t,
             &Truth {
-                psi_l_rad: x[idx::PSI_L],
-                psi_r_rad: x[idx::PSI_R],
+                psi_l_rad: psi_l,
+                psi_r_rad: psi_r,
                 speed_mps: inputs.speed_mps,
                 coil_current_a: coil_meas,
             },
@@ -819,9 +861,9 @@ fn run_loop<F: FirmwareStep>(
                 valid: o.slow.valid,
             });
         }
-        let f_d = sim.forces(&inputs).damper_n;
-        s.psi_l_rad.push(x[idx::PSI_L]);
-        s.theta_sw_rad.push(x[idx::THETA_SW]);
+        let f_d = sim.damper_force_n(&inputs);
+        s.psi_l_rad.push(psi_l);
+        s.theta_sw_rad.push(steering);
         s.cmd_a.push(coil_cmd);
         s.coil_a.push(coil);
         s.force_n.push(f_d);
@@ -829,7 +871,7 @@ fn run_loop<F: FirmwareStep>(
             obs.on_sample(&SampleRecord {
                 k: k as u64,
                 t_s: t,
-                state: &x,
+                state: sim.state(),
                 inputs: &inputs,
                 meas: &meas,
                 control: &out,
@@ -841,9 +883,9 @@ fn run_loop<F: FirmwareStep>(
         if k % every == 0 {
             res.trace.push(TraceRow {
                 t_s: t,
-                psi_l_rad: x[idx::PSI_L],
-                psi_r_rad: x[idx::PSI_R],
-                theta_sw_rad: x[idx::THETA_SW],
+                psi_l_rad: psi_l,
+                psi_r_rad: psi_r,
+                theta_sw_rad: steering,
                 speed_mps: inputs.speed_mps,
                 driver_torque_nm: inputs.driver_torque_nm,
                 current_cmd_a: coil_cmd,
@@ -859,8 +901,7 @@ fn run_loop<F: FirmwareStep>(
                 speed_meas_mps: meter_in.2,
             });
         }
-        sim.advance(cfg.dt_s, &inputs)
-            .map_err(LoopError::Integrate)?;
+        SimPlant::advance(&mut sim, cfg.dt_s, &inputs).map_err(LoopError::Integrate)?;
     }
     res.sim_s = n as f64 * cfg.dt_s;
     res.wall_s = wall.elapsed().as_secs_f64();

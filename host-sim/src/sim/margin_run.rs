@@ -13,38 +13,45 @@ use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::{
     DataPipeline, PipelineOutput, PipelineParams, ShimmyPipeline,
 };
+use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind, ModeSelect};
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
-use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::model::family::{SimModel, SimPlant};
+use crate::model::plant::{Damper, Method};
 
 /// Control period, s.
 pub const DT_S: f64 = 1e-3;
 
-/// An open-loop margin scenario.
+/// An open-loop margin scenario on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct MarginScenario {
+pub struct MarginScenario<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// Parameters of the simulated plant.
-    pub params: PlantParams,
+    pub params: M,
     /// Parameters of the pipeline's model (the same as `params` unless a mismatch is studied);
     /// `None`: the data-only arm (mode meter, fusion and monitor without a model margin).
-    pub model: Option<PlantParams>,
+    pub model: Option<M>,
     /// Speed profile.
     pub speed: SpeedProfile,
     /// Simulated duration, s.
     pub duration_s: f64,
-    /// Road-noise std per wheel, N m (corner 30 Hz, half common to both wheels).
+    /// Road-noise std per wheel, N m (corner 30 Hz, half common to both wheels), for the car:
+    /// times [`SimModel::yaw_torque_scale`] on the model.
     pub noise_nm: f64,
-    /// Imbalance amplitude per wheel, N m (phases 0 and 1 rad).
+    /// Imbalance amplitude per wheel, N m (phases 0 and 1 rad), for the car: times
+    /// [`SimModel::yaw_torque_scale`] on the model.
     pub imbalance_nm: f64,
     /// Noise seed.
     pub seed: u64,
 }
 
-impl MarginScenario {
+impl<M: SimModel<N>, const N: usize> MarginScenario<M, N> {
     /// Constant speed `v_kmh` for `settle_s`, then a ramp to `to_kmh` at `rate` km/h/s.
-    pub fn ramp(params: PlantParams, from_kmh: f64, to_kmh: f64, rate: f64, settle_s: f64) -> Self {
+    pub fn ramp(params: M, from_kmh: f64, to_kmh: f64, rate: f64, settle_s: f64) -> Self {
         let t1 = settle_s + (to_kmh - from_kmh).abs() / rate.max(1e-6);
         Self {
             params,
@@ -63,7 +70,7 @@ impl MarginScenario {
     }
 
     /// Constant speed for `duration_s`.
-    pub fn constant(params: PlantParams, v_kmh: f64, duration_s: f64) -> Self {
+    pub fn constant(params: M, v_kmh: f64, duration_s: f64) -> Self {
         Self {
             params,
             model: Some(params),
@@ -78,14 +85,15 @@ impl MarginScenario {
     fn scenario(&self) -> Scenario {
         let mut s = Scenario::new(self.speed.clone());
         s.current_a = 0.0;
+        let scale = self.params.yaw_torque_scale();
         if self.noise_nm > 0.0 {
-            s.noise = Some(RoadNoise::new(self.noise_nm, 30.0, 0.5, self.seed));
+            s.noise = Some(RoadNoise::new(self.noise_nm * scale, 30.0, 0.5, self.seed));
         }
         if self.imbalance_nm > 0.0 {
             s.imbalance = Some(Imbalance {
-                amplitude_nm: [self.imbalance_nm; 2],
+                amplitude_nm: [self.imbalance_nm * scale; 2],
                 phase_rad: [0.0, 1.0],
-                radius_m: self.params.r,
+                radius_m: self.params.rolling_radius_m(),
             });
         }
         s
@@ -172,7 +180,7 @@ impl MarginRun {
 
 /// The linear onset speed of `p` without damper by a 0.5 km/h scan + Brent (independent of the
 /// pipeline's incremental search).
-pub fn onset_kmh(p: &PlantParams) -> Option<f64> {
+pub fn onset_kmh<M: LinearModel<N>, const N: usize>(p: &M) -> Option<f64> {
     stability::hopf_crossings(
         p,
         0.0,
@@ -188,16 +196,16 @@ pub fn onset_kmh(p: &PlantParams) -> Option<f64> {
 }
 
 /// The pipeline of a run: the full one (model tracker stepped every call) or the data-only arm.
-enum Pipe {
-    Full(Box<ShimmyPipeline<16>>),
+enum Pipe<M: LinearModel<N>, const N: usize> {
+    Full(Box<ShimmyPipeline<16, M, N>>),
     DataOnly(Box<DataPipeline<16>>),
 }
 
-impl Pipe {
-    fn new(model: Option<PlantParams>, pp: PipelineParams) -> Result<Self> {
+impl<M: LinearModel<N>, const N: usize> Pipe<M, N> {
+    fn new(model: Option<M>, pp: PipelineParams) -> Result<Self> {
         Ok(match model {
             Some(m) => Pipe::Full(Box::new(
-                ShimmyPipeline::new(m, pp).context("pipeline config")?,
+                ShimmyPipeline::for_model(m, pp).context("pipeline config")?,
             )),
             None => Pipe::DataOnly(Box::new(DataPipeline::new(&pp).context("pipeline config")?)),
         })
@@ -227,24 +235,29 @@ impl Pipe {
 
 /// Runs the open-loop scenario through the pipeline. `true_every`: compute the true
 /// eigenvalues every n-th row (0 = never).
-pub fn run(sc: &MarginScenario, pp: PipelineParams, true_every: usize) -> Result<MarginRun> {
+pub fn run<M: SimModel<N>, const N: usize>(
+    sc: &MarginScenario<M, N>,
+    pp: PipelineParams,
+    true_every: usize,
+) -> Result<MarginRun> {
     run_with_progress(sc, pp, true_every, &mut |_, _| {})
 }
 
 /// [`run`], telling `progress(done, total)` 1 ms steps every simulated second and at the end.
-pub fn run_with_progress(
-    sc: &MarginScenario,
+pub fn run_with_progress<M: SimModel<N>, const N: usize>(
+    sc: &MarginScenario<M, N>,
     pp: PipelineParams,
     true_every: usize,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<MarginRun> {
     let wall = std::time::Instant::now();
-    let p = sc.params;
-    let mut sim = Simulator::new(Plant::new(p, Damper::None), [0.0; N_STATE]);
+    let p = sc.params.linear();
+    let mut sim = sc.params.plant(Damper::None, Method::default());
     let mut scen = sc.scenario();
-    let mut pipe = Pipe::new(sc.model, pp)?;
+    let mut pipe = Pipe::new(sc.model.map(|m| m.linear()), pp)?;
     let mut first_inconsistent = None;
     let onset = onset_kmh(&p);
+    let radius_m = sc.params.rolling_radius_m() as f32;
     let n = (sc.duration_s / DT_S).round() as usize;
     let mut rows = Vec::with_capacity(n / 10 + 1);
     let mut first_warning = None;
@@ -263,7 +276,7 @@ pub fn run_with_progress(
         sim.advance(DT_S, &u)
             .with_context(|| format!("integration failed at t = {t}"))?;
         let t1 = t + DT_S;
-        let x = sim.state();
+        let [psi_l, psi_r] = sim.wheel_yaw_rad();
         let v = sc.speed.at(t1);
         let accel = (sc.speed.at(t1 + 0.5 * DT_S) - sc.speed.at(t1 - 0.5 * DT_S)) / DT_S;
         if let (Some(on), None) = (onset, onset_time) {
@@ -272,11 +285,11 @@ pub fn run_with_progress(
             }
         }
         let sample = Sample {
-            psi_l_rad: x[idx::PSI_L] as f32,
-            psi_r_rad: x[idx::PSI_R] as f32,
+            psi_l_rad: psi_l as f32,
+            psi_r_rad: psi_r as f32,
             wheel: WheelOrder::Speed {
                 speed_mps: v as f32,
-                radius_m: p.r as f32,
+                radius_m,
             },
             damper_cmd: 0.0,
         };
@@ -323,7 +336,7 @@ pub fn run_with_progress(
             zeta_offset: r.zeta_offset as f64,
             zeta_correction: r.zeta_correction as f64,
             amplitude_deg: (o.meter.amplitude_rad as f64).to_degrees(),
-            yaw_deg: (0.5 * (x[idx::PSI_L] + x[idx::PSI_R])).to_degrees(),
+            yaw_deg: (0.5 * (psi_l + psi_r)).to_degrees(),
         });
     }
     progress(n, n);

@@ -3,11 +3,11 @@
 //! setting summarised by their end amplitude ([`run_speed`]), with the peak-tracking analysis
 //! ([`peaks`], [`fit_growth`]) used to compare time-domain growth rates with eigenvalues.
 
-use crate::model::disturbance::{initial_yaw, Scenario};
+use crate::model::disturbance::Scenario;
+use crate::model::family::{SimModel, SimPlant};
 use crate::model::integrator::IntegrateError;
-use crate::model::plant::{idx, Damper, Forces, Inputs, Plant, Simulator, State, STATE_NAMES};
+use crate::model::plant::{Damper, Forces, Inputs, Method, Simulator, State, STATE_NAMES};
 use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::PlantParams;
 
 /// Control period of the runs, s (inputs held per period, as in closed loop).
 pub const DT_S: f64 = 1e-3;
@@ -80,28 +80,29 @@ impl DamperSetting {
         }
     }
 
-    fn plant(self, params: &PlantParams) -> (Plant, f64) {
+    /// The plant's damper and its constant coil current, A.
+    pub fn damper(self) -> (Damper, f64) {
         match self {
-            DamperSetting::Off => (Plant::new(*params, Damper::None), 0.0),
-            DamperSetting::Mr { damper, current_a } => {
-                (Plant::new(*params, Damper::Mr(damper)), current_a)
-            }
+            DamperSetting::Off => (Damper::None, 0.0),
+            DamperSetting::Mr { damper, current_a } => (Damper::Mr(damper), current_a),
         }
     }
 }
 
-/// Runs the plant at constant speed `v_mps` from an in-phase wheel-yaw start `psi0_rad` for
-/// `duration_s` and summarises the last two windows of `window_s`.
-pub fn run_speed(
-    params: &PlantParams,
+/// Runs the plant of the vehicle model `params` (any member of the family) at constant speed
+/// `v_mps` from an in-phase wheel-yaw start `psi0_rad` for `duration_s` and summarises the last
+/// two windows of `window_s` (peak |psi_L|).
+pub fn run_speed<M: SimModel<N>, const N: usize>(
+    params: &M,
     damper: DamperSetting,
     v_mps: f64,
     psi0_rad: f64,
     duration_s: f64,
     window_s: f64,
-) -> Result<RunSummary, IntegrateError> {
-    let (plant, current) = damper.plant(params);
-    let mut sim = Simulator::new(plant, initial_yaw(psi0_rad));
+) -> anyhow::Result<RunSummary> {
+    let (damper, current) = damper.damper();
+    let mut sim = params.plant(damper, Method::default());
+    sim.set_wheel_yaw(psi0_rad, psi0_rad);
     let u = Inputs {
         current_cmd_a: current,
         speed_mps: v_mps,
@@ -112,7 +113,7 @@ pub fn run_speed(
     let (mut amp_end, mut amp_prev) = (0.0f64, 0.0f64);
     for k in 0..n {
         sim.advance(DT_S, &u)?;
-        let a = sim.state()[idx::PSI_L].abs();
+        let a = sim.wheel_yaw_rad()[0].abs();
         if k + w >= n {
             amp_end = amp_end.max(a);
         } else if k + 2 * w >= n {

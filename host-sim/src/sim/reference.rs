@@ -19,11 +19,11 @@
 //! mode (e.g. the anti-phase wheel-yaw mode near 47 Hz).
 
 use crate::model::damper_equiv::{mr_equivalent_viscous, stroke_amplitude_m};
+use crate::model::family::SimModel;
 use crate::sim::closed_loop::{Arm, LoopConfig, LoopResult, TraceRow};
 use rayon::prelude::*;
 use shimmy_core::eigen::{EigenError, Mode};
 use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::PlantParams;
 use shimmy_core::stability::{mode_at, ModeSelect};
 
 /// What the reference line is, for legends and captions.
@@ -57,24 +57,25 @@ pub struct RefPoint {
 
 /// The shimmy mode of `p` at `v_mps` with the damper `damper` (`None`: no damper) held at
 /// `current_a` and oscillating with in-phase wheel-yaw amplitude `amplitude_rad`; with its c_eq.
-pub fn shimmy_mode_with_damper(
-    p: &PlantParams,
+pub fn shimmy_mode_with_damper<M: SimModel<N>, const N: usize>(
+    p: &M,
     damper: Option<&SpencerParams>,
     v_mps: f64,
     current_a: f64,
     amplitude_rad: f64,
 ) -> Result<(Mode, f64), EigenError> {
-    let m0 = mode_at(p, v_mps, 0.0, ModeSelect::Shimmy)?;
+    let lin = p.linear();
+    let m0 = mode_at(&lin, v_mps, 0.0, ModeSelect::Shimmy)?;
     let Some(sp) = damper else {
         return Ok((m0, 0.0));
     };
-    let amp_m = stroke_amplitude_m(p.l_t, amplitude_rad.max(MIN_AMPLITUDE_RAD));
+    let amp_m = stroke_amplitude_m(p.steering_arm_m(), amplitude_rad.max(MIN_AMPLITUDE_RAD));
     let mut c = mr_equivalent_viscous(sp, current_a, m0.freq_hz, amp_m);
-    let mut m = mode_at(p, v_mps, c, ModeSelect::Shimmy)?;
+    let mut m = mode_at(&lin, v_mps, c, ModeSelect::Shimmy)?;
     // The damper stiffens and damps the mode, which moves its frequency; one more pass at the
     // new frequency (the frequency moves little with c).
     c = mr_equivalent_viscous(sp, current_a, m.freq_hz, amp_m);
-    m = mode_at(p, v_mps, c, ModeSelect::Shimmy)?;
+    m = mode_at(&lin, v_mps, c, ModeSelect::Shimmy)?;
     Ok((m, c))
 }
 
@@ -110,7 +111,11 @@ fn envelope_at(peaks: &[(f64, f64)], t: f64) -> f64 {
 
 /// The reference line of run `r` of `cfg`, one point every `every_s` seconds of its trace
 /// ([`reference_at`] on that grid).
-pub fn reference_line(cfg: &LoopConfig, r: &LoopResult, every_s: f64) -> Vec<RefPoint> {
+pub fn reference_line<M: SimModel<N>, const N: usize>(
+    cfg: &LoopConfig<M, N>,
+    r: &LoopResult,
+    every_s: f64,
+) -> Vec<RefPoint> {
     let (Some(first), Some(last)) = (r.trace.first(), r.trace.last()) else {
         return Vec::new();
     };
@@ -122,7 +127,11 @@ pub fn reference_line(cfg: &LoopConfig, r: &LoopResult, every_s: f64) -> Vec<Ref
 /// The reference points of run `r` of `cfg` at `times` (computed in parallel): at each time the
 /// speed, the mean coil current over [`CURRENT_WINDOW_S`] and the wheel-yaw envelope
 /// ([`yaw_peaks`], interpolated). Times where no shimmy mode is found are left out.
-pub fn reference_at(cfg: &LoopConfig, r: &LoopResult, times: &[f64]) -> Vec<RefPoint> {
+pub fn reference_at<M: SimModel<N>, const N: usize>(
+    cfg: &LoopConfig<M, N>,
+    r: &LoopResult,
+    times: &[f64],
+) -> Vec<RefPoint> {
     let damper = match cfg.arm {
         Arm::NoDamper => None,
         Arm::Mr(_) => Some(cfg.damper),

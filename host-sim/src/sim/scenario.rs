@@ -4,16 +4,18 @@
 //! scenario file (`scenario_file`) or from the built-in standard set (`standard`), and the one
 //! way to turn it into a [`LoopConfig`] and run it.
 
-use crate::model::disturbance::{initial_yaw, Scenario};
+use crate::model::disturbance::Scenario;
+use crate::model::family::{yaw_state, FamilyVehicle, SimModel};
 use crate::model::faults::FaultSpec;
 use crate::model::sensors::SensorConfig;
 use crate::sim::arg_range;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::sim::vehicle_file;
-use anyhow::{Context, Result};
+use crate::sim::vehicle_file::FileModel;
+use anyhow::{bail, Context, Result};
 use shimmy_core::control::ControlParams;
-use shimmy_core::vehicle::Vehicle;
-use std::path::PathBuf;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::PlantParams;
+use std::path::{Path, PathBuf};
 
 /// The controller names, one per controller, as they appear in tables, legends and file names
 /// (`no-damper` = no damper force at all). Every command and scenario file also accepts the
@@ -37,18 +39,21 @@ pub fn controller_name(name: &str) -> Option<&'static str> {
 /// A scenario file's passive-on current, as error messages name it.
 pub const ON_CURRENT_FIELD: &str = "field `controller.on_current_a`";
 
-/// A validated scenario, ready to run.
+/// A validated scenario on the vehicle model `M` (the car by default), ready to run.
 #[derive(Clone, Debug)]
-pub struct ScenarioSpec {
+pub struct ScenarioSpec<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// Short name (tables, headings; file names use its sanitised form).
     pub name: String,
     /// One line on what it is (plot titles of `compare`); empty for scenario files.
     pub description: String,
     /// The true vehicle: the simulated plant, damper and sensors.
-    pub plant: Vehicle,
+    pub plant: M::Vehicle,
     /// The vehicle the firmware believes (its controller's and estimator's models, gains and
     /// thresholds); `None`: the plant's vehicle ([`Self::model`]).
-    pub model_vehicle: Option<Vehicle>,
+    pub model_vehicle: Option<M::Vehicle>,
     /// Controller name, one of [`CONTROLLERS`] (callers running several controllers override it).
     pub controller: String,
     /// Fixed current of `passive-on`, in A.
@@ -71,11 +76,12 @@ pub struct ScenarioSpec {
     pub out_dir: Option<PathBuf>,
 }
 
-impl ScenarioSpec {
+impl<M: SimModel<N>, const N: usize> ScenarioSpec<M, N> {
     /// A scenario with the defaults of a file that gives only these: no description, the plant
     /// at rest, no settling metric, ASMC, default sensors, a trace at 200 Hz, no faults.
     /// The sensors are the plant vehicle's; the firmware believes the plant's vehicle.
-    pub fn new(name: &str, plant: &Vehicle, scenario: Scenario, duration_s: f64) -> Self {
+    pub fn new(name: &str, plant: &M::Vehicle, scenario: Scenario, duration_s: f64) -> Self {
+        let sensors = SensorConfig::from_vehicle(&M::family_vehicle(plant).parts.sensors);
         ScenarioSpec {
             name: name.to_string(),
             description: String::new(),
@@ -87,7 +93,7 @@ impl ScenarioSpec {
             scenario,
             duration_s,
             t_dist_s: None,
-            sensors: SensorConfig::from_vehicle(&plant.sensors),
+            sensors,
             trace_every: 5,
             faults: Vec::new(),
             out_dir: None,
@@ -96,11 +102,11 @@ impl ScenarioSpec {
 
     /// Replaces the simulated vehicle (and with it the sensors' calibration; the noise seed
     /// stays), e.g. for `--vehicle` on the command line.
-    pub fn set_plant(&mut self, plant: Vehicle) {
+    pub fn set_plant(&mut self, plant: M::Vehicle) {
         self.plant = plant;
         self.sensors = SensorConfig {
             seed: self.sensors.seed,
-            ..SensorConfig::from_vehicle(&plant.sensors)
+            ..SensorConfig::from_vehicle(&M::family_vehicle(&plant).parts.sensors)
         };
     }
 
@@ -114,12 +120,16 @@ impl ScenarioSpec {
         vehicle: Option<&str>,
         model: Option<&str>,
         controller: Option<(&str, f64)>,
-    ) -> Result<()> {
+    ) -> Result<()>
+    where
+        M: FileModel<N>,
+    {
         if let Some(v) = vehicle {
-            self.set_plant(vehicle_file::load(v).context("--vehicle")?);
+            self.set_plant(M::load_vehicle(v, Path::new("")).context("--vehicle")?);
         }
         if let Some(m) = model {
-            self.model_vehicle = Some(vehicle_file::load(m).context("--model-vehicle")?);
+            self.model_vehicle =
+                Some(M::load_vehicle(m, Path::new("")).context("--model-vehicle")?);
         }
         let source = match controller {
             Some((name, on_current_a)) => {
@@ -133,8 +143,13 @@ impl ScenarioSpec {
     }
 
     /// The vehicle the firmware believes.
-    pub fn model(&self) -> &Vehicle {
+    pub fn model(&self) -> &M::Vehicle {
         self.model_vehicle.as_ref().unwrap_or(&self.plant)
+    }
+
+    /// The vehicle the firmware believes, as the model's parameters and the shared sections.
+    pub fn model_family(&self) -> FamilyVehicle<M> {
+        M::family_vehicle(self.model())
     }
 
     /// Checks the passive-on current (when that is the controller) against the coil rating of
@@ -142,7 +157,16 @@ impl ScenarioSpec {
     /// names where the current was given (an option or a scenario file's field).
     pub fn check_on_current(&self, source: &str) -> Result<()> {
         if self.controller == "passive-on" {
-            arg_range::check_current(source, self.on_current_a, self.model())?;
+            arg_range::check_current(source, self.on_current_a, &self.model_family().parts)?;
+        }
+        if self.controller == "margin-asmc" && self.model_family().model.host_app_model().is_none()
+        {
+            bail!(
+                "controller `margin-asmc` reads the firmware's margin report, whose host build \
+                 runs the {} model task; this vehicle is a {}: choose another controller",
+                PlantParams::NAME,
+                <M::Linear as LinearModel<N>>::NAME
+            );
         }
         Ok(())
     }
@@ -160,22 +184,26 @@ impl ScenarioSpec {
 
 /// The closed-loop configuration of `spec` driven by `arm`: the plant vehicle simulated, the
 /// model vehicle's controller model and gains.
-pub fn loop_config(spec: &ScenarioSpec, arm: Arm) -> LoopConfig {
-    let mut cfg = LoopConfig::new(&spec.plant, arm, spec.duration_s).with_model(spec.model());
+pub fn loop_config<M: SimModel<N>, const N: usize>(
+    spec: &ScenarioSpec<M, N>,
+    arm: Arm,
+) -> LoopConfig<M, N> {
+    let mut cfg = LoopConfig::for_vehicle(&M::family_vehicle(&spec.plant), arm, spec.duration_s)
+        .with_model_vehicle(&spec.model_family());
     cfg.sensors = spec.sensors;
     cfg.record_every = spec.trace_every;
-    cfg.x0 = initial_yaw(spec.initial_yaw_rad);
+    cfg.x0 = yaw_state::<M, N>(spec.initial_yaw_rad);
     cfg.faults = spec.faults.clone();
     cfg
 }
 
 /// Runs `spec` with `arm` and the control parameters `control` (e.g. the model vehicle's with
 /// a study's gain overrides).
-pub fn run_arm(
-    spec: &ScenarioSpec,
+pub fn run_arm<M: SimModel<N>, const N: usize>(
+    spec: &ScenarioSpec<M, N>,
     arm: Arm,
     control: &ControlParams,
-) -> Result<(LoopConfig, LoopResult)> {
+) -> Result<(LoopConfig<M, N>, LoopResult)> {
     let mut cfg = loop_config(spec, arm);
     cfg.control = *control;
     let mut scenario = spec.scenario.clone();
@@ -185,6 +213,8 @@ pub fn run_arm(
 }
 
 /// Runs `spec` with its own controller and the model vehicle's control parameters.
-pub fn run(spec: &ScenarioSpec) -> Result<(LoopConfig, LoopResult)> {
-    run_arm(spec, spec.arm()?, &spec.model().control_params())
+pub fn run<M: SimModel<N>, const N: usize>(
+    spec: &ScenarioSpec<M, N>,
+) -> Result<(LoopConfig<M, N>, LoopResult)> {
+    run_arm(spec, spec.arm()?, &spec.model_family().control_params())
 }

@@ -70,14 +70,17 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
+use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
 use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
-use shimmy_core::params::kmh_to_mps;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{kmh_to_mps, PlantParams};
+use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -238,6 +241,11 @@ fn in_range(field: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<f64
 
 /// Reads and validates a scenario file; vehicle files it names are found relative to it.
 pub fn load(path: &Path) -> Result<ScenarioSpec> {
+    car(load_any(path)?).with_context(|| format!("in scenario file {}", path.display()))
+}
+
+/// [`load`] for a scenario on a vehicle of any model of the family.
+pub fn load_any(path: &Path) -> Result<AnyScenario> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let stem = path
@@ -245,7 +253,7 @@ pub fn load(path: &Path) -> Result<ScenarioSpec> {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     let dir = path.parent().unwrap_or(Path::new(""));
-    parse_in(&text, &stem, dir).with_context(|| format!("in scenario file {}", path.display()))
+    parse_any_in(&text, &stem, dir).with_context(|| format!("in scenario file {}", path.display()))
 }
 
 /// Parses and validates scenario TOML; `default_name` names the run when the file does not;
@@ -254,34 +262,138 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
     parse_in(text, default_name, Path::new(""))
 }
 
-/// The vehicle of a `[plant]` or `[model]` section (`key`): the named set or file, then the
-/// plant overrides, validated as a whole.
-fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<Vehicle> {
-    let spec = section.vehicle.as_deref().unwrap_or("nominal");
-    let mut v =
-        vehicle_file::load_relative(spec, dir).with_context(|| format!("field `{key}.vehicle`"))?;
-    for (name, value) in &section.overrides {
-        vehicle_file::set_field(&mut v, "plant", &format!("{key}.overrides"), name, *value)?;
+/// A scenario on a vehicle of any model of the family (the `[plant]` vehicle's model; the
+/// `[model]` vehicle must be of the same).
+#[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)]
+pub enum AnyScenario {
+    /// On the car.
+    Car(ScenarioSpec),
+    /// On the mining truck.
+    Truck(ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>),
+}
+
+impl AnyScenario {
+    /// The scenario's name.
+    pub fn name(&self) -> &str {
+        match self {
+            AnyScenario::Car(s) => &s.name,
+            AnyScenario::Truck(s) => &s.name,
+        }
     }
-    v.validate()
-        .with_context(|| format!("field `{key}.overrides`"))?;
+}
+
+/// The car's scenario, or an error naming the model of another.
+fn car(s: AnyScenario) -> Result<ScenarioSpec> {
+    match s {
+        AnyScenario::Car(s) => Ok(s),
+        AnyScenario::Truck(s) => bail!(
+            "scenario `{}` is on a {} vehicle; this command runs the {} only",
+            s.name,
+            TruckParams::NAME,
+            PlantParams::NAME
+        ),
+    }
+}
+
+/// The vehicle of a `[plant]` or `[model]` section (`key`): the named set or file, then the
+/// plant overrides (the model's parameters by name), validated as a whole.
+fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVehicle> {
+    let spec = section.vehicle.as_deref().unwrap_or("nominal");
+    let mut v = vehicle_file::load_model_relative(spec, dir)
+        .with_context(|| format!("field `{key}.vehicle`"))?;
+    match &mut v {
+        ModelVehicle::Car(v) => {
+            for (name, value) in &section.overrides {
+                vehicle_file::set_field(v, "plant", &format!("{key}.overrides"), name, *value)?;
+            }
+            v.validate()
+                .with_context(|| format!("field `{key}.overrides`"))?;
+        }
+        ModelVehicle::Truck(t) => {
+            for (name, value) in &section.overrides {
+                t.model = t
+                    .model
+                    .with_param(name, *value)
+                    .with_context(|| format!("field `{key}.overrides.{name}`"))?;
+            }
+            t.model
+                .validate()
+                .map_err(|e| anyhow::anyhow!("truck: {e}"))
+                .with_context(|| format!("field `{key}.overrides`"))?;
+        }
+        ModelVehicle::DualAxle(_) => bail!(
+            "field `{key}.vehicle`: a {} vehicle; scenario files take the car or the mining truck",
+            <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                { shimmy_core::dual_axle::N_STATES },
+            >>::NAME
+        ),
+    }
     Ok(v)
 }
 
 /// [`parse`] with vehicle files looked up relative to `dir` (the scenario file's folder).
 pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSpec> {
+    car(parse_any_in(text, default_name, dir)?)
+}
+
+/// [`parse_in`] for a scenario on a vehicle of any model of the family.
+pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnyScenario> {
     let f: File = toml::from_str(text)?;
     let duration_s = in_range("duration_s", f.duration_s, 0.01, 3600.0, "s")?;
 
-    let mut plant = match &f.plant {
+    let plant = match &f.plant {
         Some(p) => vehicle_of("plant", p, dir)?,
-        None => Vehicle::nominal(),
+        None => ModelVehicle::Car(Vehicle::nominal()),
     };
     let model_vehicle = match &f.model {
         Some(m) => Some(vehicle_of("model", m, dir)?),
         None => None,
     };
+    match (plant, model_vehicle) {
+        (ModelVehicle::Car(p), None) => {
+            build(&f, p, None, default_name, duration_s).map(AnyScenario::Car)
+        }
+        (ModelVehicle::Car(p), Some(ModelVehicle::Car(m))) => {
+            build(&f, p, Some(m), default_name, duration_s).map(AnyScenario::Car)
+        }
+        (ModelVehicle::Truck(p), m) => {
+            let m = match m {
+                None => None,
+                Some(ModelVehicle::Truck(m)) => Some(m),
+                Some(other) => bail!(
+                    "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
+                     of the plant's model",
+                    other.model_name(),
+                    TruckParams::NAME
+                ),
+            };
+            if f.driver.is_some() {
+                bail!(
+                    "field `driver`: the {} steers hydrostatically, no driver torque reaches \
+                     its linkage; leave the section out",
+                    TruckParams::NAME
+                );
+            }
+            build(&f, p, m, default_name, duration_s).map(AnyScenario::Truck)
+        }
+        (p, m) => bail!(
+            "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is of the \
+             plant's model",
+            m.map_or("missing", |m| m.model_name()),
+            p.model_name()
+        ),
+    }
+}
 
+/// The rest of the file on the plant vehicle `plant` (and the believed `model_vehicle`).
+fn build<M: SimModel<N>, const N: usize>(
+    f: &File,
+    mut plant: M::Vehicle,
+    model_vehicle: Option<M::Vehicle>,
+    default_name: &str,
+    duration_s: f64,
+) -> Result<ScenarioSpec<M, N>> {
     let (controller, on_current_a) = match &f.controller {
         Some(c) => {
             let Some(kind) = controller_name(&c.kind) else {
@@ -351,7 +463,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         scenario.imbalance = Some(Imbalance {
             amplitude_nm: [a, a],
             phase_rad,
-            radius_m: plant.plant.r,
+            radius_m: M::family_vehicle(&plant).model.rolling_radius_m(),
         });
     }
     if let Some(d) = &f.driver {
@@ -399,7 +511,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
             ("encoder_noise_lsb", s.encoder_noise_lsb),
         ] {
             if let Some(x) = value {
-                vehicle_file::set_field(&mut plant, "sensors", "sensors", name, x)?;
+                vehicle_file::set_field(M::parts_mut(&mut plant), "sensors", "sensors", name, x)?;
             }
         }
     }
@@ -425,7 +537,7 @@ pub fn parse_in(text: &str, default_name: &str, dir: &Path) -> Result<ScenarioSp
         .collect::<Result<Vec<_>>>()?;
     let sensors = SensorConfig {
         seed: f.seed,
-        ..SensorConfig::from_vehicle(&plant.sensors)
+        ..SensorConfig::from_vehicle(&M::family_vehicle(&plant).parts.sensors)
     };
     // Settling is measured from the initial perturbation (t = 0), else from the first impulse.
     let t_dist_s = if initial_yaw_rad != 0.0 {

@@ -31,6 +31,8 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
+use crate::model::dual_axle_plant::dual_axle_parts;
+use crate::model::family::{truck_parts, FamilyVehicle, SimModel};
 use anyhow::{bail, Context, Result};
 use shimmy_core::dual_axle::{DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::model::LinearModel;
@@ -46,10 +48,66 @@ use std::path::{Path, PathBuf};
 pub enum ModelVehicle {
     /// The 4-DOF car (`car-4dof`): the whole vehicle (plant, damper, sensors, gains).
     Car(Vehicle),
-    /// The mining dump truck (`mining-truck-5dof`): its linear model's parameters.
-    Truck(TruckParams),
-    /// The dual-front-axle heavy truck (`dual-axle-truck-8dof`): its model's parameters.
-    DualAxle(DualAxleParams),
+    /// The mining dump truck (`mining-truck-5dof`): its model's parameters, damper, sensors,
+    /// gains and thresholds.
+    Truck(FamilyVehicle<TruckParams>),
+    /// The dual-front-axle heavy truck (`dual-axle-truck-8dof`): its model's parameters (no
+    /// damper, sensors or gains configured: `stability`, `sensitivity`, `bifurcation` and the
+    /// open-loop `margin`).
+    DualAxle(FamilyVehicle<DualAxleParams>),
+}
+
+impl ModelVehicle {
+    /// The model's name (`car-4dof`, `mining-truck-5dof`).
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            ModelVehicle::Car(_) => PlantParams::NAME,
+            ModelVehicle::Truck(_) => TruckParams::NAME,
+            ModelVehicle::DualAxle(_) => DualAxleParams::NAME,
+        }
+    }
+}
+
+/// A model of the family whose vehicle a vehicle file (or a set name) gives: what a command
+/// generic over the model loads `--vehicle` with.
+pub trait FileModel<const N: usize>: SimModel<N> {
+    /// The vehicle `spec` (a set name or a file, relative to `dir`), or an error naming the
+    /// model it has when that is another.
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<Self::Vehicle>;
+}
+
+impl FileModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<Vehicle> {
+        load_relative(spec, dir)
+    }
+}
+
+impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TruckParams>> {
+        match load_model_relative(spec, dir)? {
+            ModelVehicle::Truck(t) => Ok(t),
+            other => bail!(
+                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
+                 the believed vehicle are of one model)",
+                other.model_name(),
+                TruckParams::NAME
+            ),
+        }
+    }
+}
+
+impl FileModel<{ shimmy_core::dual_axle::N_STATES }> for DualAxleParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<DualAxleParams>> {
+        match load_model_relative(spec, dir)? {
+            ModelVehicle::DualAxle(t) => Ok(t),
+            other => bail!(
+                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
+                 the believed vehicle are of one model)",
+                other.model_name(),
+                DualAxleParams::NAME
+            ),
+        }
+    }
 }
 
 /// The model names a vehicle file's `model` key takes.
@@ -57,16 +115,33 @@ pub const MODEL_NAMES: [&str; 3] = [PlantParams::NAME, TruckParams::NAME, DualAx
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
+    load_model_relative(spec, Path::new(""))
+}
+
+/// [`load_model`] with a relative path taken relative to `dir`. Set names win over files of the
+/// same name.
+pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     if let Some(set) = TruckSet::from_name(spec) {
-        return Ok(ModelVehicle::Truck(set.params()));
+        return Ok(ModelVehicle::Truck(FamilyVehicle {
+            model: set.params(),
+            parts: truck_parts()?,
+        }));
     }
     if let Some(set) = DualAxleSet::from_name(spec) {
-        return Ok(ModelVehicle::DualAxle(set.params()));
+        return Ok(ModelVehicle::DualAxle(FamilyVehicle {
+            model: set.params(),
+            parts: dual_axle_parts(),
+        }));
     }
     if ParamSet::from_name(spec).is_some() {
         return load(spec).map(ModelVehicle::Car);
     }
-    let path = Path::new(spec);
+    let path: PathBuf = if Path::new(spec).is_absolute() {
+        PathBuf::from(spec)
+    } else {
+        dir.join(spec)
+    };
+    let path = path.as_path();
     if !path.is_file() {
         bail!(
             "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {})",
@@ -86,7 +161,12 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
-        m if m == DualAxleParams::NAME => parse_dual_axle(&table).map(ModelVehicle::DualAxle),
+        m if m == DualAxleParams::NAME => parse_dual_axle(&table).map(|model| {
+            ModelVehicle::DualAxle(FamilyVehicle {
+                model,
+                parts: dual_axle_parts(),
+            })
+        }),
         _ => parse(text).map(ModelVehicle::Car),
     }
 }
@@ -108,8 +188,10 @@ fn model_of(table: &toml::Table) -> Result<&str> {
     }
 }
 
-/// A `mining-truck-5dof` file: `base` (a truck set) and the `[truck]` section.
-fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
+/// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
+/// sections of every model (`[damper]`, `[damper_model]`, `[sensors]`, `[controller]`,
+/// `[thresholds]`, from [`truck_parts`]).
+fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
     let base = match table.get("base") {
         None => TruckSet::Full.name(),
         Some(toml::Value::String(s)) => s.as_str(),
@@ -126,13 +208,21 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
         );
     };
     let mut t = set.params();
+    let mut parts = truck_parts()?;
     for (key, value) in table {
         match key.as_str() {
             "model" | "base" => continue,
             "truck" => {}
+            k if k != "plant" && SECTIONS.contains(&k) => {
+                for (name, x) in section_numbers(key, value)? {
+                    set_field(&mut parts, k, k, name, x)?;
+                }
+                continue;
+            }
             _ => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, truck",
-                TruckParams::NAME
+                "field `{key}`: no such section for model {}, allowed: model, base, truck, {}",
+                TruckParams::NAME,
+                SECTIONS[1..].join(", ")
             ),
         }
         for (name, x) in section_numbers(key, value)? {
@@ -151,7 +241,8 @@ fn parse_truck(table: &toml::Table) -> Result<TruckParams> {
         }
     }
     t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
-    Ok(t)
+    parts.validate()?;
+    Ok(FamilyVehicle { model: t, parts })
 }
 
 /// A `dual-axle-truck-8dof` file: `base` (a dual-axle set) and the `[dual_axle]` section.
@@ -338,9 +429,8 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 /// The message of a car-only command given another model.
 fn car_only(what: &str) -> String {
     format!(
-        "{what} is a {} or {} model; this command needs the {} (the mining truck runs \
-         through `stability`, `sensitivity` and `gas-charge`, the dual-axle truck through \
-         `stability`, `sensitivity` and `bifurcation`)",
+        "{what} is a {} or {} model; this command needs the {} (it reads the car's steering \
+         wheel or its firmware image's model task)",
         TruckParams::NAME,
         DualAxleParams::NAME,
         PlantParams::NAME
@@ -456,7 +546,7 @@ mod tests {
             car("base = \"hard\"\n"),
             car("model = \"car-4dof\"\nbase = \"hard\"\n")
         );
-        let ModelVehicle::Truck(t) = parse_model(
+        let ModelVehicle::Truck(FamilyVehicle { model: t, .. }) = parse_model(
             "model = \"mining-truck-5dof\"\nbase = \"truck-empty\"\n[truck]\nhps_v0_m3 = 0.0145\npayload_kg = 100000\n",
         )
         .unwrap() else {
@@ -506,7 +596,7 @@ mod tests {
     /// values and axle order are rejected naming them.
     #[test]
     fn a_dual_axle_file_reads_its_section() {
-        let ModelVehicle::DualAxle(t) = parse_model(
+        let ModelVehicle::DualAxle(FamilyVehicle { model: t, .. }) = parse_model(
             "model = \"dual-axle-truck-8dof\"\nbase = \"dual-axle\"\n[dual_axle]\nk_t = 2.0e5\nm_f = 80\n",
         )
         .unwrap() else {

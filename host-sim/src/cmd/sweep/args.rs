@@ -1,6 +1,7 @@
 //! The arguments and grid axes shared by both sweep variants (the eigenvalue map and the
 //! time-domain map), so that neither has to import the other.
 
+use crate::model::family::{param_names, ParamInfo, SimModel};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::scenario::controller_name;
 use anyhow::{bail, Result};
@@ -93,26 +94,41 @@ pub fn axes(
     vehicle: &Vehicle,
     default_steps: (usize, usize),
 ) -> Result<(Vec<f64>, Vec<f64>, Param)> {
-    let base = &vehicle.plant;
-    let Some(param) = Param::from_name(&a.param) else {
-        let names: Vec<&str> = Param::ALL.iter().map(|p| p.name()).collect();
+    let (speeds, values, info) = axes_of(a, &vehicle.plant, vehicle, default_steps)?;
+    let Some(param) = Param::from_name(info.name) else {
+        bail!("--param {}: not a parameter of the car", a.param);
+    };
+    Ok((speeds, values, param))
+}
+
+/// [`axes`] for any vehicle model `model` of the family (the coil rating from `parts`).
+pub fn axes_of<M: SimModel<N>, const N: usize>(
+    a: &SweepArgs,
+    model: &M,
+    parts: &Vehicle,
+    default_steps: (usize, usize),
+) -> Result<(Vec<f64>, Vec<f64>, ParamInfo)> {
+    let (Some(info), Some(base)) = (
+        M::params().into_iter().find(|p| p.name == a.param),
+        model.param(&a.param),
+    ) else {
         bail!(
             "--param {}: no such parameter, allowed: {}",
             a.param,
-            names.join(", ")
+            param_names::<M, N>()
         );
     };
     let v_steps = a.v_steps.unwrap_or(default_steps.0);
     let factor_steps = a.factor_steps.unwrap_or(default_steps.1);
     check(a)?;
     for &i in &a.damper_current_a {
-        arg_range::check_current("--damper-current-a", i, vehicle)?;
+        arg_range::check_current("--damper-current-a", i, parts)?;
     }
     if a.controllers
         .iter()
         .any(|c| controller_name(c) == Some("passive-on"))
     {
-        arg_range::check_current("--on-current-a", a.on_current_a, vehicle)?;
+        arg_range::check_current("--on-current-a", a.on_current_a, parts)?;
     }
     if !(1..=401).contains(&factor_steps) || !(2..=1001).contains(&v_steps) {
         bail!("--factor-steps {factor_steps}, --v-steps {v_steps}: allowed 1 to 401 and 2 to 1001");
@@ -127,10 +143,10 @@ pub fn axes(
             } else {
                 a.factor_min + (a.factor_max - a.factor_min) * j as f64 / (factor_steps - 1) as f64
             };
-            base.get(param) * f
+            base * f
         })
         .collect();
-    Ok((speeds_kmh, values, param))
+    Ok((speeds_kmh, values, info))
 }
 
 /// The single-option ranges again (for arguments built in code rather than parsed; the

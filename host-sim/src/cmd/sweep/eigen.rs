@@ -4,15 +4,19 @@
 //! it, and CSV. Rows run in parallel (rayon) with a progress bar; the result does not depend on
 //! the number of threads (each grid point is computed independently, rows are written in order).
 
-use super::args::{axes, SweepArgs};
+use super::args::{axes_of, SweepArgs};
 use crate::model::damper_equiv::damper_equivalent;
+use crate::model::family::{ParamInfo, SimModel};
 use crate::out::plot_util;
+use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -40,18 +44,29 @@ pub struct SweepMap {
     pub rows: Vec<SweepRow>,
 }
 
-/// Computes the maps.
-pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
-    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
-    let base = vehicle.plant;
-    let (speeds_kmh, values, param) = axes(a, &vehicle, (149, 41))?;
+/// Computes the maps on the vehicle of `--vehicle`, of any model of the family.
+pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
+    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => compute_on(a, &v.plant, &v),
+        ModelVehicle::Truck(t) => compute_on(a, &t.model, &t.parts),
+        ModelVehicle::DualAxle(t) => compute_on(a, &t.model, &t.parts),
+    }
+}
+
+/// The maps of the vehicle model `base` with the damper of `vehicle`.
+pub fn compute_on<M: SimModel<N>, const N: usize>(
+    a: &SweepArgs,
+    base: &M,
+    vehicle: &Vehicle,
+) -> Result<(ParamInfo, Vec<SweepMap>)> {
+    let (speeds_kmh, values, param) = axes_of(a, base, vehicle, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
     if a.damper_current_a.is_empty() {
         dampers.push(("no damper".into(), 0.0));
     }
     for &i in &a.damper_current_a {
         let d = damper_equivalent(
-            &base,
+            base,
             &vehicle.damper.spencer,
             i,
             a.ref_amplitude_deg,
@@ -75,7 +90,9 @@ pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
         let rows: Result<Vec<SweepRow>> = values
             .par_iter()
             .map(|&value| {
-                let row = row(&base.with(param, value), value, c, &speeds_kmh, a);
+                let row = base
+                    .with_param(param.name, value)
+                    .and_then(|p| row(&p.linear(), value, c, &speeds_kmh, a));
                 bar.inc(1);
                 row
             })
@@ -91,7 +108,13 @@ pub fn compute(a: &SweepArgs) -> Result<(Param, Vec<SweepMap>)> {
     Ok((param, maps))
 }
 
-fn row(p: &PlantParams, value: f64, c: f64, speeds_kmh: &[f64], a: &SweepArgs) -> Result<SweepRow> {
+fn row<M: LinearModel<N>, const N: usize>(
+    p: &M,
+    value: f64,
+    c: f64,
+    speeds_kmh: &[f64],
+    a: &SweepArgs,
+) -> Result<SweepRow> {
     let max_re = speeds_kmh
         .iter()
         .map(|&v| {
@@ -130,24 +153,18 @@ pub fn command(a: &SweepArgs) -> Result<()> {
         } else {
             format!("damper{k}")
         };
-        let grid = a.out.join(format!("sweep-{}-{tag}.csv", param.name()));
-        let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name()));
-        let png = a.out.join(format!("sweep-{}-{tag}.png", param.name()));
+        let grid = a.out.join(format!("sweep-{}-{tag}.csv", param.name));
+        let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name));
+        let png = a.out.join(format!("sweep-{}-{tag}.png", param.name));
         write_csv(&grid, &boundary, param, map)?;
         plot(&png, param, map, &a.vehicle)?;
         println!(
             "{} ({}, c = {:.1} N s/m): Hopf boundary vs {} [{}]",
-            a.vehicle,
-            map.damper,
-            map.c_nspm,
-            param.name(),
-            param.unit()
+            a.vehicle, map.damper, map.c_nspm, param.name, param.unit
         );
         println!(
             "  {:>14}  {:>12} {:>12}",
-            param.name(),
-            "onset km/h",
-            "offset km/h"
+            param.name, "onset km/h", "offset km/h"
         );
         let every = (map.rows.len() / 10).max(1);
         for r in map.rows.iter().step_by(every) {
@@ -178,11 +195,10 @@ pub fn command(a: &SweepArgs) -> Result<()> {
     Ok(())
 }
 
-fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Result<()> {
+fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> Result<()> {
     let mut s = format!(
         "{} [{}],speed [km/h],max Re lambda (oscillatory) [1/s]\n",
-        param.name(),
-        param.unit()
+        param.name, param.unit
     );
     for r in &map.rows {
         for (v, re) in map.speeds_kmh.iter().zip(&r.max_re) {
@@ -192,8 +208,7 @@ fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Resu
     std::fs::write(grid, s)?;
     let mut b = format!(
         "{} [{}],crossing speed [km/h],kind\n",
-        param.name(),
-        param.unit()
+        param.name, param.unit
     );
     for r in &map.rows {
         for (v, onset) in &r.crossings {
@@ -209,7 +224,7 @@ fn write_csv(grid: &Path, boundary: &Path, param: Param, map: &SweepMap) -> Resu
     Ok(())
 }
 
-fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
+fn plot(path: &Path, param: ParamInfo, map: &SweepMap, set: &str) -> Result<()> {
     let picture =
         BitMapBackend::new(path, (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
     picture.fill(&WHITE)?;
@@ -236,7 +251,7 @@ fn plot(path: &Path, param: Param, map: &SweepMap, set: &str) -> Result<()> {
     chart
         .configure_mesh()
         .x_desc("speed [km/h]")
-        .y_desc(format!("{} [{}]", param.name(), param.unit()))
+        .y_desc(format!("{} [{}]", param.name, param.unit))
         .draw()?;
     // Symmetric colour scale around zero, clipped at the 95th percentile of |Re|.
     let mut mags: Vec<f64> = map
@@ -314,7 +329,7 @@ mod tests {
         assert_eq!(last.max_re, again[0].rows[2].max_re, "deterministic");
         // The boundary of the nominal row is the nominal Hopf window found independently by a
         // fine hopf_crossings call.
-        let p = PlantParams::nominal();
+        let p = shimmy_core::params::PlantParams::nominal();
         let fine =
             stability::hopf_crossings(&p, 0.0, kmh_to_mps(5.0), kmh_to_mps(120.0), 0.05, 1e-6)
                 .unwrap();

@@ -1,0 +1,610 @@
+//! The vehicle-model family in the simulator: what a command needs of a vehicle model, so that
+//! it is written once for every model (`/docs/architecture.md`, "Vehicle models").
+//!
+//! The core's [`LinearModel`] is the linear side (A(V), dA/dV, the damper's input column, the
+//! wheel-yaw output, the mode shapes: eigenvalues, Hopf crossings, sensitivities and the
+//! model-margin tracker run on it). [`SimModel`] adds the simulator's side: the nonlinear plant
+//! ([`SimPlant`]: stepped one control period at a time with the MR damper's coil current, the
+//! speed and the disturbances' kingpin yaw torques as held [`Inputs`], the measured wheel yaw
+//! angles out), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
+//! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
+//!
+//! Members: the 4-DOF car ([`PlantParams`], 10 states) and the 5-DOF mining truck
+//! ([`TruckParams`], 12 states). A new model implements [`LinearModel`] in core and
+//! [`SimModel`] here; `bifurcation`, `sweep` (eigenvalue maps), `margin` and the closed loop
+//! are generic over `M: SimModel<N>`; a command dispatches on the vehicle file's model
+//! (`sim::vehicle_file::ModelVehicle`).
+
+use anyhow::{bail, Result};
+use shimmy_core::control::smc::NominalPlant;
+use shimmy_core::control::ControlParams;
+use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::kmh_to_mps;
+use shimmy_core::params::{Param, ParamSet, PlantParams};
+use shimmy_core::stability::{hopf_crossings, CrossingKind};
+use shimmy_core::supervisor::params::SupervisorParams;
+use shimmy_core::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
+use shimmy_core::vehicle::Vehicle;
+
+use super::damper_equiv::damper_equivalent;
+
+use super::integrator::IntegrateError;
+use super::plant::{idx, Damper, Inputs, Method, Plant, Simulator, STATE_NAMES};
+use super::truck_plant::TruckPlant;
+
+/// A vehicle model as the simulator runs it; `N` is the state count of its linear model.
+pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'static {
+    /// The core's linear model (eigenvalues, Hopf crossings, the model-margin tracker).
+    type Linear: LinearModel<N> + Copy + Send + Sync + std::fmt::Debug + 'static;
+    /// The nonlinear plant in time.
+    type Plant: SimPlant + Clone + Send;
+
+    /// The linear model of this vehicle.
+    fn linear(&self) -> Self::Linear;
+
+    /// The simulated state (the plant's and the damper's), e.g. `[f64; 13]` for the car: the
+    /// closed loop's initial state (all zero by default; a kick sets the wheel yaw angles,
+    /// which are the first two entries of every model).
+    type State: AsRef<[f64]> + AsMut<[f64]> + Copy + Default + std::fmt::Debug + Send + Sync;
+    /// The whole vehicle of this model as a vehicle file gives it (the car: the core's
+    /// [`Vehicle`]; another model: [`FamilyVehicle`]).
+    type Vehicle: Copy + std::fmt::Debug + PartialEq + Send + Sync;
+
+    /// What the steering DOF of [`SimPlant::steering_angle_rad`] is, after "steering" in
+    /// tables (the car: `wheel`; the truck: `linkage`).
+    const STEERING: &'static str;
+
+    /// The vehicle as the model's parameters and the shared sections.
+    fn family_vehicle(v: &Self::Vehicle) -> FamilyVehicle<Self>;
+
+    /// The shared sections of `v` (damper, sensors, gains, thresholds), to set fields in.
+    fn parts_mut(v: &mut Self::Vehicle) -> &mut Vehicle;
+
+    /// The nonlinear plant at rest with `damper` on the track rod, integrated by `method`
+    /// (a model may have one integrator only and take `method`'s tolerance); the parameters
+    /// are a validated vehicle's.
+    fn plant(&self, damper: Damper, method: Method) -> Self::Plant;
+
+    /// Loaded rolling radius, m (the wheel order of the mode meter, the imbalance).
+    fn rolling_radius_m(&self) -> f64;
+
+    /// Steering-arm length l_t, m: the damper's stroke is `(l_t/2)(psi_L + psi_R)`.
+    fn steering_arm_m(&self) -> f64;
+
+    /// The controller's nominal plant (I_k, c_k, l_t: the ASMC's model).
+    fn nominal_plant(&self) -> NominalPlant;
+
+    /// The car plant the host build of the firmware's application (`shimmy_firmware::pil::
+    /// HostApp`) runs its model task on, if it runs this model: the image's model task is
+    /// compiled for one model (cargo feature `model-truck`), the host build is the car's. `None`:
+    /// no margin report in the closed loop (the margin-scheduled controller is not available).
+    fn host_app_model(&self) -> Option<PlantParams>;
+
+    /// Factor on the kingpin yaw torques of a scenario's disturbances (road noise, imbalance,
+    /// potholes, kicks), which scenario files give for the car: the ratio of this model's
+    /// kingpin yaw inertia to that of the car's `nominal` set, so that a disturbance gives the
+    /// same angular acceleration of the wheel (1 for the car).
+    fn yaw_torque_scale(&self) -> f64;
+
+    /// The parameters a sweep can vary (with [`Self::param`], [`Self::with_param`]): name and
+    /// unit.
+    fn params() -> Vec<ParamInfo>;
+
+    /// The value of the parameter `name`, if there is one.
+    fn param(&self, name: &str) -> Option<f64>;
+
+    /// A copy with the parameter `name` set to `value`, or an error naming it and its range.
+    fn with_param(&self, name: &str, value: f64) -> Result<Self>;
+}
+
+/// A parameter of a model by name, for axes and tables.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamInfo {
+    /// Field name (as in the vehicle file).
+    pub name: &'static str,
+    /// SI unit (`-` for none).
+    pub unit: &'static str,
+}
+
+/// The names of `M`'s parameters, comma separated (for messages).
+pub fn param_names<M: SimModel<N>, const N: usize>() -> String {
+    M::params()
+        .iter()
+        .map(|p| p.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The state of `M` at rest with both wheels yawed by `psi_rad` (in phase; the wheel yaw
+/// angles are the first two states of every model).
+pub fn yaw_state<M: SimModel<N>, const N: usize>(psi_rad: f64) -> M::State {
+    let mut x = M::State::default();
+    x.as_mut()[0] = psi_rad;
+    x.as_mut()[1] = psi_rad;
+    x
+}
+
+/// A vehicle's nonlinear plant, one control period at a time (inputs held).
+pub trait SimPlant {
+    /// Puts the plant at rest with the wheels at yaw `psi_l_rad`, `psi_r_rad` (a kick).
+    fn set_wheel_yaw(&mut self, psi_l_rad: f64, psi_r_rad: f64);
+    /// Replaces the whole state (the model's [`SimModel::State`] as a slice).
+    fn set_state(&mut self, x: &[f64]);
+    /// Advances by `dt_s` with `inputs` held (zero-order hold).
+    fn advance(&mut self, dt_s: f64, inputs: &Inputs) -> Result<(), IntegrateError>;
+    /// The wheel yaw angles `[psi_L, psi_R]`, rad: what the encoders measure.
+    fn wheel_yaw_rad(&self) -> [f64; 2];
+    /// The steering angle of the model's steering DOF (the car: the steering wheel; the
+    /// truck: the hydraulic linkage at the kingpin), rad.
+    fn steering_angle_rad(&self) -> f64;
+    /// The damper's filtered coil input (1 V per A), A; 0 without an MR damper.
+    fn coil_input_a(&self) -> f64;
+    /// The damper force at the current state under `inputs`, N.
+    fn damper_force_n(&self, inputs: &Inputs) -> f64;
+    /// The whole simulated state (model order, the damper's states last).
+    fn state(&self) -> &[f64];
+    /// Names of [`Self::state`]'s entries, for CSV headers.
+    fn state_names(&self) -> &'static [&'static str];
+    /// Simulated time, s.
+    fn time_s(&self) -> f64;
+}
+
+impl SimPlant for Simulator {
+    fn set_wheel_yaw(&mut self, psi_l_rad: f64, psi_r_rad: f64) {
+        let mut x = [0.0; super::plant::N_STATE];
+        x[idx::PSI_L] = psi_l_rad;
+        x[idx::PSI_R] = psi_r_rad;
+        Simulator::set_state(self, x);
+    }
+
+    fn set_state(&mut self, x: &[f64]) {
+        let mut s = [0.0; super::plant::N_STATE];
+        s.copy_from_slice(x);
+        Simulator::set_state(self, s);
+    }
+
+    fn advance(&mut self, dt_s: f64, inputs: &Inputs) -> Result<(), IntegrateError> {
+        Simulator::advance(self, dt_s, inputs)
+    }
+
+    fn wheel_yaw_rad(&self) -> [f64; 2] {
+        let x = Simulator::state(self);
+        [x[idx::PSI_L], x[idx::PSI_R]]
+    }
+
+    fn steering_angle_rad(&self) -> f64 {
+        Simulator::state(self)[idx::THETA_SW]
+    }
+
+    fn coil_input_a(&self) -> f64 {
+        match self.plant().damper {
+            Damper::Mr(_) => Simulator::state(self)[idx::U],
+            _ => 0.0,
+        }
+    }
+
+    fn damper_force_n(&self, inputs: &Inputs) -> f64 {
+        self.forces(inputs).damper_n
+    }
+
+    fn state(&self) -> &[f64] {
+        Simulator::state(self)
+    }
+
+    fn state_names(&self) -> &'static [&'static str] {
+        &STATE_NAMES
+    }
+
+    fn time_s(&self) -> f64 {
+        Simulator::time_s(self)
+    }
+}
+
+/// The kingpin yaw inertia the scenario files' disturbances are written for: the car's
+/// `nominal` set.
+fn reference_yaw_inertia_kgm2() -> f64 {
+    ParamSet::Nominal.params().i_k
+}
+
+impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    type Linear = PlantParams;
+    type Plant = Simulator;
+    type State = super::plant::State;
+    type Vehicle = Vehicle;
+    const STEERING: &'static str = "wheel";
+
+    fn family_vehicle(v: &Vehicle) -> FamilyVehicle<Self> {
+        FamilyVehicle::car(*v)
+    }
+
+    fn parts_mut(v: &mut Vehicle) -> &mut Vehicle {
+        v
+    }
+
+    fn linear(&self) -> Self {
+        *self
+    }
+
+    fn plant(&self, damper: Damper, method: Method) -> Simulator {
+        Simulator::with_method(
+            Plant::new(*self, damper),
+            [0.0; super::plant::N_STATE],
+            method,
+        )
+    }
+
+    fn rolling_radius_m(&self) -> f64 {
+        self.r
+    }
+
+    fn steering_arm_m(&self) -> f64 {
+        self.l_t
+    }
+
+    fn nominal_plant(&self) -> NominalPlant {
+        NominalPlant::from_params(self)
+    }
+
+    fn host_app_model(&self) -> Option<PlantParams> {
+        Some(*self)
+    }
+
+    fn yaw_torque_scale(&self) -> f64 {
+        1.0
+    }
+
+    fn params() -> Vec<ParamInfo> {
+        Param::ALL
+            .iter()
+            .map(|p| ParamInfo {
+                name: p.name(),
+                unit: p.unit(),
+            })
+            .collect()
+    }
+
+    fn param(&self, name: &str) -> Option<f64> {
+        Param::from_name(name).map(|p| self.get(p))
+    }
+
+    fn with_param(&self, name: &str, value: f64) -> Result<Self> {
+        match Param::from_name(name) {
+            Some(p) => Ok(self.with(p, value)),
+            None => bail!(
+                "parameter `{name}`: no such parameter of {}, allowed: {}",
+                PlantParams::NAME,
+                param_names::<Self, { shimmy_core::plant::N_STATES }>()
+            ),
+        }
+    }
+}
+
+impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    type Linear = TruckParams;
+    type Plant = TruckPlant;
+    type State = [f64; super::truck_plant::N_SIM];
+    type Vehicle = FamilyVehicle<TruckParams>;
+    const STEERING: &'static str = "linkage";
+
+    fn family_vehicle(v: &Self::Vehicle) -> FamilyVehicle<Self> {
+        *v
+    }
+
+    fn parts_mut(v: &mut Self::Vehicle) -> &mut Vehicle {
+        &mut v.parts
+    }
+
+    fn linear(&self) -> Self {
+        *self
+    }
+
+    /// The truck has one integrator (Dopri5); it takes `method`'s relative tolerance (1e-7
+    /// for the fixed-step methods).
+    fn plant(&self, damper: Damper, method: Method) -> TruckPlant {
+        let rtol = match method {
+            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
+        };
+        TruckPlant::new(self, damper, rtol)
+    }
+
+    fn rolling_radius_m(&self) -> f64 {
+        self.r
+    }
+
+    fn steering_arm_m(&self) -> f64 {
+        self.l_t
+    }
+
+    fn nominal_plant(&self) -> NominalPlant {
+        NominalPlant {
+            i_k_kgm2: self.i_k as f32,
+            c_k_nms_per_rad: self.c_k as f32,
+            l_t_m: self.l_t as f32,
+        }
+    }
+
+    fn yaw_torque_scale(&self) -> f64 {
+        self.i_k / reference_yaw_inertia_kgm2()
+    }
+
+    fn host_app_model(&self) -> Option<PlantParams> {
+        None
+    }
+
+    fn params() -> Vec<ParamInfo> {
+        TRUCK_FIELDS
+            .iter()
+            .map(|f| ParamInfo {
+                name: f.name,
+                unit: f.unit,
+            })
+            .collect()
+    }
+
+    fn param(&self, name: &str) -> Option<f64> {
+        self.get(name)
+    }
+
+    fn with_param(&self, name: &str, value: f64) -> Result<Self> {
+        let mut t = *self;
+        match t.set(name, value) {
+            Ok(()) => Ok(t),
+            Err(shimmy_core::truck::TruckFieldError::Unknown) => bail!(
+                "parameter `{name}`: no such parameter of {}, allowed: {}",
+                TruckParams::NAME,
+                param_names::<Self, { shimmy_core::truck::N_STATES }>()
+            ),
+            Err(e) => bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
+        }
+    }
+}
+
+/// A vehicle of the model `M`: the model's parameters and the sections every model shares, in
+/// a core [`Vehicle`] (the damper and the firmware's model of it, the sensors, the controller's
+/// gains, the warning thresholds and the fusion). For a model other than the car the
+/// `parts.plant` is not used: the controller's nominal plant comes from the model
+/// ([`SimModel::nominal_plant`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FamilyVehicle<M> {
+    /// The vehicle model's parameters.
+    pub model: M,
+    /// The damper, sensors, gains and thresholds.
+    pub parts: Vehicle,
+}
+
+impl FamilyVehicle<PlantParams> {
+    /// The car `v`: its plant is the model.
+    pub fn car(v: Vehicle) -> Self {
+        Self {
+            model: v.plant,
+            parts: v,
+        }
+    }
+}
+
+impl<M> FamilyVehicle<M> {
+    /// The controller's parameters: [`Vehicle::control_params`] with the model's nominal plant.
+    pub fn control_params<const N: usize>(&self) -> ControlParams
+    where
+        M: SimModel<N>,
+    {
+        ControlParams {
+            nominal: self.model.nominal_plant(),
+            ..self.parts.control_params()
+        }
+    }
+
+    /// The supervisor's thresholds ([`Vehicle::supervisor_params`]).
+    pub fn supervisor_params(&self) -> SupervisorParams {
+        self.parts.supervisor_params()
+    }
+
+    /// The margin pipeline's parameters ([`Vehicle::pipeline_params`]; its model is
+    /// [`Self::model`]).
+    pub fn pipeline_params(&self) -> PipelineParams {
+        self.parts.pipeline_params()
+    }
+}
+
+/// The least viscous track-rod damper coefficient that leaves `m` without a Hopf onset from 1
+/// to 150 km/h, N s/m (0 when it has none without a damper; bisection to 0.1 %); `None` when
+/// no coefficient up to 1e9 N s/m does.
+pub fn least_stabilising_c<M: LinearModel<N>, const N: usize>(m: &M) -> Option<f64> {
+    let unstable = |c: f64| {
+        hopf_crossings(
+            m,
+            c,
+            kmh_to_mps(1.0),
+            kmh_to_mps(150.0),
+            kmh_to_mps(0.5),
+            1e-3,
+        )
+        .map_or(true, |cs| cs.iter().any(|x| x.kind == CrossingKind::Onset))
+    };
+    if !unstable(0.0) {
+        return Some(0.0);
+    }
+    let mut hi = 1.0;
+    while unstable(hi) {
+        hi *= 2.0;
+        if hi > 1e9 {
+            return None;
+        }
+    }
+    let mut lo = 0.5 * hi;
+    while hi - lo > 1e-3 * hi {
+        let mid = 0.5 * (lo + hi);
+        if unstable(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some(hi)
+}
+
+/// The truck's steering damper against the car's, as a factor on every force coefficient of
+/// the car's reference damper: the truck's damper is sized as the car's is, so that its
+/// energy-equivalent viscous coefficient at the rated current (describing function at the
+/// default 0.5 deg, [`damper_equivalent`]) is the same multiple of the least coefficient that
+/// closes the Hopf window ([`least_stabilising_c`]) as the car's (the `nominal` car and the
+/// loaded truck, `truck-full`, the worst case). The Spencer model's force is linear in its
+/// force coefficients (the Bouc-Wen and internal displacements do not change), so the factor is
+/// exact at that amplitude; `docs/mining-truck.md` gives the figures.
+pub fn truck_damper_scale() -> Result<f64> {
+    static SCALE: std::sync::OnceLock<std::result::Result<f64, String>> =
+        std::sync::OnceLock::new();
+    SCALE
+        .get_or_init(|| compute_truck_damper_scale().map_err(|e| format!("{e:#}")))
+        .clone()
+        .map_err(|e| anyhow::anyhow!(e))
+}
+
+fn compute_truck_damper_scale() -> Result<f64> {
+    let car = Vehicle::from_set(ParamSet::Nominal);
+    let truck = TruckSet::Full.params();
+    let sp = car.damper.spencer;
+    let rated = sp.u_max;
+    let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
+    let amp_deg = super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
+    let ceq_car = damper_equivalent(&car.plant, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
+    let ceq_truck = damper_equivalent(&truck, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
+    let (Some(c_car), Some(c_truck)) =
+        (least_stabilising_c(&car.plant), least_stabilising_c(&truck))
+    else {
+        bail!("truck damper sizing: no viscous damper closes a Hopf window");
+    };
+    if c_car <= 0.0 || ceq_truck <= 0.0 {
+        bail!("truck damper sizing: the car has no Hopf window to size against");
+    }
+    Ok((ceq_car / c_car) * c_truck / ceq_truck)
+}
+
+/// The truck's shared sections by default: the car's reference damper, sensors, gains and
+/// thresholds with every force coefficient of the damper (the Spencer model's and the firmware's
+/// Bingham model's) and the skyhook coefficient scaled by [`truck_damper_scale`]. The coil,
+/// its rating and the sensors are the car's (the larger damper has a larger piston and gap,
+/// not another coil); the ASMC's gains are angular accelerations of the wheel, its force comes
+/// from the nominal plant's 2 I_k / l_t; the thresholds are damping ratios, speed margins and
+/// times, model-independent.
+pub fn truck_parts() -> Result<Vehicle> {
+    let s = truck_damper_scale()?;
+    let mut v = Vehicle::from_set(ParamSet::Nominal);
+    let sp = &mut v.damper.spencer;
+    for c in [
+        &mut sp.c0a,
+        &mut sp.c0b,
+        &mut sp.k0,
+        &mut sp.c1a,
+        &mut sp.c1b,
+        &mut sp.k1,
+        &mut sp.alpha_a,
+        &mut sp.alpha_b,
+    ] {
+        *c *= s;
+    }
+    let m = &mut v.damper.model;
+    for c in [
+        &mut m.f_ca_n,
+        &mut m.f_cb_n_per_a,
+        &mut m.c_a_ns_per_m,
+        &mut m.c_b_ns_per_m_a,
+    ] {
+        *c *= s as f32;
+    }
+    v.controller.skyhook_ns_per_m *= s as f32;
+    Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shimmy_core::truck::TruckSet;
+
+    /// The family's car plant is the car's simulator unchanged: the same state after the same
+    /// inputs, bit for bit, as `Simulator` driven directly.
+    #[test]
+    fn the_cars_family_plant_is_its_simulator() {
+        let p = ParamSet::Nominal.params();
+        let mut a = p.plant(
+            Damper::Mr(shimmy_core::mr_damper::SpencerParams::steering()),
+            Method::default(),
+        );
+        a.set_wheel_yaw(0.01, 0.01);
+        let mut b = Simulator::new(
+            Plant::with_mr_damper(p),
+            crate::model::disturbance::initial_yaw(0.01),
+        );
+        let u = Inputs {
+            current_cmd_a: 0.5,
+            speed_mps: 15.0,
+            ..Inputs::default()
+        };
+        for _ in 0..200 {
+            SimPlant::advance(&mut a, 1e-3, &u).unwrap();
+            b.advance(1e-3, &u).unwrap();
+        }
+        assert_eq!(SimPlant::state(&a), &b.state()[..]);
+        assert_eq!(a.damper_force_n(&u), b.forces(&u).damper_n);
+    }
+
+    /// The truck's plant with a viscous damper decays or grows at the rate of the linear
+    /// model's shimmy mode with the same damper coefficient (small motion: the nonlinear
+    /// elements are their linearisation), and its MR damper's force opposes the stroke rate.
+    #[test]
+    fn the_trucks_family_plant_follows_its_linear_model_with_a_damper() {
+        use shimmy_core::stability::{mode_at, ModeSelect};
+        let t = TruckSet::Full.params();
+        let v = 30.0 / 3.6;
+        let c = 2.0e5;
+        let m = mode_at(&t, v, c, ModeSelect::Shimmy).unwrap();
+        let mut sim = t.plant(Damper::Viscous(c), Method::default());
+        sim.set_wheel_yaw(1e-4, 1e-4);
+        let u = Inputs {
+            speed_mps: v,
+            ..Inputs::default()
+        };
+        let (settle, dur) = (2.0, 8.0);
+        let (mut first, mut last) = (0.0_f64, 0.0_f64);
+        let n = (dur / 1e-3) as usize;
+        for k in 0..n {
+            sim.advance(1e-3, &u).unwrap();
+            let tk = (k + 1) as f64 * 1e-3;
+            let [l, r] = sim.wheel_yaw_rad();
+            let yaw = (0.5 * (l + r)).abs();
+            if tk > settle && tk <= settle + 1.0 {
+                first = first.max(yaw);
+            }
+            if tk > dur - 1.0 {
+                last = last.max(yaw);
+            }
+        }
+        let growth = (last / first).ln() / (dur - 1.0 - settle);
+        assert!(
+            (growth - m.re).abs() < 0.1 * m.re.abs().max(0.05),
+            "time domain {growth} 1/s, eigenvalue {} 1/s",
+            m.re
+        );
+        // an MR damper at rated current dissipates: its force has the sign of the stroke rate
+        let mut mr = t.plant(
+            Damper::Mr(shimmy_core::mr_damper::SpencerParams::steering()),
+            Method::default(),
+        );
+        mr.set_wheel_yaw(2e-3, 2e-3);
+        let u = Inputs {
+            speed_mps: v,
+            current_cmd_a: 2.0,
+            ..Inputs::default()
+        };
+        let mut work = 0.0;
+        for _ in 0..2000 {
+            let x = mr.state();
+            let rate = 0.5 * t.l_t * (x[5] + x[6]);
+            work += mr.damper_force_n(&u) * rate * 1e-3;
+            mr.advance(1e-3, &u).unwrap();
+        }
+        assert!(work > 0.0, "damper work {work} J");
+    }
+}
