@@ -532,7 +532,7 @@ pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs
     for r in &rows {
         writeln!(
             w,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{:.9e},{},{:.9e},{},{:.9e},{},{},{},{},{},{}",
             r.v_kmh,
             r.free.amp_end_rad.to_degrees(),
             r.free.shimmies(),
