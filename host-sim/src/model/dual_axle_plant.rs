@@ -96,9 +96,7 @@ impl DualAxleSim {
 
     /// The tyre's lateral force on axle `axle` (0, 1) at lagged slip `a`, N.
     pub fn tyre_force_n(&self, axle: usize, a: f64) -> f64 {
-        let d = self.t.mu * self.op.f_z[axle];
-        let b = self.op.c_a[axle] / (self.t.c_s * d);
-        d * (self.t.c_s * (b * a).atan()).sin()
+        tyre_force_n(&self.t, &self.op, axle, a)
     }
 
     /// The smoothed kingpin friction torque at yaw rate `w`, N m (resisting).
@@ -140,6 +138,14 @@ impl DualAxleSim {
     }
 }
 
+/// The Magic-Formula lateral force of a tyre of axle `axle` at lagged slip `a`, N: `D sin(C_s
+/// atan(B a))`, `D = mu F_z`, `B = C_a / (C_s D)` (slope `C_a` at 0).
+fn tyre_force_n(t: &DualAxleParams, op: &DualAxleOperatingPoint, axle: usize, a: f64) -> f64 {
+    let d = t.mu * op.f_z[axle];
+    let b = op.c_a[axle] / (t.c_s * d);
+    d * (t.c_s * (b * a).atan()).sin()
+}
+
 /// The tyres' saturation (as its departure from `C_a a`) and the kingpin friction
 /// `-m_f tanh(psi' / eps)`, added to the linear model's `dx` (the first [`N_STATES`] entries).
 fn add_nonlinear(
@@ -152,9 +158,7 @@ fn add_nonlinear(
 ) {
     let lever = t.e + t.t_p;
     for (wheel, roll, slip, axle) in WHEELS {
-        let d = t.mu * op.f_z[axle];
-        let b = op.c_a[axle] / (t.c_s * d);
-        let extra = d * (t.c_s * (b * x[slip]).atan()).sin() - op.c_a[axle] * x[slip];
+        let extra = tyre_force_n(t, op, axle, x[slip]) - op.c_a[axle] * x[slip];
         let (dw, dr) = (N_DOF + wheel, N_DOF + roll);
         dx[dw] += (-lever * extra - m_f * (x[dw] / eps).tanh()) / t.i_k;
         dx[dr] += t.h_r * extra / t.i_phi;
