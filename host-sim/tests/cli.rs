@@ -183,18 +183,25 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--vehicle `nominal`", "mining-truck-5dof"],
         ),
         (
+            // the truck's damper has the car's coil: rated 2 A
             &[
                 "stability",
                 "--vehicle",
                 "truck-full",
                 "--damper-current-a",
-                "0.5",
+                "2.5",
             ],
-            &["--damper-current-a", "mining-truck-5dof"],
+            &["--damper-current-a", rated],
         ),
         (
-            &["bifurcation", "--vehicle", "truck-full"],
-            &["truck-full", "mining-truck-5dof", "car-4dof"],
+            &[
+                "bifurcation",
+                "--vehicle",
+                "truck-full",
+                "--damper-current-a",
+                "2.5",
+            ],
+            &["--damper-current-a", rated],
         ),
         (
             &["bifurcation", "--damper-current-a", "NaN"],
@@ -432,5 +439,31 @@ fn gas_charge_fails_without_a_stable_charge_and_answers_with_one() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(out.contains("least gas charge: 37.2"), "{out}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A truck vehicle on a command that runs the car only is rejected before anything runs,
+/// naming both models and the commands that take the truck; the same vehicle runs through a
+/// command of the family (`params`).
+#[test]
+fn a_truck_on_a_car_only_command_is_rejected_naming_the_models() {
+    for cmd in ["compare", "report", "mismatch", "meter-accuracy"] {
+        rejected(
+            &[cmd, "--vehicle", "truck-full"],
+            &[
+                "mining-truck-5dof",
+                "car-4dof",
+                "sweep, margin, faults and run",
+            ],
+        );
+    }
+    let dir = temp_dir();
+    let o = run_in(&dir, &["params", "truck-full"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("[truck]") && out.contains("[damper]") && !out.contains("[plant]"),
+        "{out}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -623,7 +623,14 @@ pub struct FaultsArgs {
     /// file; default: `--vehicle`.
     #[arg(long)]
     pub model_vehicle: Option<String>,
+    /// Peak of the yaw kick after the fault (20 ms half-sine on both wheels), N m for the car
+    /// (another model: times its `yaw_torque_scale`): 0 to 5000.
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(KICK_NM))]
+    pub kick_nm: f64,
 }
+
+/// The kick's peak torque: 0 to 5000 N m (car-equivalent).
+pub const KICK_NM: Range = Range::closed(0.0, 5000.0, "N m");
 
 impl FaultsArgs {
     /// The cases `--only` selects; an error naming the existing cases when none matches.
@@ -634,6 +641,7 @@ impl FaultsArgs {
             arg_range::SPEED_KMH.check("--speeds-kmh", v)?;
         }
         DURATION_S.check("--duration-s", self.duration_s)?;
+        KICK_NM.check("--kick-nm", self.kick_nm)?;
         let all = standard_cases();
         let names: Vec<String> = all.iter().map(|c| c.name.clone()).collect();
         let cases: Vec<Case> = all
@@ -848,6 +856,7 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
             None => None,
         },
         duration_s: a.duration_s,
+        kick_nm: a.kick_nm,
         ..Setup::<M, N>::on(plant)
     };
     let wall = std::time::Instant::now();

@@ -82,9 +82,10 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     fn host_app_model(&self) -> Option<PlantParams>;
 
     /// Factor on the kingpin yaw torques of a scenario's disturbances (road noise, imbalance,
-    /// potholes, kicks), which scenario files give for the car: the ratio of this model's
-    /// kingpin yaw inertia to that of the car's `nominal` set, so that a disturbance gives the
-    /// same angular acceleration of the wheel (1 for the car).
+    /// potholes, kicks), which scenario files give for the car: the road acts through the
+    /// tyre's lateral force at its trail, so the factor is the ratio of this model's tyre yaw
+    /// stiffness `(e + t_p) C_a` to that of the car's `nominal` set (the same slip disturbance;
+    /// 1 for the car).
     fn yaw_torque_scale(&self) -> f64;
 
     /// The parameters a sweep can vary (with [`Self::param`], [`Self::with_param`]): name and
@@ -201,10 +202,11 @@ impl SimPlant for Simulator {
     }
 }
 
-/// The kingpin yaw inertia the scenario files' disturbances are written for: the car's
-/// `nominal` set.
-fn reference_yaw_inertia_kgm2() -> f64 {
-    ParamSet::Nominal.params().i_k
+/// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the
+/// car's `nominal` set), N m/rad.
+fn reference_tyre_yaw_stiffness() -> f64 {
+    let p = ParamSet::Nominal.params();
+    (p.e + p.t_p) * p.c_a
 }
 
 impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
@@ -326,7 +328,7 @@ impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     }
 
     fn yaw_torque_scale(&self) -> f64 {
-        self.i_k / reference_yaw_inertia_kgm2()
+        (self.e + self.t_p) * self.point_or_tyres_only().c_a / reference_tyre_yaw_stiffness()
     }
 
     fn host_app_model(&self) -> Option<PlantParams> {
@@ -522,6 +524,55 @@ pub fn truck_parts() -> Result<Vehicle> {
 mod tests {
     use super::*;
     use shimmy_core::truck::TruckSet;
+
+    /// The truck's default damper is sized as the car's: at the rated current its c_eq is the
+    /// same multiple of the least stabilising coefficient; and, checked on the eigenvalues
+    /// (independent of the sizing rule), the loaded truck keeps a Hopf window with the damper
+    /// at 0 A and none at the rated current, as the car does.
+    #[test]
+    fn the_trucks_damper_is_sized_as_the_cars() {
+        let car = Vehicle::from_set(ParamSet::Nominal);
+        let truck = TruckSet::Full.params();
+        let parts = truck_parts().unwrap();
+        let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
+        let deg = super::super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
+        let car_2a = damper_equivalent(&car.plant, &car.damper.spencer, 2.0, deg, v0, v1).unwrap();
+        let truck_2a = damper_equivalent(&truck, &parts.damper.spencer, 2.0, deg, v0, v1).unwrap();
+        let truck_0a = damper_equivalent(&truck, &parts.damper.spencer, 0.0, deg, v0, v1).unwrap();
+        let (c_car, c_truck) = (
+            least_stabilising_c(&car.plant).unwrap(),
+            least_stabilising_c(&truck).unwrap(),
+        );
+        println!(
+            "scale {:.3}; least stabilising c: car {c_car:.1}, truck {c_truck:.1} N s/m; c_eq at \
+             2 A: car {:.1}, truck {:.1} N s/m; truck at 0 A {:.1} N s/m",
+            truck_damper_scale().unwrap(),
+            car_2a.c_eq_nspm,
+            truck_2a.c_eq_nspm,
+            truck_0a.c_eq_nspm
+        );
+        // linear in the force factor at a fixed frequency; the describing function's second
+        // pass takes the frequency of the mode with the damper in place, which the larger
+        // damper moves a little: 1 %
+        let (r_truck, r_car) = (truck_2a.c_eq_nspm / c_truck, car_2a.c_eq_nspm / c_car);
+        assert!((r_truck / r_car - 1.0).abs() < 0.01, "{r_truck} {r_car}");
+        let onsets = |c: f64| {
+            hopf_crossings(&truck, c, v0, v1, kmh_to_mps(0.5), 1e-3)
+                .unwrap()
+                .iter()
+                .filter(|x| x.kind == CrossingKind::Onset)
+                .count()
+        };
+        assert!(onsets(truck_0a.c_eq_nspm) > 0);
+        assert_eq!(onsets(truck_2a.c_eq_nspm), 0);
+        // the firmware's damper model is scaled with the simulator's
+        let s = truck_damper_scale().unwrap() as f32;
+        assert_eq!(
+            parts.damper.model.c_b_ns_per_m_a,
+            car.damper.model.c_b_ns_per_m_a * s
+        );
+        parts.validate().unwrap();
+    }
 
     /// The family's car plant is the car's simulator unchanged: the same state after the same
     /// inputs, bit for bit, as `Simulator` driven directly.

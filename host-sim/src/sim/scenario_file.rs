@@ -998,4 +998,54 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             dir.display()
         );
     }
+
+    /// The truck's shipped scenarios parse as truck scenarios; the car-only loader and a truck
+    /// scenario with a driver torque or with the margin-scheduled controller (whose report the
+    /// host build of the firmware runs on the car's model only) are rejected, naming why.
+    #[test]
+    fn the_trucks_shipped_scenarios_are_truck_scenarios() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenarios")
+            .join("truck");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                let s = load_any(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+                assert!(matches!(s, AnyScenario::Truck(_)), "{}", path.display());
+                let e = format!("{:#}", load(&path).unwrap_err());
+                assert!(e.contains("mining-truck-5dof"), "{e}");
+                n += 1;
+            }
+        }
+        assert_eq!(n, 3);
+        let truck =
+            "duration_s = 1.0\n[plant]\nvehicle = \"truck-full\"\n[speed]\nconstant_kmh = 30.0\n";
+        let e =
+            |text: String| format!("{:#}", parse_any_in(&text, "t", Path::new("")).unwrap_err());
+        let msg = e(format!(
+            "{truck}[driver]\nslalom = {{ amplitude_nm = 2.0, freq_hz = 0.5, start_s = 0.0 }}\n"
+        ));
+        assert!(msg.contains("field `driver`"), "{msg}");
+        let msg = e(format!("{truck}[controller]\nkind = \"margin-asmc\"\n"));
+        assert!(
+            msg.contains("margin-asmc") && msg.contains("car-4dof"),
+            "{msg}"
+        );
+        let msg = e(format!("{truck}[model]\nvehicle = \"nominal\"\n"));
+        assert!(msg.contains("field `model.vehicle`"), "{msg}");
+        // overrides of a truck plant are its [truck] fields by name
+        let AnyScenario::Truck(s) = parse_any_in(
+            &truck.replace(
+                "\"truck-full\"",
+                "\"truck-full\"\noverrides = { hps_v0_m3 = 0.02 }",
+            ),
+            "t",
+            Path::new(""),
+        )
+        .unwrap() else {
+            panic!("a truck scenario")
+        };
+        assert_eq!(s.plant.model.hps.v0_m3, 0.02);
+    }
 }

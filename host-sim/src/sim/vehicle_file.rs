@@ -426,11 +426,15 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     Ok(v)
 }
 
+/// The commands that run a truck vehicle, for messages.
+pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
+     sweep, margin, faults and run";
+
 /// The message of a car-only command given another model.
 fn car_only(what: &str) -> String {
     format!(
-        "{what} is a {} or {} model; this command needs the {} (it reads the car's steering \
-         wheel or its firmware image's model task)",
+        "{what} is a {} or {} model; this command runs the {} only so far (the truck runs \
+         through {TRUCK_COMMANDS})",
         TruckParams::NAME,
         DualAxleParams::NAME,
         PlantParams::NAME

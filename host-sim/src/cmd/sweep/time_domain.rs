@@ -10,17 +10,19 @@
 //! computed in parallel (rayon) and collected in grid order, so the CSV does not depend on the
 //! number of threads.
 
-use super::args::{axes, SweepArgs, MAX_RUNS};
-use crate::model::disturbance::{initial_yaw, Scenario};
+use super::args::{axes_of, SweepArgs, MAX_RUNS};
+use crate::model::disturbance::Scenario;
+use crate::model::family::{yaw_state, FamilyVehicle, ParamInfo, SimModel};
 use crate::out::plot_util;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
+use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
+use shimmy_core::control::ControllerKind;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind};
-use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -59,7 +61,7 @@ pub struct TdMap {
 #[derive(Clone, Debug)]
 pub struct TdGrid {
     /// Varied parameter.
-    pub param: Param,
+    pub param: ParamInfo,
     /// Speeds, km/h.
     pub speeds_kmh: Vec<f64>,
     /// Parameter values.
@@ -80,16 +82,19 @@ pub fn arms(a: &SweepArgs) -> Result<Vec<Arm>> {
         .collect()
 }
 
-fn grid(a: &SweepArgs) -> Result<(Vehicle, TdGrid)> {
-    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
-    let base = vehicle.plant;
-    let (speeds_kmh, values, param) = axes(a, &vehicle, DEFAULT_STEPS)?;
+fn grid<M: SimModel<N>, const N: usize>(
+    a: &SweepArgs,
+    vehicle: &FamilyVehicle<M>,
+) -> Result<TdGrid> {
+    let base = vehicle.model;
+    let (speeds_kmh, values, param) = axes_of(a, &base, &vehicle.parts, DEFAULT_STEPS)?;
     let step = kmh_to_mps((a.v_max_kmh - a.v_min_kmh) / (speeds_kmh.len() - 1) as f64 / 4.0);
     let hopf = values
         .iter()
         .map(|&v| {
+            let p = base.with_param(param.name, v)?;
             stability::hopf_crossings(
-                &base.with(param, v),
+                &p.linear(),
                 0.0,
                 kmh_to_mps(a.v_min_kmh),
                 kmh_to_mps(a.v_max_kmh),
@@ -101,23 +106,20 @@ fn grid(a: &SweepArgs) -> Result<(Vehicle, TdGrid)> {
                     .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
                     .collect()
             })
-            .with_context(|| format!("Hopf crossings at {} = {v}", param.name()))
+            .with_context(|| format!("Hopf crossings at {} = {v}", param.name))
         })
         .collect::<Result<_>>()?;
-    Ok((
-        vehicle,
-        TdGrid {
-            param,
-            speeds_kmh,
-            values,
-            hopf,
-        },
-    ))
+    Ok(TdGrid {
+        param,
+        speeds_kmh,
+        values,
+        hopf,
+    })
 }
 
 /// One run: the vehicle with the swept parameter changed, its firmware still believing `base`.
-fn point(
-    base: &Vehicle,
+fn point<M: SimModel<N>, const N: usize>(
+    base: &FamilyVehicle<M>,
     g: &TdGrid,
     j: usize,
     i: usize,
@@ -125,23 +127,18 @@ fn point(
     a: &SweepArgs,
 ) -> Result<TdPoint> {
     let (value, v_kmh) = (g.values[j], g.speeds_kmh[i]);
-    let plant = Vehicle {
-        plant: base.plant.with(g.param, value),
+    let plant = FamilyVehicle {
+        model: base.model.with_param(g.param.name, value)?,
         ..*base
     };
-    let mut cfg = LoopConfig::new(&plant, arm, a.duration_s).with_model(base);
+    let mut cfg = LoopConfig::for_vehicle(&plant, arm, a.duration_s).with_model_vehicle(base);
     cfg.estimator = false;
     cfg.record_every = usize::MAX;
     cfg.sensors.seed = a.seed;
-    cfg.x0 = initial_yaw(a.kick_deg.to_radians());
+    cfg.x0 = yaw_state::<M, N>(a.kick_deg.to_radians());
     let mut sc = Scenario::constant_speed(kmh_to_mps(v_kmh));
-    let r = closed_loop::run(&cfg, &mut sc, None).with_context(|| {
-        format!(
-            "{} at {v_kmh} km/h, {} = {value}",
-            arm.name(),
-            g.param.name()
-        )
-    })?;
+    let r = closed_loop::run(&cfg, &mut sc, None)
+        .with_context(|| format!("{} at {v_kmh} km/h, {} = {value}", arm.name(), g.param.name))?;
     let m: RunMetrics = r.metrics(&cfg, Some(0.0));
     Ok(TdPoint {
         value,
@@ -156,7 +153,26 @@ fn point(
 
 /// Computes every controller's map (all points in parallel, collected in grid order).
 pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
+    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => compute_on(a, &FamilyVehicle::car(v)),
+        ModelVehicle::Truck(t) => compute_on(a, &t),
+        ModelVehicle::DualAxle(t) => compute_on(a, &t),
+    }
+}
+
+/// [`compute`] on the vehicle `base` of any model of the family.
+fn compute_on<M: SimModel<N>, const N: usize>(
+    a: &SweepArgs,
+    base: &FamilyVehicle<M>,
+) -> Result<(TdGrid, Vec<TdMap>)> {
     let arms = arms(a)?;
+    if arms.contains(&Arm::Mr(ControllerKind::MarginAsmc)) && base.model.host_app_model().is_none()
+    {
+        bail!(
+            "--controllers margin-asmc: the host build of the firmware's margin report runs the \
+             car's model task only"
+        );
+    }
     super::args::check(a)?;
     let runs = a.v_steps.unwrap_or(DEFAULT_STEPS.0)
         * a.factor_steps.unwrap_or(DEFAULT_STEPS.1)
@@ -164,7 +180,7 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
     if runs > MAX_RUNS {
         bail!("--v-steps x --factor-steps x --controllers: {runs} closed-loop runs; allowed: at most {MAX_RUNS}");
     }
-    let (base, g) = grid(a)?;
+    let g = grid(a, base)?;
     let (nv, np) = (g.speeds_kmh.len(), g.values.len());
     let jobs: Vec<(usize, usize, usize)> = (0..arms.len())
         .flat_map(|c| (0..np).flat_map(move |j| (0..nv).map(move |i| (c, j, i))))
@@ -183,7 +199,7 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
     let pts: Vec<TdPoint> = jobs
         .par_iter()
         .map(|&(c, j, i)| {
-            let p = point(&base, &g, j, i, arms[c], a);
+            let p = point(base, &g, j, i, arms[c], a);
             bar.inc(1);
             p
         })
@@ -204,8 +220,8 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
 pub fn csv(g: &TdGrid, m: &TdMap) -> String {
     let mut s = format!(
         "{} [{}],speed [km/h],controller,peak yaw [deg],end amplitude [deg],max amplitude [deg],shimmy [0/1],coil energy [J]\n",
-        g.param.name(),
-        g.param.unit()
+        g.param.name,
+        g.param.unit
     );
     for p in &m.points {
         let _ = writeln!(
@@ -227,8 +243,7 @@ pub fn csv(g: &TdGrid, m: &TdMap) -> String {
 fn boundary_csv(g: &TdGrid) -> String {
     let mut b = format!(
         "{} [{}],linear Hopf crossing without damper [km/h],kind\n",
-        g.param.name(),
-        g.param.unit()
+        g.param.name, g.param.unit
     );
     for (v, cs) in g.values.iter().zip(&g.hopf) {
         for (s, on) in cs {
@@ -267,7 +282,7 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
     plot_util::mesh(
         &mut chart,
         "speed [km/h]",
-        &format!("{} [{}]", g.param.name(), g.param.unit()),
+        &format!("{} [{}]", g.param.name, g.param.unit),
     )?;
     chart.draw_series(m.points.iter().map(|p| {
         Rectangle::new(
@@ -312,7 +327,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
     let (g, maps) = compute(a)?;
     let wall_s = wall.elapsed().as_secs_f64();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let name = g.param.name();
+    let name = g.param.name;
     let boundary = a.out.join(format!("td-boundary-{name}.csv"));
     std::fs::write(&boundary, boundary_csv(&g))?;
     let mut files = vec![boundary];
@@ -333,7 +348,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
         name,
         g.values[0],
         g.values[g.values.len() - 1],
-        g.param.unit(),
+        g.param.unit,
         a.v_min_kmh,
         a.v_max_kmh,
         a.duration_s,
