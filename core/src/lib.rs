@@ -12,6 +12,8 @@
 //! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
 //! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
 //! - [`trailer`]: trailer sway (2 DOF on a laterally compliant hitch) as a model of the family;
+//! - [`dual_axle`]: the dual-front-axle heavy truck (8 DOF, two steered axles linked by a
+//!   mid-shift transmission) as a model of the family;
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -39,6 +41,7 @@ mod fmt;
     )
 )]
 pub mod control;
+pub mod dual_axle;
 pub mod eigen;
 // The estimator's fixed-size numeric kernels index arrays in loops bounded by their capacity;
 // that those bounds checks can never fire is shown by the panic-free link check

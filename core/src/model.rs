@@ -9,9 +9,10 @@
 //! sensitivities, the incremental margin) is written once, generic over the member, with the
 //! state count a const generic so that every buffer stays on the stack.
 //!
-//! Members: the 4-DOF car-class solid axle ([`crate::params::PlantParams`], 10 states) and the
-//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states), the 2-DOF trailer on a
-//! compliant hitch ([`crate::trailer::TrailerParams`], 5 states).
+//! Members: the 4-DOF car-class solid axle ([`crate::params::PlantParams`], 10 states), the
+//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states), the 8-DOF
+//! dual-front-axle truck ([`crate::dual_axle::DualAxleParams`], 20 states) and the 2-DOF
+//! trailer on a compliant hitch ([`crate::trailer::TrailerParams`], 5 states).
 
 use nalgebra::{Complex, SMatrix, SVector};
 

@@ -9,6 +9,7 @@ and eigenvalues the Rust results must match.
 usage: plant_scipy.py CASE.toml RESULT.json
        plant_scipy.py truck CASE.toml RESULT.txt
        plant_scipy.py trailer CASE.toml RESULT.txt
+       plant_scipy.py dual CASE.toml RESULT.txt
 CASE.toml holds [plant] (parameter names as in core/src/params.rs), [damper] (Spencer model,
 already scaled), [case] (speed, current, initial yaw, duration, sample times, sweep speeds) and
 optionally [ramp] (the demo's drive with a simple current law instead of the controller, for the
@@ -23,6 +24,10 @@ The `trailer` form is the 2-DOF trailer on a compliant hitch of docs/trailer.md,
 that document: CASE.toml holds [trailer] (names as in core/src/trailer.rs) and [case] speeds_mps
 and damper_nspm (the sway damper's coefficient); RESULT.txt gets one line `speed re im` per
 eigenvalue.
+
+The `dual` form is the dual-front-axle truck of docs/dual-axle-truck.md, written from that
+document: CASE.toml holds [dual] (names as in core/src/dual_axle.rs) and [case] speeds_mps;
+RESULT.txt as for the truck.
 """
 import json
 import sys
@@ -236,12 +241,73 @@ def trailer_main(case_path, out_path):
                 out.write(f"{float(v)!r} {float(lam.real)!r} {float(lam.imag)!r}\n")
 
 
+def dual_linear_a(d, v):
+    """A(V) of the dual-front-axle truck without damper (docs/dual-axle-truck.md):
+    q = [psi_1L, psi_1R, psi_2L, psi_2R, phi_1, phi_2, theta_g, theta_m], x = [q, q', a_1L, a_1R,
+    a_2L, a_2R]; the potential energy is a sum of springs 1/2 k (r_i q_i - r_j q_j)^2, K its
+    Hessian; M q'' + C q' + K q = G a, sigma a' = V (psi - a) + e psi' - h_r phi_i'."""
+    f_z = [0.5 * d["axle_load_1_kg"] * G0, 0.5 * d["axle_load_2_kg"] * G0]
+    c_a = [d["c_a_per_fz"] * f for f in f_z]
+    half_b, half_s = d["track"] / 2.0, d["spring_spacing"] / 2.0
+    k_phi = 2.0 * d["k_tz"] * half_b**2 + 2.0 * d["k_spring"] * half_s**2
+    c_phi = 2.0 * d["c_shock"] * half_s**2
+    n_2 = (d["wheelbase"] - d["axle_spacing"]) / d["wheelbase"]
+    h = d["i_p"] * v / d["r"]
+    # the springs as (i, j, stiffness, r_i, r_j) and to ground (i, stiffness)
+    springs = [(0, 1, d["k_tr"], 1.0, 1.0), (2, 3, d["k_tr"], 1.0, 1.0),
+               (0, 6, d["k_d1"], 1.0, 1.0), (2, 7, d["k_d2"], 1.0, 1.0),
+               (7, 6, d["k_t"], 1.0, n_2)]
+    grounded = [(6, d["k_g"]), (4, k_phi), (5, k_phi)]
+    k = np.zeros((8, 8))
+    for i, j, s, ri, rj in springs:
+        u = np.zeros(8)
+        u[i], u[j] = ri, -rj
+        k += s * np.outer(u, u)
+    for i, s in grounded:
+        k[i, i] += s
+    m = np.diag([d["i_k"]] * 4 + [d["i_phi"]] * 2 + [d["j_g"], d["j_m"]])
+    c = np.diag([d["c_k"]] * 4 + [c_phi] * 2 + [d["c_g"], d["c_m"]])
+    wheels = [(0, 4, c_a[0]), (1, 4, c_a[0]), (2, 5, c_a[1]), (3, 5, c_a[1])]
+    g = np.zeros((8, 4))
+    for n, (w, ax, ca) in enumerate(wheels):
+        c[w, ax] += h
+        c[ax, w] -= h
+        g[w, n] = -(d["e"] + d["t_p"]) * ca
+        g[ax, n] = d["h_r"] * ca
+    m_inv = np.linalg.inv(m)
+    a = np.zeros((20, 20))
+    a[0:8, 8:16] = np.eye(8)
+    a[8:16, 0:8] = -m_inv @ k
+    a[8:16, 8:16] = -m_inv @ c
+    a[8:16, 16:20] = m_inv @ g
+    s = d["sigma"]
+    for n, (w, ax, _) in enumerate(wheels):
+        row = 16 + n
+        a[row, w] = v / s
+        a[row, 8 + w] = d["e"] / s
+        a[row, 8 + ax] = -d["h_r"] / s
+        a[row, row] = -v / s
+    return a
+
+
+def eig_main(build, section, case_path, out_path):
+    with open(case_path, "rb") as f:
+        cfg = tomllib.load(f)
+    with open(out_path, "w") as out:
+        for v in cfg["case"]["speeds_mps"]:
+            for lam in np.linalg.eigvals(build(cfg[section], v)):
+                out.write(f"{float(v)!r} {float(lam.real)!r} {float(lam.imag)!r}\n")
+
+
 def main():
     if sys.argv[1] == "truck":
         truck_main(sys.argv[2], sys.argv[3])
         return
     if sys.argv[1] == "trailer":
         trailer_main(sys.argv[2], sys.argv[3])
+        return
+    if sys.argv[1] == "dual":
+        eig_main(dual_linear_a, "dual", sys.argv[2], sys.argv[3])
         return
     case_path, out_path = sys.argv[1], sys.argv[2]
     with open(case_path, "rb") as f:

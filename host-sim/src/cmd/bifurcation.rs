@@ -319,8 +319,9 @@ pub const WINDOW_S: Range = Range::above(0.0, 300.0, "s");
 /// Command-line arguments of `shimmy-sim bifurcation`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BifurcationArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
+    /// Vehicle: a named set (nominal, gentle, hard; the dual-axle truck's dual-axle) or a
+    /// vehicle file (TOML, see docs/vehicle-file.md; parameter files are vehicle files).
+    /// `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Fit the MR damper and hold this coil current in A (0 to the vehicle's coil rating);
@@ -352,7 +353,21 @@ pub struct BifurcationArgs {
     /// Output directory.
     #[arg(long, default_value = "out/bifurcation")]
     pub out: PathBuf,
+    /// The dual-axle truck: the kingpin friction's smoothing `tanh(psi'/eps)`, rad/s: above 0,
+    /// at most 1.
+    #[arg(long, default_value_t = crate::model::dual_axle_plant::DEFAULT_EPS_RADPS, allow_negative_numbers = true, value_parser = arg_range::f64_in(EPS_RADPS))]
+    pub friction_eps_radps: f64,
+    /// The dual-axle truck: leave out the table of the paper's directions (transition rod,
+    /// friction, trail, caster at -20 % / +20 %).
+    #[arg(long)]
+    pub no_directions: bool,
 }
+
+/// Friction smoothing: above 0, at most 1 rad/s.
+pub const EPS_RADPS: Range = Range::above(0.0, 1.0, "rad/s");
+/// The dual-axle truck's reference speed for the limit-cycle amplitude of the directions table,
+/// km/h (the class's limited top speed).
+pub const DUAL_AXLE_REF_KMH: f64 = 90.0;
 
 /// Entry point of `shimmy-sim bifurcation`.
 pub fn command(a: &BifurcationArgs) -> Result<()> {
@@ -375,10 +390,21 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.duration_s,
         a.window_s
     );
+    EPS_RADPS.check("--friction-eps-radps", a.friction_eps_radps)?;
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => command_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => command_on(a, &t.model, &t.parts),
         ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("bifurcation")),
+        ModelVehicle::DualAxle(t) => {
+            anyhow::ensure!(
+                a.damper_current_a.is_none(),
+                "--damper-current-a: the {} model has no MR damper configured; leave it out",
+                <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                    { shimmy_core::dual_axle::N_STATES },
+                >>::NAME
+            );
+            dual_axle(&t.model, a)
+        }
     }
 }
 
@@ -410,6 +436,272 @@ fn command_on<M: SimModel<N>, const N: usize>(
     })
 }
 
+/// `bifurcation` on the dual-axle truck (`docs/dual-axle-truck.md`): friction off and on from
+/// the small start, friction on from the large start; the friction's onsets refined; the
+/// paper's directions; table, `bifurcation.csv`, `directions.csv`, `bifurcation.png`.
+pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs) -> Result<()> {
+    use crate::sim::dual_axle_study::{self as study, CycleRuns};
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let runs = CycleRuns {
+        small_deg: a.small_deg,
+        large_deg: a.large_deg,
+        duration_s: a.duration_s,
+        window_s: a.window_s,
+        eps_radps: a.friction_eps_radps,
+    };
+    let n = ((a.v_max_kmh - a.v_min_kmh) / a.step_kmh + 1e-9).floor() as usize + 1;
+    let speeds: Vec<f64> = (0..n)
+        .map(|k| a.v_min_kmh + k as f64 * a.step_kmh)
+        .collect();
+    let t0 = std::time::Instant::now();
+    let rows = study::sweep(t, &runs, &speeds)?;
+    println!(
+        "bifurcation: `{}` (dual-axle truck, kingpin friction M_f = {} N m smoothed by eps = {} \
+         rad/s); {} s runs, amplitude = peak |(psi_1L + psi_1R)/2| over the last {} s",
+        a.vehicle, t.m_f, a.friction_eps_radps, a.duration_s, a.window_s
+    );
+    println!(
+        "{:>8} | {:>12} | {:>12} | {:>12} | {:>10}",
+        "V km/h",
+        format!("free {}deg", a.small_deg),
+        format!("fric {}deg", a.small_deg),
+        format!("fric {}deg", a.large_deg),
+        "eig re 1/s"
+    );
+    let cell = |c: &crate::model::dual_axle_plant::CycleSummary| {
+        format!(
+            "{:.4}{}",
+            c.amp_end_rad.to_degrees(),
+            if c.shimmies() { " *" } else { "  " }
+        )
+    };
+    for r in &rows {
+        println!(
+            "{:>8.1} | {:>12} | {:>12} | {:>12} | {:>10.4}",
+            r.v_kmh,
+            cell(&r.free),
+            cell(&r.small),
+            cell(&r.large),
+            r.eig_re_per_s
+        );
+    }
+    println!("amplitudes in deg; * = shimmy at the end of the run (not decaying, above 1e-4 rad)");
+    let grid = |pred: &dyn Fn(&study::DualBifurcationRow) -> bool| {
+        let hits: Vec<f64> = rows.iter().filter(|r| pred(r)).map(|r| r.v_kmh).collect();
+        hits.first().zip(hits.last()).map(|(a, b)| (*a, *b))
+    };
+    let (lo, hi) = (a.v_min_kmh, a.v_max_kmh);
+    let lin = study::linear_onset_kmh(t, lo, hi)?;
+    let on_small = study::friction_onset_kmh(t, &runs, a.small_deg, lo, hi, 0.25)?;
+    let on_large = study::friction_onset_kmh(t, &runs, a.large_deg, lo, hi, 0.25)?;
+    let text =
+        |x: Option<f64>| x.map_or("none in the range".to_string(), |v| format!("{v:.2} km/h"));
+    println!("linear (friction-free) Hopf onset: {}", text(lin));
+    println!(
+        "with friction: shimmy from the {} deg start from {}, from the {} deg start from {} \
+         (bisection to 0.25 km/h)",
+        a.small_deg,
+        text(on_small),
+        a.large_deg,
+        text(on_large)
+    );
+    let both = grid(&|r| r.large.shimmies() && !r.small.shimmies());
+    if let Some((l, h)) = both {
+        println!(
+            "coexisting: the straight run (small start) and a limit cycle (large start) from {l} \
+             to {h} km/h (grid points)"
+        );
+    }
+    if let Some((l, h)) = grid(&|r| r.large.shimmies()) {
+        println!("limit cycles with friction (large start) from {l} to {h} km/h (grid points)");
+    }
+    let v_ref = DUAL_AXLE_REF_KMH.clamp(lo, hi);
+    let threshold = study::threshold_start_deg(t, &runs, v_ref, a.small_deg, a.large_deg, 0.01)?;
+    if let Some(d) = threshold {
+        println!(
+            "at {v_ref} km/h with friction: starts below {d:.2} deg return to the straight run, \
+             larger ones end in the limit cycle (an unstable cycle of about this size separates \
+             the two; bisection to 0.01 deg)"
+        );
+    }
+    let csv = a.out.join("bifurcation.csv");
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&csv)?);
+    writeln!(
+        w,
+        "v_kmh,free_small_amp_deg,free_small_shimmy,fric_small_amp_deg,fric_small_shimmy,fric_large_amp_deg,fric_large_shimmy,eig_re_per_s,small_start_deg,large_start_deg,m_f_nm,eps_radps"
+    )?;
+    for r in &rows {
+        writeln!(
+            w,
+            "{},{:.9e},{},{:.9e},{},{:.9e},{},{},{},{},{},{}",
+            r.v_kmh,
+            r.free.amp_end_rad.to_degrees(),
+            r.free.shimmies(),
+            r.small.amp_end_rad.to_degrees(),
+            r.small.shimmies(),
+            r.large.amp_end_rad.to_degrees(),
+            r.large.shimmies(),
+            r.eig_re_per_s,
+            a.small_deg,
+            a.large_deg,
+            t.m_f,
+            a.friction_eps_radps
+        )?;
+    }
+    w.flush()?;
+    let png = a.out.join("bifurcation.png");
+    plot_dual(&png, &rows, a, lin, on_large)?;
+    println!("wrote {} and {}", csv.display(), png.display());
+    if !a.no_directions {
+        let dirs = study::directions(t, &runs, 0.2, lo, hi, DUAL_AXLE_REF_KMH)?;
+        println!(
+            "paper's directions (Wei et al. 2015), each at -20 % / +20 %: linear onset, friction \
+             onset from {} deg, limit-cycle amplitude at {DUAL_AXLE_REF_KMH} km/h from {} deg",
+            a.large_deg, a.large_deg
+        );
+        let path = a.out.join("directions.csv");
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&path)?);
+        writeln!(
+            f,
+            "param,what,factor,linear_onset_kmh,friction_onset_kmh,amp_ref_deg,ref_kmh,agrees_linear_onset,agrees_friction_onset,agrees_amplitude"
+        )?;
+        for r in &dirs {
+            let agrees = study::agrees_with_paper(&dirs, r.name);
+            println!(
+                "  {:<5} x{:<4} | linear onset {:>18} | friction onset {:>18} | amplitude {:>7.3} deg | {}",
+                r.name,
+                r.factor,
+                text(r.linear_onset_kmh),
+                text(r.friction_onset_kmh),
+                r.amp_ref_deg,
+                agrees.map_or(String::new(), |g| g.text())
+            );
+            writeln!(
+                f,
+                "{},{},{},{},{},{},{},{},{},{}",
+                r.name,
+                r.what,
+                r.factor,
+                r.linear_onset_kmh
+                    .map_or(String::new(), |x| format!("{x:.4}")),
+                r.friction_onset_kmh
+                    .map_or(String::new(), |x| format!("{x:.4}")),
+                r.amp_ref_deg,
+                DUAL_AXLE_REF_KMH,
+                agrees.map_or(String::new(), |g| g.linear_onset.to_string()),
+                agrees.map_or(String::new(), |g| g.friction_onset.to_string()),
+                agrees.map_or(String::new(), |g| g.amplitude.to_string())
+            )?;
+        }
+        f.flush()?;
+        println!("wrote {}", path.display());
+    }
+    let simulated = 3.0 * rows.len() as f64 * a.duration_s;
+    println!(
+        "{} grid runs, {simulated:.0} s simulated; {:.1} s wall in all",
+        3 * rows.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn plot_dual(
+    path: &Path,
+    rows: &[crate::sim::dual_axle_study::DualBifurcationRow],
+    a: &BifurcationArgs,
+    linear_onset_kmh: Option<f64>,
+    friction_onset_kmh: Option<f64>,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let root = BitMapBackend::new(path, (1000, 620)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let y_max = rows
+        .iter()
+        .map(|r| r.free.amp_end_rad.max(r.large.amp_end_rad).to_degrees())
+        .fold(0.0f64, f64::max)
+        .max(a.large_deg)
+        * 1.1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "Dual-axle truck: wheel-yaw amplitude vs speed (`{}`)",
+                a.vehicle
+            ),
+            ("sans-serif", 22),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(a.v_min_kmh..a.v_max_kmh, 0.0..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc("speed V [km/h]")
+        .y_desc(format!(
+            "peak |(psi_1L+psi_1R)/2| over last {} s [deg]",
+            a.window_s
+        ))
+        .draw()?;
+    type Pick = fn(&crate::sim::dual_axle_study::DualBifurcationRow) -> f64;
+    let series: [(String, RGBColor, Pick); 3] = [
+        (
+            format!("no friction, start {} deg", a.small_deg),
+            GREEN,
+            |r| r.free.amp_end_rad,
+        ),
+        (format!("friction, start {} deg", a.small_deg), BLUE, |r| {
+            r.small.amp_end_rad
+        }),
+        (format!("friction, start {} deg", a.large_deg), RED, |r| {
+            r.large.amp_end_rad
+        }),
+    ];
+    for (label, color, pick) in series {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| (r.v_kmh, pick(r).to_degrees()))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart.draw_series(
+            pts.iter()
+                .map(|&(x, y)| Circle::new((x, y), 3, color.filled())),
+        )?;
+    }
+    for (v, color, name, y) in [
+        (linear_onset_kmh, BLACK, "linear Hopf onset", 0.95),
+        (
+            friction_onset_kmh,
+            MAGENTA,
+            "friction onset (large start)",
+            0.88,
+        ),
+    ] {
+        if let Some(v) = v {
+            chart.draw_series(LineSeries::new(
+                [(v, 0.0), (v, y_max)],
+                color.stroke_width(1),
+            ))?;
+            chart.draw_series(std::iter::once(Text::new(
+                format!("{name} {v:.1} km/h"),
+                (v, y * y_max),
+                ("sans-serif", 14),
+            )))?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -434,6 +726,42 @@ mod tests {
         let csv = std::fs::read_to_string(out.join("bifurcation.csv")).expect("csv");
         assert!(csv.starts_with("v_kmh,small_start_deg,small_amp_deg"));
         assert_eq!(csv.lines().count(), 1 + 3);
+        let png = std::fs::read(out.join("bifurcation.png")).expect("png");
+        assert_eq!(&png[1..4], b"PNG");
+        std::fs::remove_dir_all(&out).ok();
+    }
+
+    /// The dual-axle truck's mode: table, CSV (three runs per speed) and PNG from a vehicle
+    /// file of that model.
+    #[test]
+    fn the_dual_axle_mode_writes_csv_and_png() {
+        let out = std::env::temp_dir().join(format!("shimmy-bif-dual-{}", std::process::id()));
+        std::fs::create_dir_all(&out).unwrap();
+        let file = out.join("dual.toml");
+        std::fs::write(
+            &file,
+            "model = \"dual-axle-truck-8dof\"\n[dual_axle]\nm_f = 20.0\n",
+        )
+        .unwrap();
+        let a = BifurcationArgs {
+            vehicle: file.display().to_string(),
+            damper_current_a: None,
+            v_min_kmh: 30.0,
+            v_max_kmh: 90.0,
+            step_kmh: 30.0,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 4.0,
+            window_s: 1.0,
+            out: out.clone(),
+            friction_eps_radps: 0.01,
+            no_directions: true,
+        };
+        command(&a).expect("run");
+        let csv = std::fs::read_to_string(out.join("bifurcation.csv")).expect("csv");
+        assert!(csv.starts_with("v_kmh,free_small_amp_deg"));
+        assert_eq!(csv.lines().count(), 1 + 3);
+        assert!(csv.lines().nth(1).unwrap().ends_with(",20,0.01"), "{csv}");
         let png = std::fs::read(out.join("bifurcation.png")).expect("png");
         assert_eq!(&png[1..4], b"PNG");
         std::fs::remove_dir_all(&out).ok();

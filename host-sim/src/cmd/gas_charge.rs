@@ -61,7 +61,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
     );
     let t = match vehicle_file::load_model(&args.vehicle)? {
         ModelVehicle::Truck(t) => t.model,
-        ModelVehicle::Car(_) | ModelVehicle::Trailer(_) => bail!(
+        ModelVehicle::Car(_) | ModelVehicle::Trailer(_) | ModelVehicle::DualAxle(_) => bail!(
             "--vehicle `{}`: gas-charge needs a {} vehicle (truck-empty, truck-full or a file with that model)",
             args.vehicle,
             TruckParams::NAME

@@ -287,6 +287,9 @@ pub fn command(a: &MarginArgs) -> Result<()> {
         (ModelVehicle::Truck(v), ModelVehicle::Truck(m)) => {
             run_on(a, v.model, m.model, m.pipeline_params(), provenance)
         }
+        (ModelVehicle::DualAxle(v), ModelVehicle::DualAxle(m)) => {
+            run_on(a, v.model, m.model, m.pipeline_params(), provenance)
+        }
         _ => bail!(
             "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's model is \
              of the vehicle's model",

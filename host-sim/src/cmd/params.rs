@@ -26,6 +26,20 @@ pub fn command(spec: &str) -> Result<()> {
             }
             (t.parts, &SECTIONS[1..])
         }
+        ModelVehicle::DualAxle(t) => {
+            println!("[dual_axle]");
+            for f in &shimmy_core::dual_axle::DUAL_AXLE_FIELDS {
+                println!(
+                    "  {:<22} = {:>14.6} {:<16} ({} ..= {})",
+                    f.name,
+                    t.model.get(f.name).unwrap_or(f64::NAN),
+                    f.unit,
+                    f.range.0,
+                    f.range.1
+                );
+            }
+            (t.parts, &SECTIONS[1..])
+        }
         ModelVehicle::Trailer(t) => {
             println!("[trailer]");
             for f in &shimmy_core::trailer::TRAILER_FIELDS {

@@ -6,6 +6,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use shimmy_core::dual_axle::{DualAxleParams, DUAL_AXLE_FIELDS};
 use shimmy_core::eigen::ModeShape;
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
@@ -20,7 +21,7 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 #[derive(clap::Args, Debug, Clone)]
 pub struct SensitivityArgs {
     /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full; the trailer's trailer) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
+    /// truck-full; the dual-axle truck's dual-axle; the trailer's trailer) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
     /// vehicle files). `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
@@ -64,6 +65,10 @@ pub const TRUCK_FIELDS_WITHOUT_EFFECT: [&str; 3] = ["mu", "c_s", "l_t"];
 /// The trailer's fields left out of its sensitivity study: the simulator tyre's friction and
 /// shape and the damper lever do not enter the linear model without a damper.
 pub const TRAILER_FIELDS_WITHOUT_EFFECT: [&str; 3] = ["mu", "c_s", "l_d"];
+/// The dual-axle truck's fields left out of its sensitivity study: the kingpin friction and the
+/// simulator tyre's friction and shape are not in the linear model, the damper lever has no
+/// effect without a damper (the friction's effect is `bifurcation`'s, nonlinear).
+pub const DUAL_AXLE_FIELDS_WITHOUT_EFFECT: [&str; 4] = ["m_f", "mu", "c_s", "l_t"];
 
 /// A crossing as the sensitivity table shows it: speed km/h, kind, frequency Hz, mode shape.
 pub type CrossingRow = (f64, stability::CrossingKind, f64, ModeShape);
@@ -161,6 +166,26 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
                         let name = f.name;
                         let w: Variant = Box::new(move |k| {
                             let mut v: TruckParams = t;
+                            if v.set(name, base * k).is_err() || v.validate().is_err() {
+                                return Ok(None);
+                            }
+                            window_of(&v).map(Some)
+                        });
+                        (f.name, f.unit, base, w)
+                    })
+                    .collect();
+                (window_of(&t)?, vs)
+            }
+            ModelVehicle::DualAxle(tv) => {
+                let t = tv.model;
+                let vs = DUAL_AXLE_FIELDS
+                    .iter()
+                    .filter(|f| !DUAL_AXLE_FIELDS_WITHOUT_EFFECT.contains(&f.name))
+                    .map(|f| {
+                        let base = t.get(f.name).unwrap_or(f64::NAN);
+                        let name = f.name;
+                        let w: Variant = Box::new(move |k| {
+                            let mut v: DualAxleParams = t;
                             if v.set(name, base * k).is_err() || v.validate().is_err() {
                                 return Ok(None);
                             }

@@ -20,8 +20,9 @@ use crate::sim::vehicle_file;
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
     /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full; the trailer's trailer) or a vehicle file (TOML, see docs/vehicle-file.md;
-    /// parameter files are vehicle files). `--params` is the older name.
+    /// truck-full; the dual-axle truck's dual-axle; the trailer's trailer) or a vehicle file
+    /// (TOML, see docs/vehicle-file.md; parameter files are vehicle files). `--params` is the
+    /// older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
@@ -83,6 +84,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
     match vehicle_file::load_model(&args.vehicle)? {
         vehicle_file::ModelVehicle::Car(v) => with_damper(&v.plant, &v, args),
         vehicle_file::ModelVehicle::Truck(t) => with_damper(&t.model, &t.parts, args),
+        vehicle_file::ModelVehicle::DualAxle(t) => with_damper(&t.model, &t.parts, args),
         vehicle_file::ModelVehicle::Trailer(t) => {
             anyhow::ensure!(
                 args.damper_current_a.is_none(),

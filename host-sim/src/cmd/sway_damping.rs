@@ -75,7 +75,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
     );
     let t = match vehicle_file::load_model(&args.vehicle)? {
         ModelVehicle::Trailer(t) => t,
-        ModelVehicle::Car(_) | ModelVehicle::Truck(_) => bail!(
+        ModelVehicle::Car(_) | ModelVehicle::Truck(_) | ModelVehicle::DualAxle(_) => bail!(
             "--vehicle `{}`: sway-damping needs a {} vehicle (`trailer` or a file with that model)",
             args.vehicle,
             TrailerParams::NAME

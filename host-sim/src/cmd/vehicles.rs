@@ -27,7 +27,7 @@ use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
 use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// The named sets of the table by default: one or more per model of the family.
-pub const DEFAULT_SETS: &str = "nominal,hard,truck-full,truck-empty,trailer";
+pub const DEFAULT_SETS: &str = "nominal,hard,truck-full,truck-empty,dual-axle,trailer";
 
 /// Speed range of the crossing scan, km/h.
 const SCAN_KMH: (f64, f64) = (1.0, 150.0);
@@ -118,6 +118,7 @@ pub fn row(name: &str, v: &ModelVehicle, a: &VehiclesArgs) -> Result<VehicleRow>
     match v {
         ModelVehicle::Car(v) => row_on(name, &v.plant, v, a),
         ModelVehicle::Truck(t) => row_on(name, &t.model, &t.parts, a),
+        ModelVehicle::DualAxle(t) => row_on(name, &t.model, &t.parts, a),
         ModelVehicle::Trailer(t) => {
             // No SimModel yet (no MR damper, no mode meter for 0.6 Hz sway: docs/trailer.md):
             // its own nonlinear plant for the cycle, no lead.

@@ -7,6 +7,7 @@
 pub mod coil_drive;
 pub mod damper_equiv;
 pub mod disturbance;
+pub mod dual_axle_plant;
 pub mod family;
 pub mod faults;
 pub mod integrator;

@@ -119,13 +119,16 @@ impl Provenance {
     /// [`Self::vehicle`] for a vehicle of any model: another model's record is the SHA-256 of
     /// its parameters (model and shared sections) as the simulator holds them.
     pub fn model_vehicle(mut self, role: &str, spec: &str, v: &ModelVehicle) -> Result<Self> {
-        // A model's record: whether `spec` is one of its sets, and its parameters as held.
-        let (named, record) = match v {
+        let (record, named) = match v {
             ModelVehicle::Car(car) => return self.vehicle(role, spec, car),
-            ModelVehicle::Truck(t) => (TruckSet::from_name(spec).is_some(), format!("{t:?}")),
-            ModelVehicle::Trailer(t) => (
-                shimmy_core::trailer::TrailerSet::from_name(spec).is_some(),
+            ModelVehicle::Truck(t) => (format!("{t:?}"), TruckSet::from_name(spec).is_some()),
+            ModelVehicle::DualAxle(t) => (
                 format!("{t:?}"),
+                shimmy_core::dual_axle::DualAxleSet::from_name(spec).is_some(),
+            ),
+            ModelVehicle::Trailer(t) => (
+                format!("{t:?}"),
+                shimmy_core::trailer::TrailerSet::from_name(spec).is_some(),
             ),
         };
         if !named {

@@ -11,6 +11,7 @@ pub mod arg_range;
 pub mod closed_loop;
 pub mod demo_case;
 pub mod device_link;
+pub mod dual_axle_study;
 pub mod log_file;
 pub mod margin_run;
 pub mod open_loop;

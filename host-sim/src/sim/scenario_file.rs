@@ -327,6 +327,12 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVe
                 vehicle_file::not_on_trailer("run").context(format!("field `{key}.vehicle`"))
             )
         }
+        ModelVehicle::DualAxle(_) => bail!(
+            "field `{key}.vehicle`: a {} vehicle; scenario files take the car or the mining truck",
+            <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                { shimmy_core::dual_axle::N_STATES },
+            >>::NAME
+        ),
     }
     Ok(v)
 }
@@ -360,10 +366,10 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
             let m = match m {
                 None => None,
                 Some(ModelVehicle::Truck(m)) => Some(m),
-                Some(ModelVehicle::Car(_) | ModelVehicle::Trailer(_)) => bail!(
+                Some(other) => bail!(
                     "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
                      of the plant's model",
-                    PlantParams::NAME,
+                    other.model_name(),
                     TruckParams::NAME
                 ),
             };
@@ -376,14 +382,11 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
             }
             build(&f, p, m, default_name, duration_s).map(AnyScenario::Truck)
         }
-        (ModelVehicle::Trailer(_), _) | (_, Some(ModelVehicle::Trailer(_))) => {
-            Err(vehicle_file::not_on_trailer("run"))
-        }
-        (ModelVehicle::Car(_), Some(ModelVehicle::Truck(_))) => bail!(
+        (p, m) => bail!(
             "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is of the \
              plant's model",
-            TruckParams::NAME,
-            PlantParams::NAME
+            m.map_or("missing", |m| m.model_name()),
+            p.model_name()
         ),
     }
 }

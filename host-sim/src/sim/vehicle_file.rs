@@ -28,9 +28,11 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
+use crate::model::dual_axle_plant::dual_axle_parts;
 use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::members::truck_parts;
 use anyhow::{bail, Context, Result};
+use shimmy_core::dual_axle::{DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{ParamSet, PlantParams};
 use shimmy_core::trailer::{TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS};
@@ -50,6 +52,9 @@ pub enum ModelVehicle {
     Truck(FamilyVehicle<TruckParams>),
     /// The trailer on a compliant hitch (`trailer-2dof`): its linear model's parameters.
     Trailer(TrailerParams),
+    /// The dual-front-axle heavy truck (`dual-axle-truck-8dof`): its model's parameters and the
+    /// shared sections (the car's reference damper, sensors and gains, unsized for it).
+    DualAxle(FamilyVehicle<DualAxleParams>),
 }
 
 impl ModelVehicle {
@@ -59,6 +64,7 @@ impl ModelVehicle {
             ModelVehicle::Car(_) => PlantParams::NAME,
             ModelVehicle::Truck(_) => TruckParams::NAME,
             ModelVehicle::Trailer(_) => TrailerParams::NAME,
+            ModelVehicle::DualAxle(_) => DualAxleParams::NAME,
         }
     }
 }
@@ -91,8 +97,27 @@ impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     }
 }
 
+impl FileModel<{ shimmy_core::dual_axle::N_STATES }> for DualAxleParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<DualAxleParams>> {
+        match load_model_relative(spec, dir)? {
+            ModelVehicle::DualAxle(t) => Ok(t),
+            other => bail!(
+                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
+                 the believed vehicle are of one model)",
+                other.model_name(),
+                DualAxleParams::NAME
+            ),
+        }
+    }
+}
+
 /// The model names a vehicle file's `model` key takes.
-pub const MODEL_NAMES: [&str; 3] = [PlantParams::NAME, TruckParams::NAME, TrailerParams::NAME];
+pub const MODEL_NAMES: [&str; 4] = [
+    PlantParams::NAME,
+    TruckParams::NAME,
+    DualAxleParams::NAME,
+    TrailerParams::NAME,
+];
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
@@ -106,6 +131,12 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
         return Ok(ModelVehicle::Truck(FamilyVehicle {
             model: set.params(),
             parts: truck_parts()?,
+        }));
+    }
+    if let Some(set) = DualAxleSet::from_name(spec) {
+        return Ok(ModelVehicle::DualAxle(FamilyVehicle {
+            model: set.params(),
+            parts: dual_axle_parts(),
         }));
     }
     if let Some(set) = TrailerSet::from_name(spec) {
@@ -122,10 +153,11 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     let path = path.as_path();
     if !path.is_file() {
         bail!(
-            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {})",
+            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {}, {})",
             path.display(),
             set_names(),
             truck_set_names(),
+            dual_axle_set_names(),
             trailer_set_names()
         );
     }
@@ -139,6 +171,12 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
+        m if m == DualAxleParams::NAME => parse_dual_axle(&table).map(|model| {
+            ModelVehicle::DualAxle(FamilyVehicle {
+                model,
+                parts: dual_axle_parts(),
+            })
+        }),
         m if m == TrailerParams::NAME => parse_trailer(&table).map(ModelVehicle::Trailer),
         _ => parse(text).map(ModelVehicle::Car),
     }
@@ -216,6 +254,66 @@ fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
     t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
     parts.validate()?;
     Ok(FamilyVehicle { model: t, parts })
+}
+
+/// A `dual-axle-truck-8dof` file: `base` (a dual-axle set) and the `[dual_axle]` section.
+fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
+    let base = match table.get("base") {
+        None => DualAxleSet::Rated.name(),
+        Some(toml::Value::String(s)) => s.as_str(),
+        Some(other) => bail!(
+            "field `base`: expected a set name, found {}",
+            other.type_str()
+        ),
+    };
+    let Some(set) = DualAxleSet::from_name(base) else {
+        bail!(
+            "field `base`: unknown set `{base}` for model {}, allowed: {}",
+            DualAxleParams::NAME,
+            dual_axle_set_names()
+        );
+    };
+    let mut t = set.params();
+    for (key, value) in table {
+        match key.as_str() {
+            "model" | "base" => continue,
+            "dual_axle" => {}
+            _ => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, dual_axle",
+                DualAxleParams::NAME
+            ),
+        }
+        for (name, x) in section_numbers(key, value)? {
+            match t.set(name, x) {
+                Ok(()) => {}
+                Err(DualAxleFieldError::Unknown) => bail!(
+                    "field `dual_axle.{name}`: no such field, allowed: {}",
+                    DUAL_AXLE_FIELDS
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Err(e) => bail!(
+                    "{}",
+                    e.to_string().replacen("field `", "field `dual_axle.", 1)
+                ),
+            }
+        }
+    }
+    t.validate().map_err(|e| {
+        anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
+    })?;
+    Ok(t)
+}
+
+/// The dual-axle truck's named sets, for messages.
+pub fn dual_axle_set_names() -> String {
+    DualAxleSet::ALL
+        .iter()
+        .map(|s| s.name())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
@@ -330,6 +428,12 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
         bail!(
             "{}",
             car_only(&format!("vehicle `{spec}`"), TruckParams::NAME)
+        );
+    }
+    if DualAxleSet::from_name(spec).is_some() {
+        bail!(
+            "{}",
+            car_only(&format!("vehicle `{spec}`"), DualAxleParams::NAME)
         );
     }
     if TrailerSet::from_name(spec).is_some() {
@@ -597,6 +701,47 @@ mod tests {
             load_model("nominal").unwrap(),
             ModelVehicle::Car(_)
         ));
+    }
+
+    /// A dual-axle file sets `[dual_axle]` fields by name on its base; bad sections, fields,
+    /// values and axle order are rejected naming them.
+    #[test]
+    fn a_dual_axle_file_reads_its_section() {
+        let ModelVehicle::DualAxle(FamilyVehicle { model: t, .. }) = parse_model(
+            "model = \"dual-axle-truck-8dof\"\nbase = \"dual-axle\"\n[dual_axle]\nk_t = 2.0e5\nm_f = 80\n",
+        )
+        .unwrap() else {
+            panic!("a dual-axle file read as another model")
+        };
+        let mut want = DualAxleSet::Rated.params();
+        want.k_t = 2.0e5;
+        want.m_f = 80.0;
+        assert_eq!(t, want);
+        let err = |text: &str| format!("{:#}", parse_model(text).unwrap_err());
+        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_t = -1.0\n");
+        assert!(
+            e.contains("field `dual_axle.k_t`") && e.contains("1000"),
+            "{e}"
+        );
+        let e = err("model = \"dual-axle-truck-8dof\"\n[dual_axle]\nk_tt = 5.0\n");
+        assert!(e.contains("field `dual_axle.k_tt`: no such field"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\n[truck]\nk_d = 5.0\n");
+        assert!(e.contains("field `truck`: no such section"), "{e}");
+        let e = err("model = \"dual-axle-truck-8dof\"\nbase = \"truck-full\"\n");
+        assert!(e.contains("field `base`") && e.contains("dual-axle"), "{e}");
+        let e = err(
+            "model = \"dual-axle-truck-8dof\"\n[dual_axle]\naxle_spacing = 4.9\nwheelbase = 4.0\n",
+        );
+        assert!(e.contains("field `dual_axle.axle_spacing`"), "{e}");
+        assert!(matches!(
+            load_model("dual-axle").unwrap(),
+            ModelVehicle::DualAxle(_)
+        ));
+        let e = format!("{:#}", load("dual-axle").unwrap_err());
+        assert!(
+            e.contains("dual-axle-truck-8dof") && e.contains("car-4dof"),
+            "{e}"
+        );
     }
 
     /// A trailer file sets `[trailer]` fields by name over the `trailer` set; bad sections,

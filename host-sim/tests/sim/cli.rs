@@ -224,6 +224,16 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--damper-current-a", amps],
         ),
         (
+            &[
+                "bifurcation",
+                "--vehicle",
+                "dual-axle",
+                "--friction-eps-radps",
+                "0",
+            ],
+            &["--friction-eps-radps", "0 < value <= 1 rad/s"],
+        ),
+        (
             &["bifurcation", "--step-kmh", "0"],
             &["--step-kmh", "0.1 <= value <= 100 km/h"],
         ),

@@ -5,6 +5,7 @@
 //! trailer's against its trailer, written from `docs/trailer.md`.
 //! Needs python3 with numpy and scipy (`cargo xtask test` installs them).
 use nalgebra::Complex;
+use shimmy_core::dual_axle::{self, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::eigen::eigenvalues;
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::kmh_to_mps;
@@ -251,5 +252,93 @@ fn trailer_eigenvalues_match_the_scipy_implementation() {
         }
     }
     println!("trailer eigenvalues: worst relative difference {worst:e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every eigenvalue of `ours` matched to the nearest unused one of `theirs`: the worst
+/// difference relative to max(|lambda|, 1).
+fn worst_nearest_match(ours: &[Complex<f64>], theirs: &[Complex<f64>]) -> f64 {
+    assert_eq!(ours.len(), theirs.len());
+    let mut used = vec![false; theirs.len()];
+    let mut worst = 0.0_f64;
+    for l in ours {
+        let (j, d) = theirs
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| !used[*j])
+            .map(|(j, m)| (j, (m - l).norm()))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap();
+        used[j] = true;
+        worst = worst.max(d / l.norm().max(1.0));
+    }
+    worst
+}
+
+/// The dual-front-axle truck's eigenvalues against the NumPy implementation written from
+/// `docs/dual-axle-truck.md` (its own loads, roll stiffness, steer ratio and the stiffness matrix
+/// as the Hessian of the rods' energy): within 1e-9 relative, for the named set, a soft and a
+/// stiff transition rod and an unequal axle load, from 1 to 120 km/h.
+#[test]
+fn dual_axle_eigenvalues_match_the_scipy_implementation() {
+    let dir = std::env::temp_dir().join(format!("shimmy-scipy-dual-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../host-sim/reference/plant_scipy.py"
+    );
+    let speeds: Vec<f64> = (0..=12)
+        .map(|i| kmh_to_mps(1.0 + 119.0 * f64::from(i) / 12.0))
+        .collect();
+    let base = DualAxleSet::Rated.params();
+    let mut soft = base;
+    soft.k_t *= 0.3;
+    let mut stiff = base;
+    stiff.k_t *= 3.0;
+    let mut unequal = base;
+    unequal.axle_load_2_kg = 6500.0;
+    unequal.c_m = 300.0;
+    let mut worst = 0.0_f64;
+    for (n, t) in [base, soft, stiff, unequal].iter().enumerate() {
+        t.validate().unwrap();
+        let mut case = String::from("[dual]\n");
+        for f in &DUAL_AXLE_FIELDS {
+            case += &format!("{} = {:?}\n", f.name, t.get(f.name).unwrap());
+        }
+        let list: Vec<String> = speeds.iter().map(|v| format!("{v:?}")).collect();
+        case += &format!("[case]\nspeeds_mps = [{}]\n", list.join(", "));
+        let (case_path, out) = (
+            dir.join(format!("dual-{n}.toml")),
+            dir.join(format!("dual-{n}.txt")),
+        );
+        std::fs::write(&case_path, case).unwrap();
+        let status = std::process::Command::new("python3")
+            .arg(script)
+            .arg("dual")
+            .arg(&case_path)
+            .arg(&out)
+            .status()
+            .expect("python3 runs");
+        assert!(status.success(), "plant_scipy.py dual failed");
+        let text = std::fs::read_to_string(&out).unwrap();
+        for &v in &speeds {
+            let theirs: Vec<Complex<f64>> = text
+                .lines()
+                .map(|l| {
+                    l.split_whitespace()
+                        .map(|x| x.parse::<f64>().unwrap())
+                        .collect::<Vec<_>>()
+                })
+                .filter(|f| f[0] == v)
+                .map(|f| Complex::new(f[1], f[2]))
+                .collect();
+            assert_eq!(theirs.len(), dual_axle::N_STATES);
+            let ours = eigenvalues(&t.linearise(v, 0.0)).unwrap();
+            let rel = worst_nearest_match(&ours, &theirs);
+            worst = worst.max(rel);
+            assert!(rel < 1e-9, "case {n} V={v}: {rel:e}");
+        }
+    }
+    println!("dual-axle eigenvalues: worst relative difference {worst:e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -50,6 +50,7 @@ pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
         ModelVehicle::Car(v) => compute_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => compute_on(a, &t.model, &t.parts),
         ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("sweep")),
+        ModelVehicle::DualAxle(t) => compute_on(a, &t.model, &t.parts),
     }
 }
 

@@ -156,6 +156,10 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => compute_on(a, &FamilyVehicle::car(v)),
         ModelVehicle::Truck(t) => compute_on(a, &t),
+        ModelVehicle::DualAxle(t) => compute_on(a, &t),
+        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer(
+            "sweep --controllers",
+        )),
     }
 }
 
