@@ -387,15 +387,7 @@ impl<T: SolveFloat, const N: usize> ComplexLu<T, N> {
             if !(best > T::zero() && best.to_f64().is_finite()) {
                 return Err(EigenError::Singular);
             }
-            // Entry by entry: `m.swap` of whole rows goes through `ptr::swap`, whose
-            // overlapping copy links `memmove` (1.4 KB of flash; `cargo xtask size`).
-            if p != k {
-                for j in 0..N {
-                    let t = m[k][j];
-                    m[k][j] = m[p][j];
-                    m[p][j] = t;
-                }
-            }
+            m.swap(k, p);
             perm.swap(k, p);
             // 1 / pivot, scaled by its 1-norm so that |pivot|^2 cannot overflow
             let d = m[k][k];
