@@ -15,12 +15,14 @@
 //! Microsystems, Inc.: "Permission to use, copy, modify, and distribute this software is
 //! freely granted, provided that this notice is preserved."), as in the `libm` crate.
 
-use core::f64::consts::FRAC_PI_2;
+// The kernels' coefficients as msun writes them (more digits than an f64 holds; they round to
+// msun's f64 values, which the test against libm checks bit for bit).
+#![allow(clippy::excessive_precision)]
+
+use core::f64::consts::{FRAC_2_PI, FRAC_PI_2};
 
 /// Largest |x| bit pattern of the medium range (|x| ~< 2^28 pi/2).
 const MEDIUM_END: u32 = 0x4dc9_0fdb;
-/// 0x3FE45F30, 0x6DC9C883
-const INV_PIO2: f64 = 6.366_197_723_675_813_824_33e-1;
 /// First 25 bits of pi/2 (0x3FF921FB, 0x50000000).
 const PIO2_1: f64 = 1.570_796_310_901_641_845_70;
 /// pi/2 - PIO2_1 (0x3E5110b4, 0x611A6263).
@@ -40,7 +42,8 @@ fn reduce(x: f32) -> Option<(i32, f64)> {
         0x407b_53d2..=0x40af_eddf => (3, 3.0 * FRAC_PI_2),
         0x40af_ede0..=0x40e2_31d5 => (4, 4.0 * FRAC_PI_2),
         0x40e2_31d6..MEDIUM_END => {
-            let f_n = (x64 * INV_PIO2 + TOINT) - TOINT;
+            // 2/pi rounded to f64 is msun's invpio2 (0x3FE45F30, 0x6DC9C883)
+            let f_n = (x64 * FRAC_2_PI + TOINT) - TOINT;
             return Some((f_n as i32, x64 - f_n * PIO2_1 - f_n * PIO2_1T));
         }
         _ => return None,
