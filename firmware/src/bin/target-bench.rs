@@ -102,6 +102,16 @@ mod bench {
             run: meter_run,
         },
         Entry {
+            name: "meter run with a model margin (fusion corrects it)",
+            budget: Budget::Hard(METER_RUN_BUDGET),
+            run: meter_run_with_model,
+        },
+        Entry {
+            name: "meter run, the same yaw without a model margin",
+            budget: Budget::None,
+            run: meter_run_damped_no_model,
+        },
+        Entry {
             name: "link: LinkState::on_update in the meter task (max)",
             budget: Budget::None,
             run: link_update,
@@ -317,6 +327,8 @@ mod bench {
     /// Results the model-refresh row derives from (stored by the entries that measure them).
     static CONTROL_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static METER_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static METER_MODEL_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static METER_DAMPED_RUN_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static BOOKKEEPING_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static TELEMETRY_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static IDLE_PASS_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
@@ -422,6 +434,91 @@ mod bench {
         }
         METER_RUN_MAX.store(run, Ordering::Relaxed);
         (plain, dec, run)
+    }
+
+    /// The worst meter run (10 pushes) with a model margin the data contradict, after the
+    /// fusion has decided: the model says zeta 0.2 with its onset 5 m/s ahead, the yaw (a
+    /// zeta 0.05 mode at 7 Hz) is far less damped, so the consistency flag drops and every report carries the
+    /// corrected margin (the curvature-keeping onset of the shifted model curve), the path the
+    /// plain meter run (no model) never reaches. Measured over 0.5 s after 16 s of warm-up
+    /// (the slow meter's warm-up, one meter memory and the 3 s hold); `u32::MAX` (over budget)
+    /// unless every measured report came from that path.
+    fn meter_run_with_model() -> u32 {
+        use shimmy_core::estimator::model_margin::ModelMargin;
+        let model = ModelMargin {
+            zeta: 0.2,
+            freq_hz: 7.0,
+            dzeta_dv_per_mps: -0.03,
+            v_crit_onset_mps: Some(20.0),
+            valid: true,
+        };
+        let run = damped_mode_meter_run(Some(&model));
+        METER_MODEL_RUN_MAX.store(run, Ordering::Relaxed);
+        run
+    }
+
+    /// The same meter run on the same yaw without a model margin (fusion returns early): the
+    /// difference to the entry above is the model-margin path's own cost.
+    fn meter_run_damped_no_model() -> u32 {
+        let run = damped_mode_meter_run(None);
+        METER_DAMPED_RUN_MAX.store(run, Ordering::Relaxed);
+        run
+    }
+
+    /// Worst meter run over 0.5 s after 16 s on a damped-mode yaw, with `model` handed to
+    /// every push; with a model, `u32::MAX` unless every measured report carried the
+    /// corrected margin.
+    fn damped_mode_meter_run(
+        model: Option<&shimmy_core::estimator::model_margin::ModelMargin>,
+    ) -> u32 {
+        use shimmy_core::estimator::fusion::MarginSource;
+        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
+        let Ok(mut d) = DataMargin::new() else {
+            return u32::MAX;
+        };
+        // a damped mode (zeta 0.05 at 7 Hz: AR(2) poles at exp(s T), T = 1 ms) driven by the
+        // LCG's white noise, about 1.4e-3 rad RMS: the corrected damping stays positive, so
+        // the whole corrected-onset computation (the root of the shifted quadratic) runs
+        let (zeta, w) = (0.05f32, 2.0 * core::f32::consts::PI * 7.0);
+        let rho = libm::expf(-zeta * w * 1e-3);
+        let a1 = 2.0 * rho * libm::cosf(w * libm::sqrtf(1.0 - zeta * zeta) * 1e-3);
+        let a2 = -rho * rho;
+        let (mut y1, mut y2) = (0.0f32, 0.0f32);
+        let mut seed = 7u32;
+        let (mut run, mut run_acc, mut corrected) = (0u32, 0u32, true);
+        for k in 0..16_500u32 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let e = ((seed >> 8) as f32 / 16_777_216.0 - 0.5) * 2e-5;
+            let y = a1 * y1 + a2 * y2 + e;
+            (y2, y1) = (y1, y);
+            let (l, r) = (y, 0.98 * y);
+            let s = MeterSample {
+                step: k,
+                psi_l_rad: l,
+                psi_r_rad: r,
+                speed_mps: 15.0,
+                cmd_a: 0.5,
+            };
+            if k < 16_000 {
+                let _ = d.push(&s, model);
+                continue;
+            }
+            let mut out = None;
+            run_acc += measure_once(|| out = black_box(d.push(black_box(&s), model)));
+            if let Some((u, _)) = out {
+                corrected &= model.is_none()
+                    || u.report.margin_source == MarginSource::Data
+                        && !u.report.model_consistent
+                        && u.report.zeta_correction != 0.0
+                        && u.report.speed_margin_mps.is_some_and(|m| m > 0.0);
+                run = run.max(run_acc);
+                run_acc = 0;
+            }
+        }
+        if !corrected {
+            return u32::MAX;
+        }
+        run
     }
 
     /// The store's RAM flash for the benchmark: 2 KiB sectors (the page scans of the board's
@@ -873,12 +970,28 @@ mod bench {
         tracker_counts().2
     }
 
+    /// The meter run the load rows count: the reference run (the 7 Hz yaw of [`yaw`], no
+    /// model) plus the model-margin path's own cost, the difference between the two runs on
+    /// the damped-mode yaw with and without a model (the firmware always hands the meter
+    /// task a model margin). `u32::MAX` when an entry it needs failed. The damped-mode yaw
+    /// also costs the meter itself more (its own row, without a model): a signal dependence
+    /// of the root solve, not of the fusion.
+    fn meter_run_max() -> u32 {
+        let [reference, with_model, without] =
+            [&METER_RUN_MAX, &METER_MODEL_RUN_MAX, &METER_DAMPED_RUN_MAX]
+                .map(|a| a.load(Ordering::Relaxed));
+        if [reference, with_model, without].contains(&u32::MAX) {
+            return u32::MAX;
+        }
+        reference.saturating_add(with_model.saturating_sub(without))
+    }
+
     /// Wall time of the worst warm model cycle on the board at the measured load [ms]: the
     /// background loop gets what the control step (1 kHz) and the meter run (100 Hz) leave of
     /// [`INSN_PER_S`] (168 MHz at 1.5 cycles per instruction). `u32::MAX` when nothing is left.
     fn model_refresh_ms() -> u32 {
         let control = u64::from(CONTROL_MAX.load(Ordering::Relaxed)) * 1000;
-        let meter = u64::from(METER_RUN_MAX.load(Ordering::Relaxed)) * 100;
+        let meter = u64::from(meter_run_max()) * 100;
         let avail = INSN_PER_S.saturating_sub(control + meter);
         let cycle = u64::from(tracker_counts().2);
         defmt::info!(
@@ -903,9 +1016,8 @@ mod bench {
     /// instruction, over 168 MHz.
     fn cpu_load_permille() -> u32 {
         let control = u64::from(CONTROL_MAX.load(Ordering::Relaxed)) * 1000;
-        let meter = (u64::from(METER_RUN_MAX.load(Ordering::Relaxed))
-            + u64::from(BOOKKEEPING_MAX.load(Ordering::Relaxed)))
-            * 100;
+        let meter =
+            (u64::from(meter_run_max()) + u64::from(BOOKKEEPING_MAX.load(Ordering::Relaxed))) * 100;
         let model = u64::from(tracker_counts().2) * 10;
         let idle = u64::from(IDLE_PASS_MAX.load(Ordering::Relaxed)) * 100
             + u64::from(IDLE_WAKE_MAX.load(Ordering::Relaxed)) * 1000;

@@ -85,6 +85,7 @@ mod wrong_model {
     fn model_only() -> PipelineParams {
         let mut pp = PipelineParams::default();
         pp.fusion.mismatch_sigmas = f32::INFINITY;
+        pp.fusion.less_stable_sigmas = f32::INFINITY;
         pp.fusion.agreement_sigmas = f32::INFINITY;
         pp
     }
@@ -153,6 +154,28 @@ mod wrong_model {
         let (with, held) = (lead(PipelineParams::default(), 1), lead(time_hold, 1));
         println!("seed 1: {with:.2} km/h, {held:.2} km/h with a time-only hold");
         assert!(with > held + 1.0, "{with} vs time-only hold {held}");
+    }
+
+    /// Plant C_a +20 % on seed 1 (reduced `shimmy-sim mismatch --only "C_a +20"`): the
+    /// issue's 3 km/h lead is met once the safe side (data below the model) is decided at 2.0
+    /// sigmas instead of 2.5 (lead 3.26 km/h, the flag drops at 20.4 km/h); the fusion before,
+    /// with 2.5 sigmas both ways (the negative arm), led by 2.72 km/h. The drives at 70 % of the
+    /// onset stay free of warnings (`no_false_warning_well_below_the_window` and the table).
+    #[test]
+    fn less_stable_plant_leads_by_3_kmh_with_the_safe_side_threshold() {
+        use shimmy_sim::cmd::mismatch::MIN_LEAD_KMH;
+        let c = case("C_a +20 %");
+        let pp = PipelineParams::default();
+        let mut symmetric = pp;
+        symmetric.fusion.less_stable_sigmas = symmetric.fusion.mismatch_sigmas;
+        let lead = |pp| ramp_seeded(&c, pp, 1).lead().expect("a warning").0;
+        let (with, before) = (lead(pp), lead(symmetric));
+        println!("C_a +20 %, seed 1: lead {with:.2} km/h, {before:.2} with 2.5 sigmas both ways");
+        assert!(with >= MIN_LEAD_KMH, "lead {with}");
+        assert!(
+            before < MIN_LEAD_KMH,
+            "the symmetric threshold also led by {before}"
+        );
     }
 
     /// Plant C_a -20 % (more stable: true onset 42.69 km/h) driven at 70 % of its onset,
