@@ -331,8 +331,8 @@ pub fn eigenvectors_of<T: SolveFloat, const N: usize>(
         core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
     let (mut v, mut w) = (start, start);
     for _ in 0..2 {
-        v = unit_array(lu.solve_head(&v))?;
-        w = unit_array(lu.solve_adjoint_head(&w))?;
+        v = unit_array(lu.solve(&v))?;
+        w = unit_array(lu.solve_adjoint(&w))?;
     }
     let wide = |x: [Complex<T>; N]| {
         ComplexVector::<N>::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
@@ -359,15 +359,12 @@ fn unit_array<T: SolveFloat, const N: usize>(
 /// `m`): with solves for M and for its adjoint M^H from the same factors. Hand-written because
 /// nalgebra's generic LU of a complex matrix costs ~2x on the M4 at opt-level "s"
 /// (`cargo xtask bench`, eigenvector rows), and it has no adjoint solve without copying L and U.
-/// The tests' reference on plain arrays: the solver code uses [`BorderedLu`] for every size.
-#[cfg(test)]
 struct ComplexLu<T, const N: usize> {
     m: [[Complex<T>; N]; N],
     /// Row i of the factors is row `perm[i]` of M.
     perm: [usize; N],
 }
 
-#[cfg(test)]
 impl<T: SolveFloat, const N: usize> ComplexLu<T, N> {
     /// Factors `m`; [`EigenError::Singular`] on a zero (or non-finite) pivot.
     #[inline(never)] // one copy per size, not one per caller (flash)
@@ -496,9 +493,9 @@ fn iterate_shifted<T: SolveFloat, const N: usize>(
         core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
     for _ in 0..3 {
         v = unit_array(if left {
-            lu.solve_adjoint_head(&v)
+            lu.solve_adjoint(&v)
         } else {
-            lu.solve_head(&v)
+            lu.solve(&v)
         })?;
     }
     Ok(ComplexVector::<N>::from_fn(|i, _| {
@@ -506,25 +503,22 @@ fn iterate_shifted<T: SolveFloat, const N: usize>(
     }))
 }
 
-/// The LU of (A - mu I) in `T`, bordered by a unit row and column: the LU of the Newton
-/// system ([`BorderedLu`]) serves the eigenvectors too, so the image has one complex LU, not
-/// two (1.4 KB of flash, `cargo xtask size`). The border changes nothing in the head block:
-/// its column is zero, so it is never a pivot, and it adds exact zeros to the head's sums
-/// (the test `the_bordered_shifted_lu_solves_as_the_square_one`).
+/// The LU of (A - mu I) in `T`.
 #[inline(never)]
 fn shifted_lu<T: SolveFloat, const N: usize>(
     a: &Matrix<N>,
     mu: Complex<f64>,
-) -> Result<BorderedLu<T, N>, EigenError> {
+) -> Result<ComplexLu<T, N>, EigenError> {
     let t = T::of_f64;
     let mu_t = Complex::new(t(mu.re), t(mu.im));
-    let zero = Complex::new(T::zero(), T::zero());
-    BorderedLu::factor(Ext::from_fn(|i| {
-        Ext::from_fn(|j| match (a.get((i, j)), i == j) {
-            (Some(&x), false) => Complex::new(t(x), T::zero()),
-            (Some(&x), true) => Complex::new(t(x), T::zero()) - mu_t,
-            (None, true) => Complex::new(T::one(), T::zero()),
-            (None, false) => zero,
+    ComplexLu::factor(core::array::from_fn(|i| {
+        core::array::from_fn(|j| {
+            let x = Complex::new(t(a[(i, j)]), T::zero());
+            if i == j {
+                x - mu_t
+            } else {
+                x
+            }
         })
     }))
 }
@@ -654,26 +648,6 @@ impl<T: SolveFloat, const N: usize> BorderedLu<T, N> {
             *y.at_mut(i) = acc / row.get(i);
         }
         y
-    }
-
-    /// [`Self::solve`] of `b` with a zero border entry; the head of x.
-    fn solve_head(&self, b: &[Complex<T>; N]) -> [Complex<T>; N] {
-        let zero = Complex::new(T::zero(), T::zero());
-        self.solve(&Ext {
-            head: *b,
-            tail: zero,
-        })
-        .head
-    }
-
-    /// [`Self::solve_adjoint`] of `b` with a zero border entry; the head of x.
-    fn solve_adjoint_head(&self, b: &[Complex<T>; N]) -> [Complex<T>; N] {
-        let zero = Complex::new(T::zero(), T::zero());
-        self.solve_adjoint(&Ext {
-            head: *b,
-            tail: zero,
-        })
-        .head
     }
 
     /// x with M^H x = b (as [`ComplexLu`]'s adjoint solve).
@@ -1068,51 +1042,6 @@ mod tests {
             for i in 0..=N {
                 assert_eq!(bits(x[i]), bits(y.get(i)), "solve {i}");
                 assert_eq!(bits(xa[i]), bits(ya.get(i)), "adjoint solve {i}");
-            }
-        }
-        check::<f64>();
-        check::<f32>();
-    }
-
-    /// The eigenvectors' LU of (A - mu I), bordered by a unit row and column, factors and
-    /// solves as the square N x N LU on plain arrays: the same pivots and the same head entries
-    /// (equal as numbers; only the sign of an exact zero may differ), in both precisions.
-    #[test]
-    fn the_bordered_shifted_lu_solves_as_the_square_one() {
-        fn check<T: SolveFloat>() {
-            const N: usize = N_STATES;
-            let a = linearise(&ParamSet::Nominal.params(), 12.0, 300.0);
-            let l = least_damped_mode(&eigenvalues(&a).unwrap())
-                .unwrap()
-                .eigenvalue();
-            let mu = l + Complex::new(1e-3, 1e-3);
-            let t = T::of_f64;
-            let square = ComplexLu::<T, N>::factor(core::array::from_fn(|i| {
-                core::array::from_fn(|j| {
-                    let x = Complex::new(t(a[(i, j)]), T::zero());
-                    if i == j {
-                        x - Complex::new(t(mu.re), t(mu.im))
-                    } else {
-                        x
-                    }
-                })
-            }))
-            .unwrap();
-            let bordered = shifted_lu::<T, N>(&a, mu).unwrap();
-            for r in 0..N {
-                assert_eq!(square.perm[r], bordered.perm.get(r));
-                for c in 0..N {
-                    assert!(square.m[r][c] == bordered.m.at(r).get(c), "{r} {c}");
-                }
-            }
-            let b: [Complex<T>; N] =
-                core::array::from_fn(|i| Complex::new(t(1.0 + 0.3 * i as f64), t(-0.2 * i as f64)));
-            let (x, y) = (square.solve(&b), bordered.solve_head(&b));
-            let (xa, ya) = (square.solve_adjoint(&b), bordered.solve_adjoint_head(&b));
-            for i in 0..N {
-                assert!(x[i] == y[i], "solve {i}");
-                assert!(xa[i] == ya[i], "adjoint solve {i}");
-                assert!(y[i].re.to_f64() != 0.0, "{i}: a solve that is not trivial");
             }
         }
         check::<f64>();
