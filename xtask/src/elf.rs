@@ -20,11 +20,14 @@ use std::path::Path;
 /// opt-level z -1.2 KB, the RLS update's checks folded in -0.1 KB: 125,092 B, and this budget
 /// 124 KiB (1,884 B, 1.5 % of headroom). Then no `memmove` linked (-1,192 B), f32 sin/cos/tan
 /// without libm's huge-argument reduction (`core::trig`, -3,520 B), one accessor per vehicle
-/// field instead of a getter and a setter (-1,832 B), one complex LU for both sizes (-776 B):
-/// 119,300 B, and this budget 117 KiB (508 B, 0.4 % of headroom). Still over issues 23/24's cap
+/// field instead of a getter and a setter (-1,832 B): 121,324 B with the session's merged
+/// branches (the model family's generic pipeline, issue 14's safe-side fusion threshold). One
+/// complex LU for both sizes saved 2,072 B more but cost the warm model cycle 8.4 k
+/// instructions, which put the firmware at 50.4 per mille, over the 50 guard: reverted. This
+/// budget 119 KiB (532 B, 0.4 % of headroom). Still over issues 23/24's cap
 /// of 96 KiB for store, log and link, and issue 17's 64 KiB without them (README, "Memory":
 /// what the parts measure in the breakdown by source).
-pub const FLASH_BUDGET: u64 = 117 * 1024;
+pub const FLASH_BUDGET: u64 = 119 * 1024;
 pub const RAM_BUDGET: u64 = 24 * 1024;
 
 /// STM32F405RG memory map (must match `memory.x`): code in flash sectors 0-7 (the store owns

@@ -77,6 +77,8 @@ pub struct VehicleRow {
     pub limit_cycle: Option<(f64, Option<f64>)>,
     /// First-warning lead before the plant's onset on the ramp: (km/h, s); `None`: no warning.
     pub lead: Option<(f64, f64)>,
+    /// Whether the margin run was made (not for a model without a `SimModel`).
+    pub lead_measured: bool,
 }
 
 /// `shimmy-sim vehicles`.
@@ -202,6 +204,7 @@ fn linear_row<M: LinearModel<N>, const N: usize>(name: &str, linear: &M) -> Resu
         onset_freq_hz,
         limit_cycle: None,
         lead: None,
+        lead_measured: false,
     })
 }
 
@@ -237,6 +240,7 @@ fn row_on<M: SimModel<N>, const N: usize>(
             SETTLE_S,
         );
         sc.seed = a.seed;
+        r.lead_measured = true;
         r.lead = run(&sc, parts.pipeline_params(), 0)
             .context("margin run")?
             .lead();
@@ -307,8 +311,12 @@ pub fn table(rows: &[VehicleRow], rate_kmh_per_s: f64) -> (Vec<String>, Vec<Vec<
                 Some((v, None)) => format!("{v:.1}: decays"),
                 None => "-".into(),
             },
-            r.lead
-                .map_or("no warning".into(), |(dv, dt)| format!("{dv:.2} / {dt:.1}")),
+            match (r.lead, r.lead_measured) {
+                (Some((dv, dt)), _) => format!("{dv:.2} / {dt:.1}"),
+                (None, true) => "no warning".into(),
+                (None, false) if r.windows.is_empty() => "-".into(),
+                (None, false) => "not run".into(),
+            },
         ]);
     }
     (header.to_vec(), t)
