@@ -199,112 +199,171 @@ fn model_of(table: &toml::Table) -> Result<&str> {
     }
 }
 
-/// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
-/// sections of every model (`[damper]`, `[damper_model]`, `[sensors]`, `[controller]`,
-/// `[thresholds]`, from [`truck_parts`]).
-fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
+/// What a vehicle file of a model other than the car's is read with: its model name, its own
+/// section, its named sets and its fields.
+struct MemberFile<T> {
+    /// The model's name.
+    model: &'static str,
+    /// Its section (`[truck]`, ...).
+    section: &'static str,
+    /// The set `base` defaults to.
+    default_base: &'static str,
+    /// The set of a name.
+    set: fn(&str) -> Option<T>,
+    /// The set names, for messages.
+    set_names: fn() -> String,
+    /// The field names, for messages.
+    fields: fn() -> Vec<&'static str>,
+    /// Sets a field: `Err(None)` for an unknown name, `Err(Some(message))` for a bad value.
+    set_field: fn(&mut T, &str, f64) -> std::result::Result<(), Option<String>>,
+    /// Validates the whole, the message naming the field.
+    validate: fn(&T) -> Result<()>,
+}
+
+/// A file of the model `m`: `base` (one of its sets), its section and, when `parts` is given,
+/// the shared sections of every model (`[damper]`, `[damper_model]`, `[sensors]`,
+/// `[controller]`, `[thresholds]`) into `parts`.
+fn parse_member<T>(
+    table: &toml::Table,
+    m: &MemberFile<T>,
+    mut parts: Option<&mut Vehicle>,
+) -> Result<T> {
     let base = match table.get("base") {
-        None => TruckSet::Full.name(),
+        None => m.default_base,
         Some(toml::Value::String(s)) => s.as_str(),
         Some(other) => bail!(
             "field `base`: expected a set name, found {}",
             other.type_str()
         ),
     };
-    let Some(set) = TruckSet::from_name(base) else {
+    let Some(mut t) = (m.set)(base) else {
         bail!(
             "field `base`: unknown set `{base}` for model {}, allowed: {}",
-            TruckParams::NAME,
-            truck_set_names()
+            m.model,
+            (m.set_names)()
         );
     };
-    let mut t = set.params();
-    let mut parts = truck_parts()?;
     for (key, value) in table {
-        match key.as_str() {
-            "model" | "base" => continue,
-            "truck" => {}
-            k if k != "plant" && SECTIONS.contains(&k) => {
+        match (key.as_str(), parts.as_deref_mut()) {
+            ("model" | "base", _) => continue,
+            (k, _) if k == m.section => {}
+            (k, Some(parts)) if k != "plant" && SECTIONS.contains(&k) => {
                 for (name, x) in section_numbers(key, value)? {
-                    set_field(&mut parts, k, k, name, x)?;
+                    set_field(parts, k, k, name, x)?;
                 }
                 continue;
             }
-            _ => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, truck, {}",
-                TruckParams::NAME,
-                SECTIONS[1..].join(", ")
+            (_, shared) => bail!(
+                "field `{key}`: no such section for model {}, allowed: model, base, {}{}",
+                m.model,
+                m.section,
+                if shared.is_some() {
+                    format!(", {}", SECTIONS[1..].join(", "))
+                } else {
+                    String::new()
+                }
             ),
         }
         for (name, x) in section_numbers(key, value)? {
-            match t.set(name, x) {
+            match (m.set_field)(&mut t, name, x) {
                 Ok(()) => {}
-                Err(TruckFieldError::Unknown) => bail!(
-                    "field `truck.{name}`: no such field, allowed: {}",
-                    TRUCK_FIELDS
-                        .iter()
-                        .map(|f| f.name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                Err(None) => bail!(
+                    "field `{}.{name}`: no such field, allowed: {}",
+                    m.section,
+                    (m.fields)().join(", ")
                 ),
-                Err(e) => bail!("{}", e.to_string().replacen("field `", "field `truck.", 1)),
+                Err(Some(e)) => bail!(
+                    "{}",
+                    e.replacen("field `", &format!("field `{}.", m.section), 1)
+                ),
             }
         }
     }
-    t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))?;
-    parts.validate()?;
-    Ok(FamilyVehicle { model: t, parts })
+    (m.validate)(&t)?;
+    if let Some(parts) = parts {
+        parts.validate()?;
+    }
+    Ok(t)
+}
+
+/// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
+/// sections (from [`truck_parts`]).
+fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
+    let mut parts = truck_parts()?;
+    let model = parse_member(
+        table,
+        &MemberFile {
+            model: TruckParams::NAME,
+            section: "truck",
+            default_base: TruckSet::Full.name(),
+            set: |n| TruckSet::from_name(n).map(TruckSet::params),
+            set_names: truck_set_names,
+            fields: || TRUCK_FIELDS.iter().map(|f| f.name).collect(),
+            set_field: |t, n, x| match t.set(n, x) {
+                Ok(()) => Ok(()),
+                Err(TruckFieldError::Unknown) => Err(None),
+                Err(e) => Err(Some(e.to_string())),
+            },
+            validate: |t| t.validate().map_err(|e| anyhow::anyhow!("truck: {e}")),
+        },
+        Some(&mut parts),
+    )?;
+    Ok(FamilyVehicle { model, parts })
 }
 
 /// A `dual-axle-truck-8dof` file: `base` (a dual-axle set) and the `[dual_axle]` section.
 fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
-    let base = match table.get("base") {
-        None => DualAxleSet::Rated.name(),
-        Some(toml::Value::String(s)) => s.as_str(),
-        Some(other) => bail!(
-            "field `base`: expected a set name, found {}",
-            other.type_str()
-        ),
-    };
-    let Some(set) = DualAxleSet::from_name(base) else {
-        bail!(
-            "field `base`: unknown set `{base}` for model {}, allowed: {}",
-            DualAxleParams::NAME,
-            dual_axle_set_names()
-        );
-    };
-    let mut t = set.params();
-    for (key, value) in table {
-        match key.as_str() {
-            "model" | "base" => continue,
-            "dual_axle" => {}
-            _ => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, dual_axle",
-                DualAxleParams::NAME
-            ),
-        }
-        for (name, x) in section_numbers(key, value)? {
-            match t.set(name, x) {
-                Ok(()) => {}
-                Err(DualAxleFieldError::Unknown) => bail!(
-                    "field `dual_axle.{name}`: no such field, allowed: {}",
-                    DUAL_AXLE_FIELDS
-                        .iter()
-                        .map(|f| f.name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-                Err(e) => bail!(
-                    "{}",
-                    e.to_string().replacen("field `", "field `dual_axle.", 1)
-                ),
-            }
-        }
-    }
-    t.validate().map_err(|e| {
-        anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
-    })?;
-    Ok(t)
+    parse_member(
+        table,
+        &MemberFile {
+            model: DualAxleParams::NAME,
+            section: "dual_axle",
+            default_base: DualAxleSet::Rated.name(),
+            set: |n| DualAxleSet::from_name(n).map(DualAxleSet::params),
+            set_names: dual_axle_set_names,
+            fields: || DUAL_AXLE_FIELDS.iter().map(|f| f.name).collect(),
+            set_field: |t, n, x| match t.set(n, x) {
+                Ok(()) => Ok(()),
+                Err(DualAxleFieldError::Unknown) => Err(None),
+                Err(e) => Err(Some(e.to_string())),
+            },
+            validate: |t| {
+                t.validate().map_err(|e| {
+                    anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
+                })
+            },
+        },
+        None,
+    )
+}
+
+/// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
+fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
+    parse_member(
+        table,
+        &MemberFile {
+            model: TrailerParams::NAME,
+            section: "trailer",
+            default_base: TrailerSet::Caravan.name(),
+            set: |n| TrailerSet::from_name(n).map(TrailerSet::params),
+            set_names: trailer_set_names,
+            fields: || TRAILER_FIELDS.iter().map(|f| f.name).collect(),
+            set_field: |t, n, x| match t.set(n, x) {
+                Ok(()) => Ok(()),
+                Err(TrailerFieldError::Unknown) => Err(None),
+                Err(e) => Err(Some(e.to_string())),
+            },
+            validate: |t| {
+                t.validate().map_err(|e| {
+                    anyhow::anyhow!(
+                        "{}",
+                        e.to_string().replacen("field `", "field `trailer.", 1)
+                    )
+                })
+            },
+        },
+        None,
+    )
 }
 
 /// The dual-axle truck's named sets, for messages.
@@ -314,60 +373,6 @@ pub fn dual_axle_set_names() -> String {
         .map(|s| s.name())
         .collect::<Vec<_>>()
         .join(", ")
-}
-
-/// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
-fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
-    let base = match table.get("base") {
-        None => TrailerSet::Caravan.name(),
-        Some(toml::Value::String(s)) => s.as_str(),
-        Some(other) => bail!(
-            "field `base`: expected a set name, found {}",
-            other.type_str()
-        ),
-    };
-    let Some(set) = TrailerSet::from_name(base) else {
-        bail!(
-            "field `base`: unknown set `{base}` for model {}, allowed: {}",
-            TrailerParams::NAME,
-            trailer_set_names()
-        );
-    };
-    let mut t = set.params();
-    for (key, value) in table {
-        match key.as_str() {
-            "model" | "base" => continue,
-            "trailer" => {}
-            _ => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, trailer",
-                TrailerParams::NAME
-            ),
-        }
-        for (name, x) in section_numbers(key, value)? {
-            match t.set(name, x) {
-                Ok(()) => {}
-                Err(TrailerFieldError::Unknown) => bail!(
-                    "field `trailer.{name}`: no such field, allowed: {}",
-                    TRAILER_FIELDS
-                        .iter()
-                        .map(|f| f.name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-                Err(e) => bail!(
-                    "{}",
-                    e.to_string().replacen("field `", "field `trailer.", 1)
-                ),
-            }
-        }
-    }
-    t.validate().map_err(|e| {
-        anyhow::anyhow!(
-            "{}",
-            e.to_string().replacen("field `", "field `trailer.", 1)
-        )
-    })?;
-    Ok(t)
 }
 
 /// The trailer's named sets, for messages.
