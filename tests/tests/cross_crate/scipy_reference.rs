@@ -140,20 +140,9 @@ fn truck_eigenvalues_match_the_scipy_implementation() {
                 .collect();
             assert_eq!(theirs.len(), truck::N_STATES);
             let ours = eigenvalues(&t.linearise(v, 0.0)).unwrap();
-            let mut used = [false; truck::N_STATES];
-            for l in ours {
-                let (j, d) = theirs
-                    .iter()
-                    .enumerate()
-                    .filter(|(j, _)| !used[*j])
-                    .map(|(j, m)| (j, (m - l).norm()))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .unwrap();
-                used[j] = true;
-                let rel = d / l.norm().max(1.0);
-                worst = worst.max(rel);
-                assert!(rel < 1e-9, "case {n} V={v}: {l} vs {} ({rel:e})", theirs[j]);
-            }
+            let rel = worst_nearest_match(&ours, &theirs);
+            worst = worst.max(rel);
+            assert!(rel < 1e-9, "case {n} V={v}: {rel:e}");
         }
     }
     println!("truck eigenvalues: worst relative difference {worst:e}");
@@ -235,20 +224,9 @@ fn trailer_eigenvalues_match_the_scipy_implementation() {
                 .collect();
             assert_eq!(theirs.len(), trailer::N_STATES);
             let ours = eigenvalues(&t.linearise(v, *c)).unwrap();
-            let mut used = [false; trailer::N_STATES];
-            for l in ours {
-                let (j, d) = theirs
-                    .iter()
-                    .enumerate()
-                    .filter(|(j, _)| !used[*j])
-                    .map(|(j, m)| (j, (m - l).norm()))
-                    .min_by(|a, b| a.1.total_cmp(&b.1))
-                    .unwrap();
-                used[j] = true;
-                let rel = d / l.norm().max(1.0);
-                worst = worst.max(rel);
-                assert!(rel < 1e-9, "case {n} V={v}: {l} vs {} ({rel:e})", theirs[j]);
-            }
+            let rel = worst_nearest_match(&ours, &theirs);
+            worst = worst.max(rel);
+            assert!(rel < 1e-9, "case {n} V={v}: {rel:e}");
         }
     }
     println!("trailer eigenvalues: worst relative difference {worst:e}");
