@@ -52,6 +52,14 @@ pub trait LinearModel<const N: usize> {
     /// The shape of the mode with right eigenvector `v`: which motion dominates, by modal
     /// kinetic energy; [`ModeShape::is_shimmy`] marks the shimmy mode (the trailer's: sway).
     fn classify(&self, v: &ComplexVector<N>) -> ModeShapeInfo;
+
+    /// How many times slower the model's shimmy (or sway) mode is than the car's ~6 Hz shimmy
+    /// the mode meter is tuned for: the data-driven meter on this model runs
+    /// `EstimatorConfig::time_scaled(k)` (a whole number, because it scales the decimation).
+    /// 1 (the car's meter) unless the model says otherwise.
+    fn meter_time_scale(&self) -> u16 {
+        1
+    }
 }
 
 /// Which motion dominates a mode.

@@ -186,8 +186,18 @@ impl<M> FamilyVehicle<M> {
     }
 
     /// The margin pipeline's parameters ([`Vehicle::pipeline_params`]; its model is
-    /// [`Self::model`]).
-    pub fn pipeline_params(&self) -> PipelineParams {
-        self.parts.pipeline_params()
+    /// [`Self::model`]), the mode meter slowed to the model's mode
+    /// ([`LinearModel::meter_time_scale`]).
+    pub fn pipeline_params<const N: usize>(&self) -> PipelineParams
+    where
+        M: SimModel<N>,
+    {
+        let pp = self.parts.pipeline_params();
+        PipelineParams {
+            estimator: pp
+                .estimator
+                .time_scaled(self.model.linear().meter_time_scale()),
+            ..pp
+        }
     }
 }

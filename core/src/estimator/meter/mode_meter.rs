@@ -115,6 +115,30 @@ impl Default for EstimatorConfig {
     }
 }
 
+impl EstimatorConfig {
+    /// The same meter for a mode `k` times slower (lower in frequency) than the one it was
+    /// tuned for: every frequency (anti-alias edge, band, high-pass, tracking tolerance) divided
+    /// by `k`, every time constant multiplied by `k`, and the decimation multiplied by `k`, so
+    /// the decimated rate falls by `k` and the forgetting factors (per decimated step) keep the
+    /// same number of mode cycles in memory. `k = 1` is `self`; a model states its `k` as
+    /// [`crate::model::LinearModel::meter_time_scale`].
+    pub fn time_scaled(self, k: u16) -> Self {
+        let kf = f32::from(k.max(1));
+        Self {
+            decimation: self.decimation.saturating_mul(k.max(1)),
+            aa_stop_hz: self.aa_stop_hz / kf,
+            excitation_tau_s: self.excitation_tau_s * kf,
+            freeze_reset_s: self.freeze_reset_s * kf,
+            highpass_hz: self.highpass_hz / kf,
+            amplitude_tau_s: self.amplitude_tau_s * kf,
+            band_lo_hz: self.band_lo_hz / kf,
+            band_hi_hz: self.band_hi_hz / kf,
+            track_tol_hz: self.track_tol_hz / kf,
+            ..self
+        }
+    }
+}
+
 /// Invalid configuration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -734,6 +758,14 @@ mod tests {
     fn config_is_validated_and_state_is_small() {
         let ok = EstimatorConfig::default();
         assert!(MarginEstimator::<f32>::new(ok).is_ok());
+        for k in [1, 2, 10] {
+            let scaled = ok.time_scaled(k);
+            assert!(MarginEstimator::<f32>::new(scaled).is_ok(), "k = {k}");
+            assert_eq!(u32::from(scaled.decimation), 10 * u32::from(k));
+            assert!((scaled.band_lo_hz * f32::from(k) - ok.band_lo_hz).abs() < 1e-5);
+            assert!((scaled.amplitude_tau_s / f32::from(k) - ok.amplitude_tau_s).abs() < 1e-6);
+        }
+        assert_eq!(ok.time_scaled(1), ok);
         let bad = |c: EstimatorConfig| MarginEstimator::<f32>::new(c).err();
         assert_eq!(
             bad(EstimatorConfig { ar_order: 1, ..ok }),
