@@ -2,7 +2,7 @@
 //! trace (`target/conformance/host.txt`), the target program prints the same under QEMU; every
 //! channel must agree bit for bit.
 
-use crate::{build_firmware, cargo, qemu, root};
+use crate::{build_firmware, host_cargo, qemu, root};
 
 /// One digest line: `conformance | channel | count | hash | last value bits`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -61,7 +61,7 @@ pub fn compare(host: &[Row], target: &[Row]) -> Result<usize, String> {
 pub fn step() -> Result<String, String> {
     // `--workspace` (not `-p shimmy-tests`) resolves the same features as the host-test step,
     // so this reuses its build instead of compiling ~50 dependencies again.
-    cargo(&[
+    host_cargo(&[
         "test",
         "--workspace",
         "--test",

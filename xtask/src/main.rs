@@ -1,7 +1,7 @@
 //! Project automation. `cargo xtask test` is the one test command (CI runs exactly it).
 //!
 //! ```text
-//! cargo xtask test               host tests, fmt, clippy (host + target), the Python module's
+//! cargo xtask test               host tests, fmt, clippy (host build + target), the Python module's
 //!                                and the FMU's tests, firmware build + size, on-target tests
 //!                                under QEMU (and proof that a failing one fails)
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
@@ -140,17 +140,30 @@ const TRUCK_MODEL: &str = "model-truck";
 /// Building one package (`-p shimmy-sim`, maturin's `cargo rustc` of `python/`) resolves its
 /// dependencies' features without the rest of the workspace and compiles most of them again.
 /// A new host artifact belongs here; a step uses it from [`host_build`]'s directory.
-const HOST_BUILD: &[&str] = &[
-    "build",
-    "--workspace",
-    "--lib",
-    "--tests",
-    "--examples",
-    "--bin",
-    "shimmy-sim",
-    "--bin",
-    "shimmy-fmu-bundle",
-];
+/// It is also the host's lint: clippy checks every workspace crate as it compiles
+/// ([`with_host_lints`]), so the lint and the build are one compilation, not two.
+const HOST_BUILD: &[&str] = &["build", "--workspace", "--all-targets"];
+
+/// `cmd` (a host cargo call) with clippy as the compiler of the workspace's own crates, its
+/// warnings denied: what `cargo clippy --workspace --all-targets -- -D warnings` does, but the
+/// artifacts are real, so [`HOST_BUILD`] is the lint. Every host cargo call of a step goes
+/// through here ([`host_cargo`], [`cargo_rebuilt`]): the wrapper is part of cargo's
+/// fingerprint, and a call without it would compile the workspace again. Never for the
+/// firmware: clippy-driver compiles at MIR opt-level 0, which would change the images.
+fn with_host_lints(cmd: &mut Command) -> &mut Command {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let driver = Path::new(&cargo).with_file_name("clippy-driver");
+    cmd.env("RUSTC_WORKSPACE_WRAPPER", driver)
+        .env("CLIPPY_ARGS", "-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__")
+}
+
+/// `cargo args` for the host with the lint of [`with_host_lints`], so it reuses [`host_build`].
+pub fn host_cargo(args: &[&str]) -> Result<(), String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    run(with_host_lints(&mut Command::new(cargo))
+        .args(args)
+        .current_dir(root()))
+}
 
 /// Set once [`HOST_BUILD`] has run in this process.
 static HOST_BUILT: AtomicBool = AtomicBool::new(false);
@@ -182,7 +195,7 @@ fn host_tests() -> Step {
             rebuilt.join(", ")
         ));
     }
-    cargo(&["test", "--workspace"])?;
+    host_cargo(&["test", "--workspace"])?;
     Ok(String::new())
 }
 
@@ -190,7 +203,7 @@ fn host_tests() -> Step {
 /// the packages it compiled ([`rebuilt_packages`]).
 fn cargo_rebuilt(args: &[&str]) -> Result<Vec<String>, String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Command::new(cargo)
+    let out = with_host_lints(&mut Command::new(cargo))
         .args(args)
         .arg("--message-format=json-render-diagnostics")
         .stderr(std::process::Stdio::inherit())
@@ -234,22 +247,12 @@ fn test() -> Result<(), String> {
         ("cargo fmt --check", || {
             cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
         }),
-        ("clippy (host, all targets)", || {
-            cargo(&[
-                "clippy",
-                "--workspace",
-                "--all-targets",
-                "--",
-                "-D",
-                "warnings",
-            ])
-            .map(|_| String::new())
-        }),
         ("clippy (firmware, thumbv7em)", clippy_firmware),
         ("rustdoc (workspace, -D warnings)", rustdoc),
-        ("host build (tests, shimmy-sim, Python module, FMU)", || {
-            host_build().map(|_| "one feature resolution for every host step".into())
-        }),
+        (
+            "host build with clippy -D warnings (all targets, Python module, FMU)",
+            || host_build().map(|_| "one feature resolution for every host step".into()),
+        ),
         ("host tests (cargo test --workspace)", host_tests),
         ("Python module (pytest python/tests)", python::module_tests),
         (
