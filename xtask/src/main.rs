@@ -153,8 +153,10 @@ const HOST_BUILD: &[&str] = &["build", "--workspace", "--all-targets"];
 fn with_host_lints(cmd: &mut Command) -> &mut Command {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let driver = Path::new(&cargo).with_file_name("clippy-driver");
-    cmd.env("RUSTC_WORKSPACE_WRAPPER", driver)
-        .env("CLIPPY_ARGS", "-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__")
+    cmd.env("RUSTC_WORKSPACE_WRAPPER", driver).env(
+        "CLIPPY_ARGS",
+        "-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__",
+    )
 }
 
 /// `cargo args` for the host with the lint of [`with_host_lints`], so it reuses [`host_build`].
