@@ -16,7 +16,8 @@
 //! inside RK4's stability region, radius ~2.8).
 
 use shimmy_core::dual_axle::{
-    DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, WHEELS,
+    DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, PSI_2L,
+    PSI_2R, WHEELS,
 };
 use shimmy_core::eigen::eigenvalues;
 use shimmy_core::model::{LinearModel, Matrix};
@@ -399,6 +400,9 @@ pub struct DualAxlePlant {
     damper: super::plant::Damper,
     a0: Matrix<N_STATES>,
     da: Matrix<N_STATES>,
+    /// The mode meter's output row on the four wheel yaws (1L, 1R, 2L, 2R), the linear
+    /// model's `wheel_yaw_output`.
+    meter_row: [f64; 4],
     v: f64,
     x: [f64; N_SIM],
     t_s: f64,
@@ -425,6 +429,10 @@ impl DualAxlePlant {
             damper,
             a0: t.linearise(0.0, 0.0),
             da: t.dlinearise_dv(),
+            meter_row: {
+                let c = t.wheel_yaw_output();
+                [c[PSI_1L], c[PSI_1R], c[PSI_2L], c[PSI_2R]]
+            },
             v: 0.0,
             x: [0.0; N_SIM],
             t_s: 0.0,
@@ -512,6 +520,18 @@ impl super::family::SimPlant for DualAxlePlant {
 
     fn wheel_yaw_rad(&self) -> [f64; 2] {
         [self.x[PSI_1L], self.x[PSI_1R]]
+    }
+
+    /// Both axles' wheel yaw through the linear model's output row (the modal filter of
+    /// `DualAxleParams::meter_weights`), as a pair of equal angles.
+    fn meter_yaw_rad(&self) -> [f64; 2] {
+        let y: f64 = self
+            .meter_row
+            .iter()
+            .zip([PSI_1L, PSI_1R, PSI_2L, PSI_2R])
+            .map(|(c, i)| c * self.x[i])
+            .sum();
+        [y, y]
     }
 
     fn steering_angle_rad(&self) -> f64 {
@@ -623,8 +643,173 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     }
 }
 
-/// The shared sections (damper, sensors, gains, thresholds) of a dual-axle vehicle: the car's
-/// reference set's, unsized for this truck (its damper is not configured: `docs/dual-axle-truck.md`).
-pub fn dual_axle_parts() -> shimmy_core::vehicle::Vehicle {
-    shimmy_core::vehicle::Vehicle::from_set(shimmy_core::params::ParamSet::Nominal)
+/// The shared sections (damper, sensors, gains, thresholds) of a dual-axle vehicle, sized for
+/// this truck from the car's reference set against the named set `dual-axle`
+/// (`docs/dual-axle-truck.md`, "Damper, gains and thresholds"):
+/// - the damper (across axle 1's track rod) and the skyhook coefficient scaled as the mining
+///   truck's are (`members::damper_scale_like_the_cars`);
+/// - the damping-ratio thresholds times the ratio of the shimmy mode's damping slope dzeta/dV
+///   at the onset, this truck's over the `nominal` car's, so that each stands for the same
+///   speed distance to the onset as on the car (the speed-margin and time thresholds are that
+///   distance already and stay);
+/// - the ASMC's boundary layer `phi` (a rate: a quarter of a 0.01-rad shimmy's at the car's
+///   6 Hz) times the ratio of the shimmy frequencies at the onsets; the other gains are
+///   angular accelerations of the wheel and stay (the force comes from `2 I_k / l_t`).
+pub fn dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
+    static PARTS: std::sync::OnceLock<Result<shimmy_core::vehicle::Vehicle, String>> =
+        std::sync::OnceLock::new();
+    PARTS
+        .get_or_init(|| compute_dual_axle_parts().map_err(|e| format!("{e:#}")))
+        .clone()
+        .map_err(|e| anyhow::anyhow!(e))
+}
+
+/// The shimmy mode at `m`'s onset: (dzeta/dV in s/m, frequency in Hz).
+fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Result<(f64, f64)> {
+    use shimmy_core::stability::{dzeta_dv, ModeSelect};
+    let onset = crate::sim::margin_run::onset_kmh(m)
+        .ok_or_else(|| anyhow::anyhow!("{}: no Hopf onset in 1-150 km/h to size against", M::NAME))?;
+    let (mode, slope, _) = dzeta_dv(m, shimmy_core::params::kmh_to_mps(onset), 0.0, ModeSelect::Shimmy)
+        .map_err(|e| anyhow::anyhow!("{}: shimmy mode at the onset: {e:?}", M::NAME))?;
+    Ok((slope, mode.freq_hz))
+}
+
+fn compute_dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
+    use shimmy_core::dual_axle::DualAxleSet;
+    use shimmy_core::params::ParamSet;
+    let t = DualAxleSet::Rated.params();
+    let mut v = super::members::car_parts_with_damper_scaled(
+        super::members::damper_scale_like_the_cars(&t)?,
+    );
+    let (slope_car, f_car) = onset_slope_and_freq(&ParamSet::Nominal.params())?;
+    let (slope_t, f_t) = onset_slope_and_freq(&t)?;
+    anyhow::ensure!(
+        slope_car < 0.0 && slope_t < 0.0,
+        "damping slopes at the onsets not negative: car {slope_car}, dual-axle {slope_t} s/m"
+    );
+    let k = (slope_t / slope_car) as f32;
+    let th = &mut v.thresholds;
+    for z in [
+        &mut th.zeta_low_on,
+        &mut th.zeta_low_off,
+        &mut th.zeta_crit_on,
+        &mut th.zeta_crit_off,
+    ] {
+        *z *= k;
+    }
+    v.controller.smc.phi_radps *= (f_t / f_car) as f32;
+    v.validate()
+        .map_err(|e| anyhow::anyhow!("dual-axle shared sections: {e}"))?;
+    Ok(v)
+}
+
+#[cfg(test)]
+mod margin_tests {
+    use super::*;
+    use crate::model::family::{SimModel, SimPlant};
+    use crate::model::plant::{Damper, Method};
+    use crate::sim::margin_run::{self, MarginScenario};
+    use shimmy_core::dual_axle::DualAxleSet;
+    use shimmy_core::estimator::meter::mode_meter::{MarginEstimator, Sample, WheelOrder};
+    use shimmy_core::estimator::monitor::Level;
+    use shimmy_core::params::kmh_to_mps;
+    use shimmy_core::stability::{mode_at, ModeSelect};
+
+    fn parts_of(t: DualAxleParams) -> super::super::family::FamilyVehicle<DualAxleParams> {
+        super::super::family::FamilyVehicle {
+            model: t,
+            parts: dual_axle_parts().unwrap(),
+        }
+    }
+
+    /// The negative test of the meter's signal: the same 60 s of the friction-free plant at
+    /// 45 km/h under the margin run's road noise and imbalance, fed to two copies of the
+    /// truck's mode meter, one on the modal signal (`meter_yaw_rad`), one on axle 1's in-phase
+    /// wheel yaw (what it read before). The first reads the linear model's shimmy damping
+    /// within 0.006; axle 1 alone, where the ~15 Hz axle-against-axle mode and the tramp share
+    /// the signal, reads it at least twice as far off.
+    #[test]
+    fn the_modal_signal_reads_the_shimmy_damping_and_axle_1_alone_does_not() {
+        let t = DualAxleSet::Frictionless.params();
+        let v = kmh_to_mps(45.0);
+        let truth = mode_at(&t, v, 0.0, ModeSelect::Shimmy).unwrap().zeta;
+        let sc = MarginScenario::<DualAxleParams, N_STATES>::constant(t, 45.0, 60.0);
+        let mut scen = sc.scenario();
+        let cfg = parts_of(t).pipeline_params::<N_STATES>().estimator;
+        let mut modal = MarginEstimator::<f32>::new(cfg).unwrap();
+        let mut axle1 = MarginEstimator::<f32>::new(cfg).unwrap();
+        let mut plant = t.plant(Damper::None, Method::default());
+        let (mut sum_m, mut sum_a, mut n) = (0.0, 0.0, 0u32);
+        let wheel = WheelOrder::Speed {
+            speed_mps: v as f32,
+            radius_m: t.r as f32,
+        };
+        let sample = |y: f64| Sample {
+            psi_l_rad: y as f32,
+            psi_r_rad: y as f32,
+            wheel,
+            damper_cmd: 0.0,
+        };
+        for k in 0..60_000 {
+            let u = scen.inputs(k as f64 * 1e-3, 1e-3);
+            plant.advance(1e-3, &u).unwrap();
+            let [l, r] = plant.wheel_yaw_rad();
+            let om = modal.push(&sample(plant.meter_yaw_rad()[0]));
+            let oa = axle1.push(&sample(0.5 * (l + r)));
+            if k >= 30_000 {
+                if let (Some(om), Some(oa)) = (om, oa) {
+                    if om.slow.valid && oa.slow.valid {
+                        sum_m += f64::from(om.slow.zeta);
+                        sum_a += f64::from(oa.slow.zeta);
+                        n += 1;
+                    }
+                }
+            }
+        }
+        assert!(n > 1000, "{n} valid steps");
+        let (zm, za) = (sum_m / f64::from(n), sum_a / f64::from(n));
+        println!("true shimmy damping {truth:.4}; meter on the modal signal {zm:.4}, on axle 1 {za:.4}");
+        assert!((zm - truth).abs() < 0.006, "modal {zm} vs {truth}");
+        assert!(
+            (za - truth).abs() > 2.0 * (zm - truth).abs(),
+            "axle 1 {za}, modal {zm}, truth {truth}"
+        );
+    }
+
+    /// The margin run on the friction-free truck, the plant off the nominal model by -+15 % in
+    /// the pneumatic trail and the transition-rod stiffness (the model stays nominal): the
+    /// first warning comes before the plant's onset on a 1 km/h/s ramp from 35 km/h to 5 km/h
+    /// past it (56 km/h at least).
+    #[test]
+    fn the_warning_leads_the_onset_when_the_plant_is_not_the_model() {
+        let model = DualAxleSet::Frictionless.params();
+        for (name, f) in [("t_p", 1.15), ("t_p", 0.85), ("k_t", 1.15), ("k_t", 0.85)] {
+            let plant = model
+                .with_param(name, model.get(name).unwrap() * f)
+                .unwrap();
+            // to 56 km/h as `shimmy-sim margin` does, or past a more stable plant's onset
+            let to = margin_run::onset_kmh(&plant).unwrap().max(51.0) + 5.0;
+            let mut sc = MarginScenario::ramp(plant, 35.0, to, 1.0, 30.0);
+            sc.model = Some(model);
+            let pp = parts_of(model).pipeline_params::<N_STATES>();
+            let run = margin_run::run(&sc, pp, 0).unwrap();
+            let lead = run.lead();
+            println!(
+                "{name} x{f}: plant onset {:?} km/h, first warning {:?}, lead {lead:?}",
+                run.onset_kmh, run.first_warning
+            );
+            let (dv, _) = lead.unwrap_or_else(|| panic!("{name} x{f}: no warning"));
+            assert!(dv > 0.0, "{name} x{f}: lead {dv} km/h");
+        }
+    }
+
+    /// No false warning: 120 s at 70 % of the onset (plant = model, friction off).
+    #[test]
+    fn no_warning_at_70_percent_of_the_onset() {
+        let t = DualAxleSet::Frictionless.params();
+        let onset = margin_run::onset_kmh(&t).unwrap();
+        let sc = MarginScenario::constant(t, 0.7 * onset, 120.0);
+        let run = margin_run::run(&sc, parts_of(t).pipeline_params::<N_STATES>(), 0).unwrap();
+        assert_eq!(run.max_level, Level::Normal, "{:?}", run.first_warning);
+    }
 }
