@@ -876,6 +876,14 @@ mod meter_signal_tests {
                 .map(|p| p.1)
                 .unwrap()
         };
+        std::println!(
+            "weights {w:?} at {:.2} km/h; shares (Hz, modal filter, axle 1 alone): {:?}",
+            t.meter_reference_speed_mps() * 3.6,
+            with.iter()
+                .zip(alone.iter())
+                .map(|(a, b)| (a.0, a.1, b.1))
+                .collect::<heapless::Vec<_, 10>>()
+        );
         assert!(near15(&alone) > 0.8, "{alone:?}");
         assert!(near15(&with) < 0.1, "{with:?}");
         for ((f, g), (_, g1)) in with.iter().zip(alone.iter()) {
