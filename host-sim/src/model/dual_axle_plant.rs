@@ -667,10 +667,16 @@ pub fn dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
 /// The shimmy mode at `m`'s onset: (dzeta/dV in s/m, frequency in Hz).
 fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Result<(f64, f64)> {
     use shimmy_core::stability::{dzeta_dv, ModeSelect};
-    let onset = crate::sim::margin_run::onset_kmh(m)
-        .ok_or_else(|| anyhow::anyhow!("{}: no Hopf onset in 1-150 km/h to size against", M::NAME))?;
-    let (mode, slope, _) = dzeta_dv(m, shimmy_core::params::kmh_to_mps(onset), 0.0, ModeSelect::Shimmy)
-        .map_err(|e| anyhow::anyhow!("{}: shimmy mode at the onset: {e:?}", M::NAME))?;
+    let onset = crate::sim::margin_run::onset_kmh(m).ok_or_else(|| {
+        anyhow::anyhow!("{}: no Hopf onset in 1-150 km/h to size against", M::NAME)
+    })?;
+    let (mode, slope, _) = dzeta_dv(
+        m,
+        shimmy_core::params::kmh_to_mps(onset),
+        0.0,
+        ModeSelect::Shimmy,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: shimmy mode at the onset: {e:?}", M::NAME))?;
     Ok((slope, mode.freq_hz))
 }
 
@@ -768,7 +774,9 @@ mod margin_tests {
         }
         assert!(n > 1000, "{n} valid steps");
         let (zm, za) = (sum_m / f64::from(n), sum_a / f64::from(n));
-        println!("true shimmy damping {truth:.4}; meter on the modal signal {zm:.4}, on axle 1 {za:.4}");
+        println!(
+            "true shimmy damping {truth:.4}; meter on the modal signal {zm:.4}, on axle 1 {za:.4}"
+        );
         assert!((zm - truth).abs() < 0.01, "modal {zm} vs {truth}");
         assert!(
             (za - truth).abs() > 1.5 * (zm - truth).abs(),
