@@ -171,16 +171,20 @@ pub struct DualAxleOperatingPoint {
 pub enum DualAxleSet {
     /// The reference 8x4 truck at its rated front-axle loads.
     Rated,
+    /// The same truck without kingpin dry friction (`m_f` = 0): the simulator's plant is then
+    /// the linear model's plus the tyres' saturation (the margin runs' friction-free case).
+    Frictionless,
 }
 
 impl DualAxleSet {
     /// Every named set.
-    pub const ALL: [DualAxleSet; 1] = [DualAxleSet::Rated];
+    pub const ALL: [DualAxleSet; 2] = [DualAxleSet::Rated, DualAxleSet::Frictionless];
 
     /// The set's name (vehicle files, command lines).
     pub const fn name(self) -> &'static str {
         match self {
             DualAxleSet::Rated => "dual-axle",
+            DualAxleSet::Frictionless => "dual-axle-frictionless",
         }
     }
 
@@ -193,6 +197,10 @@ impl DualAxleSet {
     pub fn params(self) -> DualAxleParams {
         match self {
             DualAxleSet::Rated => DualAxleParams::reference(),
+            DualAxleSet::Frictionless => DualAxleParams {
+                m_f: 0.0,
+                ..DualAxleParams::reference()
+            },
         }
     }
 }
@@ -308,6 +316,96 @@ impl DualAxleParams {
         k[PHI_1][PHI_1] += op.k_phi;
         k[PHI_2][PHI_2] += op.k_phi;
         k
+    }
+}
+
+/// The speeds the meter's weights are computed at: the model's first Hopf onset in this range
+/// (0.5 km/h scan, Brent), else the top of the range (no warning to give below it).
+const METER_SCAN_MPS: (f64, f64, f64) = (1.0 / 3.6, 150.0 / 3.6, 0.5 / 3.6);
+
+impl DualAxleParams {
+    /// The speed the mode meter's weights are taken at ([`Self::meter_weights`]), m/s: the
+    /// first Hopf onset of 1-150 km/h, else 150 km/h.
+    pub fn meter_reference_speed_mps(&self) -> f64 {
+        let (v0, v1, dv) = METER_SCAN_MPS;
+        crate::stability::hopf_crossings(self, 0.0, v0, v1, dv, crate::stability::DEFAULT_TOL_MPS)
+            .ok()
+            .and_then(|cs| {
+                cs.iter()
+                    .find(|c| c.kind == crate::stability::CrossingKind::Onset)
+                    .map(|c| c.speed_mps)
+            })
+            .unwrap_or(v1)
+    }
+
+    /// The weights `[w_1, w_2]` of the signal the mode meter sees,
+    /// `y = w_1 (psi_1L + psi_1R) / 2 + w_2 (psi_2L + psi_2R) / 2` (the in-phase yaw of each
+    /// axle, all four kingpin encoders): a least-squares modal filter for the shimmy mode at
+    /// [`Self::meter_reference_speed_mps`]. Every oscillatory mode's right eigenvector is scaled
+    /// to unit modal kinetic energy and reduced to its two in-phase axle yaws `u_k`; the weights
+    /// minimise the other modes' share `sum |w . u_k|^2` with the shimmy mode's (phase-aligned)
+    /// `w . u_s` fixed to its axle-1 part, so a shimmy reads as axle 1's in-phase yaw (the
+    /// amplitude thresholds keep their meaning) while the lightly damped ~15 Hz mode (the axles
+    /// yawing against each other) and the tramp mode that axle 1 alone shows next to it cancel.
+    /// `[1, 0]` (axle 1 alone) if the eigen-solve fails.
+    pub fn meter_weights(&self) -> [f64; 2] {
+        self.modal_weights_at(self.meter_reference_speed_mps())
+            .unwrap_or([1.0, 0.0])
+    }
+
+    fn modal_weights_at(&self, v_mps: f64) -> Option<[f64; 2]> {
+        use crate::stability::{select_mode, ModeSelect};
+        let a = self.linearise(v_mps, 0.0);
+        let vals = crate::eigen::eigenvalues(&a).ok()?;
+        let shimmy = select_mode(self, &a, &vals, ModeSelect::Shimmy)
+            .ok()?
+            .eigenvalue();
+        let (mut q, mut u_s) = ([[0.0; 2]; 2], None);
+        for l in vals
+            .iter()
+            .filter(|l| l.im > 0.0 && crate::eigen::is_oscillatory(**l))
+        {
+            let v = crate::eigen::eigenvector(&a, *l).ok()?;
+            let energy: f64 = (0..N_DOF)
+                .map(|i| self.inertia(i) * v[N_DOF + i].norm_sqr())
+                .sum();
+            if energy.is_nan() || energy <= 0.0 {
+                continue;
+            }
+            let s = 1.0 / libm::sqrt(energy);
+            let u = [
+                (v[PSI_1L] + v[PSI_1R]) * (0.5 * s),
+                (v[PSI_2L] + v[PSI_2R]) * (0.5 * s),
+            ];
+            if (*l - shimmy).norm() <= 1e-9 * shimmy.norm() {
+                u_s = Some(u);
+            } else {
+                for (i, row) in q.iter_mut().enumerate() {
+                    for (j, qij) in row.iter_mut().enumerate() {
+                        *qij += (u[i] * u[j].conj()).re;
+                    }
+                }
+            }
+        }
+        let u_s = u_s?;
+        let n1 = u_s[0].norm();
+        if n1.is_nan() || n1 <= 0.0 {
+            return None;
+        }
+        // the shimmy shape rotated so that axle 1's part is real and positive
+        let rot = u_s[0].conj() / n1;
+        let r = [n1, (u_s[1] * rot).re];
+        let det = q[0][0] * q[1][1] - q[0][1] * q[1][0];
+        if det.is_nan() || det.abs() <= 1e-12 * (q[0][0] * q[1][1]).abs() {
+            return None;
+        }
+        let c = [
+            (q[1][1] * r[0] - q[0][1] * r[1]) / det,
+            (q[0][0] * r[1] - q[1][0] * r[0]) / det,
+        ];
+        let k = n1 / (c[0] * r[0] + c[1] * r[1]);
+        let w = [c[0] * k, c[1] * k];
+        (w[0].is_finite() && w[1].is_finite()).then_some(w)
     }
 }
 
@@ -554,11 +652,15 @@ impl LinearModel<N_STATES> for DualAxleParams {
         b
     }
 
-    /// Axle 1's in-phase wheel yaw (its kingpin encoders).
+    /// The mode meter's signal: both axles' in-phase wheel yaw weighted by
+    /// [`DualAxleParams::meter_weights`] (all four kingpin encoders).
     fn wheel_yaw_output(&self) -> SVector<f64, N_STATES> {
+        let [w1, w2] = self.meter_weights();
         let mut c = SVector::<f64, N_STATES>::zeros();
-        c[PSI_1L] = 0.5;
-        c[PSI_1R] = 0.5;
+        c[PSI_1L] = 0.5 * w1;
+        c[PSI_1R] = 0.5 * w1;
+        c[PSI_2L] = 0.5 * w2;
+        c[PSI_2R] = 0.5 * w2;
         c
     }
 
@@ -715,6 +817,87 @@ mod tests {
             let (v, _) = onset(&u).expect("an onset");
             assert!(v > v0 + 0.1, "{name} x{f}: {v} vs {v0}");
         }
+    }
+}
+
+#[cfg(test)]
+mod meter_signal_tests {
+    use super::*;
+
+    /// The shimmy mode's gain (per unit modal energy) in a signal with weights `w` on the
+    /// axles' in-phase yaw, and each oscillatory mode's gain relative to it, at the meter's
+    /// reference speed: (frequency Hz, share).
+    fn shares(t: &DualAxleParams, w: [f64; 2]) -> (f64, heapless::Vec<(f64, f64), 10>) {
+        let v = t.meter_reference_speed_mps();
+        let a = t.linearise(v, 0.0);
+        let vals = crate::eigen::eigenvalues(&a).unwrap();
+        let shimmy =
+            crate::stability::select_mode(t, &a, &vals, crate::stability::ModeSelect::Shimmy)
+                .unwrap()
+                .eigenvalue();
+        let gain = |l: nalgebra::Complex<f64>| {
+            let x = crate::eigen::eigenvector(&a, l).unwrap();
+            let e: f64 = (0..N_DOF)
+                .map(|i| t.inertia(i) * x[N_DOF + i].norm_sqr())
+                .sum();
+            ((x[PSI_1L] + x[PSI_1R]) * (0.5 * w[0]) + (x[PSI_2L] + x[PSI_2R]) * (0.5 * w[1])).norm()
+                / libm::sqrt(e)
+        };
+        let g_s = gain(shimmy);
+        let mut out = heapless::Vec::new();
+        for l in vals
+            .iter()
+            .filter(|l| l.im > 0.0 && crate::eigen::is_oscillatory(**l))
+        {
+            out.push((l.im / (2.0 * core::f64::consts::PI), gain(*l) / g_s))
+                .unwrap();
+        }
+        (g_s, out)
+    }
+
+    /// The meter's weights come from the model's mode shapes: on the named set the lightly
+    /// damped ~15 Hz mode (the axles yawing against each other, as large as the shimmy on
+    /// axle 1 alone) falls below a tenth of the shimmy's share, no other mode gains more than
+    /// 0.02 of share over axle 1 alone (the 93-Hz linkage mode gains 0.018, outside the meter's
+    /// band), a shimmy reads as axle 1's in-phase yaw, and the output row is the weights.
+    #[test]
+    fn the_weights_isolate_the_shimmy_mode() {
+        let t = DualAxleSet::Rated.params();
+        let w = t.meter_weights();
+        assert!(w[0] > 0.0 && w[1] > 0.0, "{w:?}");
+        let ((g_w, with), (g_1, alone)) = (shares(&t, w), shares(&t, [1.0, 0.0]));
+        // |w . u_s| = |u_s1| up to the shape's small imaginary part (the weights are real)
+        assert!((g_w / g_1 - 1.0).abs() < 0.01, "{g_w} vs {g_1}");
+        let near15 = |s: &[(f64, f64)]| {
+            s.iter()
+                .find(|(f, _)| (13.0..17.0).contains(f))
+                .map(|p| p.1)
+                .unwrap()
+        };
+        std::println!(
+            "weights {w:?} at {:.2} km/h; shares (Hz, modal filter, axle 1 alone): {:?}",
+            t.meter_reference_speed_mps() * 3.6,
+            with.iter()
+                .zip(alone.iter())
+                .map(|(a, b)| (a.0, a.1, b.1))
+                .collect::<heapless::Vec<_, 10>>()
+        );
+        assert!(near15(&alone) > 0.8, "{alone:?}");
+        assert!(near15(&with) < 0.1, "{with:?}");
+        for ((f, g), (_, g1)) in with.iter().zip(alone.iter()) {
+            assert!(*g <= g1 + 0.02, "{f} Hz: {g} vs axle 1 alone {g1}");
+        }
+        let c = t.wheel_yaw_output();
+        assert_eq!(
+            [c[PSI_1L], c[PSI_1R], c[PSI_2L], c[PSI_2R]],
+            [0.5 * w[0], 0.5 * w[0], 0.5 * w[1], 0.5 * w[1]]
+        );
+        assert_eq!(c.iter().filter(|x| **x != 0.0).count(), 4);
+        // the weights follow the model: a softer transition rod changes the shapes and them
+        let mut soft = t;
+        soft.k_t *= 0.5;
+        let ws = soft.meter_weights();
+        assert!((ws[1] - w[1]).abs() > 1e-3, "{ws:?} vs {w:?}");
     }
 }
 

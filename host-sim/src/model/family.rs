@@ -130,6 +130,13 @@ pub trait SimPlant {
     fn advance(&mut self, dt_s: f64, inputs: &Inputs) -> Result<(), IntegrateError>;
     /// The wheel yaw angles `[psi_L, psi_R]`, rad: what the encoders measure.
     fn wheel_yaw_rad(&self) -> [f64; 2];
+    /// The `[psi_L, psi_R]` pair the mode meter is fed (it reads their mean): the model's
+    /// measured output row ([`LinearModel::wheel_yaw_output`]) applied to the state, as a pair
+    /// of equal angles where that row is not one axle's two wheels. By default the wheel yaw
+    /// angles themselves ([`Self::wheel_yaw_rad`]).
+    fn meter_yaw_rad(&self) -> [f64; 2] {
+        self.wheel_yaw_rad()
+    }
     /// The steering angle of the model's steering DOF (the car: the steering wheel; the
     /// truck: the hydraulic linkage at the kingpin), rad.
     fn steering_angle_rad(&self) -> f64;

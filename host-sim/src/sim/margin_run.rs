@@ -82,7 +82,8 @@ impl<M: SimModel<N>, const N: usize> MarginScenario<M, N> {
         }
     }
 
-    fn scenario(&self) -> Scenario {
+    /// The disturbances of the run (road noise, imbalance; damper current 0).
+    pub fn scenario(&self) -> Scenario {
         let mut s = Scenario::new(self.speed.clone());
         s.current_a = 0.0;
         let scale = self.params.yaw_torque_scale();
@@ -141,7 +142,8 @@ pub struct MarginRow {
     pub zeta_correction: f64,
     /// Yaw envelope amplitude, deg.
     pub amplitude_deg: f64,
-    /// Mean wheel yaw, deg.
+    /// Mean of the yaw pair the meter is fed (`SimPlant::meter_yaw_rad`: the car's wheel
+    /// yaw), deg.
     pub yaw_deg: f64,
 }
 
@@ -276,7 +278,7 @@ pub fn run_with_progress<M: SimModel<N>, const N: usize>(
         sim.advance(DT_S, &u)
             .with_context(|| format!("integration failed at t = {t}"))?;
         let t1 = t + DT_S;
-        let [psi_l, psi_r] = sim.wheel_yaw_rad();
+        let [psi_l, psi_r] = sim.meter_yaw_rad();
         let v = sc.speed.at(t1);
         let accel = (sc.speed.at(t1 + 0.5 * DT_S) - sc.speed.at(t1 - 0.5 * DT_S)) / DT_S;
         if let (Some(on), None) = (onset, onset_time) {

@@ -136,7 +136,7 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     if let Some(set) = DualAxleSet::from_name(spec) {
         return Ok(ModelVehicle::DualAxle(FamilyVehicle {
             model: set.params(),
-            parts: dual_axle_parts(),
+            parts: dual_axle_parts()?,
         }));
     }
     if let Some(set) = TrailerSet::from_name(spec) {
@@ -171,11 +171,11 @@ pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
     match model_of(&table)? {
         m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
-        m if m == DualAxleParams::NAME => parse_dual_axle(&table).map(|model| {
-            ModelVehicle::DualAxle(FamilyVehicle {
+        m if m == DualAxleParams::NAME => parse_dual_axle(&table).and_then(|model| {
+            Ok(ModelVehicle::DualAxle(FamilyVehicle {
                 model,
-                parts: dual_axle_parts(),
-            })
+                parts: dual_axle_parts()?,
+            }))
         }),
         m if m == TrailerParams::NAME => parse_trailer(&table).map(ModelVehicle::Trailer),
         _ => parse(text).map(ModelVehicle::Car),
