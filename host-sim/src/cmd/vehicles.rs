@@ -19,8 +19,8 @@ use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
-use crate::model::family::SimModel;
-use crate::model::trailer_plant::final_yaw_amplitude_rad;
+use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::trailer_plant::trailer_parts;
 use crate::sim::arg_range;
 use crate::sim::margin_run::{run, MarginScenario};
 use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
@@ -121,27 +121,7 @@ pub fn row(name: &str, v: &ModelVehicle, a: &VehiclesArgs) -> Result<VehicleRow>
         ModelVehicle::Car(v) => row_on(name, &v.plant, v, a),
         ModelVehicle::Truck(t) => row_on(name, &t.model, &t.parts, a),
         ModelVehicle::DualAxle(t) => row_on(name, &t.model, &t.parts, a),
-        ModelVehicle::Trailer(t) => {
-            // No SimModel yet (no MR damper, no mode meter for 0.6 Hz sway: docs/trailer.md):
-            // its own nonlinear plant for the cycle, no lead.
-            let mut r = linear_row(name, t)?;
-            r.limit_cycle = r.limit_cycle_speed().map(|(v_kmh, f)| {
-                let (duration_s, window_s) = cycle_run(f);
-                let amp = final_yaw_amplitude_rad(
-                    t,
-                    kmh_to_mps(v_kmh),
-                    0.0,
-                    LC_START_DEG.to_radians(),
-                    duration_s,
-                    window_s,
-                );
-                (
-                    v_kmh,
-                    (amp > 0.1 * LC_START_DEG.to_radians()).then(|| amp.to_degrees()),
-                )
-            });
-            Ok(r)
-        }
+        ModelVehicle::Trailer(t) => row_on(name, t, &trailer_parts()?, a),
     }
 }
 
@@ -241,7 +221,13 @@ fn row_on<M: SimModel<N>, const N: usize>(
         );
         sc.seed = a.seed;
         r.lead_measured = true;
-        r.lead = run(&sc, parts.pipeline_params(), 0)
+        // the family vehicle's pipeline: the mode meter slowed to the model's mode
+        let pipeline = FamilyVehicle {
+            model: *model,
+            parts: *parts,
+        }
+        .pipeline_params();
+        r.lead = run(&sc, pipeline, 0)
             .context("margin run")?
             .lead();
     }

@@ -70,7 +70,7 @@ impl SimPlant for Simulator {
 
 /// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the
 /// car's `nominal` set), N m/rad.
-fn reference_tyre_yaw_stiffness() -> f64 {
+pub(crate) fn reference_tyre_yaw_stiffness() -> f64 {
     let p = ParamSet::Nominal.params();
     (p.e + p.t_p) * p.c_a
 }
@@ -284,23 +284,31 @@ pub fn truck_damper_scale() -> Result<f64> {
 }
 
 fn compute_truck_damper_scale() -> Result<f64> {
+    damper_scale_against_car(&TruckSet::Full.params())
+}
+
+/// The factor on the car's reference damper's force coefficients that sizes it for `model` as
+/// it is for the `nominal` car: at the rated current its energy-equivalent viscous coefficient
+/// (describing function at 0.5 deg of measured yaw, [`damper_equivalent`]) is the same
+/// multiple of the least coefficient closing the Hopf window ([`least_stabilising_c`]).
+pub fn damper_scale_against_car<M: SimModel<N>, const N: usize>(model: &M) -> Result<f64> {
     let car = Vehicle::from_set(ParamSet::Nominal);
-    let truck = TruckSet::Full.params();
+    let lin = model.linear();
     let sp = car.damper.spencer;
     let rated = sp.u_max;
     let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
     let amp_deg = super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
     let ceq_car = damper_equivalent(&car.plant, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
-    let ceq_truck = damper_equivalent(&truck, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
-    let (Some(c_car), Some(c_truck)) =
-        (least_stabilising_c(&car.plant), least_stabilising_c(&truck))
+    let ceq_model = damper_equivalent(model, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
+    let (Some(c_car), Some(c_model)) =
+        (least_stabilising_c(&car.plant), least_stabilising_c(&lin))
     else {
-        bail!("truck damper sizing: no viscous damper closes a Hopf window");
+        bail!("{} damper sizing: no viscous damper closes a Hopf window", M::Linear::NAME);
     };
-    if c_car <= 0.0 || ceq_truck <= 0.0 {
-        bail!("truck damper sizing: the car has no Hopf window to size against");
+    if c_car <= 0.0 || ceq_model <= 0.0 {
+        bail!("{} damper sizing: the car has no Hopf window to size against", M::Linear::NAME);
     }
-    Ok((ceq_car / c_car) * c_truck / ceq_truck)
+    Ok((ceq_car / c_car) * c_model / ceq_model)
 }
 
 /// The truck's shared sections by default: the car's reference damper, sensors, gains and
@@ -311,7 +319,13 @@ fn compute_truck_damper_scale() -> Result<f64> {
 /// from the nominal plant's 2 I_k / l_t; the thresholds are damping ratios, speed margins and
 /// times, model-independent.
 pub fn truck_parts() -> Result<Vehicle> {
-    let s = truck_damper_scale()?;
+    Ok(parts_with_damper_scale(truck_damper_scale()?))
+}
+
+/// The car's reference shared sections with every force coefficient of the damper (the
+/// Spencer model's and the firmware's Bingham model's) and the skyhook coefficient times `s`
+/// ([`truck_parts`] gives the reasons).
+pub fn parts_with_damper_scale(s: f64) -> Vehicle {
     let mut v = Vehicle::from_set(ParamSet::Nominal);
     let sp = &mut v.damper.spencer;
     for c in [
@@ -336,7 +350,7 @@ pub fn truck_parts() -> Result<Vehicle> {
         *c *= s as f32;
     }
     v.controller.skyhook_ns_per_m *= s as f32;
-    Ok(v)
+    v
 }
 
 #[cfg(test)]
