@@ -37,7 +37,10 @@ const LC_START_DEG: f64 = 0.5;
 const RAMP_PAST_ONSET_KMH: f64 = 3.0;
 /// Ramp start as a fraction of the onset speed.
 const RAMP_FROM_FRACTION: f64 = 0.6;
-/// Constant-speed lead-in of the margin run (as `shimmy-sim margin`), s.
+/// Constant-speed lead-in of the margin run (as `shimmy-sim margin`), s, for the car's meter;
+/// a model whose meter is slowed `k` times (`LinearModel::meter_time_scale`) warms up `k`
+/// times longer and gets `k` times this (else its first report, valid only after the warm-up,
+/// lands inside the ramp: the trailer's first warning came at the warm-up's end).
 const SETTLE_S: f64 = 30.0;
 
 /// Arguments of `shimmy-sim vehicles`.
@@ -217,7 +220,7 @@ fn row_on<M: SimModel<N>, const N: usize>(
             RAMP_FROM_FRACTION * on,
             on + RAMP_PAST_ONSET_KMH,
             a.rate_kmh_per_s,
-            SETTLE_S,
+            SETTLE_S * f64::from(model.linear().meter_time_scale()),
         );
         sc.seed = a.seed;
         r.lead_measured = true;
