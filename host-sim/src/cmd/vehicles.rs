@@ -230,9 +230,7 @@ fn row_on<M: SimModel<N>, const N: usize>(
             parts: *parts,
         }
         .pipeline_params();
-        r.lead = run(&sc, pipeline, 0)
-            .context("margin run")?
-            .lead();
+        r.lead = run(&sc, pipeline, 0).context("margin run")?.lead();
     }
     Ok(r)
 }

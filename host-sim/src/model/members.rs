@@ -300,13 +300,18 @@ pub fn damper_scale_against_car<M: SimModel<N>, const N: usize>(model: &M) -> Re
     let amp_deg = super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
     let ceq_car = damper_equivalent(&car.plant, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
     let ceq_model = damper_equivalent(model, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
-    let (Some(c_car), Some(c_model)) =
-        (least_stabilising_c(&car.plant), least_stabilising_c(&lin))
+    let (Some(c_car), Some(c_model)) = (least_stabilising_c(&car.plant), least_stabilising_c(&lin))
     else {
-        bail!("{} damper sizing: no viscous damper closes a Hopf window", M::Linear::NAME);
+        bail!(
+            "{} damper sizing: no viscous damper closes a Hopf window",
+            M::Linear::NAME
+        );
     };
     if c_car <= 0.0 || ceq_model <= 0.0 {
-        bail!("{} damper sizing: the car has no Hopf window to size against", M::Linear::NAME);
+        bail!(
+            "{} damper sizing: the car has no Hopf window to size against",
+            M::Linear::NAME
+        );
     }
     Ok((ceq_car / c_car) * c_model / ceq_model)
 }

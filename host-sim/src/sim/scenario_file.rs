@@ -72,8 +72,8 @@ use crate::model::disturbance::{
 };
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
-use crate::model::trailer_plant::trailer_vehicle;
 use crate::model::sensors::SensorConfig;
+use crate::model::trailer_plant::trailer_vehicle;
 use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use crate::sim::vehicle_file::{self, ModelVehicle};

@@ -195,7 +195,13 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--vehicle `nominal`", "trailer-2dof"],
         ),
         (
-            &["margin", "--vehicle", "trailer", "--model-vehicle", "nominal"],
+            &[
+                "margin",
+                "--vehicle",
+                "trailer",
+                "--model-vehicle",
+                "nominal",
+            ],
             &["`nominal`", "trailer-2dof", "car-4dof"],
         ),
         (

@@ -157,7 +157,9 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
         ModelVehicle::Car(v) => compute_on(a, &FamilyVehicle::car(v)),
         ModelVehicle::Truck(t) => compute_on(a, &t),
         ModelVehicle::DualAxle(t) => compute_on(a, &t),
-        ModelVehicle::Trailer(t) => compute_on(a, &crate::model::trailer_plant::trailer_vehicle(t)?),
+        ModelVehicle::Trailer(t) => {
+            compute_on(a, &crate::model::trailer_plant::trailer_vehicle(t)?)
+        }
     }
 }
 
