@@ -10,7 +10,8 @@
 //! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
 //!
 //! Members (`super::members`): the 4-DOF car (`PlantParams`, 10 states) and the 5-DOF mining
-//! truck (`TruckParams`, 12 states). A new model implements [`LinearModel`] in core and
+//! truck (`TruckParams`, 12 states); the dual-axle truck and the trailer (`TrailerParams`, 5
+//! states) in their plants' modules. A new model implements [`LinearModel`] in core and
 //! [`SimModel`] in the simulator; `bifurcation`, `sweep` (eigenvalue maps), `margin` and the closed loop
 //! are generic over `M: SimModel<N>`; a command dispatches on the vehicle file's model
 //! (`sim::vehicle_file::ModelVehicle`).

@@ -2,8 +2,11 @@
 //! with the tyres' saturation added as its departure from the linearisation, so that the
 //! small-motion limit is the linear model exactly: the Magic-Formula force
 //! `F = D sin(C_s atan(B alpha))` of the lagged slip (`D = mu F_z`, `B = C_a / (C_s D)`: slope
-//! C_a at 0, saturating at D) in place of `C_a alpha` in both equations of motion. The sway
-//! damper is the linear viscous one of the model (coefficient `c_damper_nspm`).
+//! C_a at 0, saturating at D) in place of `C_a alpha` in both equations of motion. In
+//! [`TrailerSim`] (the studies' plant) the sway damper is the linear viscous one of the model
+//! (coefficient `c_damper_nspm`); [`TrailerPlant`] is the family's plant (`SimModel`: margin,
+//! bifurcation, sweep, faults, run) with the MR damper at the hitch, sized by
+//! [`trailer_damper_scale`].
 //!
 //! Fixed-step RK4 at 2 ms: the fastest pole, the tyre lag's `-V / sigma`, is at most
 //! 70 / 0.4 = 175 1/s at the top speed of the named set, 0.35 per step (RK4's real-axis limit
