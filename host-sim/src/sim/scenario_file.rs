@@ -344,7 +344,7 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVe
                 .with_context(|| format!("field `{key}.overrides`"))?;
         }
         ModelVehicle::DualAxle(_) => bail!(
-            "field `{key}.vehicle`: a {} vehicle; scenario files take the car or the mining truck",
+            "field `{key}.vehicle`: a {} vehicle; scenario files take the car, the mining truck or the trailer",
             <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
                 { shimmy_core::dual_axle::N_STATES },
             >>::NAME

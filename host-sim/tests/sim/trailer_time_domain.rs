@@ -246,3 +246,38 @@ fn the_slowed_meter_reads_the_sway_damping() {
         assert!((freq - ft).abs() < 0.02 * ft, "{kmh}: {freq} vs {ft}");
     }
 }
+
+/// A trailer scenario's bad input is named before any run: a plant override out of its range
+/// (with the range), an unknown parameter (with the allowed ones), a driver section (the
+/// trailer has no steering), a car as the firmware's model.
+#[test]
+fn a_bad_trailer_scenario_is_rejected_naming_the_field() {
+    use shimmy_sim::sim::scenario_file;
+    let base = "duration_s = 5.0\n[speed]\nconstant_kmh = 90.0\n[plant]\nvehicle = \"trailer\"\n";
+    let err = |extra: &str| {
+        let text = format!("{base}{extra}");
+        format!(
+            "{:#}",
+            scenario_file::parse_any_in(&text, "t", std::path::Path::new("")).unwrap_err()
+        )
+    };
+    let e = err("overrides = { k_y = -1.0 }\n");
+    assert!(
+        e.contains("plant.overrides.k_y") && e.contains("N/m"),
+        "{e}"
+    );
+    let e = err("overrides = { k_d = 1.0 }\n");
+    assert!(e.contains("k_d") && e.contains("c_a_per_fz"), "{e}");
+    let e = err("[driver]\n");
+    assert!(e.contains("driver"), "{e}");
+    let e = err("[model]\nvehicle = \"nominal\"\n");
+    assert!(e.contains("model.vehicle") && e.contains("car-4dof"), "{e}");
+    // and a good override reaches the plant
+    let text = format!("{base}overrides = {{ k_y = 4250.0 }}\n");
+    let scenario_file::AnyScenario::Trailer(s) =
+        scenario_file::parse_any_in(&text, "t", std::path::Path::new("")).unwrap()
+    else {
+        panic!("a trailer scenario")
+    };
+    assert_eq!(s.plant.model.k_y, 4250.0);
+}
