@@ -413,6 +413,13 @@ impl LinearModel<N_STATES> for TrailerParams {
         c
     }
 
+    /// 10: the sway at its onset (0.64 Hz for the caravan) is ten times slower than the car's
+    /// ~6 Hz shimmy; the car's 3-20 Hz band becomes 0.3-2 Hz, the decimation 100 (a 10 Hz
+    /// meter rate) and its memories ten times longer in seconds, the same in sway cycles.
+    fn meter_time_scale(&self) -> u16 {
+        10
+    }
+
     /// By the modal kinetic energy of yaw about the hitch (`I_h |psi'|^2`) against the hitch's
     /// lateral motion (`m |y'|^2`): [`ModeShape::Sway`] when yaw has the larger share,
     /// [`ModeShape::HitchLateral`] otherwise; [`ModeShape::TyreLag`] when the slip angle

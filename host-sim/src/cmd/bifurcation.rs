@@ -394,7 +394,10 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => command_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => command_on(a, &t.model, &t.parts),
-        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("bifurcation")),
+        ModelVehicle::Trailer(t) => {
+            let t = crate::model::trailer_plant::trailer_vehicle(t)?;
+            command_on(a, &t.model, &t.parts)
+        }
         ModelVehicle::DualAxle(t) => {
             anyhow::ensure!(
                 a.damper_current_a.is_none(),

@@ -840,7 +840,10 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
     match vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
         ModelVehicle::Truck(t) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, t),
-        ModelVehicle::Trailer(_) => Err(vehicle_file::not_on_trailer("faults")),
+        ModelVehicle::Trailer(t) => command_on::<
+            shimmy_core::trailer::TrailerParams,
+            { shimmy_core::trailer::N_STATES },
+        >(a, crate::model::trailer_plant::trailer_vehicle(t)?),
         ModelVehicle::DualAxle(t) => command_on::<
             shimmy_core::dual_axle::DualAxleParams,
             { shimmy_core::dual_axle::N_STATES },

@@ -290,6 +290,10 @@ pub fn command(a: &MarginArgs) -> Result<()> {
         (ModelVehicle::DualAxle(v), ModelVehicle::DualAxle(m)) => {
             run_on(a, v.model, m.model, m.pipeline_params(), provenance)
         }
+        (ModelVehicle::Trailer(v), ModelVehicle::Trailer(m)) => {
+            let m = crate::model::trailer_plant::trailer_vehicle(*m)?;
+            run_on(a, *v, m.model, m.pipeline_params(), provenance)
+        }
         _ => bail!(
             "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's model is \
              of the vehicle's model",

@@ -57,6 +57,7 @@ pub fn command(a: &RunArgs) -> Result<()> {
     match scenario_file::load_any(&a.scenario)? {
         AnyScenario::Car(spec) => run_spec(a, spec),
         AnyScenario::Truck(spec) => run_spec(a, spec),
+        AnyScenario::Trailer(spec) => run_spec(a, spec),
     }
 }
 

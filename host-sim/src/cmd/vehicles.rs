@@ -19,8 +19,8 @@ use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
-use crate::model::family::SimModel;
-use crate::model::trailer_plant::final_yaw_amplitude_rad;
+use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::trailer_plant::trailer_parts;
 use crate::sim::arg_range;
 use crate::sim::margin_run::{run, MarginScenario};
 use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
@@ -37,7 +37,10 @@ const LC_START_DEG: f64 = 0.5;
 const RAMP_PAST_ONSET_KMH: f64 = 3.0;
 /// Ramp start as a fraction of the onset speed.
 const RAMP_FROM_FRACTION: f64 = 0.6;
-/// Constant-speed lead-in of the margin run (as `shimmy-sim margin`), s.
+/// Constant-speed lead-in of the margin run (as `shimmy-sim margin`), s, for the car's meter;
+/// a model whose meter is slowed `k` times (`LinearModel::meter_time_scale`) warms up `k`
+/// times longer and gets `k` times this (else its first report, valid only after the warm-up,
+/// lands inside the ramp: the trailer's first warning came at the warm-up's end).
 const SETTLE_S: f64 = 30.0;
 
 /// Arguments of `shimmy-sim vehicles`.
@@ -121,27 +124,7 @@ pub fn row(name: &str, v: &ModelVehicle, a: &VehiclesArgs) -> Result<VehicleRow>
         ModelVehicle::Car(v) => row_on(name, &v.plant, v, a),
         ModelVehicle::Truck(t) => row_on(name, &t.model, &t.parts, a),
         ModelVehicle::DualAxle(t) => row_on(name, &t.model, &t.parts, a),
-        ModelVehicle::Trailer(t) => {
-            // No SimModel yet (no MR damper, no mode meter for 0.6 Hz sway: docs/trailer.md):
-            // its own nonlinear plant for the cycle, no lead.
-            let mut r = linear_row(name, t)?;
-            r.limit_cycle = r.limit_cycle_speed().map(|(v_kmh, f)| {
-                let (duration_s, window_s) = cycle_run(f);
-                let amp = final_yaw_amplitude_rad(
-                    t,
-                    kmh_to_mps(v_kmh),
-                    0.0,
-                    LC_START_DEG.to_radians(),
-                    duration_s,
-                    window_s,
-                );
-                (
-                    v_kmh,
-                    (amp > 0.1 * LC_START_DEG.to_radians()).then(|| amp.to_degrees()),
-                )
-            });
-            Ok(r)
-        }
+        ModelVehicle::Trailer(t) => row_on(name, t, &trailer_parts()?, a),
     }
 }
 
@@ -237,13 +220,17 @@ fn row_on<M: SimModel<N>, const N: usize>(
             RAMP_FROM_FRACTION * on,
             on + RAMP_PAST_ONSET_KMH,
             a.rate_kmh_per_s,
-            SETTLE_S,
+            SETTLE_S * f64::from(model.linear().meter_time_scale()),
         );
         sc.seed = a.seed;
         r.lead_measured = true;
-        r.lead = run(&sc, parts.pipeline_params(), 0)
-            .context("margin run")?
-            .lead();
+        // the family vehicle's pipeline: the mode meter slowed to the model's mode
+        let pipeline = FamilyVehicle {
+            model: *model,
+            parts: *parts,
+        }
+        .pipeline_params();
+        r.lead = run(&sc, pipeline, 0).context("margin run")?.lead();
     }
     Ok(r)
 }

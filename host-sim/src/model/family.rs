@@ -10,7 +10,8 @@
 //! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
 //!
 //! Members (`super::members`): the 4-DOF car (`PlantParams`, 10 states) and the 5-DOF mining
-//! truck (`TruckParams`, 12 states). A new model implements [`LinearModel`] in core and
+//! truck (`TruckParams`, 12 states); the dual-axle truck and the trailer (`TrailerParams`, 5
+//! states) in their plants' modules. A new model implements [`LinearModel`] in core and
 //! [`SimModel`] in the simulator; `bifurcation`, `sweep` (eigenvalue maps), `margin` and the closed loop
 //! are generic over `M: SimModel<N>`; a command dispatches on the vehicle file's model
 //! (`sim::vehicle_file::ModelVehicle`).
@@ -48,6 +49,16 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     /// What the steering DOF of [`SimPlant::steering_angle_rad`] is, after "steering" in
     /// tables (the car: `wheel`; the truck: `linkage`).
     const STEERING: &'static str;
+
+    /// The state at rest with the measured yaw at `psi_rad` (a kick): both wheel yaw angles,
+    /// the first two states, unless the model says otherwise (the trailer's one yaw is not
+    /// first).
+    fn kick_state(psi_rad: f64) -> Self::State {
+        let mut x = Self::State::default();
+        x.as_mut()[0] = psi_rad;
+        x.as_mut()[1] = psi_rad;
+        x
+    }
 
     /// The vehicle as the model's parameters and the shared sections.
     fn family_vehicle(v: &Self::Vehicle) -> FamilyVehicle<Self>;
@@ -111,13 +122,10 @@ pub fn param_names<M: SimModel<N>, const N: usize>() -> String {
         .join(", ")
 }
 
-/// The state of `M` at rest with both wheels yawed by `psi_rad` (in phase; the wheel yaw
-/// angles are the first two states of every model).
+/// The state of `M` at rest with its measured yaw at `psi_rad` (both wheels in phase:
+/// [`SimModel::kick_state`]).
 pub fn yaw_state<M: SimModel<N>, const N: usize>(psi_rad: f64) -> M::State {
-    let mut x = M::State::default();
-    x.as_mut()[0] = psi_rad;
-    x.as_mut()[1] = psi_rad;
-    x
+    M::kick_state(psi_rad)
 }
 
 /// A vehicle's nonlinear plant, one control period at a time (inputs held).

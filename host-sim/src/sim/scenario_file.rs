@@ -73,6 +73,7 @@ use crate::model::disturbance::{
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
+use crate::model::trailer_plant::trailer_vehicle;
 use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use crate::sim::vehicle_file::{self, ModelVehicle};
@@ -80,6 +81,7 @@ use anyhow::{bail, Context, Result};
 use serde::Deserialize;
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, PlantParams};
+use shimmy_core::trailer::TrailerParams;
 use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
 use std::collections::BTreeMap;
@@ -271,6 +273,8 @@ pub enum AnyScenario {
     Car(ScenarioSpec),
     /// On the mining truck.
     Truck(ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>),
+    /// On the trailer.
+    Trailer(ScenarioSpec<TrailerParams, { shimmy_core::trailer::N_STATES }>),
 }
 
 impl AnyScenario {
@@ -279,6 +283,7 @@ impl AnyScenario {
         match self {
             AnyScenario::Car(s) => &s.name,
             AnyScenario::Truck(s) => &s.name,
+            AnyScenario::Trailer(s) => &s.name,
         }
     }
 }
@@ -291,6 +296,12 @@ fn car(s: AnyScenario) -> Result<ScenarioSpec> {
             "scenario `{}` is on a {} vehicle; this command runs the {} only",
             s.name,
             TruckParams::NAME,
+            PlantParams::NAME
+        ),
+        AnyScenario::Trailer(s) => bail!(
+            "scenario `{}` is on a {} vehicle; this command runs the {} only",
+            s.name,
+            TrailerParams::NAME,
             PlantParams::NAME
         ),
     }
@@ -322,13 +333,18 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVe
                 .map_err(|e| anyhow::anyhow!("truck: {e}"))
                 .with_context(|| format!("field `{key}.overrides`"))?;
         }
-        ModelVehicle::Trailer(_) => {
-            return Err(
-                vehicle_file::not_on_trailer("run").context(format!("field `{key}.vehicle`"))
-            )
+        ModelVehicle::Trailer(t) => {
+            for (name, value) in &section.overrides {
+                *t = t
+                    .with_param(name, *value)
+                    .with_context(|| format!("field `{key}.overrides.{name}`"))?;
+            }
+            t.validate()
+                .map_err(|e| anyhow::anyhow!("trailer: {e}"))
+                .with_context(|| format!("field `{key}.overrides`"))?;
         }
         ModelVehicle::DualAxle(_) => bail!(
-            "field `{key}.vehicle`: a {} vehicle; scenario files take the car or the mining truck",
+            "field `{key}.vehicle`: a {} vehicle; scenario files take the car, the mining truck or the trailer",
             <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
                 { shimmy_core::dual_axle::N_STATES },
             >>::NAME
@@ -381,6 +397,26 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
                 );
             }
             build(&f, p, m, default_name, duration_s).map(AnyScenario::Truck)
+        }
+        (ModelVehicle::Trailer(p), m) => {
+            let m = match m {
+                None => None,
+                Some(ModelVehicle::Trailer(m)) => Some(trailer_vehicle(m)?),
+                Some(other) => bail!(
+                    "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
+                     of the plant's model",
+                    other.model_name(),
+                    TrailerParams::NAME
+                ),
+            };
+            if f.driver.is_some() {
+                bail!(
+                    "field `driver`: the {} has no steering for a driver torque; leave the \
+                     section out",
+                    TrailerParams::NAME
+                );
+            }
+            build(&f, trailer_vehicle(p)?, m, default_name, duration_s).map(AnyScenario::Trailer)
         }
         (p, m) => bail!(
             "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is of the \

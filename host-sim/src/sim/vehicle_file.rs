@@ -111,6 +111,20 @@ impl FileModel<{ shimmy_core::dual_axle::N_STATES }> for DualAxleParams {
     }
 }
 
+impl FileModel<{ shimmy_core::trailer::N_STATES }> for TrailerParams {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TrailerParams>> {
+        match load_model_relative(spec, dir)? {
+            ModelVehicle::Trailer(t) => crate::model::trailer_plant::trailer_vehicle(t),
+            other => bail!(
+                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
+                 the believed vehicle are of one model)",
+                other.model_name(),
+                TrailerParams::NAME
+            ),
+        }
+    }
+}
+
 /// The model names a vehicle file's `model` key takes.
 pub const MODEL_NAMES: [&str; 4] = [
     PlantParams::NAME,
@@ -523,25 +537,6 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 /// The commands that run a truck vehicle, for messages.
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
      sweep, margin, faults and run";
-
-/// The commands that run a trailer vehicle, for messages.
-pub const TRAILER_COMMANDS: &str = "params, stability, sensitivity and sway-damping";
-
-/// The error of a command that runs on every model of the family but the trailer, which does not
-/// have a nonlinear plant with the MR damper yet (`docs/trailer.md`).
-pub fn not_on_trailer(command: &str) -> anyhow::Error {
-    let others: Vec<&str> = MODEL_NAMES
-        .iter()
-        .copied()
-        .filter(|m| *m != TrailerParams::NAME)
-        .collect();
-    anyhow::anyhow!(
-        "`{command}` runs the {} models, not the {} yet (the trailer runs through \
-         {TRAILER_COMMANDS})",
-        others.join(", "),
-        TrailerParams::NAME
-    )
-}
 
 /// The message of a car-only command given another model.
 fn car_only(what: &str, model: &str) -> String {

@@ -195,8 +195,14 @@ fn other_commands_reject_bad_numbers_before_running() {
             &["--vehicle `nominal`", "trailer-2dof"],
         ),
         (
-            &["bifurcation", "--vehicle", "trailer"],
-            &["trailer", "trailer-2dof", "car-4dof"],
+            &[
+                "margin",
+                "--vehicle",
+                "trailer",
+                "--model-vehicle",
+                "nominal",
+            ],
+            &["`nominal`", "trailer-2dof", "car-4dof"],
         ),
         (
             // the truck's damper has the car's coil: rated 2 A

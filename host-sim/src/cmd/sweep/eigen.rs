@@ -49,7 +49,10 @@ pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
     match crate::sim::vehicle_file::load_model(&a.vehicle)? {
         ModelVehicle::Car(v) => compute_on(a, &v.plant, &v),
         ModelVehicle::Truck(t) => compute_on(a, &t.model, &t.parts),
-        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer("sweep")),
+        ModelVehicle::Trailer(t) => {
+            let t = crate::model::trailer_plant::trailer_vehicle(t)?;
+            compute_on(a, &t.model, &t.parts)
+        }
         ModelVehicle::DualAxle(t) => compute_on(a, &t.model, &t.parts),
     }
 }

@@ -157,9 +157,9 @@ pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
         ModelVehicle::Car(v) => compute_on(a, &FamilyVehicle::car(v)),
         ModelVehicle::Truck(t) => compute_on(a, &t),
         ModelVehicle::DualAxle(t) => compute_on(a, &t),
-        ModelVehicle::Trailer(_) => Err(crate::sim::vehicle_file::not_on_trailer(
-            "sweep --controllers",
-        )),
+        ModelVehicle::Trailer(t) => {
+            compute_on(a, &crate::model::trailer_plant::trailer_vehicle(t)?)
+        }
     }
 }
 
