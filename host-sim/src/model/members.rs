@@ -70,7 +70,7 @@ impl SimPlant for Simulator {
 
 /// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the
 /// car's `nominal` set), N m/rad.
-fn reference_tyre_yaw_stiffness() -> f64 {
+pub(crate) fn reference_tyre_yaw_stiffness() -> f64 {
     let p = ParamSet::Nominal.params();
     (p.e + p.t_p) * p.c_a
 }
