@@ -336,6 +336,7 @@ pub fn truck_parts() -> Result<Vehicle> {
         *c *= s as f32;
     }
     v.controller.skyhook_ns_per_m *= s as f32;
+    v.thresholds = TruckParams::warning_thresholds();
     Ok(v)
 }
 

@@ -14,5 +14,6 @@ mod markdown_tables;
 mod meter_accuracy;
 mod plant_time_domain;
 mod reference_line;
+mod truck_commands;
 mod truck_time_domain;
 mod vehicle;
