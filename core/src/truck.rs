@@ -724,12 +724,20 @@ fn check(f: &TruckField, value: f64) -> Result<(), TruckFieldError> {
 
 impl TruckParams {
     /// The truck vehicle's warning thresholds by default (its `[thresholds]` section): the
-    /// car's ([`PipelineParams::tuned_monitor`]) with the data path's damping thresholds
-    /// lowered for the truck's lightly damped mode (zeta 0.0098 at 70 % of the loaded truck's
-    /// onset, where the car's `zeta_low_on` 0.005 flickers), chosen by `shimmy-sim mismatch
-    /// --vehicle truck-full` (`docs/mining-truck.md`, "Warning thresholds").
+    /// car's ([`PipelineParams::tuned_monitor`]) with the data path's MarginLow damping
+    /// thresholds lowered for the truck's lightly damped mode (zeta 0.0098 at 70 % of the
+    /// loaded truck's onset, where the car's `zeta_low_on` 0.005 flickers: 24-42 false
+    /// warnings per hour on the data-only arm, 0 with these) and the speed-margin thresholds
+    /// lowered (the truck's 70 % point is only 7 km/h from its onset), chosen by `shimmy-sim
+    /// mismatch --vehicle truck-full` (`docs/mining-truck.md`, "Warning thresholds").
     pub fn warning_thresholds() -> MonitorParams {
         MonitorParams {
+            zeta_low_on: -0.005,
+            zeta_low_off: 0.005,
+            dv_low_on_mps: 1.2,
+            dv_low_off_mps: 1.4,
+            dv_crit_on_mps: 0.6,
+            dv_crit_off_mps: 0.9,
             ..PipelineParams::tuned_monitor()
         }
     }

@@ -95,7 +95,7 @@ fn mismatch_runs_on_a_truck_file() {
             "--vehicle",
             f.to_str().unwrap(),
             "--only",
-            "I_k +20",
+            "k_h -20",
             "--rates-kmh-per-s",
             "2",
             "--drive-s",
@@ -109,7 +109,7 @@ fn mismatch_runs_on_a_truck_file() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let case = &json["cases"][0];
-    assert_eq!(case["case"], "I_k +20 %");
+    assert_eq!(case["case"], "k_h -20 %");
     let lead = case["ramps"][0]["lead_kmh"].as_f64().expect("a warning");
     assert!(lead > 0.0, "{case}");
     assert_eq!(o.status.success(), case["passes"].as_bool().unwrap());
@@ -203,17 +203,17 @@ fn report_compare_and_the_demo_run_on_a_truck_file() {
 }
 
 /// The truck's thresholds on a plant that differs from the model (the pipeline believes the
-/// loaded truck, the plant has a 20 % larger kingpin inertia I_k: its onset lower): the first
+/// loaded truck, the plant has a 20 % softer hydraulic linkage k_h: its onset 4 km/h lower): the first
 /// warning on a 1 km/h/s ramp comes before the plant's onset, and a constant drive at 70 % of
 /// that onset gives no warning at all.
 #[test]
 fn the_trucks_thresholds_lead_and_stay_quiet_on_a_mismatched_plant() {
     let model = TruckSet::Full.params();
     let (_, plant) = model
-        .single_variants(1.2)
+        .single_variants(0.8)
         .unwrap()
         .into_iter()
-        .find(|(l, _)| *l == "I_k")
+        .find(|(l, _)| *l == "k_h")
         .unwrap();
     let pp = shimmy_sim::model::family::FamilyVehicle {
         model,
