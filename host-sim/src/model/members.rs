@@ -308,8 +308,8 @@ fn compute_truck_damper_scale() -> Result<f64> {
 /// Bingham model's) and the skyhook coefficient scaled by [`truck_damper_scale`]. The coil,
 /// its rating and the sensors are the car's (the larger damper has a larger piston and gap,
 /// not another coil); the ASMC's gains are angular accelerations of the wheel, its force comes
-/// from the nominal plant's 2 I_k / l_t; the thresholds are damping ratios, speed margins and
-/// times, model-independent.
+/// from the nominal plant's 2 I_k / l_t; the warning thresholds are the truck's own
+/// ([`TruckParams::warning_thresholds`]).
 pub fn truck_parts() -> Result<Vehicle> {
     let s = truck_damper_scale()?;
     let mut v = Vehicle::from_set(ParamSet::Nominal);
