@@ -1,7 +1,9 @@
 //! `shimmy-sim compare`: every controller over a standard scenario set, one table (plus CSV and
 //! PNG plots of wheel yaw, coil current and adaptive gain vs time per scenario).
 
+use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::sensors::SensorConfig;
+use crate::model::study::StudyModel;
 use crate::out::file_name::sanitize;
 use crate::out::plots::plot_runs;
 use crate::out::progress;
@@ -9,14 +11,16 @@ use crate::out::table::opt;
 use crate::sim::arg_range::{f32_in, Range};
 use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
 use crate::sim::scenario::{self, ScenarioSpec};
-use crate::sim::standard::standard_scenarios;
-use crate::sim::vehicle_file;
-use anyhow::{Context, Result};
+use crate::sim::scenario_file::ScenarioModel;
+use crate::sim::standard::standard_scenarios_on;
+use crate::sim::vehicle_file::{self, ModelVehicle};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::schedule::SpeedSchedule;
 use shimmy_core::control::{ControlParams, ControllerKind};
-use shimmy_core::params::mps_to_kmh;
-use shimmy_core::vehicle::Vehicle;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{mps_to_kmh, PlantParams};
+use shimmy_core::truck::TruckParams;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -70,8 +74,9 @@ pub struct CompareArgs {
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
     #[arg(long)]
     pub ideal_sensors: bool,
-    /// Vehicle the scenario set runs on: a named set (nominal, gentle, hard) or a vehicle file
-    /// (TOML, see docs/vehicle-file.md). `--params` is the older name.
+    /// Vehicle the scenario set runs on: a named set (nominal, gentle, hard, truck-full,
+    /// truck-empty) or a vehicle file (TOML, see docs/vehicle-file.md). `--params` is the older
+    /// name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// The vehicle the firmware believes (controller model, gains; the gain options above
@@ -82,7 +87,10 @@ pub struct CompareArgs {
 
 impl CompareArgs {
     /// The control parameters: the model vehicle's with the overrides applied.
-    pub fn control_params(&self, model: &Vehicle) -> ControlParams {
+    pub fn control_params<M: SimModel<N>, const N: usize>(
+        &self,
+        model: &FamilyVehicle<M>,
+    ) -> ControlParams {
         let mut c = model.control_params();
         if let Some(v) = self.dead_zone {
             c.asmc.dead_zone_radps = v;
@@ -127,8 +135,8 @@ pub struct RunRow {
 
 /// Runs one scenario with one arm: its metrics (settling from the scenario's disturbance time)
 /// and the run.
-pub fn run_one(
-    spec: &ScenarioSpec,
+pub fn run_one<M: SimModel<N>, const N: usize>(
+    spec: &ScenarioSpec<M, N>,
     arm: Arm,
     control: &ControlParams,
 ) -> Result<(RunMetrics, LoopResult)> {
@@ -139,8 +147,8 @@ pub fn run_one(
 /// The least constant current (to `tol_a`) with which no scenario in `specs` shimmies
 /// (bisection on [0, i_max]; assumes more current never makes it worse). Scenarios that still
 /// shimmy at `i_max` (beyond the damper's authority) are left out; their names are returned.
-pub fn least_suppressing_current(
-    specs: &[ScenarioSpec],
+pub fn least_suppressing_current<M: SimModel<N>, const N: usize>(
+    specs: &[ScenarioSpec<M, N>],
     i_max: f32,
     tol_a: f32,
 ) -> Result<(f32, Vec<String>)> {
@@ -152,8 +160,8 @@ pub fn least_suppressing_current(
 /// The least current level `i` (to `tol_a`, bisection on [0, i_max]) for which the arm
 /// `arm(i)` lets no scenario in `specs` shimmy, leaving out (and naming) the scenarios that
 /// shimmy even at `arm(i_max)`.
-pub fn least_suppressing(
-    specs: &[ScenarioSpec],
+pub fn least_suppressing<M: SimModel<N>, const N: usize>(
+    specs: &[ScenarioSpec<M, N>],
     i_max: f32,
     tol_a: f32,
     arm: impl Fn(f32) -> Arm + Sync,
@@ -161,7 +169,7 @@ pub fn least_suppressing(
     let at_max: Vec<bool> = specs
         .par_iter()
         .map(|s| {
-            Ok(run_one(s, arm(i_max), &s.model().control_params())?
+            Ok(run_one(s, arm(i_max), &s.model_family().control_params())?
                 .0
                 .shimmies())
         })
@@ -172,7 +180,7 @@ pub fn least_suppressing(
         .filter(|(_, &b)| b)
         .map(|(s, _)| s.name.clone())
         .collect();
-    let specs: Vec<ScenarioSpec> = specs
+    let specs: Vec<ScenarioSpec<M, N>> = specs
         .iter()
         .zip(&at_max)
         .filter(|(_, &b)| !b)
@@ -182,7 +190,7 @@ pub fn least_suppressing(
         let r: Result<Vec<bool>> = specs
             .par_iter()
             .map(|s| {
-                Ok(!run_one(s, arm(i), &s.model().control_params())?
+                Ok(!run_one(s, arm(i), &s.model_family().control_params())?
                     .0
                     .shimmies())
             })
@@ -211,13 +219,13 @@ pub fn least_suppressing(
 /// margin-scheduled arm arms), and as the level the least current with which no scenario of the
 /// set shimmies (bisection to 0.02 A, as for passive-on). Returns the schedule and the scenarios
 /// it cannot stabilise at the coil rating.
-pub fn tune_speed_schedule(
-    specs: &[ScenarioSpec],
-    model: &Vehicle,
+pub fn tune_speed_schedule<M: SimModel<N>, const N: usize>(
+    specs: &[ScenarioSpec<M, N>],
+    model: &FamilyVehicle<M>,
 ) -> Result<(SpeedSchedule, Vec<String>)> {
     use shimmy_core::stability::{hopf_crossings, CrossingKind, DEFAULT_TOL_MPS, V_SEARCH_MAX_MPS};
     let crossings = hopf_crossings(
-        &model.plant,
+        &model.model.linear(),
         0.0,
         0.5,
         V_SEARCH_MAX_MPS,
@@ -234,21 +242,24 @@ pub fn tune_speed_schedule(
         .iter()
         .find(|c| c.kind == CrossingKind::Offset && c.speed_mps > onset)
         .map_or(V_SEARCH_MAX_MPS, |c| c.speed_mps);
-    let sp = &model.controller.schedule;
+    let sp = &model.parts.controller.schedule;
     let table = |current_a: f32| SpeedSchedule {
         v_lo_mps: onset as f32 - sp.arm_margin_mps,
         v_hi_mps: offset as f32 + sp.arm_margin_mps,
         ramp_mps: sp.idle_margin_mps - sp.arm_margin_mps,
         current_a,
     };
-    let (i, beyond) = least_suppressing(specs, model.rated_current_a(), 0.02, |i| {
+    let (i, beyond) = least_suppressing(specs, model.parts.rated_current_a(), 0.02, |i| {
         Arm::Mr(ControllerKind::SpeedScheduled(table(i)))
     })?;
     Ok((table(i), beyond))
 }
 
 /// Formats the table.
-pub fn table(rows: &[RunRow], specs: &[ScenarioSpec]) -> String {
+pub fn table<M: SimModel<N>, const N: usize>(
+    rows: &[RunRow],
+    specs: &[ScenarioSpec<M, N>],
+) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "| {:<22} | {:<11} | {:>7} | {:>7} | {:>6} | {:>7} | {:>6} | {:>6} | {:>7} | {:>7} | {:>7} | {:>7} | {:>7} |\n",
@@ -291,7 +302,10 @@ pub fn settles_no_later(a_s: f64, b_s: f64) -> bool {
 }
 
 /// The acceptance checks of issue 4, as lines of text (and whether all passed).
-pub fn verdict(rows: &[RunRow], specs: &[ScenarioSpec]) -> (String, bool) {
+pub fn verdict<M: SimModel<N>, const N: usize>(
+    rows: &[RunRow],
+    specs: &[ScenarioSpec<M, N>],
+) -> (String, bool) {
     let mut out = String::new();
     let mut all = true;
     let get = |sc: &str, name: &str| {
@@ -368,7 +382,10 @@ pub fn verdict(rows: &[RunRow], specs: &[ScenarioSpec]) -> (String, bool) {
 /// noisy `ramp` a current total variation at most a fifth of today's ASMC's; in the `slalom` an
 /// RMS damper force at most 10 % above the 0 A damper's. Returns the summary table (Markdown),
 /// the lines of the checks and whether all passed.
-pub fn margin_verdict(rows: &[RunRow], specs: &[ScenarioSpec]) -> (String, String, bool) {
+pub fn margin_verdict<M: SimModel<N>, const N: usize>(
+    rows: &[RunRow],
+    specs: &[ScenarioSpec<M, N>],
+) -> (String, String, bool) {
     let get = |sc: &str, name: &str| {
         rows.iter()
             .find(|r| r.scenario == sc && r.arm.name() == name)
@@ -494,8 +511,8 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
 }
 
 /// Runs every arm over every scenario (in parallel).
-pub fn run_all(
-    specs: &[ScenarioSpec],
+pub fn run_all<M: SimModel<N>, const N: usize>(
+    specs: &[ScenarioSpec<M, N>],
     arms: &[Arm],
     control: &ControlParams,
 ) -> Result<Vec<RunRow>> {
@@ -523,16 +540,51 @@ pub fn run_all(
 
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
-    let vehicle = vehicle_file::load(&a.vehicle)?;
+    match vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
+        ModelVehicle::Truck(v) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, v),
+        other => bail!(
+            "`compare` runs the {} and {} models, not the {} (vehicle `{}`)",
+            PlantParams::NAME,
+            TruckParams::NAME,
+            other.model_name(),
+            a.vehicle
+        ),
+    }
+}
+
+/// The command on the vehicle `vehicle` of the model `M`.
+fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
+    a: &CompareArgs,
+    vehicle: M::Vehicle,
+) -> Result<()> {
     let model = match &a.model_vehicle {
-        Some(m) => vehicle_file::load(m).context("--model-vehicle")?,
+        Some(m) => M::load_vehicle(m, Path::new("")).context("--model-vehicle")?,
         None => vehicle,
     };
+    let model_family = M::family_vehicle(&model);
     if let Some(i) = a.on_current_a {
-        crate::sim::arg_range::check_current("--on-current-a", i, &model)?;
+        crate::sim::arg_range::check_current("--on-current-a", i, &model_family.parts)?;
     }
+    // The margin-scheduled arm reads the firmware's margin report, whose host build runs the
+    // car's model task: on another model it is left out, and said so.
+    let controllers: Vec<&String> = a
+        .controllers
+        .iter()
+        .filter(|n| {
+            let keep = n.as_str() != "margin-asmc" || model_family.model.host_app_model().is_some();
+            if !keep {
+                println!(
+                    "margin-asmc left out: its margin report comes from the firmware's host build, which runs the {} model task, not the {}",
+                    PlantParams::NAME,
+                    <M::Linear as LinearModel<N>>::NAME
+                );
+            }
+            keep
+        })
+        .collect();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut specs = standard_scenarios(&vehicle, a.quick);
+    let mut specs = standard_scenarios_on::<M, N>(&vehicle, a.quick)?;
     for s in &mut specs {
         s.model_vehicle = Some(model);
     }
@@ -550,7 +602,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
             i as f32
         }
         None => {
-            let i_max = model.rated_current_a();
+            let i_max = model_family.parts.rated_current_a();
             let (i, beyond) = least_suppressing_current(&specs, i_max, 0.02)?;
             println!("passive-on current: {i:.3} A (least constant current with no shimmy in any scenario that {i_max} A can stabilise, bisection to 0.02 A)");
             if !beyond.is_empty() {
@@ -562,8 +614,8 @@ pub fn command(a: &CompareArgs) -> Result<()> {
             i
         }
     };
-    let speed_sched = if a.controllers.iter().any(|n| n == "speed-sched") {
-        let (t, beyond) = tune_speed_schedule(&specs, &model)?;
+    let speed_sched = if controllers.iter().any(|n| *n == "speed-sched") {
+        let (t, beyond) = tune_speed_schedule(&specs, &model_family)?;
         println!(
             "speed-sched: {:.3} A from {:.1} to {:.1} km/h, ramps of {:.1} km/h (the model's Hopf window widened by arm_margin_mps; least level with no shimmy in any scenario it can stabilise, bisection to 0.02 A)",
             t.current_a,
@@ -581,8 +633,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
     } else {
         None
     };
-    let arms: Vec<Arm> = a
-        .controllers
+    let arms: Vec<Arm> = controllers
         .iter()
         .map(|n| match (n.as_str(), speed_sched) {
             ("speed-sched", Some(t)) => Ok(Arm::Mr(ControllerKind::SpeedScheduled(t))),
@@ -593,7 +644,7 @@ pub fn command(a: &CompareArgs) -> Result<()> {
         println!("scenario {:<22} {}", s.name, s.description);
     }
     let wall = std::time::Instant::now();
-    let rows = run_all(&specs, &arms, &a.control_params(&model))?;
+    let rows = run_all(&specs, &arms, &a.control_params(&model_family))?;
     let wall_s = wall.elapsed().as_secs_f64();
     let tab = table(&rows, &specs);
     println!("\n{tab}");

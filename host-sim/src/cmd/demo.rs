@@ -3,18 +3,22 @@
 //! meter running in the loop, and a self-contained Markdown report with plots and metrics.
 //! `--vehicle` and `--model-vehicle` run it on another vehicle (the ramp stays 20 -> 120 km/h).
 
+use crate::model::family::SimModel;
 use crate::model::plant::Method;
 use crate::out::plot_util;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{LoopResult, RunMetrics, CLOSED_LOOP_METHOD};
-use crate::sim::demo_case::{demo_case_for, run_arm, ARMS, ROAD_SEED};
+use crate::sim::demo_case::{demo_case_on, run_arm, ARMS, ROAD_SEED};
+use crate::sim::scenario_file::ScenarioModel;
 use crate::sim::standard::POTHOLE_NM;
-use crate::sim::vehicle_file;
-use anyhow::{Context, Result};
+use crate::sim::vehicle_file::{self, FileModel, ModelVehicle};
+use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use shimmy_core::params::mps_to_kmh;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{mps_to_kmh, PlantParams};
+use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -22,8 +26,8 @@ use std::path::{Path, PathBuf};
 /// Options of the demo on the command line (`shimmy-sim [--vehicle V] [--model-vehicle M]`).
 #[derive(clap::Args, Clone, Debug)]
 pub struct DemoArgs {
-    /// The demo's simulated vehicle: a named set (nominal, gentle, hard) or a vehicle file
-    /// (TOML, see docs/vehicle-file.md) [default: nominal].
+    /// The demo's simulated vehicle: a named set (nominal, gentle, hard, truck-full,
+    /// truck-empty) or a vehicle file (TOML, see docs/vehicle-file.md) [default: nominal].
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
     /// The vehicle the demo's firmware believes (its controller's and estimator's models,
@@ -45,17 +49,20 @@ pub const RAMP_S: Range = Range::closed(1.0, 600.0, "s");
 /// The demo's ramp length without `--ramp-s`, s.
 pub const RAMP_S_DEFAULT: f64 = 30.0;
 
-/// Demo options.
+/// Demo options, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct DemoOptions {
+pub struct DemoOptions<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// Output directory.
     pub out: PathBuf,
     /// Ramp duration, s (20 -> 120 km/h).
     pub ramp_s: f64,
     /// The simulated vehicle and its name (as given: a set or a file).
-    pub plant: (String, Vehicle),
+    pub plant: (String, M::Vehicle),
     /// The vehicle the firmware believes and its name; `None`: the simulated one.
-    pub model: Option<(String, Vehicle)>,
+    pub model: Option<(String, M::Vehicle)>,
     /// The plant integrator of both arms.
     pub method: Method,
 }
@@ -72,11 +79,12 @@ impl Default for DemoOptions {
     }
 }
 
-impl DemoOptions {
-    /// The default demo with the options of `a` (range-checked, the vehicles loaded and
-    /// validated).
-    pub fn from_args(a: &DemoArgs) -> Result<Self> {
-        let mut o = DemoOptions {
+impl<M: FileModel<N>, const N: usize> DemoOptions<M, N> {
+    /// The default demo on the simulated vehicle `plant` (`--vehicle` as given, or `nominal`)
+    /// with the options of `a` (range-checked, the model vehicle loaded and validated).
+    pub fn from_args(a: &DemoArgs, plant: M::Vehicle) -> Result<Self> {
+        let default = DemoOptions::<PlantParams>::default();
+        Ok(DemoOptions {
             ramp_s: RAMP_S.check("--ramp-s", a.ramp_s)?,
             method: match &a.integrator {
                 Some(name) => {
@@ -84,15 +92,16 @@ impl DemoOptions {
                 }
                 None => CLOSED_LOOP_METHOD,
             },
-            ..DemoOptions::default()
-        };
-        if let Some(v) = &a.vehicle {
-            o.plant = (v.clone(), vehicle_file::load(v).context("--vehicle")?);
-        }
-        if let Some(m) = &a.model_vehicle {
-            o.model = Some((m.clone(), vehicle_file::load(m).context("--model-vehicle")?));
-        }
-        Ok(o)
+            out: default.out,
+            plant: (a.vehicle.clone().unwrap_or(default.plant.0), plant),
+            model: match &a.model_vehicle {
+                Some(m) => Some((
+                    m.clone(),
+                    M::load_vehicle(m, Path::new("")).context("--model-vehicle")?,
+                )),
+                None => None,
+            },
+        })
     }
 }
 
@@ -161,13 +170,13 @@ fn plot_meter(
 
 /// Runs the demo and writes `report.md` with its plots into `o.out` (through
 /// [`report::write`], the same writer as `shimmy-sim report`).
-pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
+pub fn run_demo<M: ScenarioModel<N>, const N: usize>(o: &DemoOptions<M, N>) -> Result<DemoOutput> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let (plant_name, plant) = &o.plant;
     let model = o.model.as_ref().map_or(plant, |(_, m)| m);
-    let mut case = demo_case_for(plant, model, o.ramp_s)?;
+    let mut case = demo_case_on::<M, N>(plant, model, o.ramp_s)?;
     case.method = o.method;
-    let results: Vec<ReportRun> = ARMS
+    let results: Vec<ReportRun<M, N>> = ARMS
         .par_iter()
         .map(|&(label, arm)| {
             let (cfg, r) = run_arm(&case, arm, o.ramp_s, 5)?;
@@ -184,8 +193,9 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
     let mut intro = String::new();
     let _ = writeln!(
         intro,
-        "Plant: `{plant_name}` 4-DOF solid axle with the Spencer MR damper (coil lag included); sensors: {}-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n",
-        plant.sensors.encoder_bits
+        "Plant: `{plant_name}` ({}) with the Spencer MR damper (coil lag included); sensors: {}-bit encoders with noise and 1 sample delay, noisy wheel speed; control and mode meter: the firmware's `shimmy-core` code at 1 kHz.\n",
+        <M::Linear as LinearModel<N>>::NAME,
+        M::family_vehicle(plant).parts.sensors.encoder_bits
     );
     if let Some((model_name, _)) = &o.model {
         let _ = writeln!(
@@ -221,9 +231,13 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
         case.t_pothole_s,
         mps_to_kmh(case.v_fastest_mps)
     );
-    let mut provenance = Provenance::of_this_process().vehicle("vehicle", plant_name, plant)?;
+    let mut provenance = Provenance::of_this_process().model_vehicle(
+        "vehicle",
+        plant_name,
+        &M::any_vehicle(plant),
+    )?;
     if let Some((model_name, m)) = &o.model {
-        provenance = provenance.vehicle("model vehicle", model_name, m)?;
+        provenance = provenance.model_vehicle("model vehicle", model_name, &M::any_vehicle(m))?;
     }
     let provenance = provenance
         .seed("road noise", ROAD_SEED)
@@ -252,7 +266,25 @@ pub fn run_demo(o: &DemoOptions) -> Result<DemoOutput> {
 
 /// The no-argument command (with `--vehicle` / `--model-vehicle` only).
 pub fn command(a: &DemoArgs) -> Result<()> {
-    let o = DemoOptions::from_args(a)?;
+    let vehicle = match &a.vehicle {
+        Some(v) => vehicle_file::load_model(v).context("--vehicle")?,
+        None => ModelVehicle::Car(Vehicle::nominal()),
+    };
+    match vehicle {
+        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
+        ModelVehicle::Truck(v) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, v),
+        other => bail!(
+            "the demo runs the {} and {} models, not the {}",
+            PlantParams::NAME,
+            TruckParams::NAME,
+            other.model_name()
+        ),
+    }
+}
+
+/// The demo on the simulated vehicle `plant` of the model `M`.
+fn command_on<M: ScenarioModel<N>, const N: usize>(a: &DemoArgs, plant: M::Vehicle) -> Result<()> {
+    let o = DemoOptions::<M, N>::from_args(a, plant)?;
     println!("shimmy demo: damper off vs ASMC through the Hopf window (see `shimmy-sim --help` for the other commands)");
     let out = run_demo(&o)?;
     println!(

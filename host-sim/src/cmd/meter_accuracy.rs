@@ -1,6 +1,7 @@
 //! `shimmy-sim meter-accuracy`: the mode meter's accuracy on the simulated plant (issue 14).
 //!
-//! The nonlinear 10-state plant (Magic-Formula tyres) runs open loop at constant speed with
+//! The vehicle's nonlinear plant (the car's 10-state plant or the mining truck's, any
+//! [`SimModel`]; Magic-Formula tyres) runs open loop at constant speed with
 //! road noise and wheel imbalance, damper off (`Damper::None`) or on: the MR damper's
 //! energy-equivalent viscous coefficient at a constant coil current (`damper_equivalent`, the
 //! coefficient `shimmy-sim stability --damper-current-a` uses) as a viscous track-rod damper
@@ -8,7 +9,8 @@
 //! pre-yield, as a spring as much as a damper, and no viscous linearisation gives its "true"
 //! damping (at 0.5 A the meter reads the mode at 9.7 Hz where the c_eq model says 5.8 Hz); the
 //! viscous damper is exactly what the linear model assumes. The mode meter
-//! (`MarginEstimator<f32>`, default configuration, as the firmware runs it) sees the two
+//! (`MarginEstimator<f32>`, the vehicle's configuration as the firmware runs it: the default
+//! one slowed by the model's `meter_time_scale`, 2 on the ~3 Hz truck) sees the two
 //! measured wheel yaws; its slow estimate is sampled once per second after a warm-up. The
 //! truth is the shimmy mode of the linearised plant A(V) with the same damper
 //! (`ModeSelect::Shimmy`: chosen by its in-phase wheel-yaw shape).
@@ -26,16 +28,18 @@ use rayon::prelude::*;
 use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, Sample, WheelOrder,
 };
+use shimmy_core::model::LinearModel;
 use shimmy_core::params::kmh_to_mps;
 use shimmy_core::stability::{self, ModeSelect};
-use shimmy_core::vehicle::Vehicle;
 
 use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
-use crate::model::plant::{idx, Damper, Plant, Simulator, N_STATE};
+use crate::model::family::{FamilyVehicle, SimModel, SimPlant};
+use crate::model::plant::{Damper, Method};
+use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// Control period, s.
 const DT_S: f64 = 1e-3;
@@ -58,12 +62,14 @@ pub struct MeterAccuracyArgs {
     /// `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
-    /// Speeds of the damper-off arm, km/h (outside the plant's Hopf window), each 1 to 250.
-    #[arg(long, value_delimiter = ',', default_value = "10,20,90,105,120", value_parser = arg_range::speed_kmh())]
-    pub speeds_off_kmh: Vec<f64>,
-    /// Speeds of the damper-on arm, km/h, each 1 to 250.
-    #[arg(long, value_delimiter = ',', default_value = "10,40,60,90,120", value_parser = arg_range::speed_kmh())]
-    pub speeds_on_kmh: Vec<f64>,
+    /// Speeds of the damper-off arm, km/h (outside the plant's Hopf window), each 1 to 250
+    /// [default: 10,20,90,105,120 on the car, 8,12,16,20 on the mining truck].
+    #[arg(long, value_delimiter = ',', value_parser = arg_range::speed_kmh())]
+    pub speeds_off_kmh: Option<Vec<f64>>,
+    /// Speeds of the damper-on arm, km/h, each 1 to 250 [default: 10,40,60,90,120 on the car,
+    /// 10,30,50 on the mining truck].
+    #[arg(long, value_delimiter = ',', value_parser = arg_range::speed_kmh())]
+    pub speeds_on_kmh: Option<Vec<f64>>,
     /// Constant coil current of the damper-on arm, A: 0 to the vehicle's coil rating.
     #[arg(long, default_value_t = 0.5, value_parser = arg_range::current_a())]
     pub current_a: f64,
@@ -77,6 +83,11 @@ pub struct MeterAccuracyArgs {
     /// show the previous meters).
     #[arg(long, value_parser = clap::value_parser!(u8).range(2..=10))]
     pub slow_ar_order: Option<u8>,
+    /// The meter slowed by this factor instead of the model's own
+    /// (`LinearModel::meter_time_scale`: 1 for the car, 2 for the mining truck), 1 to 8: what
+    /// the model's factor was chosen by.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=8))]
+    pub meter_time_scale: Option<u16>,
     /// Output directory (meter_accuracy.md, meter_accuracy.csv).
     #[arg(long, default_value = "out/meter-accuracy")]
     pub out: PathBuf,
@@ -158,21 +169,22 @@ pub fn slow_t_eff_s(cfg: &EstimatorConfig) -> f64 {
 
 /// Runs one seed of one cell through a meter configured by `cfg`: `record_s` of per-second
 /// slow estimates after the warm-up. Road noise 5 N m per wheel (30 Hz corner, half common),
-/// imbalance 2 N m (phases 0, 1 rad).
-pub fn run_case(
-    vehicle: &Vehicle,
+/// imbalance 2 N m (phases 0, 1 rad), both for the car: times the model's
+/// [`SimModel::yaw_torque_scale`].
+pub fn run_case<M: SimModel<N>, const N: usize>(
+    vehicle: &FamilyVehicle<M>,
     cfg: EstimatorConfig,
     case: Case,
     seed: u64,
     record_s: f64,
 ) -> Result<CaseRun> {
-    let p = &vehicle.plant;
+    let p = &vehicle.model;
     let v = kmh_to_mps(case.speed_kmh);
     let c_eq = match case.current_a {
         Some(i) => {
             damper_equivalent(
                 p,
-                &vehicle.damper.spencer,
+                &vehicle.parts.damper.spencer,
                 i,
                 REF_WHEEL_YAW_AMPL_RAD.to_degrees(),
                 kmh_to_mps(5.0),
@@ -187,13 +199,14 @@ pub fn run_case(
     } else {
         Damper::None
     };
-    let mut sim = Simulator::new(Plant::new(*p, damper), [0.0; N_STATE]);
+    let mut sim = p.plant(damper, Method::default());
     let mut scen = Scenario::new(SpeedProfile::Constant(v));
-    scen.noise = Some(RoadNoise::new(5.0, 30.0, 0.5, seed));
+    let scale = p.yaw_torque_scale();
+    scen.noise = Some(RoadNoise::new(5.0 * scale, 30.0, 0.5, seed));
     scen.imbalance = Some(Imbalance {
-        amplitude_nm: [2.0; 2],
+        amplitude_nm: [2.0 * scale; 2],
         phase_rad: [0.0, 1.0],
-        radius_m: p.r,
+        radius_m: p.rolling_radius_m(),
     });
     let mut est = MarginEstimator::<f32>::new(cfg).context("meter config")?;
     let warm = warmup_s(&cfg);
@@ -206,14 +219,14 @@ pub fn run_case(
         let u = scen.inputs(t, DT_S);
         sim.advance(DT_S, &u)
             .with_context(|| format!("integration failed at t = {t}"))?;
-        let x = sim.state();
+        let [psi_l, psi_r] = sim.wheel_yaw_rad();
         let t1 = t + DT_S;
         est.push(&Sample {
-            psi_l_rad: x[idx::PSI_L] as f32,
-            psi_r_rad: x[idx::PSI_R] as f32,
+            psi_l_rad: psi_l as f32,
+            psi_r_rad: psi_r as f32,
             wheel: WheelOrder::Speed {
                 speed_mps: v as f32,
-                radius_m: p.r as f32,
+                radius_m: p.rolling_radius_m() as f32,
             },
             damper_cmd: 0.0,
         });
@@ -225,7 +238,7 @@ pub fn run_case(
             }
         }
     }
-    let m = stability::mode_at(p, v, c_eq, ModeSelect::Shimmy)?;
+    let m = stability::mode_at(&p.linear(), v, c_eq, ModeSelect::Shimmy)?;
     Ok(CaseRun {
         zeta_true: m.zeta,
         freq_true_hz: m.freq_hz,
@@ -280,8 +293,8 @@ pub fn cell_stats(cfg: &EstimatorConfig, case: Case, runs: &[CaseRun]) -> Option
 }
 
 /// Runs every cell with `seeds` seeds (in parallel) and returns the statistics in order.
-pub fn study(
-    vehicle: &Vehicle,
+pub fn study<M: SimModel<N>, const N: usize>(
+    vehicle: &FamilyVehicle<M>,
     cfg: EstimatorConfig,
     cases: &[Case],
     seeds: u32,
@@ -355,33 +368,57 @@ pub fn markdown(rows: &[CellStats]) -> String {
 pub fn command(a: &MeterAccuracyArgs) -> Result<()> {
     SEEDS.check("--seeds", f64::from(a.seeds))?;
     RECORD_S.check("--record-s", a.record_s)?;
-    for &v in a.speeds_off_kmh.iter().chain(&a.speeds_on_kmh) {
+    match vehicle_file::load_model(&a.vehicle)? {
+        ModelVehicle::Car(v) => command_on(a, &FamilyVehicle::car(v)),
+        ModelVehicle::Truck(v) => command_on(a, &v),
+        other => bail!(
+            "`meter-accuracy` runs the {} and {} models, not the {} (vehicle `{}`)",
+            shimmy_core::params::PlantParams::NAME,
+            shimmy_core::truck::TruckParams::NAME,
+            other.model_name(),
+            a.vehicle
+        ),
+    }
+}
+
+/// The command on a vehicle of the model `M`: its meter is the vehicle's (time-scaled to the
+/// model's mode, [`FamilyVehicle::pipeline_params`]).
+fn command_on<M: StudyModel<N>, const N: usize>(
+    a: &MeterAccuracyArgs,
+    vehicle: &FamilyVehicle<M>,
+) -> Result<()> {
+    let (off, on) = M::meter_speeds_kmh();
+    let speeds_off = a.speeds_off_kmh.clone().unwrap_or_else(|| off.to_vec());
+    let speeds_on = a.speeds_on_kmh.clone().unwrap_or_else(|| on.to_vec());
+    for &v in speeds_off.iter().chain(&speeds_on) {
         arg_range::SPEED_KMH.check("--speeds-off-kmh / --speeds-on-kmh", v)?;
     }
-    let vehicle = vehicle_file::load(&a.vehicle)?;
-    arg_range::check_current("--current-a", a.current_a, &vehicle)?;
-    let cases: Vec<Case> = a
-        .speeds_off_kmh
+    arg_range::check_current("--current-a", a.current_a, &vehicle.parts)?;
+    let cases: Vec<Case> = speeds_off
         .iter()
         .map(|&v| Case {
             current_a: None,
             speed_kmh: v,
         })
-        .chain(a.speeds_on_kmh.iter().map(|&v| Case {
+        .chain(speeds_on.iter().map(|&v| Case {
             current_a: Some(a.current_a),
             speed_kmh: v,
         }))
         .collect();
     let wall = std::time::Instant::now();
-    let mut cfg = EstimatorConfig::default();
+    let scale = a
+        .meter_time_scale
+        .unwrap_or_else(|| vehicle.model.linear().meter_time_scale());
+    let mut cfg = vehicle.parts.pipeline_params().estimator.time_scaled(scale);
     if let Some(order) = a.slow_ar_order {
         cfg.ar_order = order;
     }
-    let rows = study(&vehicle, cfg, &cases, a.seeds, a.record_s)?;
+    let rows = study(vehicle, cfg, &cases, a.seeds, a.record_s)?;
     let md = markdown(&rows);
     println!(
-        "mode meter (slow, AR({}), f32) on the simulated plant `{}`: {} seeds x {:.0} s per speed, {:.0} s wall",
+        "mode meter (slow, AR({}), f32, time scale {}) on the simulated plant `{}`: {} seeds x {:.0} s per speed, {:.0} s wall",
         cfg.ar_order,
+        scale,
         a.vehicle,
         a.seeds,
         a.record_s,

@@ -1,8 +1,10 @@
 //! `shimmy-sim mismatch`: does the warning survive a model that is wrong? (issue 14)
 //!
-//! The pipeline's model is the `--vehicle` (nominal by default); the simulated plant differs: each of C_a, sigma,
-//! K_d, e, t_p and the load -20 % and +20 % (the load scales F_z and C_a together: a constant
-//! cornering coefficient C_a / F_z), and the `hard` and `gentle` sets. Per case, open loop with
+//! The pipeline's model is the `--vehicle` (nominal by default); the simulated plant differs: on
+//! the car each of C_a, sigma, K_d, e, t_p and the load -20 % and +20 % (the load scales F_z and
+//! C_a together: a constant cornering coefficient C_a / F_z), and the `hard` and `gentle` sets;
+//! on the mining truck each of C_a/F_z, sigma, I_k, c_h, k_h, e, t_p and the payload
+//! (`StudyModel::single_variants`). Per case, open loop with
 //! the damper off, 5 N m road noise and 2 N m imbalance (`margin_run::run`):
 //!
 //! - ramps at 1, 2 and 4 km/h per s from 0.6 x the plant's true onset (30 s settle there) to
@@ -24,15 +26,18 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::params::{Param, ParamSet, PlantParams};
-use shimmy_core::vehicle::Vehicle;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::PlantParams;
+use shimmy_core::truck::TruckParams;
 
+use crate::model::family::FamilyVehicle;
+use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// Required warning lead at 1 km/h/s in the single-parameter cases, km/h.
 pub const MIN_LEAD_KMH: f64 = 3.0;
@@ -72,42 +77,33 @@ pub struct MismatchArgs {
     pub out: PathBuf,
 }
 
-/// One plant/model pair.
+/// One plant/model pair of the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct MismatchCase {
+pub struct MismatchCase<M = PlantParams> {
     /// Name, e.g. `C_a +20 %`.
     pub name: String,
     /// The simulated plant.
-    pub plant: PlantParams,
+    pub plant: M,
     /// The pipeline's model.
-    pub model: PlantParams,
+    pub model: M,
     /// A single parameter off by +-20 % (the lead target applies).
     pub single_parameter: bool,
 }
 
-/// The study's cases for the model vehicle `model`: the plant equal to the model, the
-/// single-parameter +-20 % plants, and the `hard` and `gentle` sets as plants; the pipeline's
-/// model is always `model`'s plant.
-pub fn cases(model: &Vehicle) -> Vec<MismatchCase> {
-    let nom = model.plant;
+/// The study's cases for the model `model`: the plant equal to the model, the
+/// single-parameter +-20 % plants ([`StudyModel::single_variants`]), and the model's other
+/// plants (the car: the `hard` and `gentle` sets); the pipeline's model is always `model`.
+pub fn cases<M: StudyModel<N>, const N: usize>(model: &M) -> Result<Vec<MismatchCase<M>>> {
+    let nom = *model;
     let mut v = vec![MismatchCase {
         name: "plant = model".into(),
         plant: nom,
         model: nom,
         single_parameter: false,
     }];
-    let singles: [(&str, &[Param]); 6] = [
-        ("C_a", &[Param::CA]),
-        ("sigma", &[Param::Sigma]),
-        ("K_d", &[Param::KD]),
-        ("e", &[Param::E]),
-        ("t_p", &[Param::TP]),
-        ("load (F_z, C_a)", &[Param::FZ, Param::CA]),
-    ];
-    for (name, params) in singles {
-        for pct in [-20.0, 20.0] {
-            let f = 1.0 + pct / 100.0;
-            let plant = params.iter().fold(nom, |p, &q| p.scaled(q, f));
+    let (lower, upper) = (nom.single_variants(0.8)?, nom.single_variants(1.2)?);
+    for (lo, hi) in lower.into_iter().zip(upper) {
+        for (pct, (name, plant)) in [(-20.0, lo), (20.0, hi)] {
             v.push(MismatchCase {
                 name: format!("{name} {pct:+.0} %"),
                 plant,
@@ -116,15 +112,15 @@ pub fn cases(model: &Vehicle) -> Vec<MismatchCase> {
             });
         }
     }
-    for set in [ParamSet::Hard, ParamSet::Gentle] {
+    for (name, plant) in M::other_plants() {
         v.push(MismatchCase {
-            name: format!("`{}` plant", set.name()),
-            plant: set.params(),
+            name,
+            plant,
             model: nom,
             single_parameter: false,
         });
     }
-    v
+    Ok(v)
 }
 
 /// One ramp through the onset.
@@ -142,9 +138,9 @@ pub struct RampResult {
 
 /// Results of one case.
 #[derive(Clone, Debug)]
-pub struct CaseResult {
+pub struct CaseResult<M = PlantParams> {
     /// The case.
-    pub case: MismatchCase,
+    pub case: MismatchCase<M>,
     /// True linear onset of the plant, km/h.
     pub plant_onset_kmh: Option<f64>,
     /// The model's onset, km/h.
@@ -161,7 +157,7 @@ pub struct CaseResult {
     pub data_only_false_per_h: f64,
 }
 
-impl CaseResult {
+impl<M> CaseResult<M> {
     /// Lead at the first (slowest) ramp rate, km/h.
     pub fn lead_kmh(&self) -> Option<f64> {
         self.ramps.first().and_then(|r| r.lead_kmh)
@@ -182,12 +178,12 @@ fn ramp_lead(r: &MarginRun) -> (Option<f64>, Option<f64>) {
 }
 
 /// One ramp through the onset (or to 3 km/h past the model's onset when the plant has none).
-pub fn ramp_scenario(
-    case: &MismatchCase,
+pub fn ramp_scenario<M: StudyModel<N>, const N: usize>(
+    case: &MismatchCase<M>,
     rate: f64,
     data_only: bool,
     onset_kmh: f64,
-) -> MarginScenario {
+) -> MarginScenario<M, N> {
     let start = (RAMP_START_FRACTION * onset_kmh).max(3.0);
     let mut sc = MarginScenario::ramp(case.plant, start, onset_kmh + 3.0, rate, SETTLE_S);
     sc.model = (!data_only).then_some(case.model);
@@ -195,12 +191,12 @@ pub fn ramp_scenario(
 }
 
 /// The constant drive at [`DRIVE_FRACTION`] of the onset.
-pub fn drive_scenario(
-    case: &MismatchCase,
+pub fn drive_scenario<M: StudyModel<N>, const N: usize>(
+    case: &MismatchCase<M>,
     data_only: bool,
     onset_kmh: f64,
     drive_s: f64,
-) -> MarginScenario {
+) -> MarginScenario<M, N> {
     let mut sc = MarginScenario::constant(case.plant, DRIVE_FRACTION * onset_kmh, drive_s);
     sc.model = (!data_only).then_some(case.model);
     sc
@@ -208,19 +204,19 @@ pub fn drive_scenario(
 
 /// Runs one case: every ramp, the data-only ramp and both constant drives. Without a plant
 /// onset the model's onset sets the speeds (every warning is then a false one).
-pub fn run_case(
-    case: &MismatchCase,
+pub fn run_case<M: StudyModel<N>, const N: usize>(
+    case: &MismatchCase<M>,
     rates: &[f64],
     drive_s: f64,
     pp: PipelineParams,
     seed: u64,
-) -> Result<CaseResult> {
-    let plant_on = onset_kmh(&case.plant);
-    let model_on = onset_kmh(&case.model);
+) -> Result<CaseResult<M>> {
+    let plant_on = onset_kmh(&case.plant.linear());
+    let model_on = onset_kmh(&case.model.linear());
     let reference = plant_on
         .or(model_on)
         .context("neither plant nor model has an onset")?;
-    let seeded = |mut sc: MarginScenario| {
+    let seeded = |mut sc: MarginScenario<M, N>| {
         sc.seed = seed;
         sc
     };
@@ -261,7 +257,7 @@ pub fn run_case(
 }
 
 /// The Markdown table.
-pub fn markdown(rows: &[CaseResult], rates: &[f64]) -> String {
+pub fn markdown<M>(rows: &[CaseResult<M>], rates: &[f64]) -> String {
     let mut s = String::from("| plant | true onset [km/h] |");
     for r in rates {
         s += &format!(" lead at {r} km/h/s [km/h / s] |");
@@ -292,7 +288,7 @@ pub fn markdown(rows: &[CaseResult], rates: &[f64]) -> String {
 
 /// Every case's figures and the provenance, as `summary.json` holds them (`null` where a
 /// figure is absent).
-pub fn summary_json(rows: &[CaseResult], provenance: &Provenance) -> serde_json::Value {
+pub fn summary_json<M>(rows: &[CaseResult<M>], provenance: &Provenance) -> serde_json::Value {
     let cases: Vec<serde_json::Value> = rows
         .iter()
         .map(|r| {
@@ -325,12 +321,31 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     for &r in &a.rates_kmh_per_s {
         RATE.check("--rates-kmh-per-s", r)?;
     }
-    let vehicle = vehicle_file::load(&a.vehicle)?;
+    let vehicle = vehicle_file::load_model(&a.vehicle)?;
     let provenance = Provenance::of_this_process()
-        .vehicle("model vehicle", &a.vehicle, &vehicle)?
+        .model_vehicle("model vehicle", &a.vehicle, &vehicle)?
         .seed("road noise", a.seed);
-    let all = cases(&vehicle);
-    let chosen: Vec<MismatchCase> = all
+    match vehicle {
+        ModelVehicle::Car(v) => command_on(a, &FamilyVehicle::car(v), provenance),
+        ModelVehicle::Truck(v) => command_on(a, &v, provenance),
+        other => bail!(
+            "`mismatch` runs the {} and {} models, not the {} (vehicle `{}`)",
+            PlantParams::NAME,
+            TruckParams::NAME,
+            other.model_name(),
+            a.vehicle
+        ),
+    }
+}
+
+/// The study on the model vehicle `vehicle` (its model and its pipeline's thresholds).
+fn command_on<M: StudyModel<N>, const N: usize>(
+    a: &MismatchArgs,
+    vehicle: &FamilyVehicle<M>,
+    provenance: Provenance,
+) -> Result<()> {
+    let all = cases(&vehicle.model)?;
+    let chosen: Vec<MismatchCase<M>> = all
         .iter()
         .filter(|c| a.only.as_ref().is_none_or(|o| c.name.contains(o.as_str())))
         .cloned()
@@ -342,7 +357,7 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     let wall = std::time::Instant::now();
     let pp = vehicle.pipeline_params();
     let bar = progress::bar(chosen.len(), "mismatch cases");
-    let rows: Vec<CaseResult> = chosen
+    let rows: Vec<CaseResult<M>> = chosen
         .par_iter()
         .map(|c| {
             let r = run_case(c, &a.rates_kmh_per_s, a.drive_s, pp, a.seed);
@@ -413,8 +428,8 @@ mod tests {
 
     #[test]
     fn summary_has_every_case_and_the_provenance() {
-        let nominal = Vehicle::nominal();
-        let case = cases(&nominal).remove(0);
+        let nominal = shimmy_core::vehicle::Vehicle::nominal();
+        let case = cases(&nominal.plant).unwrap().remove(0);
         let row = CaseResult {
             plant_onset_kmh: Some(30.0),
             model_onset_kmh: Some(29.0),

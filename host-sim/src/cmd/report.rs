@@ -6,17 +6,21 @@ use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file;
+use crate::sim::scenario_file::{self, AnyScenario, ScenarioModel};
 use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::PlantParams;
+use shimmy_core::truck::TruckParams;
 use std::path::{Path, PathBuf};
 
 /// Options of `shimmy-sim report`.
 #[derive(Args, Debug, Clone)]
 pub struct ReportArgs {
-    /// Scenario files (TOML); none = every `*.toml` in host-sim/scenarios/.
+    /// Scenario files (TOML), all on one vehicle model; none = every `*.toml` in
+    /// host-sim/scenarios/ (with a truck `--vehicle`: in host-sim/scenarios/truck/).
     pub scenarios: Vec<PathBuf>,
     /// Output folder.
     #[arg(long, default_value = "out/report")]
@@ -74,10 +78,13 @@ fn controllers(a: &ReportArgs) -> Result<Vec<&'static str>> {
         .collect()
 }
 
-/// Loads and validates every file (nothing runs if one is bad), expands the controller list.
-pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
+/// Loads and validates every file (nothing runs if one is bad), expands the controller list;
+/// every file is on the model `M` (none given: `M`'s shipped scenarios).
+pub fn plan<M: ScenarioModel<N>, const N: usize>(
+    a: &ReportArgs,
+) -> Result<Vec<(PathBuf, Vec<ScenarioSpec<M, N>>)>> {
     let files = if a.scenarios.is_empty() {
-        scenario_files(&standard_dir())?
+        scenario_files(&standard_dir().join(M::SCENARIO_DIR))?
     } else {
         a.scenarios.clone()
     };
@@ -85,7 +92,8 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
     files
         .into_iter()
         .map(|f| {
-            let spec = scenario_file::load(&f)?;
+            let spec = M::scenario(scenario_file::load_any(&f)?)
+                .with_context(|| format!("scenario file {}", f.display()))?;
             // One run per `--controllers` entry, else the file's own controller.
             let runs: Vec<Option<(&str, f64)>> = if controllers.is_empty() {
                 vec![None]
@@ -110,15 +118,15 @@ pub fn plan(a: &ReportArgs) -> Result<Vec<(PathBuf, Vec<ScenarioSpec>)>> {
 }
 
 /// Runs the plan (all runs in parallel) and builds the report.
-pub fn build(a: &ReportArgs) -> Result<Report> {
-    let plan = plan(a)?;
-    let jobs: Vec<(usize, &ScenarioSpec)> = plan
+pub fn build<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<Report<M, N>> {
+    let plan = plan::<M, N>(a)?;
+    let jobs: Vec<(usize, &ScenarioSpec<M, N>)> = plan
         .iter()
         .enumerate()
         .flat_map(|(i, (_, specs))| specs.iter().map(move |s| (i, s)))
         .collect();
     let bar = progress::bar(jobs.len(), "closed-loop runs");
-    let runs: Vec<(usize, ReportRun)> = jobs
+    let runs: Vec<(usize, ReportRun<M, N>)> = jobs
         .par_iter()
         .map(|&(i, spec)| {
             let (cfg, r) = scenario::run(spec)
@@ -128,7 +136,7 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
         })
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
-    let mut sections: Vec<Section> = plan
+    let mut sections: Vec<Section<M, N>> = plan
         .iter()
         .map(|(file, specs)| {
             let s = &specs[0];
@@ -162,14 +170,15 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     }
     for (role, spec) in [("vehicle", &a.vehicle), ("model vehicle", &a.model_vehicle)] {
         if let Some(v) = spec {
-            provenance = provenance.vehicle(role, v, &vehicle_file::load(v)?)?;
+            provenance = provenance.model_vehicle(role, v, &vehicle_file::load_model(v)?)?;
         }
     }
     Ok(Report {
         title: "shimmy-sim scenario report".into(),
         intro: format!(
-            "{} scenario file(s), closed loop at 1 kHz: nonlinear 4-DOF plant with the Spencer MR damper, simulated sensors, the firmware's `shimmy-core` controller and mode meter. Controllers: {}.",
+            "{} scenario file(s), closed loop at 1 kHz: nonlinear {} plant with the Spencer MR damper, simulated sensors, the firmware's `shimmy-core` controller and mode meter. Controllers: {}.",
             sections.len(),
+            <M::Linear as LinearModel<N>>::NAME,
             if a.controllers.is_empty() {
                 "each file's own".to_string()
             } else {
@@ -181,11 +190,44 @@ pub fn build(a: &ReportArgs) -> Result<Report> {
     })
 }
 
+/// The vehicle model of the report: `--vehicle`'s, else the first file's, else the car's.
+fn model_name(a: &ReportArgs) -> Result<&'static str> {
+    if let Some(v) = &a.vehicle {
+        return Ok(vehicle_file::load_model(v)
+            .context("--vehicle")?
+            .model_name());
+    }
+    Ok(match a.scenarios.first() {
+        Some(f) => match scenario_file::load_any(f)? {
+            AnyScenario::Car(_) => PlantParams::NAME,
+            AnyScenario::Truck(_) => TruckParams::NAME,
+        },
+        None => PlantParams::NAME,
+    })
+}
+
 /// The command.
 pub fn command(a: &ReportArgs) -> Result<()> {
-    let report = build(a)?;
+    match model_name(a)? {
+        m if m == TruckParams::NAME => {
+            command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a)
+        }
+        m if m == PlantParams::NAME => {
+            command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a)
+        }
+        m => bail!(
+            "`report` runs scenario files on the {} and {} models, not the {m}",
+            PlantParams::NAME,
+            TruckParams::NAME
+        ),
+    }
+}
+
+/// The command on scenarios of the model `M`.
+fn command_on<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<()> {
+    let report = build::<M, N>(a)?;
     let w = report::write(&a.out, &report)?;
-    let rows: Vec<(&str, &ReportRun)> = report
+    let rows: Vec<(&str, &ReportRun<M, N>)> = report
         .sections
         .iter()
         .flat_map(|s| s.runs.iter().map(move |r| (s.name.as_str(), r)))
@@ -315,7 +357,7 @@ mod tests {
             vehicle: None,
             model_vehicle: None,
         };
-        let plan = plan(&a).unwrap();
+        let plan = plan::<PlantParams, { shimmy_core::plant::N_STATES }>(&a).unwrap();
         assert!(plan.len() >= 7, "{} files", plan.len());
     }
 }

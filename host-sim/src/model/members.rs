@@ -316,10 +316,12 @@ pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> 
 /// Bingham model's) and the skyhook coefficient scaled by [`truck_damper_scale`]. The coil,
 /// its rating and the sensors are the car's (the larger damper has a larger piston and gap,
 /// not another coil); the ASMC's gains are angular accelerations of the wheel, its force comes
-/// from the nominal plant's 2 I_k / l_t; the thresholds are damping ratios, speed margins and
-/// times, model-independent.
+/// from the nominal plant's 2 I_k / l_t; the warning thresholds are the truck's own
+/// ([`TruckParams::warning_thresholds`]).
 pub fn truck_parts() -> Result<Vehicle> {
-    Ok(car_parts_with_damper_scaled(truck_damper_scale()?))
+    let mut v = car_parts_with_damper_scaled(truck_damper_scale()?);
+    v.thresholds = TruckParams::warning_thresholds();
+    Ok(v)
 }
 
 /// The car's reference shared sections with every force coefficient of the damper (the

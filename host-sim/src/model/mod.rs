@@ -14,5 +14,6 @@ pub mod integrator;
 pub mod members;
 pub mod plant;
 pub mod sensors;
+pub mod study;
 pub mod trailer_plant;
 pub mod truck_plant;

@@ -10,6 +10,7 @@
 //! `report.html` (plots embedded) and `summary.json` (the metrics for scripts), both with the
 //! report's [`Provenance`] ([`write_pages`], also used by `shimmy-sim analyze`).
 
+use crate::model::family::SimModel;
 use crate::out::file_name::sanitize;
 use crate::out::html;
 use crate::out::plots::{plot_margin, plot_runs};
@@ -19,25 +20,34 @@ use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use crate::sim::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
+use shimmy_core::params::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// One closed-loop run of a report.
+/// One closed-loop run of a report, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct ReportRun {
+pub struct ReportRun<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::plant::N_STATES },
+> {
     /// Legend and table label (usually the controller).
     pub label: String,
     /// Its configuration.
-    pub cfg: LoopConfig,
+    pub cfg: LoopConfig<M, N>,
     /// Its result.
     pub result: LoopResult,
     /// Its metrics.
     pub metrics: RunMetrics,
 }
 
-impl ReportRun {
+impl<M: SimModel<N>, const N: usize> ReportRun<M, N> {
     /// A run with its metrics (settling measured from `t_dist_s`).
-    pub fn new(label: &str, cfg: LoopConfig, result: LoopResult, t_dist_s: Option<f64>) -> Self {
+    pub fn new(
+        label: &str,
+        cfg: LoopConfig<M, N>,
+        result: LoopResult,
+        t_dist_s: Option<f64>,
+    ) -> Self {
         let metrics = result.metrics(&cfg, t_dist_s);
         ReportRun {
             label: label.to_string(),
@@ -50,26 +60,27 @@ impl ReportRun {
 
 /// One scenario with its runs.
 #[derive(Clone, Debug)]
-pub struct Section {
+pub struct Section<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }>
+{
     /// Scenario name (heading; file names use a sanitised form).
     pub name: String,
     /// Markdown text under the heading.
     pub description: String,
     /// The runs, one per controller.
-    pub runs: Vec<ReportRun>,
+    pub runs: Vec<ReportRun<M, N>>,
     /// Further plots already written into the output folder: (caption, file name).
     pub extra_plots: Vec<(String, String)>,
 }
 
 /// A whole report.
-#[derive(Clone, Debug, Default)]
-pub struct Report {
+#[derive(Clone, Debug)]
+pub struct Report<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }> {
     /// Page title.
     pub title: String,
     /// Markdown under the title.
     pub intro: String,
     /// The scenarios.
-    pub sections: Vec<Section>,
+    pub sections: Vec<Section<M, N>>,
     /// Where it comes from (`None`: this process's command line only).
     pub provenance: Option<Provenance>,
 }
@@ -119,7 +130,7 @@ pub fn write_pages(
 }
 
 /// The metrics of every run as JSON (for `summary.json`).
-fn metrics_json(report: &Report) -> Value {
+fn metrics_json<M: SimModel<N>, const N: usize>(report: &Report<M, N>) -> Value {
     let runs: Vec<Value> = report
         .sections
         .iter()
@@ -196,7 +207,7 @@ fn metric_cells(m: &RunMetrics) -> [String; 11] {
 }
 
 /// The Markdown metrics table of `rows` (scenario, run).
-pub fn metrics_table(rows: &[(&str, &ReportRun)]) -> String {
+pub fn metrics_table<M: SimModel<N>, const N: usize>(rows: &[(&str, &ReportRun<M, N>)]) -> String {
     let mut s = String::from("| scenario | controller |");
     for (h, u) in METRIC_COLUMNS {
         let _ = write!(s, " {h} [{u}] |");
@@ -214,7 +225,10 @@ pub fn metrics_table(rows: &[(&str, &ReportRun)]) -> String {
     s
 }
 
-fn write_metrics_csv(path: &Path, report: &Report) -> Result<()> {
+fn write_metrics_csv<M: SimModel<N>, const N: usize>(
+    path: &Path,
+    report: &Report<M, N>,
+) -> Result<()> {
     let mut s = format!(
         "scenario,controller,{},shimmies,sim_s,wall_s\n",
         RunMetrics::CSV_HEADER
@@ -237,7 +251,7 @@ fn write_metrics_csv(path: &Path, report: &Report) -> Result<()> {
 }
 
 /// Writes the report into `out` (created if missing).
-pub fn write(out: &Path, report: &Report) -> Result<Written> {
+pub fn write<M: SimModel<N>, const N: usize>(out: &Path, report: &Report<M, N>) -> Result<Written> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut plots = Vec::new();
     let mut csv = Vec::new();
@@ -245,7 +259,7 @@ pub fn write(out: &Path, report: &Report) -> Result<Written> {
     let _ = writeln!(md, "# {}\n", report.title);
     let _ = writeln!(md, "{}\n", report.intro.trim_end());
     let _ = writeln!(md, "## Metrics\n");
-    let rows: Vec<(&str, &ReportRun)> = report
+    let rows: Vec<(&str, &ReportRun<M, N>)> = report
         .sections
         .iter()
         .flat_map(|s| s.runs.iter().map(move |r| (s.name.as_str(), r)))
@@ -278,7 +292,7 @@ pub fn write(out: &Path, report: &Report) -> Result<Written> {
             "Wheel yaw, coil current and switching gain:\n\n![{} time histories]({time_png})\n",
             sec.name
         );
-        let with_meter: Vec<(&str, &LoopConfig, &LoopResult)> = sec
+        let with_meter: Vec<(&str, &LoopConfig<M, N>, &LoopResult)> = sec
             .runs
             .iter()
             .filter(|r| r.result.meter.iter().any(|m| m.valid))

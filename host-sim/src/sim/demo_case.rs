@@ -4,22 +4,25 @@
 //! benchmark and the golden test.
 
 use crate::model::disturbance::{Scenario, SpeedProfile};
+use crate::model::family::SimModel;
 use crate::model::plant::Method;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
 use shimmy_core::vehicle::Vehicle;
 
-/// The demo's case: the vehicles, the ramp scenario and the facts the report states.
+/// The demo's case on the vehicle model `M` (the car by default): the vehicles, the ramp
+/// scenario and the facts the report states.
 #[derive(Clone, Debug)]
-pub struct DemoCase {
+pub struct DemoCase<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }>
+{
     /// The simulated vehicle.
-    pub plant: Vehicle,
+    pub plant: M::Vehicle,
     /// The vehicle the firmware believes (its controller's and estimator's models, gains).
-    pub model: Vehicle,
+    pub model: M::Vehicle,
     /// Ramp 20 -> 120 km/h with road noise, imbalance and a pothole.
     pub scenario: Scenario,
     /// Hopf crossings of the plant without damper (1-50 m/s).
@@ -53,8 +56,18 @@ pub const ROAD_SEED: u64 = 7;
 /// The demo's case on the simulated vehicle `plant` with a firmware that believes `model`;
 /// the Hopf window and the pothole's speed are the simulated plant's.
 pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
-    let p = plant.plant;
-    let crossings: Vec<HopfCrossing> = hopf_crossings(&p, 0.0, 1.0, 50.0, 0.25, 1e-3)
+    demo_case_on::<PlantParams, { shimmy_core::plant::N_STATES }>(plant, model, ramp_s)
+}
+
+/// [`demo_case_for`] on a vehicle of any model of the family (the road's torques are the
+/// car's; the loop scales them to the model, [`SimModel::yaw_torque_scale`]).
+pub fn demo_case_on<M: SimModel<N>, const N: usize>(
+    plant: &M::Vehicle,
+    model: &M::Vehicle,
+    ramp_s: f64,
+) -> Result<DemoCase<M, N>> {
+    let p = M::family_vehicle(plant).model;
+    let crossings: Vec<HopfCrossing> = hopf_crossings(&p.linear(), 0.0, 1.0, 50.0, 0.25, 1e-3)
         .context("hopf_crossings")?
         .iter()
         .copied()
@@ -65,7 +78,7 @@ pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<De
         (Some(a), Some(b)) => Some((mps_to_kmh(a.speed_mps), mps_to_kmh(b.speed_mps))),
         _ => None,
     };
-    let v_fg = fastest_growth_speed(&p);
+    let v_fg = fastest_growth_speed(&p.linear());
     let (v0, v1) = (kmh_to_mps(20.0), kmh_to_mps(120.0));
     let mut sc = Scenario::new(SpeedProfile::Ramp {
         v0_mps: v0,
@@ -73,7 +86,7 @@ pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<De
         t0_s: 0.0,
         t1_s: ramp_s,
     });
-    let (n, im) = road(ROAD_SEED, &p);
+    let (n, im) = road(ROAD_SEED, p.rolling_radius_m());
     sc.noise = Some(n);
     sc.imbalance = Some(im);
     let t_hit = ramp_s * (v_fg - v0) / (v1 - v0);
@@ -91,13 +104,14 @@ pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<De
 }
 
 /// Runs one arm of the demo (the golden regression trace and the benchmark use the ASMC arm).
-pub fn run_arm(
-    case: &DemoCase,
+pub fn run_arm<M: SimModel<N>, const N: usize>(
+    case: &DemoCase<M, N>,
     arm: Arm,
     ramp_s: f64,
     record_every: usize,
-) -> Result<(LoopConfig, LoopResult)> {
-    let mut cfg = LoopConfig::new(&case.plant, arm, ramp_s).with_model(&case.model);
+) -> Result<(LoopConfig<M, N>, LoopResult)> {
+    let mut cfg = LoopConfig::for_vehicle(&M::family_vehicle(&case.plant), arm, ramp_s)
+        .with_model_vehicle(&M::family_vehicle(&case.model));
     cfg.record_every = record_every;
     cfg.method = case.method;
     let mut s = case.scenario.clone();

@@ -70,7 +70,7 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
-use crate::model::family::SimModel;
+use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::sensors::SensorConfig;
 use crate::model::trailer_plant::trailer_vehicle;
@@ -789,6 +789,65 @@ fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
             Ok(SpeedProfile::Piecewise(out))
         }
         _ => bail!("field `speed`: give exactly one of `constant_kmh`, `ramp` or `points`"),
+    }
+}
+
+/// A model whose scenarios scenario files give: how its scenario is taken out of an
+/// [`AnyScenario`] and where its shipped scenarios are (`shimmy-sim report` on a vehicle of the
+/// model).
+pub trait ScenarioModel<const N: usize>: crate::sim::vehicle_file::FileModel<N> {
+    /// The folder of the model's shipped scenarios below `host-sim/scenarios/` (`""`: that
+    /// folder itself).
+    const SCENARIO_DIR: &'static str;
+    /// The scenario `s` if it is on this model, else an error naming both models.
+    fn scenario(s: AnyScenario) -> Result<ScenarioSpec<Self, N>>;
+    /// `v` as a vehicle of any model (provenance).
+    fn any_vehicle(v: &Self::Vehicle) -> ModelVehicle;
+    /// `v` with its model's parameters replaced by `model` (the shared sections stay).
+    fn with_model(v: &Self::Vehicle, model: Self) -> Self::Vehicle;
+}
+
+/// The error of a scenario on another model than the run's.
+fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "scenario `{name}` is on a {is} vehicle, this run's vehicle is a {wanted} (one model per \
+         run: give scenario files of the {wanted}, e.g. host-sim/scenarios/truck/ for the truck)"
+    )
+}
+
+impl ScenarioModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    const SCENARIO_DIR: &'static str = "";
+    fn scenario(s: AnyScenario) -> Result<ScenarioSpec> {
+        match s {
+            AnyScenario::Car(s) => Ok(s),
+            AnyScenario::Truck(s) => {
+                Err(other_model(&s.name, TruckParams::NAME, PlantParams::NAME))
+            }
+        }
+    }
+    fn any_vehicle(v: &Vehicle) -> ModelVehicle {
+        ModelVehicle::Car(*v)
+    }
+    fn with_model(v: &Vehicle, model: Self) -> Vehicle {
+        Vehicle { plant: model, ..*v }
+    }
+}
+
+impl ScenarioModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    const SCENARIO_DIR: &'static str = "truck";
+    fn scenario(
+        s: AnyScenario,
+    ) -> Result<ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>> {
+        match s {
+            AnyScenario::Truck(s) => Ok(s),
+            AnyScenario::Car(s) => Err(other_model(&s.name, PlantParams::NAME, TruckParams::NAME)),
+        }
+    }
+    fn any_vehicle(v: &FamilyVehicle<TruckParams>) -> ModelVehicle {
+        ModelVehicle::Truck(*v)
+    }
+    fn with_model(v: &FamilyVehicle<TruckParams>, model: Self) -> FamilyVehicle<TruckParams> {
+        FamilyVehicle { model, ..*v }
     }
 }
 

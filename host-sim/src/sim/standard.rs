@@ -5,14 +5,18 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
+use crate::model::study::StudyModel;
 use crate::sim::scenario::ScenarioSpec;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, PlantParams};
+use crate::sim::scenario_file::ScenarioModel;
+use anyhow::Result;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{mode_at, ModeSelect};
 use shimmy_core::vehicle::Vehicle;
 
 /// The speed (m/s) where the no-damper shimmy mode grows fastest (largest real part of the
 /// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
-pub fn fastest_growth_speed(p: &PlantParams) -> f64 {
+pub fn fastest_growth_speed<L: LinearModel<N>, const N: usize>(p: &L) -> f64 {
     let mut best = (f64::NEG_INFINITY, 15.0);
     let mut v = 2.0;
     while v <= 45.0 {
@@ -40,14 +44,15 @@ pub const POTHOLE_NM: f64 = 1000.0;
 /// Initial yaw of the "large" kick, deg (breaks through the 0 A damper's friction).
 pub const BIG_KICK_DEG: f64 = 3.0;
 
-/// Road noise + imbalance used in the ramp and the demo.
-pub fn road(seed: u64, p: &PlantParams) -> (RoadNoise, Imbalance) {
+/// Road noise + imbalance used in the ramp and the demo, on wheels of rolling radius
+/// `radius_m`.
+pub fn road(seed: u64, radius_m: f64) -> (RoadNoise, Imbalance) {
     (
         RoadNoise::new(4.0, 20.0, 0.5, seed),
         Imbalance {
             amplitude_nm: [3.0, 3.0],
             phase_rad: [0.0, 1.0],
-            radius_m: p.r,
+            radius_m,
         },
     )
 }
@@ -55,8 +60,20 @@ pub fn road(seed: u64, p: &PlantParams) -> (RoadNoise, Imbalance) {
 /// The standard scenario set on `vehicle` (its plant, damper, sensors; the firmware believes
 /// it). `quick` shortens the runs (for tests).
 pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
+    standard_scenarios_on::<PlantParams, { shimmy_core::plant::N_STATES }>(vehicle, quick)
+        .expect("the car's variants are infallible")
+}
+
+/// [`standard_scenarios`] on a vehicle of any model of the family (the torques are the car's;
+/// the loop scales them to the model): without the slalom on a model that takes no driver
+/// torque, with the model's robustness plants ([`StudyModel::robustness_variants`]).
+pub fn standard_scenarios_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
+    vehicle: &M::Vehicle,
+    quick: bool,
+) -> Result<Vec<ScenarioSpec<M, N>>> {
     let nominal = vehicle;
-    let v_fg = fastest_growth_speed(&nominal.plant);
+    let model = M::family_vehicle(vehicle).model;
+    let v_fg = fastest_growth_speed(&model.linear());
     let dur = if quick { 4.0 } else { 10.0 };
     let mut out = vec![
         ScenarioSpec {
@@ -99,7 +116,7 @@ pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
             t0_s: 0.0,
             t1_s: t_ramp,
         });
-        let (n, im) = road(11, &nominal.plant);
+        let (n, im) = road(11, model.rolling_radius_m());
         s.noise = Some(n);
         s.imbalance = Some(im);
         // The pothole where the ramp passes the fastest-growth speed.
@@ -114,7 +131,7 @@ pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
         });
     }
     // Slalom with driver torque inside the window (road noise on).
-    {
+    if M::DRIVER_TORQUE {
         let mut s = Scenario::constant_speed(kmh_to_mps(60.0));
         s.driver = DriverTorque::Slalom {
             amplitude_nm: 4.0,
@@ -128,24 +145,12 @@ pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
             ..ScenarioSpec::new("slalom", nominal, s, dur)
         });
     }
-    // Robustness: the hard set (half K_d) and +-20 % on C_a, sigma, e (3 deg kick at the
-    // perturbed plant's fastest-growth speed; the firmware keeps believing `vehicle`).
-    let mut variants: Vec<(String, PlantParams)> =
-        vec![("hard".into(), nominal.plant.scaled(Param::KD, 0.5))];
-    for q in [Param::CA, Param::Sigma, Param::E] {
-        for f in [0.8, 1.2] {
-            variants.push((
-                format!("{}{:+.0}%", q.name(), (f - 1.0) * 100.0),
-                nominal.plant.scaled(q, f),
-            ));
-        }
-    }
-    for (name, p) in variants {
-        let v = fastest_growth_speed(&p);
-        let plant = Vehicle {
-            plant: p,
-            ..*vehicle
-        };
+    // Robustness: the car's hard set (half K_d) and +-20 % on C_a, sigma, e, or the model's
+    // analogues (3 deg kick at the perturbed plant's fastest-growth speed; the firmware keeps
+    // believing `vehicle`).
+    for (name, p) in model.robustness_variants()? {
+        let v = fastest_growth_speed(&p.linear());
+        let plant = M::with_model(vehicle, p);
         out.push(ScenarioSpec {
             description: format!(
                 "{BIG_KICK_DEG} deg disturbance, plant `{name}` at its fastest-growth speed {:.1} km/h",
@@ -157,5 +162,5 @@ pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
             ..ScenarioSpec::new(&format!("kick-3deg-{name}"), &plant, Scenario::constant_speed(v), dur)
         });
     }
-    out
+    Ok(out)
 }

@@ -536,7 +536,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 
 /// The commands that run a truck vehicle, for messages.
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
-     sweep, margin, faults and run";
+     sweep, margin, faults, run, meter-accuracy, mismatch, report, compare and the demo";
 
 /// The message of a car-only command given another model.
 fn car_only(what: &str, model: &str) -> String {

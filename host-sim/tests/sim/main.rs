@@ -15,5 +15,6 @@ mod meter_accuracy;
 mod plant_time_domain;
 mod reference_line;
 mod trailer_time_domain;
+mod truck_commands;
 mod truck_time_domain;
 mod vehicle;

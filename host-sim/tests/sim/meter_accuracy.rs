@@ -15,10 +15,11 @@ use shimmy_core::vehicle::Vehicle;
 use shimmy_sim::cmd::meter_accuracy::{
     cell_stats, run_case, Case, CaseRun, CellStats, COVERAGE_PCT, MAX_ABS_BIAS_B, MAX_SPREAD_B,
 };
+use shimmy_sim::model::family::FamilyVehicle;
 
 /// Pools the runs of several cells into one: errors in units of each cell's own b.
 fn pooled(cfg: EstimatorConfig, cases: &[Case], seeds: u64) -> (f64, f64, f64, Vec<CellStats>) {
-    let p = Vehicle::from_set(ParamSet::Nominal);
+    let p = FamilyVehicle::car(Vehicle::from_set(ParamSet::Nominal));
     let mut cells = Vec::new();
     let (mut sum, mut sum2, mut covered, mut n) = (0.0, 0.0, 0usize, 0usize);
     for &case in cases {

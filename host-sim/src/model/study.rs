@@ -1,0 +1,150 @@
+//! What the studies vary on a vehicle model and where they run it (`mismatch`, `compare`'s
+//! robustness variants, `meter-accuracy`'s speeds, the standard set's slalom): one trait,
+//! [`StudyModel`], on top of [`SimModel`], so that each study is written once for every model
+//! and only these model facts differ.
+
+use anyhow::Result;
+use shimmy_core::params::{Param, ParamSet, PlantParams};
+use shimmy_core::truck::TruckParams;
+
+use super::family::SimModel;
+
+/// A model of the family the studies run on.
+pub trait StudyModel<const N: usize>: SimModel<N> {
+    /// Whether a driver torque reaches the steering (the car's steering wheel; the truck's
+    /// hydrostatic steering: no): the standard set's slalom needs one.
+    const DRIVER_TORQUE: bool;
+
+    /// The single-parameter uncertainties of `mismatch`: a label and the plant with that
+    /// parameter (or group, e.g. the load) scaled by `factor`.
+    fn single_variants(&self, factor: f64) -> Result<Vec<(&'static str, Self)>>;
+
+    /// Further plants of `mismatch` next to the single-parameter ones (other named sets).
+    fn other_plants() -> Vec<(String, Self)>;
+
+    /// `compare`'s robustness plants (a 3 deg kick on each, the firmware believing `self`): a
+    /// name and the plant.
+    fn robustness_variants(&self) -> Result<Vec<(String, Self)>>;
+
+    /// `meter-accuracy`'s default speeds, km/h: the damper-off arm (outside the Hopf window of
+    /// the model's default vehicle) and the damper-on arm.
+    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]);
+}
+
+impl StudyModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    const DRIVER_TORQUE: bool = true;
+
+    fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
+        let groups: [(&str, &[Param]); 6] = [
+            ("C_a", &[Param::CA]),
+            ("sigma", &[Param::Sigma]),
+            ("K_d", &[Param::KD]),
+            ("e", &[Param::E]),
+            ("t_p", &[Param::TP]),
+            ("load (F_z, C_a)", &[Param::FZ, Param::CA]),
+        ];
+        Ok(groups
+            .iter()
+            .map(|&(name, ps)| (name, ps.iter().fold(*self, |p, &q| p.scaled(q, f))))
+            .collect())
+    }
+
+    fn other_plants() -> Vec<(String, Self)> {
+        [ParamSet::Hard, ParamSet::Gentle]
+            .iter()
+            .map(|s| (format!("`{}` plant", s.name()), s.params()))
+            .collect()
+    }
+
+    fn robustness_variants(&self) -> Result<Vec<(String, Self)>> {
+        let mut v = vec![("hard".to_string(), self.scaled(Param::KD, 0.5))];
+        for q in [Param::CA, Param::Sigma, Param::E] {
+            for f in [0.8, 1.2] {
+                v.push((
+                    format!("{}{:+.0}%", q.name(), (f - 1.0) * 100.0),
+                    self.scaled(q, f),
+                ));
+            }
+        }
+        Ok(v)
+    }
+
+    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]) {
+        (
+            &[10.0, 20.0, 90.0, 105.0, 120.0],
+            &[10.0, 40.0, 60.0, 90.0, 120.0],
+        )
+    }
+}
+
+/// `p` with the field `name` times `f`.
+fn scaled<M: SimModel<N>, const N: usize>(p: &M, name: &str, f: f64) -> Result<M> {
+    let x = p
+        .param(name)
+        .ok_or_else(|| anyhow::anyhow!("no parameter `{name}`"))?;
+    p.with_param(name, x * f)
+}
+
+impl StudyModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    const DRIVER_TORQUE: bool = false;
+
+    /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
+    /// truck-full`: I_k, C_a/F_z, c_h, k_h, t_p) and the car's tyre fields sigma and e; the
+    /// load is the payload (the cornering coefficient C_a/F_z stays, as for the car's load).
+    fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
+        [
+            ("C_a/F_z", "c_a_per_fz"),
+            ("sigma", "sigma"),
+            ("I_k", "i_k"),
+            ("c_h", "c_h"),
+            ("k_h", "k_h"),
+            ("e", "e"),
+            ("t_p", "t_p"),
+            ("payload", "payload_kg"),
+        ]
+        .iter()
+        .map(|&(label, name)| Ok((label, scaled(self, name, f)?)))
+        .collect()
+    }
+
+    fn other_plants() -> Vec<(String, Self)> {
+        Vec::new()
+    }
+
+    /// The analogue of the car's `hard` set (half the restoring stiffness K_d): half the
+    /// linkage's damping c_h, the truck's least-damped path; and +-20 % on C_a/F_z, sigma, e.
+    fn robustness_variants(&self) -> Result<Vec<(String, Self)>> {
+        let mut v = vec![("c_h-50%".to_string(), scaled(self, "c_h", 0.5)?)];
+        for name in ["c_a_per_fz", "sigma", "e"] {
+            for f in [0.8, 1.2] {
+                v.push((
+                    format!("{name}{:+.0}%", (f - 1.0) * 100.0),
+                    scaled(self, name, f)?,
+                ));
+            }
+        }
+        Ok(v)
+    }
+
+    /// Off: below the loaded truck's onset (23.51 km/h); on: through its window.
+    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]) {
+        (&[8.0, 12.0, 16.0, 20.0], &[10.0, 30.0, 50.0])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shimmy_core::truck::TruckSet;
+
+    /// The truck's variants differ from the base in exactly the named field.
+    #[test]
+    fn a_trucks_variant_changes_its_field_only() {
+        let t = TruckSet::Full.params();
+        let v = t.single_variants(1.2).unwrap();
+        let (_, ik) = v.iter().find(|(l, _)| *l == "I_k").unwrap();
+        assert!((ik.i_k / t.i_k - 1.2).abs() < 1e-12);
+        assert_eq!(ik.c_h, t.c_h);
+        assert_eq!(t.robustness_variants().unwrap().len(), 7);
+    }
+}
