@@ -6,7 +6,7 @@ use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file::{self, AnyScenario, ScenarioModel};
+use crate::sim::scenario_file::{self, ScenarioModel};
 use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -198,10 +198,7 @@ fn model_name(a: &ReportArgs) -> Result<&'static str> {
             .model_name());
     }
     Ok(match a.scenarios.first() {
-        Some(f) => match scenario_file::load_any(f)? {
-            AnyScenario::Car(_) => PlantParams::NAME,
-            AnyScenario::Truck(_) => TruckParams::NAME,
-        },
+        Some(f) => scenario_file::load_any(f)?.model_name(),
         None => PlantParams::NAME,
     })
 }

@@ -26,7 +26,7 @@ use shimmy_core::vehicle::Vehicle;
 use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
 use super::members::{
-    damper_scale_like_the_cars, car_parts_with_damper_scaled, reference_tyre_yaw_stiffness,
+    car_parts_with_damper_scaled, damper_scale_like_the_cars, reference_tyre_yaw_stiffness,
 };
 use super::plant::{Damper, Inputs, Method};
 

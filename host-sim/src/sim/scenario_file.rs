@@ -286,6 +286,15 @@ impl AnyScenario {
             AnyScenario::Trailer(s) => &s.name,
         }
     }
+
+    /// The name of the scenario's vehicle model.
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            AnyScenario::Car(_) => PlantParams::NAME,
+            AnyScenario::Truck(_) => TruckParams::NAME,
+            AnyScenario::Trailer(_) => TrailerParams::NAME,
+        }
+    }
 }
 
 /// The car's scenario, or an error naming the model of another.
@@ -820,9 +829,11 @@ impl ScenarioModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
     fn scenario(s: AnyScenario) -> Result<ScenarioSpec> {
         match s {
             AnyScenario::Car(s) => Ok(s),
-            AnyScenario::Truck(s) => {
-                Err(other_model(&s.name, TruckParams::NAME, PlantParams::NAME))
-            }
+            other => Err(other_model(
+                other.name(),
+                other.model_name(),
+                PlantParams::NAME,
+            )),
         }
     }
     fn any_vehicle(v: &Vehicle) -> ModelVehicle {
@@ -840,7 +851,11 @@ impl ScenarioModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     ) -> Result<ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>> {
         match s {
             AnyScenario::Truck(s) => Ok(s),
-            AnyScenario::Car(s) => Err(other_model(&s.name, PlantParams::NAME, TruckParams::NAME)),
+            other => Err(other_model(
+                other.name(),
+                other.model_name(),
+                TruckParams::NAME,
+            )),
         }
     }
     fn any_vehicle(v: &FamilyVehicle<TruckParams>) -> ModelVehicle {

@@ -74,7 +74,8 @@ mod wrong_model {
     use shimmy_sim::sim::margin_run::{onset_kmh, MarginRun};
 
     fn case(name: &str) -> MismatchCase {
-        cases(&shimmy_core::vehicle::Vehicle::nominal())
+        cases(&shimmy_core::vehicle::Vehicle::nominal().plant)
+            .expect("cases")
             .into_iter()
             .find(|c| c.name == name)
             .expect("case")
