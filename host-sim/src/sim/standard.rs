@@ -42,12 +42,17 @@ pub const BIG_KICK_DEG: f64 = 3.0;
 
 /// Road noise + imbalance used in the ramp and the demo.
 pub fn road(seed: u64, p: &PlantParams) -> (RoadNoise, Imbalance) {
+    road_at_radius(seed, p.r)
+}
+
+/// [`road`] for wheels of rolling radius `radius_m` (any model's).
+pub fn road_at_radius(seed: u64, radius_m: f64) -> (RoadNoise, Imbalance) {
     (
         RoadNoise::new(4.0, 20.0, 0.5, seed),
         Imbalance {
             amplitude_nm: [3.0, 3.0],
             phase_rad: [0.0, 1.0],
-            radius_m: p.r,
+            radius_m,
         },
     )
 }
