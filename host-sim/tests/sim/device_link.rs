@@ -413,6 +413,7 @@ fn the_tool_gets_and_sets_a_truck_vehicle_file() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = std::fs::read_to_string(&got).unwrap();
     assert!(text.contains("model = \"mining-truck-5dof\"") && text.contains("[truck]"));
+    assert!(text.contains("payload_kg = 227000.0"), "{text}");
     let set = dir.join("set.toml");
     std::fs::write(
         &set,
