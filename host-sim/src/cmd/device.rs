@@ -3,7 +3,6 @@
 //! record, and watches its live margin report; over a serial port (`--serial`), a TCP socket
 //! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
 
-use crate::model::family::FamilyVehicle;
 use crate::sim::device_link::{
     read_record, schema_mismatch, Client, DeviceInfo, EventLog, Port, SerialPort, TcpPort,
 };
@@ -159,14 +158,9 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         } => {
             let (now, fields) = match vehicle_file::load_model(file)? {
                 ModelVehicle::Car(v) => store_and_read_back(&mut c, &info, &v)?,
-                ModelVehicle::Truck(t) => store_and_read_back(
-                    &mut c,
-                    &info,
-                    &TruckVehicle {
-                        truck: t.model,
-                        parts: t.parts,
-                    },
-                )?,
+                ModelVehicle::Truck(t) => {
+                    store_and_read_back(&mut c, &info, &TruckVehicle::from(t))?
+                }
                 other => bail!(
                     "vehicle `{file}` is a {} model; a device stores a car ({}) or a truck ({}) \
                      vehicle",
@@ -220,10 +214,7 @@ fn record_toml(rec: &[u8]) -> Result<String> {
         .map(u32::from_le_bytes);
     if schema.and_then(record_model) == Some(TruckVehicle::MODEL) {
         let t: TruckVehicle = read_record(rec)?;
-        return Ok(vehicle_file::truck_to_toml(&FamilyVehicle {
-            model: t.truck,
-            parts: t.parts,
-        }));
+        return Ok(vehicle_file::truck_to_toml(&t.into()));
     }
     Ok(vehicle_file::to_toml(&read_record::<Vehicle>(rec)?))
 }

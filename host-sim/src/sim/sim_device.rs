@@ -169,6 +169,25 @@ impl<V: RecordVehicle, L: LinearModel<S>, const S: usize> LoopObserver for Drive
 /// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's value).
 pub use shimmy_firmware::link::STANDSTILL_MPS;
 
+impl From<FamilyVehicle<TruckParams>> for TruckVehicle {
+    /// The truck as the record stores it (the same two parts).
+    fn from(v: FamilyVehicle<TruckParams>) -> Self {
+        TruckVehicle {
+            truck: v.model,
+            parts: v.parts,
+        }
+    }
+}
+
+impl From<TruckVehicle> for FamilyVehicle<TruckParams> {
+    fn from(v: TruckVehicle) -> Self {
+        FamilyVehicle {
+            model: v.truck,
+            parts: v.parts,
+        }
+    }
+}
+
 /// Top speed of the truck's drive, km/h: through the full truck's onset (23.5 km/h) towards the
 /// truck class's top speed (~64 km/h, `docs/mining-truck.md`); the car's ramp goes to 120.
 pub const TRUCK_TOP_KMH: f64 = 50.0;
@@ -195,10 +214,7 @@ pub fn drive_truck(vehicle: &FamilyVehicle<TruckParams>) -> Result<SimBackend<Tr
     scenario.imbalance = Some(imbalance);
     drive_model(
         vehicle,
-        TruckVehicle {
-            truck: vehicle.model,
-            parts: vehicle.parts,
-        },
+        TruckVehicle::from(*vehicle),
         vehicle.pipeline_params(),
         scenario,
         TRUCK_TOP_KMH,

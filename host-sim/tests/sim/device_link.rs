@@ -12,7 +12,6 @@ use shimmy_core::vehicle::{
 };
 use shimmy_link::frame::{self, MAX_FRAME};
 use shimmy_link::wire::{Header, LogEntry, PROTOCOL_HEADER};
-use shimmy_sim::model::family::FamilyVehicle;
 use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
 use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
@@ -315,10 +314,7 @@ fn a_truck_vehicle_round_trips_through_a_truck_device() {
     let ModelVehicle::Truck(t) = vehicle_file::parse_model(text).unwrap() else {
         panic!("a truck file")
     };
-    let sent = TruckVehicle {
-        truck: t.model,
-        parts: t.parts,
-    };
+    let sent = TruckVehicle::from(t);
     assert!(c.set_config(&sent).unwrap(), "in effect at standstill");
     let (rec, pending) = c.config_record().unwrap();
     assert!(!pending);
@@ -328,10 +324,7 @@ fn a_truck_vehicle_round_trips_through_a_truck_device() {
     assert_eq!(back.parts.controller.slew_a_per_s, 123.0);
     assert_eq!(*c.port_mut().backend().stored_vehicle(), back);
     // ... and through the vehicle file writer and reader, bit for bit.
-    let file = vehicle_file::truck_to_toml(&FamilyVehicle {
-        model: back.truck,
-        parts: back.parts,
-    });
+    let file = vehicle_file::truck_to_toml(&back.into());
     let ModelVehicle::Truck(reread) = vehicle_file::parse_model(&file).unwrap() else {
         panic!("the written file reads as a truck: {file}")
     };
@@ -383,10 +376,7 @@ fn before_truck() -> TruckVehicle {
     let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {
         panic!("truck-full is a truck")
     };
-    TruckVehicle {
-        truck: t.model,
-        parts: t.parts,
-    }
+    TruckVehicle::from(t)
 }
 
 /// The command line with a truck device: `config get` writes a truck vehicle file, `config
