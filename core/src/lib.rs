@@ -11,6 +11,7 @@
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
 //! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
 //! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
+//!   [`truck_vehicle`]: the truck as a stored vehicle record (its fields and the shared ones);
 //! - [`trailer`]: trailer sway (2 DOF on a laterally compliant hitch) as a model of the family;
 //! - [`dual_axle`]: the dual-front-axle heavy truck (8 DOF, two steered axles linked by a
 //!   mid-shift transmission) as a model of the family;
@@ -71,6 +72,11 @@ pub mod truck;
     )
 )]
 pub mod supervisor;
+#[cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+pub mod truck_vehicle;
 #[cfg_attr(
     not(test),
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)

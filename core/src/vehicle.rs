@@ -1209,23 +1209,113 @@ pub static FIELDS: &[Field] = &[
 /// Bytes before the values in an encoded vehicle record: the schema id (u32) and the number of
 /// values (u16), little-endian.
 pub const RECORD_HEADER_BYTES: usize = 6;
-/// The most values a record may carry (the field table has fewer; a test checks it).
-pub const RECORD_MAX_FIELDS: usize = 96;
+/// The most values a record of any model may carry (the truck's 98, its 32 model fields and the
+/// 66 shared ones, is the largest; a test checks every model).
+pub const RECORD_MAX_FIELDS: usize = 98;
 /// The largest encoded record, bytes: what a flash store or a link frame must make room for.
 pub const RECORD_MAX_BYTES: usize = RECORD_HEADER_BYTES + 8 * RECORD_MAX_FIELDS;
 
-/// The schema id of [`FIELDS`]: FNV-1a over every field's section, name and unit, in table
-/// order. A record written under another table (a field added, removed, renamed, moved or
-/// given another unit) carries another id and is refused instead of misread.
+/// A vehicle of one model as a stored record holds it: its values in a fixed order, each with a
+/// section, name and unit, under the model's schema id. The car ([`Vehicle`]) and the mining
+/// truck ([`crate::truck_vehicle::TruckVehicle`]: its model's parameters and the shared
+/// sections) are records of their own model; one encoder and decoder ([`encode_record`],
+/// [`decode_record`]) serves every model, so a record of one model is refused by another
+/// model's decoder (another schema id) instead of misread.
+pub trait RecordVehicle: Copy {
+    /// The vehicle model's name (`LinearModel::NAME`: `car-4dof`, `mining-truck-5dof`).
+    const MODEL: &'static str;
+    /// Number of values in the record.
+    fn values() -> usize;
+    /// `(section, name, unit)` of value `i`, for `i < values()`.
+    fn describe(i: usize) -> Option<(&'static str, &'static str, &'static str)>;
+    /// The vehicle a decoded record starts from (every recorded value is written over it).
+    fn record_base() -> Self;
+    /// Value `i` (`&mut`: the car's table has one accessor per field; the encoder copies once).
+    fn read_value(&mut self, i: usize) -> f64;
+    /// Checks value `i` against its field's range, then writes it.
+    fn write_value(&mut self, i: usize, x: f64) -> Result<(), VehicleError>;
+    /// Every value in range and every rule between them; the first offender.
+    fn check_all(&self) -> Result<(), VehicleError>;
+}
+
+impl RecordVehicle for Vehicle {
+    const MODEL: &'static str =
+        <PlantParams as crate::model::LinearModel<{ crate::plant::N_STATES }>>::NAME;
+
+    fn values() -> usize {
+        FIELDS.len()
+    }
+
+    fn describe(i: usize) -> Option<(&'static str, &'static str, &'static str)> {
+        FIELDS.get(i).map(|f| (f.section, f.name, f.unit))
+    }
+
+    fn record_base() -> Self {
+        Vehicle::nominal()
+    }
+
+    fn read_value(&mut self, i: usize) -> f64 {
+        FIELDS.get(i).map_or(f64::NAN, |f| (f.slot)(self).read())
+    }
+
+    fn write_value(&mut self, i: usize, x: f64) -> Result<(), VehicleError> {
+        // The decoder writes only `i < values()`; nothing lies beyond.
+        if let Some(field) = FIELDS.get(i) {
+            field.check(x)?;
+            (field.slot)(self).write(x);
+        }
+        Ok(())
+    }
+
+    fn check_all(&self) -> Result<(), VehicleError> {
+        self.validate()
+    }
+}
+
+/// The schema id of [`FIELDS`] (the car's record): FNV-1a over every field's section, name and
+/// unit, in table order. A record written under another table (a field added, removed, renamed,
+/// moved or given another unit, or another model's) carries another id and is refused instead
+/// of misread.
 pub fn record_schema() -> u32 {
-    schema_of(FIELDS)
+    record_schema_of::<Vehicle>()
+}
+
+/// The schema id of the model `V`'s record (FNV-1a over each value's section, name and unit).
+pub fn record_schema_of<V: RecordVehicle>() -> u32 {
+    schema_of((0..V::values()).filter_map(V::describe))
+}
+
+/// The model whose record carries the schema id `schema`, if it is one of the family's stored
+/// models (for messages: a host names what it got, the device keeps only its own decoder).
+pub fn record_model(schema: u32) -> Option<&'static str> {
+    use crate::truck_vehicle::TruckVehicle;
+    [
+        (record_schema_of::<Vehicle>(), Vehicle::MODEL),
+        (record_schema_of::<TruckVehicle>(), TruckVehicle::MODEL),
+    ]
+    .into_iter()
+    .find(|(s, _)| *s == schema)
+    .map(|(_, m)| m)
+}
+
+/// The value `value` of the field `section.name` of the model `V`'s record checked against
+/// that field's range (the error names the field and its range); `None` when `V`'s record has
+/// no such field. For messages about a record the other side refused.
+pub fn check_record_value<V: RecordVehicle>(
+    section: &str,
+    name: &str,
+    value: f64,
+) -> Option<Result<(), VehicleError>> {
+    let i = (0..V::values())
+        .find(|&i| V::describe(i).is_some_and(|(s, n, _)| s == section && n == name))?;
+    Some(V::record_base().write_value(i, value))
 }
 
 /// FNV-1a over the section, name and unit of each of `fields`, in order.
-fn schema_of<'a>(fields: impl IntoIterator<Item = &'a Field>) -> u32 {
+fn schema_of<'a>(fields: impl IntoIterator<Item = (&'a str, &'a str, &'a str)>) -> u32 {
     let mut hash: u32 = 0x811c_9dc5;
-    for field in fields {
-        for part in [field.section, field.name, field.unit] {
+    for (section, name, unit) in fields {
+        for part in [section, name, unit] {
             // A separator after each part, so "ab"+"c" and "a"+"bc" differ.
             for byte in part.bytes().chain(core::iter::once(0)) {
                 hash = (hash ^ u32::from(byte)).wrapping_mul(0x0100_0193);
@@ -1254,12 +1344,12 @@ pub enum RecordError {
         /// Bytes present.
         have: usize,
     },
-    /// Written under another field table.
+    /// Written under another field table (another model's, or another version's).
     #[error("vehicle record schema {found:#010x} is not this firmware's {expected:#010x}")]
     Schema {
-        /// The record's schema id.
+        /// The record's schema id ([`record_model`] names its model, if known).
         found: u32,
-        /// [`record_schema`].
+        /// The decoder's model's ([`record_schema_of`]).
         expected: u32,
     },
     /// A value fails its field's range or a rule between fields.
@@ -1267,64 +1357,73 @@ pub enum RecordError {
     Invalid(VehicleError),
 }
 
+/// Writes `v` as a record of its model (header, then every value as a little-endian f64) into
+/// `out`; returns the number of bytes written. The record is the form a flash store keeps and a
+/// host link carries; [`decode_record`] reads it.
+pub fn encode_record<V: RecordVehicle>(v: &V, out: &mut [u8]) -> Result<usize, RecordError> {
+    let count = V::values();
+    let need = RECORD_HEADER_BYTES + 8 * count;
+    let have = out.len();
+    let Some(record) = out.get_mut(..need) else {
+        return Err(RecordError::BufferTooSmall { need, have });
+    };
+    let (header, values) = record.split_at_mut(RECORD_HEADER_BYTES);
+    let (schema, n) = header.split_at_mut(4);
+    schema.copy_from_slice(&record_schema_of::<V>().to_le_bytes());
+    // values() <= RECORD_MAX_FIELDS (a test), so the count fits a u16.
+    n.copy_from_slice(&(count as u16).to_le_bytes());
+    let mut v = *v;
+    for (i, chunk) in values.as_chunks_mut::<8>().0.iter_mut().enumerate() {
+        chunk.copy_from_slice(&v.read_value(i).to_le_bytes());
+    }
+    Ok(need)
+}
+
+/// Reads a record written by [`encode_record`] for the model `V`: the schema must be `V`'s,
+/// the length must match, and the vehicle must pass `V`'s checks. Nothing is half-applied: an
+/// error returns no vehicle at all.
+pub fn decode_record<V: RecordVehicle>(bytes: &[u8]) -> Result<V, RecordError> {
+    let have = bytes.len();
+    let header_error = RecordError::Length {
+        need: RECORD_HEADER_BYTES,
+        have,
+    };
+    let (Some(schema), Some(count)) = (bytes.get(..4), bytes.get(4..RECORD_HEADER_BYTES)) else {
+        return Err(header_error);
+    };
+    let (Ok(schema), Ok(count)) = (<[u8; 4]>::try_from(schema), <[u8; 2]>::try_from(count)) else {
+        return Err(header_error);
+    };
+    let found = u32::from_le_bytes(schema);
+    let expected = record_schema_of::<V>();
+    if found != expected {
+        return Err(RecordError::Schema { found, expected });
+    }
+    let count = usize::from(u16::from_le_bytes(count));
+    let need = RECORD_HEADER_BYTES + 8 * count;
+    if count != V::values() || have != need {
+        return Err(RecordError::Length { need, have });
+    }
+    let mut vehicle = V::record_base();
+    let values = bytes.get(RECORD_HEADER_BYTES..).unwrap_or_default();
+    for (i, chunk) in values.as_chunks::<8>().0.iter().enumerate() {
+        vehicle
+            .write_value(i, f64::from_le_bytes(*chunk))
+            .map_err(RecordError::Invalid)?;
+    }
+    vehicle.check_all().map_err(RecordError::Invalid)?;
+    Ok(vehicle)
+}
+
 impl Vehicle {
-    /// Writes the vehicle as a record (header, then every field of [`FIELDS`] as a
-    /// little-endian f64) into `out`; returns the number of bytes written. The record is the
-    /// form a flash store keeps and a host link carries; [`Vehicle::decode_record`] reads it.
+    /// Writes the vehicle as a car record ([`encode_record`]).
     pub fn encode_record(&self, out: &mut [u8]) -> Result<usize, RecordError> {
-        let need = RECORD_HEADER_BYTES + 8 * FIELDS.len();
-        let have = out.len();
-        let Some(record) = out.get_mut(..need) else {
-            return Err(RecordError::BufferTooSmall { need, have });
-        };
-        let (header, values) = record.split_at_mut(RECORD_HEADER_BYTES);
-        let (schema, count) = header.split_at_mut(4);
-        schema.copy_from_slice(&record_schema().to_le_bytes());
-        // FIELDS.len() <= RECORD_MAX_FIELDS (a test), so the count fits a u16.
-        count.copy_from_slice(&(FIELDS.len() as u16).to_le_bytes());
-        let mut v = *self;
-        for (chunk, field) in values.as_chunks_mut::<8>().0.iter_mut().zip(FIELDS) {
-            chunk.copy_from_slice(&(field.slot)(&mut v).read().to_le_bytes());
-        }
-        Ok(need)
+        encode_record(self, out)
     }
 
-    /// Reads a record written by [`Vehicle::encode_record`]: the schema must be this table's,
-    /// the length must match, and the vehicle must pass [`Vehicle::validate`]. Nothing is
-    /// half-applied: an error returns no vehicle at all.
+    /// Reads a car record ([`decode_record`]): the schema must be [`record_schema`].
     pub fn decode_record(bytes: &[u8]) -> Result<Vehicle, RecordError> {
-        let have = bytes.len();
-        let header_error = RecordError::Length {
-            need: RECORD_HEADER_BYTES,
-            have,
-        };
-        let (Some(schema), Some(count)) = (bytes.get(..4), bytes.get(4..RECORD_HEADER_BYTES))
-        else {
-            return Err(header_error);
-        };
-        let (Ok(schema), Ok(count)) = (<[u8; 4]>::try_from(schema), <[u8; 2]>::try_from(count))
-        else {
-            return Err(header_error);
-        };
-        let found = u32::from_le_bytes(schema);
-        let expected = record_schema();
-        if found != expected {
-            return Err(RecordError::Schema { found, expected });
-        }
-        let count = usize::from(u16::from_le_bytes(count));
-        let need = RECORD_HEADER_BYTES + 8 * count;
-        if count != FIELDS.len() || have != need {
-            return Err(RecordError::Length { need, have });
-        }
-        let mut vehicle = Vehicle::nominal();
-        let values = bytes.get(RECORD_HEADER_BYTES..).unwrap_or_default();
-        for (chunk, field) in values.as_chunks::<8>().0.iter().zip(FIELDS) {
-            let value = f64::from_le_bytes(*chunk);
-            field.check(value).map_err(RecordError::Invalid)?;
-            (field.slot)(&mut vehicle).write(value);
-        }
-        vehicle.validate().map_err(RecordError::Invalid)?;
-        Ok(vehicle)
+        decode_record(bytes)
     }
 }
 
@@ -1515,7 +1614,7 @@ mod tests {
     #[test]
     fn the_schema_id_changes_with_the_table() {
         // The same table with its first two fields swapped.
-        let mut table: Vec<&Field> = FIELDS.iter().collect();
+        let mut table: Vec<_> = FIELDS.iter().map(|f| (f.section, f.name, f.unit)).collect();
         assert_eq!(schema_of(table.iter().copied()), record_schema());
         table.swap(0, 1);
         assert_ne!(schema_of(table.iter().copied()), record_schema());

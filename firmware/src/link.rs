@@ -159,6 +159,7 @@ impl LinkState {
 }
 
 impl Backend for LinkState {
+    type Vehicle = Vehicle;
     fn identity(&self) -> Identity<'_> {
         Identity {
             firmware: crate::BANNER,

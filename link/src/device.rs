@@ -8,7 +8,7 @@
 //! unless it is a valid request (a configuration is decoded and validated whole by the core
 //! before [`Backend::store_vehicle`] sees it).
 
-use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
+use shimmy_core::vehicle::{decode_record, encode_record, RecordVehicle, RECORD_MAX_BYTES};
 
 use crate::frame::{self, Fed, FrameError, FrameReader, MAX_FRAME};
 use crate::wire::{
@@ -20,13 +20,16 @@ use crate::PROTOCOL_VERSION;
 /// The state behind the link. The firmware implements it on its RAM-held (later flash-held)
 /// configuration and log; the simulator on its closed loop.
 pub trait Backend {
+    /// The vehicle it stores, as a record of its model (the car's `Vehicle`, the truck's
+    /// `TruckVehicle`): a record of another model is refused for its schema id.
+    type Vehicle: RecordVehicle;
     /// Firmware name and version, core version, log capacity.
     fn identity(&self) -> Identity<'_>;
     /// The stored vehicle configuration and whether it is still waiting for standstill.
-    fn vehicle(&self) -> (&Vehicle, bool);
+    fn vehicle(&self) -> (&Self::Vehicle, bool);
     /// Stores a validated vehicle; returns whether it took effect at once (standstill) or waits
     /// for the next standstill.
-    fn store_vehicle(&mut self, v: Vehicle) -> bool;
+    fn store_vehicle(&mut self, v: Self::Vehicle) -> bool;
     /// Entries in the log and entries dropped because it was full.
     fn log_len(&self) -> (u16, u32);
     /// Log entry `i` (0 = oldest kept).
@@ -150,7 +153,7 @@ impl Device {
                 Request::Identify => Response::Identity(backend.identity()),
                 Request::GetConfig => {
                     let (v, pending) = backend.vehicle();
-                    match v.encode_record(record) {
+                    match encode_record(v, record) {
                         Ok(n) => Response::Config {
                             record: record.get(..n).unwrap_or_default(),
                             pending,
@@ -158,7 +161,7 @@ impl Device {
                         Err(e) => Response::Error(ErrorReply::Config(ConfigProblem::of(e))),
                     }
                 }
-                Request::SetConfig(bytes) => match Vehicle::decode_record(bytes) {
+                Request::SetConfig(bytes) => match decode_record::<B::Vehicle>(bytes) {
                     Ok(v) => Response::ConfigStored {
                         in_effect: backend.store_vehicle(v),
                     },
@@ -211,6 +214,7 @@ mod tests {
     use crate::frame::{decode, encode, message};
     use crate::log::{EventSink, RamLog};
     use crate::wire::{FaultEvent, PROTOCOL_HEADER};
+    use shimmy_core::vehicle::Vehicle;
     use std::vec::Vec;
 
     struct TestBackend {
@@ -240,6 +244,7 @@ mod tests {
     }
 
     impl Backend for TestBackend {
+        type Vehicle = Vehicle;
         fn identity(&self) -> Identity<'_> {
             Identity {
                 firmware: "test",

@@ -86,7 +86,7 @@ pub fn step() -> Result<String, String> {
 fn session(tool: &Path, addr: &str, dir: &Path) -> Result<String, String> {
     // 1. Identity: the first connection starts the guest; the tool waits for the ready frame.
     let info = device(tool, addr, &["--ready-s", "10", "info"])?;
-    if !info.contains("shimmy-firmware") || !info.contains("same as this tool's") {
+    if !info.contains("shimmy-firmware") || !info.contains("car-4dof vehicles") {
         return Err(format!("unexpected identity:\n{info}"));
     }
     // Later connections find the device running (no ready frame): ask for the identity.

@@ -3,13 +3,19 @@
 //! record, and watches its live margin report; over a serial port (`--serial`), a TCP socket
 //! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
 
-use crate::sim::device_link::{Client, DeviceInfo, EventLog, Port, SerialPort, TcpPort};
+use crate::sim::device_link::{
+    read_record, schema_mismatch, Client, DeviceInfo, EventLog, Port, SerialPort, TcpPort,
+};
 use crate::sim::sim_device::SimDevice;
-use crate::sim::vehicle_file;
+use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-use shimmy_core::vehicle::FIELDS;
+use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::vehicle::{
+    encode_record, record_model, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES,
+    RECORD_MAX_BYTES,
+};
 use shimmy_link::wire::{fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -30,7 +36,8 @@ pub struct DeviceArgs {
     /// The in-process simulated device (a simulated drive with a shimmy warning and a fault).
     #[arg(long)]
     pub sim: bool,
-    /// The simulated device's vehicle (with `--sim`): a set name or a vehicle file.
+    /// The simulated device's vehicle (with `--sim`): a set name or a vehicle file, of the car
+    /// or the mining truck (the device then stores that model's vehicle records).
     #[arg(long, default_value = "nominal", requires = "sim")]
     pub vehicle: String,
     /// How long to wait for the device's ready frame before asking for its identity, s.
@@ -102,9 +109,20 @@ pub fn command(a: &DeviceArgs) -> Result<()> {
             &a.action,
         ),
         (None, None, true) => {
-            let v = vehicle_file::load(&a.vehicle)?;
+            let v = vehicle_file::load_model(&a.vehicle)?;
             eprintln!("simulating the drive of the in-process device ...");
-            run(SimDevice::new(&v)?, ready, &a.action)
+            match v {
+                ModelVehicle::Car(v) => run(SimDevice::new(&v)?, ready, &a.action),
+                ModelVehicle::Truck(t) => run(SimDevice::truck(&t)?, ready, &a.action),
+                other => bail!(
+                    "--vehicle {}: a {} model; the in-process device stores a car ({}) or a \
+                     truck ({}) vehicle",
+                    a.vehicle,
+                    other.model_name(),
+                    Vehicle::MODEL,
+                    TruckVehicle::MODEL
+                ),
+            }
         }
         _ => bail!("say where the device is: --serial PORT, --tcp HOST:PORT or --sim"),
     }
@@ -117,8 +135,8 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         DeviceAction::Config {
             action: ConfigAction::Get { out },
         } => {
-            let (v, pending) = c.config()?;
-            let text = vehicle_file::to_toml(&v);
+            let (rec, pending) = c.config_record()?;
+            let text = record_toml(&rec)?;
             match out {
                 Some(p) => {
                     std::fs::write(p, &text).with_context(|| format!("writing {}", p.display()))?;
@@ -138,24 +156,21 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         DeviceAction::Config {
             action: ConfigAction::Set { file },
         } => {
-            let v = vehicle_file::load(file)?;
-            let now = c.set_config(&v)?;
-            // Read back: the device must hold exactly what was sent.
-            let (back, _) = c.config()?;
-            let differ: Vec<String> = FIELDS
-                .iter()
-                .filter(|f| back.get(f).to_bits() != v.get(f).to_bits())
-                .map(|f| format!("{}.{}", f.section, f.name))
-                .collect();
-            if !differ.is_empty() {
-                bail!(
-                    "the device reads back another configuration (fields {})",
-                    differ.join(", ")
-                );
-            }
+            let (now, fields) = match vehicle_file::load_model(file)? {
+                ModelVehicle::Car(v) => store_and_read_back(&mut c, &info, &v)?,
+                ModelVehicle::Truck(t) => {
+                    store_and_read_back(&mut c, &info, &TruckVehicle::from(t))?
+                }
+                other => bail!(
+                    "vehicle `{file}` is a {} model; a device stores a car ({}) or a truck ({}) \
+                     vehicle",
+                    other.model_name(),
+                    Vehicle::MODEL,
+                    TruckVehicle::MODEL
+                ),
+            };
             println!(
-                "configuration stored and read back identical ({} fields); {}",
-                FIELDS.len(),
+                "configuration stored and read back identical ({fields} fields); {}",
                 if now {
                     "in effect (vehicle at standstill)"
                 } else {
@@ -191,6 +206,62 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
     Ok(())
 }
 
+/// The device's record as a vehicle file of its model (the car's or the truck's).
+fn record_toml(rec: &[u8]) -> Result<String> {
+    let schema = rec
+        .get(..4)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .map(u32::from_le_bytes);
+    if schema.and_then(record_model) == Some(TruckVehicle::MODEL) {
+        let t: TruckVehicle = read_record(rec)?;
+        return Ok(vehicle_file::truck_to_toml(&t.into()));
+    }
+    Ok(vehicle_file::to_toml(&read_record::<Vehicle>(rec)?))
+}
+
+/// Stores `v` on the device and reads it back: it must hold exactly the record sent. Refused
+/// here, before anything is sent, when the device stores another model's vehicles. Returns
+/// whether it is in effect and the number of fields.
+fn store_and_read_back<P: Port, V: RecordVehicle>(
+    c: &mut Client<P>,
+    info: &DeviceInfo,
+    v: &V,
+) -> Result<(bool, usize)> {
+    let schema = record_schema_of::<V>();
+    if info.vehicle_schema != schema {
+        bail!(
+            "nothing sent: {}",
+            schema_mismatch(schema, info.vehicle_schema, "the device's")
+        );
+    }
+    let now = c.set_config(v)?;
+    let mut sent = [0u8; RECORD_MAX_BYTES];
+    let n = encode_record(v, &mut sent)?;
+    let (back, _) = c.config_record()?;
+    let values = |r: &[u8]| -> Vec<[u8; 8]> {
+        r.get(RECORD_HEADER_BYTES..)
+            .unwrap_or_default()
+            .as_chunks::<8>()
+            .0
+            .to_vec()
+    };
+    let (a, b) = (values(&sent[..n]), values(&back));
+    let differ: Vec<String> = (0..V::values().max(b.len()))
+        .filter(|&i| a.get(i) != b.get(i))
+        .map(|i| match V::describe(i) {
+            Some((section, name, _)) => format!("{section}.{name}"),
+            None => format!("value {i}"),
+        })
+        .collect();
+    if !differ.is_empty() || back.get(..RECORD_HEADER_BYTES) != sent.get(..RECORD_HEADER_BYTES) {
+        bail!(
+            "the device reads back another configuration (fields {})",
+            differ.join(", ")
+        );
+    }
+    Ok((now, V::values()))
+}
+
 fn info_text(i: &DeviceInfo) -> String {
     format!(
         "firmware        {}\ncore            {}\nprotocol        {}\nvehicle schema  {:#010x}{}\nlog capacity    {} entries\n",
@@ -198,10 +269,9 @@ fn info_text(i: &DeviceInfo) -> String {
         i.core,
         i.protocol,
         i.vehicle_schema,
-        if i.vehicle_schema == shimmy_core::vehicle::record_schema() {
-            " (same as this tool's)"
-        } else {
-            " (NOT this tool's: configurations cannot be exchanged)"
+        match record_model(i.vehicle_schema) {
+            Some(m) => format!(" ({m} vehicles, a record this tool reads)"),
+            None => " (NOT one this tool reads: configurations cannot be exchanged)".into(),
         },
         i.log_capacity
     )

@@ -9,7 +9,11 @@
 //! with a delimiter, which ends whatever partial frame a cut link left in the device's reader.
 
 use anyhow::{anyhow, bail, Context, Result};
-use shimmy_core::vehicle::{find_field, Problem, Vehicle, VehicleError, RECORD_MAX_BYTES};
+use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::vehicle::{
+    check_record_value, decode_record, encode_record, record_model, RecordError, RecordVehicle,
+    Vehicle, RECORD_MAX_BYTES,
+};
 use shimmy_link::frame::{self, Fed, FrameReader, DELIMITER, MAX_FRAME};
 use shimmy_link::wire::{
     ConfigProblem, ErrorReply, FaultReport, Header, LogEntry, Request, Response, Telemetry,
@@ -189,29 +193,52 @@ fn config_problem(p: &ConfigProblem<'_>) -> String {
         ConfigProblem::Length { need, have } => {
             format!("vehicle record is {have} bytes, the device expects {need}")
         }
-        ConfigProblem::Schema { found, expected } => format!(
-            "vehicle record schema {found:#010x} is not the device's {expected:#010x} (another field table)"
-        ),
+        ConfigProblem::Schema { found, expected } => {
+            schema_mismatch(found, expected, "the device's")
+        }
         ConfigProblem::Field {
             section,
             name,
             value,
             rule,
-        } => match find_field(section, name) {
-            Some(f) if rule.is_empty() => match f.check(value) {
-                Err(e) => e.to_string(),
-                Ok(()) => format!("field `{section}.{name}` = {value}: refused"),
-            },
-            Some(f) => VehicleError {
-                section: f.section,
-                name: f.name,
-                value,
-                problem: Problem::Inconsistent("see below"),
+        } => {
+            // The field with its range, from the table of the model whose record has it.
+            let checked = check_record_value::<Vehicle>(section, name, value)
+                .or_else(|| check_record_value::<TruckVehicle>(section, name, value));
+            match checked {
+                Some(Err(e)) if rule.is_empty() => e.to_string(),
+                Some(_) if rule.is_empty() => {
+                    format!("field `{section}.{name}` = {value}: refused")
+                }
+                _ => format!("field `{section}.{name}` = {value}: {rule}"),
             }
-            .to_string()
-            .replace("see below", rule),
-            None => format!("field `{section}.{name}` = {value}: {rule}"),
-        },
+        }
+    }
+}
+
+/// A record from the device read as a vehicle of the model `V`, or an error that names the
+/// record's model when it is another.
+pub fn read_record<V: RecordVehicle>(rec: &[u8]) -> Result<V> {
+    decode_record::<V>(rec).map_err(|e| match e {
+        RecordError::Schema { found, expected } => anyhow!(
+            "the device's vehicle record is not readable: {}",
+            schema_mismatch(found, expected, "this")
+        ),
+        e => anyhow!("the device's vehicle record is not readable: {e}"),
+    })
+}
+
+/// A record of schema `found` where `whose` (the device's, this) decoder reads `expected`: the
+/// models by name when the ids are the family's, else the ids.
+pub fn schema_mismatch(found: u32, expected: u32, whose: &str) -> String {
+    match (record_model(found), record_model(expected)) {
+        (Some(f), Some(e)) => format!(
+            "the vehicle record is a {f} vehicle (schema {found:#010x}), {whose} side stores {e} \
+             vehicles (schema {expected:#010x}): another vehicle model"
+        ),
+        _ => format!(
+            "vehicle record schema {found:#010x} is not {whose} {expected:#010x} (another field table)"
+        ),
     }
 }
 
@@ -374,25 +401,29 @@ impl<P: Port> Client<P> {
         }
     }
 
-    /// The stored vehicle (validated by the core on this side too) and whether it still waits
-    /// for standstill.
+    /// The stored car vehicle (validated by the core on this side too) and whether it still
+    /// waits for standstill.
     pub fn config(&mut self) -> Result<(Vehicle, bool)> {
+        let (rec, pending) = self.config_record()?;
+        Ok((read_record(&rec)?, pending))
+    }
+
+    /// The stored vehicle's record as the device sent it (its schema id names its model,
+    /// [`record_model`]) and whether it still waits for standstill.
+    pub fn config_record(&mut self) -> Result<(Vec<u8>, bool)> {
         match self.call(&Request::GetConfig)? {
-            Reply::Config(rec, pending) => {
-                let v = Vehicle::decode_record(&rec)
-                    .map_err(|e| anyhow!("the device's vehicle record is not readable: {e}"))?;
-                Ok((v, pending))
-            }
+            Reply::Config(rec, pending) => Ok((rec, pending)),
             _ => bail!("the device answered the configuration request with something else"),
         }
     }
 
-    /// Stores `v` on the device (validated by the core here first); returns whether it is in
-    /// effect already (standstill) or waits for the next standstill.
-    pub fn set_config(&mut self, v: &Vehicle) -> Result<bool> {
-        v.validate()?;
+    /// Stores `v`, a vehicle of its model, on the device (validated by the core here first);
+    /// returns whether it is in effect already (standstill) or waits for the next standstill.
+    /// A device that stores another model refuses it (its schema id).
+    pub fn set_config<V: RecordVehicle>(&mut self, v: &V) -> Result<bool> {
+        v.check_all()?;
         let mut rec = [0u8; RECORD_MAX_BYTES];
-        let n = v.encode_record(&mut rec)?;
+        let n = encode_record(v, &mut rec)?;
         self.set_record(&rec[..n])
     }
 

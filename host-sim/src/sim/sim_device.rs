@@ -9,19 +9,24 @@
 //! log; the 10 Hz margin reports become the telemetry stream. After the drive the vehicle stands
 //! still, so a configuration write takes effect at once.
 
-use crate::model::disturbance::SpeedProfile;
+use crate::model::disturbance::{Scenario, SpeedProfile};
+use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopObserver, SampleRecord};
-use crate::sim::demo_case::demo_case_for;
+use crate::sim::demo_case::{demo_case_for, ROAD_SEED};
 use crate::sim::device_link::Port;
+use crate::sim::standard::road;
 use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
 use shimmy_core::estimator::meter::mode_meter::WheelOrder;
-use shimmy_core::estimator::pipeline::ShimmyPipeline;
+use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
+use shimmy_core::model::LinearModel;
 use shimmy_core::params::kmh_to_mps;
 use shimmy_core::supervisor::faults::FaultSet;
 use shimmy_core::supervisor::safe_controller::SafeController;
-use shimmy_core::vehicle::{record_schema, Vehicle};
+use shimmy_core::truck::TruckParams;
+use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::vehicle::{record_schema_of, RecordVehicle, Vehicle};
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
 use shimmy_link::log::{RamLog, Recorder};
 use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry};
@@ -39,9 +44,10 @@ pub const DRIVE_S: (f64, f64, f64) = (16.0, 4.0, 1.0);
 /// The injected parity fault on the left encoder: start and end, s.
 pub const PARITY_FAULT_S: (f64, f64) = (6.0, 6.5);
 
-/// What the simulated device serves.
-pub struct SimBackend {
-    vehicle: Vehicle,
+/// What the simulated device serves: a vehicle of the model `V` (the car by default, or the
+/// truck: `TruckVehicle`) and what its drive logged.
+pub struct SimBackend<V: RecordVehicle = Vehicle> {
+    vehicle: V,
     pending: bool,
     standstill: bool,
     log: RamLog<SIM_LOG_CAPACITY>,
@@ -50,20 +56,21 @@ pub struct SimBackend {
     telemetry: VecDeque<Telemetry>,
 }
 
-impl Backend for SimBackend {
+impl<V: RecordVehicle> Backend for SimBackend<V> {
+    type Vehicle = V;
     fn identity(&self) -> Identity<'_> {
         Identity {
             firmware: concat!("shimmy-sim in-process device ", env!("CARGO_PKG_VERSION")),
             core: shimmy_core::VERSION,
             protocol: PROTOCOL_VERSION,
-            vehicle_schema: record_schema(),
+            vehicle_schema: record_schema_of::<V>(),
             log_capacity: SIM_LOG_CAPACITY as u16,
         }
     }
-    fn vehicle(&self) -> (&Vehicle, bool) {
+    fn vehicle(&self) -> (&V, bool) {
         (&self.vehicle, self.pending)
     }
-    fn store_vehicle(&mut self, v: Vehicle) -> bool {
+    fn store_vehicle(&mut self, v: V) -> bool {
         self.vehicle = v;
         self.pending = !self.standstill;
         self.standstill
@@ -85,17 +92,18 @@ impl Backend for SimBackend {
     }
 }
 
-/// The loop observer of the drive: pipeline, recorder, fault bits, telemetry.
-struct DriveObserver {
-    pipe: Box<ShimmyPipeline<16>>,
+/// The loop observer of the drive: pipeline (on the model `L` with `S` states), recorder, fault
+/// bits, telemetry.
+struct DriveObserver<V: RecordVehicle, L: LinearModel<S>, const S: usize> {
+    pipe: Box<ShimmyPipeline<16, L, S>>,
     recorder: Recorder,
-    backend: SimBackend,
+    backend: SimBackend<V>,
     radius_m: f32,
     last_v: Option<(f64, f32)>,
     updates: u32,
 }
 
-impl LoopObserver for DriveObserver {
+impl<V: RecordVehicle, L: LinearModel<S>, const S: usize> LoopObserver for DriveObserver<V, L, S> {
     fn on_sample(&mut self, r: &SampleRecord<'_>) {
         let Some(o) = r.safe else {
             return;
@@ -161,18 +169,76 @@ impl LoopObserver for DriveObserver {
 /// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's value).
 pub use shimmy_firmware::link::STANDSTILL_MPS;
 
+impl From<FamilyVehicle<TruckParams>> for TruckVehicle {
+    /// The truck as the record stores it (the same two parts).
+    fn from(v: FamilyVehicle<TruckParams>) -> Self {
+        TruckVehicle {
+            truck: v.model,
+            parts: v.parts,
+        }
+    }
+}
+
+impl From<TruckVehicle> for FamilyVehicle<TruckParams> {
+    fn from(v: TruckVehicle) -> Self {
+        FamilyVehicle {
+            model: v.truck,
+            parts: v.parts,
+        }
+    }
+}
+
+/// Top speed of the truck's drive, km/h: through the full truck's onset (23.5 km/h) towards the
+/// truck class's top speed (~64 km/h, `docs/mining-truck.md`); the car's ramp goes to 120.
+pub const TRUCK_TOP_KMH: f64 = 50.0;
+
 /// Runs the drive with `vehicle` as plant and firmware model; returns the filled backend.
 pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
+    let case = demo_case_for(vehicle, vehicle, DRIVE_S.0)?;
+    drive_model(
+        &FamilyVehicle::car(*vehicle),
+        *vehicle,
+        vehicle.pipeline_params(),
+        case.scenario,
+        120.0,
+    )
+}
+
+/// The drive of the truck `vehicle` (plant and firmware model): road noise and the wheels'
+/// imbalance as the demo's (scaled to the truck's tyre by the closed loop) on a ramp to
+/// [`TRUCK_TOP_KMH`]; the device stores it as a truck record.
+pub fn drive_truck(vehicle: &FamilyVehicle<TruckParams>) -> Result<SimBackend<TruckVehicle>> {
+    let mut scenario = Scenario::new(SpeedProfile::Piecewise(vec![]));
+    let (noise, imbalance) = road(ROAD_SEED, vehicle.model.rolling_radius_m());
+    scenario.noise = Some(noise);
+    scenario.imbalance = Some(imbalance);
+    drive_model(
+        vehicle,
+        TruckVehicle::from(*vehicle),
+        vehicle.pipeline_params(),
+        scenario,
+        TRUCK_TOP_KMH,
+    )
+}
+
+/// The drive of any model: `scenario`'s disturbances on the ramp 20 km/h -> `top_kmh`, braking
+/// to a stop; `stored` is what the device then serves, `params` the margin pipeline's.
+fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
+    vehicle: &FamilyVehicle<M>,
+    stored: V,
+    params: PipelineParams,
+    mut scenario: Scenario,
+    top_kmh: f64,
+) -> Result<SimBackend<V>> {
     let (ramp_s, brake_s, stand_s) = DRIVE_S;
-    let mut case = demo_case_for(vehicle, vehicle, ramp_s)?;
-    let top = kmh_to_mps(120.0);
-    case.scenario.speed = SpeedProfile::Piecewise(vec![
+    let top = kmh_to_mps(top_kmh);
+    scenario.speed = SpeedProfile::Piecewise(vec![
         (0.0, kmh_to_mps(20.0)),
         (ramp_s, top),
         (ramp_s + brake_s, 0.0),
     ]);
     let duration = ramp_s + brake_s + stand_s;
-    let mut cfg = LoopConfig::new(vehicle, Arm::Mr(ControllerKind::Asmc), duration);
+    let mut cfg = LoopConfig::for_vehicle(vehicle, Arm::Mr(ControllerKind::Asmc), duration);
     cfg.estimator = false;
     cfg.record_every = 1000;
     cfg.faults = vec![FaultSpec {
@@ -180,13 +246,13 @@ pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
         start_s: PARITY_FAULT_S.0,
         end_s: Some(PARITY_FAULT_S.1),
     }];
-    let pipe = ShimmyPipeline::new(vehicle.plant, vehicle.pipeline_params())
+    let pipe = ShimmyPipeline::<16, M::Linear, N>::for_model(vehicle.model.linear(), params)
         .context("pipeline configuration")?;
     let mut obs = DriveObserver {
         pipe: Box::new(pipe),
         recorder: Recorder::new(),
         backend: SimBackend {
-            vehicle: *vehicle,
+            vehicle: stored,
             pending: false,
             standstill: false,
             log: RamLog::new(),
@@ -202,19 +268,19 @@ pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
             },
             telemetry: VecDeque::new(),
         },
-        radius_m: vehicle.plant.r as f32,
+        radius_m: vehicle.model.rolling_radius_m() as f32,
         last_v: None,
         updates: 0,
     };
-    closed_loop::run(&cfg, &mut case.scenario, Some(&mut obs)).context("the simulated drive")?;
+    closed_loop::run(&cfg, &mut scenario, Some(&mut obs)).context("the simulated drive")?;
     Ok(obs.backend)
 }
 
 /// The simulated device as a [`Port`]: bytes written go to the handler, its replies (and the
 /// stream, while on) come back on reads.
-pub struct SimDevice {
+pub struct SimDevice<V: RecordVehicle = Vehicle> {
     device: Device,
-    backend: SimBackend,
+    backend: SimBackend<V>,
     out: VecDeque<u8>,
     reply: Box<[u8; REPLY_BYTES]>,
     /// When the stream last sent a report (the drive's reports go out at their 10 Hz).
@@ -224,7 +290,20 @@ pub struct SimDevice {
 impl SimDevice {
     /// Runs the drive with `vehicle` and announces the device (the ready frame).
     pub fn new(vehicle: &Vehicle) -> Result<Self> {
-        let backend = drive(vehicle)?;
+        SimDevice::with_backend(drive(vehicle)?)
+    }
+}
+
+impl SimDevice<TruckVehicle> {
+    /// A device that stores a truck vehicle, after the drive of `vehicle`.
+    pub fn truck(vehicle: &FamilyVehicle<TruckParams>) -> Result<Self> {
+        SimDevice::with_backend(drive_truck(vehicle)?)
+    }
+}
+
+impl<V: RecordVehicle> SimDevice<V> {
+    /// The device serving `backend`, announced (the ready frame).
+    fn with_backend(backend: SimBackend<V>) -> Result<Self> {
         let mut d = SimDevice {
             device: Device::new(),
             backend,
@@ -238,14 +317,14 @@ impl SimDevice {
     }
 
     /// The state behind the link (tests check that bad input leaves it alone).
-    pub fn backend(&self) -> &SimBackend {
+    pub fn backend(&self) -> &SimBackend<V> {
         &self.backend
     }
 }
 
-impl SimBackend {
+impl<V: RecordVehicle> SimBackend<V> {
     /// The stored vehicle.
-    pub fn stored_vehicle(&self) -> &Vehicle {
+    pub fn stored_vehicle(&self) -> &V {
         &self.vehicle
     }
     /// Entries in the log (kept, dropped), without the open episode.
@@ -254,7 +333,7 @@ impl SimBackend {
     }
 }
 
-impl Port for SimDevice {
+impl<V: RecordVehicle> Port for SimDevice<V> {
     fn send(&mut self, bytes: &[u8]) -> Result<()> {
         for &b in bytes {
             if let Some(n) = self.device.on_byte(b, &mut self.backend, &mut self.reply) {

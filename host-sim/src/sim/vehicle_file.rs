@@ -555,13 +555,35 @@ pub fn to_toml(v: &Vehicle) -> String {
     let mut out = String::from(
         "# Vehicle file (docs/vehicle-file.md): every field, as read from a device or written by shimmy-sim.\nbase = \"nominal\"\n",
     );
-    for section in SECTIONS {
+    push_sections(&mut out, v, &SECTIONS);
+    out
+}
+
+/// Writes the truck `v` as a vehicle file (`model = "mining-truck-5dof"`): every `[truck]`
+/// field and every field of the shared sections, so that [`parse_model`] reads back the same
+/// vehicle bit for bit.
+pub fn truck_to_toml(v: &FamilyVehicle<TruckParams>) -> String {
+    let mut out = format!(
+        "# Vehicle file (docs/mining-truck.md): every field, as read from a device or written by shimmy-sim.\nmodel = \"{}\"\nbase = \"{}\"\n\n[truck]\n",
+        TruckParams::NAME,
+        TruckSet::Full.name()
+    );
+    for f in &TRUCK_FIELDS {
+        let x = v.model.get(f.name).unwrap_or(f64::NAN);
+        out.push_str(&format!("{} = {x:?}  # {}\n", f.name, f.unit));
+    }
+    push_sections(&mut out, &v.parts, &SECTIONS[1..]);
+    out
+}
+
+/// Every field of `sections` of `v`, a TOML table each.
+fn push_sections(out: &mut String, v: &Vehicle, sections: &[&str]) {
+    for section in sections {
         out.push_str(&format!("\n[{section}]\n"));
-        for f in FIELDS.iter().filter(|f| f.section == section) {
+        for f in FIELDS.iter().filter(|f| f.section == *section) {
             out.push_str(&format!("{} = {:?}  # {}\n", f.name, v.get(f), f.unit));
         }
     }
-    out
 }
 
 /// Sets the field `section.name` of `v` to `x` (checked against its range), with an error

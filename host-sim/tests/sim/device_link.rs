@@ -5,12 +5,16 @@
 //! configuration and log as they were.
 
 use anyhow::Result;
-use shimmy_core::vehicle::{find_field, Vehicle, FIELDS, RECORD_HEADER_BYTES, RECORD_MAX_BYTES};
+use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::vehicle::{
+    encode_record, find_field, record_schema_of, RecordVehicle, Vehicle, FIELDS,
+    RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
+};
 use shimmy_link::frame::{self, MAX_FRAME};
 use shimmy_link::wire::{Header, LogEntry, PROTOCOL_HEADER};
-use shimmy_sim::sim::device_link::{Client, Port};
+use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
-use shimmy_sim::sim::vehicle_file;
+use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
 use std::time::Duration;
 
 /// What can go wrong on the way to the device.
@@ -278,6 +282,167 @@ fn the_tool_refuses_a_bad_vehicle_file_and_a_missing_device() {
     assert!(!o.status.success());
     assert!(
         err.contains("--serial PORT, --tcp HOST:PORT or --sim"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A simulated device that stores trucks, behind a healthy line.
+fn truck_device() -> (
+    Client<shimmy_sim::sim::sim_device::SimDevice<TruckVehicle>>,
+    DeviceInfo,
+) {
+    let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {
+        panic!("truck-full is a truck")
+    };
+    let dev = SimDevice::truck(&t).expect("simulated truck drive");
+    let (mut c, info) = Client::connect(dev, Duration::from_millis(100)).expect("ready frame");
+    c.set_timeout(Duration::from_millis(300));
+    (c, info)
+}
+
+/// A truck vehicle file goes to a truck device and comes back bit for bit (through the record
+/// and the vehicle-file writer and reader), its record under the truck's own schema id.
+#[test]
+fn a_truck_vehicle_round_trips_through_a_truck_device() {
+    let (mut c, info) = truck_device();
+    assert_eq!(info.vehicle_schema, record_schema_of::<TruckVehicle>());
+    assert_ne!(info.vehicle_schema, record_schema_of::<Vehicle>());
+    let text =
+        "model = \"mining-truck-5dof\"\nbase = \"truck-empty\"\n[truck]\nhps_v0_m3 = 0.0145\n\
+                payload_kg = 100000\n[controller]\nslew_a_per_s = 123.0\n";
+    let ModelVehicle::Truck(t) = vehicle_file::parse_model(text).unwrap() else {
+        panic!("a truck file")
+    };
+    let sent = TruckVehicle::from(t);
+    assert!(c.set_config(&sent).unwrap(), "in effect at standstill");
+    let (rec, pending) = c.config_record().unwrap();
+    assert!(!pending);
+    let back: TruckVehicle = read_record(&rec).unwrap();
+    assert_eq!(back.truck, sent.truck);
+    assert_eq!(back.truck.payload_kg, 100_000.0);
+    assert_eq!(back.parts.controller.slew_a_per_s, 123.0);
+    assert_eq!(*c.port_mut().backend().stored_vehicle(), back);
+    // ... and through the vehicle file writer and reader, bit for bit.
+    let file = vehicle_file::truck_to_toml(&back.into());
+    let ModelVehicle::Truck(reread) = vehicle_file::parse_model(&file).unwrap() else {
+        panic!("the written file reads as a truck: {file}")
+    };
+    assert_eq!(reread, t);
+}
+
+/// A car vehicle sent to a truck device, and a truck vehicle to a car device, are refused by
+/// the device naming both models; nothing is stored. A truck value out of range is refused
+/// naming the field and its range.
+#[test]
+fn a_vehicle_of_the_other_model_is_refused_naming_both_models() {
+    let (mut c, _) = truck_device();
+    let before = *c.port_mut().backend().stored_vehicle();
+    let e = c.set_config(&Vehicle::nominal()).unwrap_err().to_string();
+    assert!(
+        e.contains("refused")
+            && e.contains("is a car-4dof vehicle")
+            && e.contains("stores mining-truck-5dof vehicles"),
+        "{e}"
+    );
+    assert_eq!(*c.port_mut().backend().stored_vehicle(), before);
+    // a truck field far out of its range, in a truck record
+    let mut rec = [0u8; RECORD_MAX_BYTES];
+    let n = encode_record(&before, &mut rec).unwrap();
+    let i = (0..TruckVehicle::values())
+        .position(|i| TruckVehicle::describe(i).is_some_and(|d| d.1 == "hps_v0_m3"))
+        .unwrap();
+    let at = RECORD_HEADER_BYTES + 8 * i;
+    rec[at..at + 8].copy_from_slice(&5.0f64.to_le_bytes());
+    let e = c.set_record(&rec[..n]).unwrap_err().to_string();
+    assert!(e.contains("truck.hps_v0_m3") && e.contains("0.2"), "{e}");
+    assert_eq!(*c.port_mut().backend().stored_vehicle(), before);
+
+    let mut car = device();
+    let before = state(&mut car);
+    let e = car.set_config(&before_truck()).unwrap_err().to_string();
+    assert!(
+        e.contains("is a mining-truck-5dof vehicle") && e.contains("stores car-4dof vehicles"),
+        "{e}"
+    );
+    assert_eq!(state(&mut car), before);
+    // the car's reader names the truck record it cannot read
+    let n = encode_record(&before_truck(), &mut rec).unwrap();
+    let e = read_record::<Vehicle>(&rec[..n]).unwrap_err().to_string();
+    assert!(e.contains("mining-truck-5dof"), "{e}");
+}
+
+fn before_truck() -> TruckVehicle {
+    let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {
+        panic!("truck-full is a truck")
+    };
+    TruckVehicle::from(t)
+}
+
+/// The command line with a truck device: `config get` writes a truck vehicle file, `config
+/// set` of a truck file is stored and read back, a car file is refused before anything is sent.
+#[test]
+fn the_tool_gets_and_sets_a_truck_vehicle_file() {
+    let dir = std::env::temp_dir().join(format!("shimmy-device-truck-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let tool = env!("CARGO_BIN_EXE_shimmy-sim");
+    let got = dir.join("got.toml");
+    let o = std::process::Command::new(tool)
+        .args([
+            "device",
+            "--sim",
+            "--vehicle",
+            "truck-full",
+            "config",
+            "get",
+            "--out",
+        ])
+        .arg(&got)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&got).unwrap();
+    assert!(text.contains("model = \"mining-truck-5dof\"") && text.contains("[truck]"));
+    assert!(text.contains("payload_kg = 227000.0"), "{text}");
+    let set = dir.join("set.toml");
+    std::fs::write(
+        &set,
+        text.replace("payload_kg = 227000.0", "payload_kg = 150000.0"),
+    )
+    .unwrap();
+    let o = std::process::Command::new(tool)
+        .args([
+            "device",
+            "--sim",
+            "--vehicle",
+            "truck-full",
+            "config",
+            "set",
+        ])
+        .arg(&set)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains("read back identical (98 fields)"), "{out}");
+    let o = std::process::Command::new(tool)
+        .args([
+            "device",
+            "--sim",
+            "--vehicle",
+            "truck-full",
+            "config",
+            "set",
+            "nominal",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("nothing sent")
+            && err.contains("car-4dof")
+            && err.contains("mining-truck-5dof"),
         "{err}"
     );
     std::fs::remove_dir_all(&dir).ok();
