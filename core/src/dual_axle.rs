@@ -377,7 +377,7 @@ impl DualAxleParams {
                 (v[PSI_1L] + v[PSI_1R]) * (0.5 * s),
                 (v[PSI_2L] + v[PSI_2R]) * (0.5 * s),
             ];
-            if (*l - shimmy).norm() <= 1e-9 * shimmy.norm() {
+            if (*l - shimmy).norm_sqr() <= 1e-18 * shimmy.norm_sqr() {
                 u_s = Some(u);
             } else {
                 for (i, row) in q.iter_mut().enumerate() {
@@ -388,7 +388,7 @@ impl DualAxleParams {
             }
         }
         let u_s = u_s?;
-        let n1 = u_s[0].norm();
+        let n1 = libm::sqrt(u_s[0].norm_sqr());
         if n1.is_nan() || n1 <= 0.0 {
             return None;
         }
