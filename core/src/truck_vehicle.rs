@@ -139,11 +139,29 @@ impl RecordVehicle for TruckVehicle {
     }
 }
 
+/// The model whose record carries the schema id `schema`, if it is one of the family's stored
+/// models (for messages: a host names what it got, the device keeps only its own decoder).
+pub fn record_model(schema: u32) -> Option<&'static str> {
+    [
+        (
+            crate::vehicle::record_schema_of::<Vehicle>(),
+            Vehicle::MODEL,
+        ),
+        (
+            crate::vehicle::record_schema_of::<TruckVehicle>(),
+            TruckVehicle::MODEL,
+        ),
+    ]
+    .into_iter()
+    .find(|(s, _)| *s == schema)
+    .map(|(_, m)| m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::vehicle::{
-        decode_record, encode_record, record_model, record_schema, record_schema_of, RecordError,
+        decode_record, encode_record, record_schema, record_schema_of, RecordError,
         RECORD_HEADER_BYTES, RECORD_MAX_BYTES, RECORD_MAX_FIELDS,
     };
 

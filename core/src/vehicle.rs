@@ -1285,19 +1285,6 @@ pub fn record_schema_of<V: RecordVehicle>() -> u32 {
     schema_of((0..V::values()).filter_map(V::describe))
 }
 
-/// The model whose record carries the schema id `schema`, if it is one of the family's stored
-/// models (for messages: a host names what it got, the device keeps only its own decoder).
-pub fn record_model(schema: u32) -> Option<&'static str> {
-    use crate::truck_vehicle::TruckVehicle;
-    [
-        (record_schema_of::<Vehicle>(), Vehicle::MODEL),
-        (record_schema_of::<TruckVehicle>(), TruckVehicle::MODEL),
-    ]
-    .into_iter()
-    .find(|(s, _)| *s == schema)
-    .map(|(_, m)| m)
-}
-
 /// The value `value` of the field `section.name` of the model `V`'s record checked against
 /// that field's range (the error names the field and its range); `None` when `V`'s record has
 /// no such field. For messages about a record the other side refused.
@@ -1347,7 +1334,7 @@ pub enum RecordError {
     /// Written under another field table (another model's, or another version's).
     #[error("vehicle record schema {found:#010x} is not this firmware's {expected:#010x}")]
     Schema {
-        /// The record's schema id ([`record_model`] names its model, if known).
+        /// The record's schema id ([`crate::truck_vehicle::record_model`] names its model, if known).
         found: u32,
         /// The decoder's model's ([`record_schema_of`]).
         expected: u32,

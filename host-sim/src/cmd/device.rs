@@ -11,10 +11,9 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
 use shimmy_core::vehicle::{
-    encode_record, record_model, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES,
-    RECORD_MAX_BYTES,
+    encode_record, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
 use shimmy_link::wire::{fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;

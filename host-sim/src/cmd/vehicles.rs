@@ -27,7 +27,8 @@ use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
 use crate::sim::vehicle_file::{self, ModelVehicle};
 
 /// The named sets of the table by default: one or more per model of the family.
-pub const DEFAULT_SETS: &str = "nominal,hard,truck-full,truck-empty,dual-axle,trailer";
+pub const DEFAULT_SETS: &str =
+    "nominal,hard,truck-full,truck-empty,dual-axle,dual-axle-frictionless,trailer";
 
 /// Speed range of the crossing scan, km/h.
 const SCAN_KMH: (f64, f64) = (1.0, 150.0);

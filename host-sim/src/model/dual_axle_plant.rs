@@ -667,7 +667,7 @@ pub fn dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
 /// The shimmy mode at `m`'s onset: (dzeta/dV in s/m, frequency in Hz).
 fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Result<(f64, f64)> {
     use shimmy_core::stability::{dzeta_dv, ModeSelect};
-    let onset = crate::sim::margin_run::onset_kmh(m).ok_or_else(|| {
+    let onset = crate::model::family::onset_kmh(m).ok_or_else(|| {
         anyhow::anyhow!("{}: no Hopf onset in 1-150 km/h to size against", M::NAME)
     })?;
     let (mode, slope, _) = dzeta_dv(
@@ -707,127 +707,6 @@ fn compute_dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
     v.validate()
         .map_err(|e| anyhow::anyhow!("dual-axle shared sections: {e}"))?;
     Ok(v)
-}
-
-#[cfg(test)]
-mod margin_tests {
-    use super::*;
-    use crate::model::family::{SimModel, SimPlant};
-    use crate::model::plant::{Damper, Method};
-    use crate::sim::margin_run::{self, MarginScenario};
-    use shimmy_core::dual_axle::DualAxleSet;
-    use shimmy_core::estimator::meter::mode_meter::{MarginEstimator, Sample, WheelOrder};
-    use shimmy_core::estimator::monitor::Level;
-    use shimmy_core::params::kmh_to_mps;
-    use shimmy_core::stability::{mode_at, ModeSelect};
-
-    fn parts_of(t: DualAxleParams) -> super::super::family::FamilyVehicle<DualAxleParams> {
-        super::super::family::FamilyVehicle {
-            model: t,
-            parts: dual_axle_parts().unwrap(),
-        }
-    }
-
-    /// The negative test of the meter's signal: the same 60 s of the friction-free plant at
-    /// 45 km/h under the margin run's road noise and imbalance, fed to two copies of the
-    /// truck's mode meter, one on the modal signal (`meter_yaw_rad`), one on axle 1's in-phase
-    /// wheel yaw (what it read before). The first reads the linear model's shimmy damping
-    /// within 0.01 (measured 0.008 high); axle 1 alone, where the ~15 Hz axle-against-axle
-    /// mode and the tramp share the signal, at least 1.5 times as far off (measured 0.016).
-    #[test]
-    fn the_modal_signal_reads_the_shimmy_damping_and_axle_1_alone_does_not() {
-        let t = DualAxleSet::Frictionless.params();
-        let v = kmh_to_mps(45.0);
-        let truth = mode_at(&t, v, 0.0, ModeSelect::Shimmy).unwrap().zeta;
-        let sc = MarginScenario::<DualAxleParams, N_STATES>::constant(t, 45.0, 60.0);
-        let mut scen = sc.scenario();
-        let cfg = parts_of(t).pipeline_params::<N_STATES>().estimator;
-        let mut modal = MarginEstimator::<f32>::new(cfg).unwrap();
-        let mut axle1 = MarginEstimator::<f32>::new(cfg).unwrap();
-        let mut plant = t.plant(Damper::None, Method::default());
-        let (mut sum_m, mut sum_a, mut n) = (0.0, 0.0, 0u32);
-        let wheel = WheelOrder::Speed {
-            speed_mps: v as f32,
-            radius_m: t.r as f32,
-        };
-        let sample = |y: f64| Sample {
-            psi_l_rad: y as f32,
-            psi_r_rad: y as f32,
-            wheel,
-            damper_cmd: 0.0,
-        };
-        for k in 0..60_000 {
-            let u = scen.inputs(k as f64 * 1e-3, 1e-3);
-            plant.advance(1e-3, &u).unwrap();
-            let [l, r] = plant.wheel_yaw_rad();
-            let om = modal.push(&sample(plant.meter_yaw_rad()[0]));
-            let oa = axle1.push(&sample(0.5 * (l + r)));
-            if k >= 30_000 {
-                if let (Some(om), Some(oa)) = (om, oa) {
-                    if om.slow.valid && oa.slow.valid {
-                        sum_m += f64::from(om.slow.zeta);
-                        sum_a += f64::from(oa.slow.zeta);
-                        n += 1;
-                    }
-                }
-            }
-        }
-        assert!(n > 1000, "{n} valid steps");
-        let (zm, za) = (sum_m / f64::from(n), sum_a / f64::from(n));
-        println!(
-            "true shimmy damping {truth:.4}; meter on the modal signal {zm:.4}, on axle 1 {za:.4}"
-        );
-        assert!((zm - truth).abs() < 0.01, "modal {zm} vs {truth}");
-        assert!(
-            (za - truth).abs() > 1.5 * (zm - truth).abs(),
-            "axle 1 {za}, modal {zm}, truth {truth}"
-        );
-    }
-
-    /// The margin run on the friction-free truck, the plant off the nominal model by -+15 % in
-    /// the pneumatic trail and the transition-rod stiffness (the model stays nominal): the
-    /// first warning raised on the ramp (a 1 km/h/s ramp from 35 km/h to 5 km/h past the
-    /// plant's onset, 56 km/h at least) comes before the onset. Counted from the ramp's start:
-    /// with `k_t` -15 % the meter's warm-up raises a warning in the first seconds of the
-    /// settle, which clears by 5 s and is no distance to the onset.
-    #[test]
-    fn the_warning_leads_the_onset_when_the_plant_is_not_the_model() {
-        let model = DualAxleSet::Frictionless.params();
-        for (name, f) in [("t_p", 1.15), ("t_p", 0.85), ("k_t", 1.15), ("k_t", 0.85)] {
-            let plant = model
-                .with_param(name, model.get(name).unwrap() * f)
-                .unwrap();
-            // to 56 km/h as `shimmy-sim margin` does, or past a more stable plant's onset
-            let to = margin_run::onset_kmh(&plant).unwrap().max(51.0) + 5.0;
-            let mut sc = MarginScenario::ramp(plant, 35.0, to, 1.0, 30.0);
-            sc.model = Some(model);
-            let pp = parts_of(model).pipeline_params::<N_STATES>();
-            let run = margin_run::run(&sc, pp, 0).unwrap();
-            let onset = run.onset_kmh.unwrap();
-            let on_ramp = run
-                .rows
-                .iter()
-                .find(|r| r.t_s >= 30.0 && r.level > Level::Normal)
-                .unwrap_or_else(|| panic!("{name} x{f}: no warning on the ramp"));
-            let dv = onset - on_ramp.speed_kmh;
-            println!(
-                "{name} x{f}: plant onset {onset:.2} km/h, first warning {:?}, on the ramp at \
-                 {:.2} km/h: lead {dv:.2} km/h",
-                run.first_warning, on_ramp.speed_kmh
-            );
-            assert!(dv > 0.0, "{name} x{f}: lead {dv} km/h");
-        }
-    }
-
-    /// No false warning: 120 s at 70 % of the onset (plant = model, friction off).
-    #[test]
-    fn no_warning_at_70_percent_of_the_onset() {
-        let t = DualAxleSet::Frictionless.params();
-        let onset = margin_run::onset_kmh(&t).unwrap();
-        let sc = MarginScenario::constant(t, 0.7 * onset, 120.0);
-        let run = margin_run::run(&sc, parts_of(t).pipeline_params::<N_STATES>(), 0).unwrap();
-        assert_eq!(run.max_level, Level::Normal, "{:?}", run.first_warning);
-    }
 }
 
 #[cfg(test)]

@@ -216,3 +216,20 @@ impl<M> FamilyVehicle<M> {
         }
     }
 }
+
+/// The linear onset speed of `p` without damper by a 0.5 km/h scan + Brent (independent of the
+/// pipeline's incremental search).
+pub fn onset_kmh<M: LinearModel<N>, const N: usize>(p: &M) -> Option<f64> {
+    shimmy_core::stability::hopf_crossings(
+        p,
+        0.0,
+        shimmy_core::params::kmh_to_mps(1.0),
+        shimmy_core::params::kmh_to_mps(150.0),
+        shimmy_core::params::kmh_to_mps(0.5),
+        shimmy_core::stability::DEFAULT_TOL_MPS,
+    )
+    .ok()?
+    .iter()
+    .find(|c| c.kind == shimmy_core::stability::CrossingKind::Onset)
+    .map(|c| shimmy_core::params::mps_to_kmh(c.speed_mps))
+}

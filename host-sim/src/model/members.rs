@@ -70,7 +70,7 @@ impl SimPlant for Simulator {
 
 /// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the
 /// car's `nominal` set), N m/rad.
-pub(crate) fn reference_tyre_yaw_stiffness() -> f64 {
+pub fn reference_tyre_yaw_stiffness() -> f64 {
     let p = ParamSet::Nominal.params();
     (p.e + p.t_p) * p.c_a
 }
@@ -369,7 +369,7 @@ mod tests {
         let truck = TruckSet::Full.params();
         let parts = truck_parts().unwrap();
         let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
-        let deg = super::super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
+        let deg = crate::model::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
         let car_2a = damper_equivalent(&car.plant, &car.damper.spencer, 2.0, deg, v0, v1).unwrap();
         let truck_2a = damper_equivalent(&truck, &parts.damper.spencer, 2.0, deg, v0, v1).unwrap();
         let truck_0a = damper_equivalent(&truck, &parts.damper.spencer, 0.0, deg, v0, v1).unwrap();

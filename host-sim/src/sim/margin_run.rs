@@ -15,7 +15,7 @@ use shimmy_core::estimator::pipeline::{
 };
 use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
-use shimmy_core::stability::{self, CrossingKind, ModeSelect};
+use shimmy_core::stability::{self, ModeSelect};
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::{SimModel, SimPlant};
@@ -180,22 +180,7 @@ impl MarginRun {
     }
 }
 
-/// The linear onset speed of `p` without damper by a 0.5 km/h scan + Brent (independent of the
-/// pipeline's incremental search).
-pub fn onset_kmh<M: LinearModel<N>, const N: usize>(p: &M) -> Option<f64> {
-    stability::hopf_crossings(
-        p,
-        0.0,
-        kmh_to_mps(1.0),
-        kmh_to_mps(150.0),
-        kmh_to_mps(0.5),
-        stability::DEFAULT_TOL_MPS,
-    )
-    .ok()?
-    .iter()
-    .find(|c| c.kind == CrossingKind::Onset)
-    .map(|c| mps_to_kmh(c.speed_mps))
-}
+pub use crate::model::family::onset_kmh;
 
 /// The pipeline of a run: the full one (model tracker stepped every call) or the data-only arm.
 enum Pipe<M: LinearModel<N>, const N: usize> {
