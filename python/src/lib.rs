@@ -499,7 +499,7 @@ fn analyze<'py>(
             let map = file.then(&changes).mapping()?;
             let samples = log_file::load(&log, &map)?;
             let opts = AnalyzeOptions {
-                vehicle,
+                vehicle: vehicle_file::ModelVehicle::Car(vehicle),
                 model,
                 max_gap_s: max_gap_ms * 1e-3,
             };

@@ -116,7 +116,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         .then(&a.changes())
         .mapping()
         .context("log mapping (options or mapping file)")?;
-    let vehicle = vehicle_file::load(&a.vehicle).context("--vehicle")?;
+    let vehicle = vehicle_file::load_model(&a.vehicle).context("--vehicle")?;
     let log = log_file::load(&a.log, &map)?;
     let opts = AnalyzeOptions {
         vehicle,
@@ -130,11 +130,9 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     })
     .with_context(|| format!("analysing {}", a.log.display()))?;
     bar.finish_and_clear();
-    let mut provenance = Provenance::of_this_process().file("log", &a.log)?.vehicle(
-        "vehicle",
-        &a.vehicle,
-        &opts.vehicle,
-    )?;
+    let mut provenance = Provenance::of_this_process()
+        .file("log", &a.log)?
+        .model_vehicle("vehicle", &a.vehicle, &opts.vehicle)?;
     if let Some(p) = &a.mapping {
         provenance = provenance.file("mapping file", p)?;
     }

@@ -15,13 +15,18 @@
 //! [`AnalyzeOptions::max_gap_s`] apart or one of them lacks the value: then the grid point has
 //! no value, as a missed sample on the board.
 
+use crate::model::family::{FamilyVehicle, SimModel};
 use crate::sim::log_file::LogSample;
+use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
 use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
 use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::estimator::pipeline::{
     AccelEstimator, DataPipeline, PipelineOutput, ShimmyPipeline,
 };
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::PlantParams;
+use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
 
 /// The meter's input period, s (1 kHz, the control rate).
@@ -43,9 +48,10 @@ pub const MAX_GAP_RANGE_S: (f64, f64) = (1e-3, 10.0);
 /// How to analyse a log.
 #[derive(Clone, Debug)]
 pub struct AnalyzeOptions {
-    /// The vehicle: rolling radius (wheel-order reference), warning thresholds and fusion
-    /// parameters, and with `model` the plant the model margin linearises.
-    pub vehicle: Vehicle,
+    /// The vehicle: rolling radius (wheel-order reference), warning thresholds, fusion and
+    /// meter parameters, and with `model` the plant the model margin linearises; the car or
+    /// the mining truck (their logs carry the two wheel yaw angles the meter reads).
+    pub vehicle: ModelVehicle,
     /// Run the model margin next to the data (as the board does); `false`: data only.
     pub model: bool,
     /// Log samples further apart than this are not interpolated: the grid points between them
@@ -57,7 +63,7 @@ impl Default for AnalyzeOptions {
     /// The nominal vehicle with its model; gaps above 20 ms (two decimated meter steps).
     fn default() -> Self {
         Self {
-            vehicle: Vehicle::nominal(),
+            vehicle: ModelVehicle::Car(Vehicle::nominal()),
             model: true,
             max_gap_s: 0.02,
         }
@@ -267,13 +273,14 @@ pub fn level_name(l: Level) -> &'static str {
     }
 }
 
-/// The pipeline of an analysis: with the model tracker, or data only.
-enum Pipe {
-    Full(Box<ShimmyPipeline<EVENT_LOG>>),
+/// The pipeline of an analysis: with the model tracker on the vehicle's model `M`, or data
+/// only.
+enum Pipe<M: LinearModel<S>, const S: usize> {
+    Full(Box<ShimmyPipeline<EVENT_LOG, M, S>>),
     DataOnly(Box<DataPipeline<EVENT_LOG>>),
 }
 
-impl Pipe {
+impl<M: LinearModel<S>, const S: usize> Pipe<M, S> {
     fn push(&mut self, s: &Sample, v: f32, a: f32, t: f64) -> Option<PipelineOutput> {
         match self {
             Pipe::Full(p) => p.push(s, v, a, t),
@@ -301,18 +308,39 @@ pub fn analyze_with_progress(
     o: &AnalyzeOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Analysis> {
+    match &o.vehicle {
+        ModelVehicle::Car(v) => analyze_on(log, o, &FamilyVehicle::car(*v), progress),
+        ModelVehicle::Truck(v) => analyze_on(log, o, v, progress),
+        other => bail!(
+            "analyze runs logs of the car ({}) and the mining truck ({}), not of the {} (its \
+             meter reads other signals than a log's two wheel yaw angles)",
+            PlantParams::NAME,
+            TruckParams::NAME,
+            other.model_name()
+        ),
+    }
+}
+
+/// [`analyze_with_progress`] on the vehicle `v` of the model `M`.
+fn analyze_on<M: SimModel<S>, const S: usize>(
+    log: &[LogSample],
+    o: &AnalyzeOptions,
+    v: &FamilyVehicle<M>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Analysis> {
     let (grid, resampling) = resample(log, o.max_gap_s)?;
-    let params = o.vehicle.pipeline_params();
-    let mut pipe = if o.model {
+    let params = v.pipeline_params();
+    let mut pipe: Pipe<M::Linear, S> = if o.model {
         Pipe::Full(Box::new(
-            ShimmyPipeline::new(o.vehicle.plant, params).context("pipeline configuration")?,
+            ShimmyPipeline::for_model(v.model.linear(), params)
+                .context("pipeline configuration")?,
         ))
     } else {
         Pipe::DataOnly(Box::new(
             DataPipeline::new(&params).context("pipeline configuration")?,
         ))
     };
-    let radius_m = o.vehicle.plant.r as f32;
+    let radius_m = v.model.rolling_radius_m() as f32;
     let mut accel = AccelEstimator::new();
     let mut speed_mps = f32::NAN;
     let mut rows = Vec::with_capacity(grid.len() / 10 + 1);

@@ -360,11 +360,11 @@ mod tests {
 #[cfg(test)]
 mod margin_tests {
     use crate::model::dual_axle_plant::*;
-    use shimmy_core::dual_axle::{DualAxleParams, N_STATES};
     use crate::model::family::{SimModel, SimPlant};
     use crate::model::plant::{Damper, Method};
     use crate::sim::margin_run::{self, MarginScenario};
     use shimmy_core::dual_axle::DualAxleSet;
+    use shimmy_core::dual_axle::{DualAxleParams, N_STATES};
     use shimmy_core::estimator::meter::mode_meter::{MarginEstimator, Sample, WheelOrder};
     use shimmy_core::estimator::monitor::Level;
     use shimmy_core::params::kmh_to_mps;
