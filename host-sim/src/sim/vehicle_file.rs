@@ -536,14 +536,15 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 
 /// The commands that run a truck vehicle, for messages.
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
-     sweep, margin, faults, run, meter-accuracy, mismatch, report, compare and the demo";
+     sweep, margin, faults, run, meter-accuracy, mismatch, report, compare, analyze, device and \
+     the demo";
 
 /// The message of a car-only command given another model.
 fn car_only(what: &str, model: &str) -> String {
     format!(
         "{what} is a {model} model; this command runs the {} only so far (the truck runs \
-         through {TRUCK_COMMANDS}; the trailer through `stability`, `sensitivity` and \
-         `sway-damping`)",
+         through {TRUCK_COMMANDS}; the trailer through `stability`, `sensitivity`, \
+         `sway-damping`, `bifurcation`, `sweep`, `margin`, `faults` and `run`)",
         PlantParams::NAME
     )
 }

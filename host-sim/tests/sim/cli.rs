@@ -470,11 +470,11 @@ fn gas_charge_fails_without_a_stable_charge_and_answers_with_one() {
 #[test]
 fn a_truck_on_a_car_only_command_is_rejected_naming_the_models() {
     rejected(
-        &["analyze", "log.csv", "--vehicle", "truck-full"],
+        &["reference-bench", "--vehicle", "truck-full"],
         &[
             "mining-truck-5dof",
             "car-4dof",
-            "mismatch, report, compare and the demo",
+            "compare, analyze, device and the demo",
         ],
     );
     let dir = temp_dir();
