@@ -723,6 +723,16 @@ fn check(f: &TruckField, value: f64) -> Result<(), TruckFieldError> {
 }
 
 impl TruckParams {
+    /// The controller's nominal plant: the wheel assembly's yaw inertia I_k and kingpin
+    /// damping c_k, and the steering arm l_t (the ASMC's model).
+    pub fn nominal_plant(&self) -> crate::control::smc::NominalPlant {
+        crate::control::smc::NominalPlant {
+            i_k_kgm2: self.i_k as f32,
+            c_k_nms_per_rad: self.c_k as f32,
+            l_t_m: self.l_t as f32,
+        }
+    }
+
     /// The truck vehicle's warning thresholds by default (its `[thresholds]` section): the
     /// car's ([`PipelineParams::tuned_monitor`]) with the data path's MarginLow damping
     /// thresholds lowered for the truck's lightly damped mode (zeta 0.0098 at 70 % of the

@@ -8,7 +8,7 @@
 use crate::model::LinearModel;
 use crate::params::Param;
 use crate::truck::{HpsError, TruckFieldError, TruckParams, TruckSet, N_STATES, TRUCK_FIELDS};
-use crate::vehicle::{Problem, RecordVehicle, Vehicle, VehicleError, FIELDS};
+use crate::vehicle::{BoardVehicle, Problem, RecordVehicle, Vehicle, VehicleError, FIELDS};
 
 /// The section of the truck's fields in a vehicle file and its record.
 pub const TRUCK_SECTION: &str = "truck";
@@ -26,7 +26,36 @@ pub struct TruckVehicle {
     pub parts: Vehicle,
 }
 
+/// The factor on the car's reference damper that sizes the truck's: every force coefficient
+/// of the damper and the skyhook coefficient times this ([`Vehicle::with_damper_scaled`]), so
+/// that its energy-equivalent viscous coefficient at the rated current is the same multiple of
+/// the least coefficient that closes the loaded truck's Hopf window as the car's is of the
+/// `nominal` car's. The sizing takes a describing-function study that has no place in the
+/// firmware, so the value is the simulator's result (`shimmy-sim`'s
+/// `members::damper_scale_like_the_cars` for `truck-full`, `docs/mining-truck.md`); a host test
+/// recomputes it and fails when the two differ.
+pub const TRUCK_DAMPER_SCALE: f64 = 34.15839289106305;
+
 impl TruckVehicle {
+    /// The truck's shared sections by default: the car's reference damper, sensors, gains and
+    /// thresholds with the damper sized by [`TRUCK_DAMPER_SCALE`] and the truck's own warning
+    /// thresholds ([`TruckParams::warning_thresholds`]). The coil, its rating and the sensors
+    /// are the car's; the ASMC's gains are angular accelerations of the wheel, its force comes
+    /// from the truck's nominal plant.
+    pub fn default_parts() -> Vehicle {
+        let mut v = Vehicle::nominal().with_damper_scaled(TRUCK_DAMPER_SCALE);
+        v.thresholds = TruckParams::warning_thresholds();
+        v
+    }
+
+    /// The named truck set `set` with the default shared sections.
+    pub fn of_set(set: TruckSet) -> Self {
+        TruckVehicle {
+            truck: set.params(),
+            parts: Self::default_parts(),
+        }
+    }
+
     /// The shared fields of the record (the car record's fields after its plant section).
     fn shared() -> &'static [crate::vehicle::Field] {
         FIELDS.get(PLANT_FIELDS..).unwrap_or_default()
@@ -136,6 +165,28 @@ impl RecordVehicle for TruckVehicle {
             .validate()
             .map_err(|e| truck_error(e, &self.truck))?;
         self.parts.validate()
+    }
+}
+
+impl BoardVehicle<N_STATES> for TruckVehicle {
+    type Model = TruckParams;
+
+    /// The loaded truck (`truck-full`, the worst case of its Hopf window) with the default
+    /// shared sections.
+    fn compiled_in() -> Self {
+        Self::of_set(TruckSet::Full)
+    }
+
+    fn model(&self) -> TruckParams {
+        self.truck
+    }
+
+    fn parts(&self) -> &Vehicle {
+        &self.parts
+    }
+
+    fn nominal_plant(&self) -> crate::control::smc::NominalPlant {
+        self.truck.nominal_plant()
     }
 }
 

@@ -24,6 +24,7 @@ use crate::control::ControlParams;
 use crate::estimator::fusion::FusionParams;
 use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
+use crate::model::LinearModel;
 use crate::mr_damper::SpencerParams;
 use crate::params::{Param, ParamSet, PlantParams};
 use crate::supervisor::params::SupervisorParams;
@@ -126,6 +127,36 @@ impl Vehicle {
     /// The reference car: the nominal plant with today's damper, sensors, gains and thresholds.
     pub fn nominal() -> Self {
         Self::with_plant(PlantParams::nominal())
+    }
+
+    /// This vehicle with every force coefficient of its damper (the Spencer model's and the
+    /// firmware's Bingham model's) and its skyhook coefficient times `s`: a damper sized for a
+    /// heavier model with the same coil (a larger piston and gap, not another coil).
+    pub fn with_damper_scaled(mut self, s: f64) -> Self {
+        let sp = &mut self.damper.spencer;
+        for c in [
+            &mut sp.c0a,
+            &mut sp.c0b,
+            &mut sp.k0,
+            &mut sp.c1a,
+            &mut sp.c1b,
+            &mut sp.k1,
+            &mut sp.alpha_a,
+            &mut sp.alpha_b,
+        ] {
+            *c *= s;
+        }
+        let m = &mut self.damper.model;
+        for c in [
+            &mut m.f_ca_n,
+            &mut m.f_cb_n_per_a,
+            &mut m.c_a_ns_per_m,
+            &mut m.c_b_ns_per_m_a,
+        ] {
+            *c *= s as f32;
+        }
+        self.controller.skyhook_ns_per_m *= s as f32;
+        self
     }
 
     /// A named plant set with the reference damper, sensors, gains and thresholds.
@@ -1400,6 +1431,64 @@ pub fn decode_record<V: RecordVehicle>(bytes: &[u8]) -> Result<V, RecordError> {
     }
     vehicle.check_all().map_err(RecordError::Invalid)?;
     Ok(vehicle)
+}
+
+/// A stored vehicle of one model as a board image is configured from it: the model's linear
+/// parameters (the model-margin tracker's model) and the sections every model shares (damper,
+/// sensors, gains, thresholds). The car ([`Vehicle`], its plant is the model) and the mining
+/// truck ([`crate::truck_vehicle::TruckVehicle`]) are members; an image is built for one.
+pub trait BoardVehicle<const N: usize>: RecordVehicle + PartialEq {
+    /// The vehicle model's linear model.
+    type Model: LinearModel<N> + Copy;
+    /// The compiled-in vehicle of the model: what a board boots with when no valid record is
+    /// stored.
+    fn compiled_in() -> Self;
+    /// The model's parameters.
+    fn model(&self) -> Self::Model;
+    /// The shared sections (for a model other than the car its `plant` is not used).
+    fn parts(&self) -> &Vehicle;
+    /// The controller's nominal plant (I_k, c_k, l_t: the ASMC's model) of [`Self::model`].
+    fn nominal_plant(&self) -> NominalPlant;
+
+    /// The controller's parameters: the shared sections' ([`Vehicle::control_params`]) with
+    /// the model's nominal plant.
+    fn controller_params(&self) -> ControlParams {
+        ControlParams {
+            nominal: self.nominal_plant(),
+            ..self.parts().control_params()
+        }
+    }
+
+    /// The margin pipeline's parameters ([`Vehicle::pipeline_params`]) with the mode meter
+    /// slowed to the model's shimmy mode ([`LinearModel::meter_time_scale`]; 1 for the car,
+    /// which leaves every value as it is).
+    fn margin_pipeline(&self) -> PipelineParams {
+        let pp = self.parts().pipeline_params();
+        PipelineParams {
+            estimator: pp.estimator.time_scaled(self.model().meter_time_scale()),
+            ..pp
+        }
+    }
+}
+
+impl BoardVehicle<{ crate::plant::N_STATES }> for Vehicle {
+    type Model = PlantParams;
+
+    fn compiled_in() -> Self {
+        Vehicle::nominal()
+    }
+
+    fn model(&self) -> PlantParams {
+        self.plant
+    }
+
+    fn parts(&self) -> &Vehicle {
+        self
+    }
+
+    fn nominal_plant(&self) -> NominalPlant {
+        NominalPlant::from_params(&self.plant)
+    }
 }
 
 impl Vehicle {

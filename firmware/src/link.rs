@@ -18,7 +18,7 @@
 
 use shimmy_core::estimator::monitor::Monitor;
 use shimmy_core::supervisor::faults::FaultSet;
-use shimmy_core::vehicle::{record_schema, Vehicle};
+use shimmy_core::vehicle::record_schema_of;
 use shimmy_link::device::Backend;
 use shimmy_link::log::{RamLog, Recorder};
 use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, Telemetry};
@@ -26,7 +26,7 @@ use shimmy_link::PROTOCOL_VERSION;
 
 use crate::control::Health;
 use crate::fault_memory::ResetRecord;
-use crate::monitoring::MarginUpdate;
+use crate::monitoring::{ImageVehicle, MarginUpdate};
 
 /// Entries the RAM log keeps (the oldest go first).
 pub const LOG_CAPACITY: usize = 32;
@@ -36,10 +36,10 @@ pub const STANDSTILL_MPS: f32 = crate::store::STANDSTILL_SPEED_MPS;
 
 /// What the link serves: configuration, event log, fault record, newest margin report.
 pub struct LinkState {
-    vehicle: Vehicle,
+    vehicle: ImageVehicle,
     pending: bool,
     /// A vehicle the host wrote that the flash store has not saved yet.
-    unsaved: Option<Vehicle>,
+    unsaved: Option<ImageVehicle>,
     standstill: bool,
     log: RamLog<LOG_CAPACITY>,
     recorder: Recorder,
@@ -52,7 +52,7 @@ impl LinkState {
     /// `vehicle`: the one this boot runs (the flash store's, or the compiled-in defaults), an
     /// empty log, no fault seen, speed unknown; `boot`: the reset record of this boot (resets,
     /// cause, faults latched before it).
-    pub fn new(boot: &ResetRecord, vehicle: Vehicle) -> Self {
+    pub fn new(boot: &ResetRecord, vehicle: ImageVehicle) -> Self {
         LinkState {
             vehicle,
             pending: false,
@@ -81,7 +81,7 @@ impl LinkState {
 
     /// The vehicle a host wrote that is not in flash yet, for the background loop to save with
     /// the store's standstill token ([`Self::keep_unsaved`] hands it back when it cannot).
-    pub fn take_unsaved(&mut self) -> Option<Vehicle> {
+    pub fn take_unsaved(&mut self) -> Option<ImageVehicle> {
         // Checked first: `take` moves the whole vehicle-sized option even when it is `None`,
         // and the background loop asks after every meter run.
         self.unsaved.as_ref()?;
@@ -90,7 +90,7 @@ impl LinkState {
 
     /// Hands back a vehicle [`Self::take_unsaved`] gave out and the store could not save yet
     /// (no standstill), unless the host has written a newer one since.
-    pub fn keep_unsaved(&mut self, v: Vehicle) {
+    pub fn keep_unsaved(&mut self, v: ImageVehicle) {
         self.unsaved.get_or_insert(v);
     }
 
@@ -159,22 +159,22 @@ impl LinkState {
 }
 
 impl Backend for LinkState {
-    type Vehicle = Vehicle;
+    type Vehicle = ImageVehicle;
     fn identity(&self) -> Identity<'_> {
         Identity {
             firmware: crate::BANNER,
             core: shimmy_core::VERSION,
             protocol: PROTOCOL_VERSION,
-            vehicle_schema: record_schema(),
+            vehicle_schema: record_schema_of::<ImageVehicle>(),
             log_capacity: LOG_CAPACITY as u16,
         }
     }
 
-    fn vehicle(&self) -> (&Vehicle, bool) {
+    fn vehicle(&self) -> (&ImageVehicle, bool) {
         (&self.vehicle, self.pending)
     }
 
-    fn store_vehicle(&mut self, v: Vehicle) -> bool {
+    fn store_vehicle(&mut self, v: ImageVehicle) -> bool {
         self.vehicle = v;
         self.unsaved = Some(v);
         self.pending = !self.standstill;
@@ -208,6 +208,7 @@ mod tests {
     use super::*;
     use crate::monitoring::{DataMargin, MeterSample};
     use crate::sim::{self, SimWorld};
+    use shimmy_core::vehicle::Vehicle;
     use shimmy_link::wire::{fault_code, level_code};
 
     /// The firmware's own chain on the simulated sensors (the QEMU app's scenario: shimmy at

@@ -26,13 +26,14 @@ mod app {
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
+    use shimmy_core::vehicle::BoardVehicle;
     use shimmy_firmware::background::PassGate;
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::LinkState;
     use shimmy_firmware::monitoring::{
-        safe_controller_for, DataMargin, MeterCadence, MeterSample, ModelTask,
+        safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -141,7 +142,9 @@ mod app {
         let (board, port) = board::init(cx.device, coil_dead);
         let (tx, rx) = cx.local.queue.split();
         let (log_tx, log_rx) = cx.local.log_queue.split();
-        let Ok(data) = DataMargin::with_params(&vehicle.pipeline_params()) else {
+        let Ok(data) =
+            DataMargin::with_params(&vehicle.margin_pipeline(), vehicle.wheel_order_radius_m())
+        else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
@@ -172,7 +175,7 @@ mod app {
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelTask::new(vehicle.plant),
+                model_task: ModelTask::new(vehicle.model()),
                 store_task,
                 log_tx,
                 log_rx,

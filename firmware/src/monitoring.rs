@@ -30,11 +30,11 @@ use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
-use shimmy_core::params::PlantParams;
+use shimmy_core::model::LinearModel;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
-use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicle::{BoardVehicle, Vehicle};
 
 /// Control period, s.
 pub const DT_S: f32 = 1e-3;
@@ -48,6 +48,30 @@ pub fn step_time_s(steps: u64) -> f64 {
 pub const METER_DECIMATION: u32 = 10;
 /// Rolling radius used for the wheel-order phase, m (the reference board's tone wheel).
 pub const ROLLING_RADIUS_M: f32 = crate::calibration::WHEEL_SPEED.rolling_radius_m;
+
+/// What the board's calibration adds to a stored vehicle of a model: the rolling radius the
+/// mode meter's wheel order takes (the wheel's rotation frequency `v / (2 pi r)`, whose
+/// imbalance the meter keeps apart from the shimmy mode).
+pub trait BoardCalibration {
+    /// The wheel order's rolling radius, m.
+    fn wheel_order_radius_m(&self) -> f32;
+}
+
+impl BoardCalibration for Vehicle {
+    /// The reference board's tone wheel ([`ROLLING_RADIUS_M`]).
+    fn wheel_order_radius_m(&self) -> f32 {
+        ROLLING_RADIUS_M
+    }
+}
+
+impl BoardCalibration for shimmy_core::truck_vehicle::TruckVehicle {
+    /// The truck's loaded rolling radius (its 40.00R57 tyres, ~1.8 m): with the car's 0.35 m
+    /// the wheel order would sweep through the truck's ~3 Hz shimmy at 20-30 km/h.
+    /// TODO(vehicle): the truck board's own tone-wheel calibration, as for the car.
+    fn wheel_order_radius_m(&self) -> f32 {
+        self.truck.r as f32
+    }
+}
 /// Capacity of the monitor's event log.
 pub const EVENT_LOG: usize = 8;
 /// Requirement on the model margin's refresh period, s: a new cycle starts every this long and
@@ -78,13 +102,13 @@ pub fn safe_controller() -> SafeController {
 }
 
 /// The supervised controller for `vehicle` (its controller and supervisor parameters, as the
-/// store loaded it); for `Vehicle::nominal()` it is [`safe_controller`] (the core test
-/// `the_nominal_vehicle_reproduces_todays_defaults`).
-pub fn safe_controller_for(vehicle: &Vehicle) -> SafeController {
+/// store loaded it; the controller's nominal plant from its model); for `Vehicle::nominal()` it
+/// is [`safe_controller`] (the core test `the_nominal_vehicle_reproduces_todays_defaults`).
+pub fn safe_controller_for<V: BoardVehicle<N>, const N: usize>(vehicle: &V) -> SafeController {
     SafeController::new(
         CONTROLLER,
-        vehicle.control_params(),
-        vehicle.supervisor_params(),
+        vehicle.controller_params(),
+        vehicle.parts().supervisor_params(),
     )
 }
 
@@ -157,17 +181,22 @@ pub struct DataMargin {
     last_step: Option<u32>,
     last_level: Level,
     last_status: MarginStatus,
+    /// The wheel order's rolling radius, m ([`BoardCalibration`]).
+    radius_m: f32,
 }
 
 impl DataMargin {
-    /// The data path with the core's tuned parameters.
+    /// The data path with the core's tuned parameters and the reference board's wheel order
+    /// ([`ROLLING_RADIUS_M`]).
     pub fn new() -> Result<Self, ConfigError> {
-        Self::with_params(&PipelineParams::default())
+        Self::with_params(&PipelineParams::default(), ROLLING_RADIUS_M)
     }
 
-    /// The data path with `params` (a vehicle's `pipeline_params()`).
-    pub fn with_params(params: &PipelineParams) -> Result<Self, ConfigError> {
+    /// The data path with `params` (a vehicle's `margin_pipeline()`) and the wheel order's
+    /// rolling radius `radius_m` ([`BoardCalibration::wheel_order_radius_m`]).
+    pub fn with_params(params: &PipelineParams, radius_m: f32) -> Result<Self, ConfigError> {
         Ok(DataMargin {
+            radius_m,
             pipe: DataPipeline::new(params)?,
             last_speed_mps: f32::NAN,
             accel: AccelEstimator::new(),
@@ -215,7 +244,7 @@ impl DataMargin {
             wheel: if speed_ok {
                 WheelOrder::Speed {
                     speed_mps: s.speed_mps,
-                    radius_m: ROLLING_RADIUS_M,
+                    radius_m: self.radius_m,
                 }
             } else {
                 WheelOrder::None
@@ -259,48 +288,40 @@ pub fn model_config() -> ModelMarginConfig {
 /// linked into the image.
 pub type ModelFloat = f32;
 
-/// The vehicle model of the image's model task, chosen at compile time: the car (default) or,
-/// with the cargo feature `model-truck`, the mining truck (`docs/mining-truck.md`).
+/// The vehicle the image is built for, chosen at compile time: the car (default) or, with the
+/// cargo feature `model-truck`, the mining truck (`docs/mining-truck.md`). It is what the flash
+/// store keeps and loads, the host link reads and writes, and the control, meter and model tasks
+/// are configured from ([`BoardVehicle`]).
 #[cfg(not(feature = "model-truck"))]
-pub type ImageModel = PlantParams;
-/// The vehicle model of the image's model task (`model-truck`: the mining truck).
+pub type ImageVehicle = Vehicle;
+/// The vehicle the image is built for (`model-truck`: the mining truck).
 #[cfg(feature = "model-truck")]
-pub type ImageModel = shimmy_core::truck::TruckParams;
-/// States of [`ImageModel`].
+pub type ImageVehicle = shimmy_core::truck_vehicle::TruckVehicle;
+/// States of the image's vehicle model.
 #[cfg(not(feature = "model-truck"))]
 pub const IMAGE_MODEL_STATES: usize = shimmy_core::plant::N_STATES;
-/// States of [`ImageModel`].
+/// States of the image's vehicle model.
 #[cfg(feature = "model-truck")]
 pub const IMAGE_MODEL_STATES: usize = shimmy_core::truck::N_STATES;
+/// The linear model of the image's model task.
+pub type ImageModel = <ImageVehicle as BoardVehicle<IMAGE_MODEL_STATES>>::Model;
 
-/// The image's model from the booted vehicle's plant: the car's plant itself.
-#[cfg(not(feature = "model-truck"))]
-fn image_model(plant: PlantParams) -> ImageModel {
-    plant
-}
-
-/// The image's model: the full truck's named set (its parameters are not part of the vehicle
-/// record yet, so the booted car plant does not configure it).
-#[cfg(feature = "model-truck")]
-fn image_model(_plant: PlantParams) -> ImageModel {
-    shimmy_core::truck::TruckSet::Full.params()
-}
-
-/// The tracker type of the image.
-pub type ImageTracker = ModelMarginTracker<ModelFloat, ImageModel, IMAGE_MODEL_STATES>;
+/// The tracker type of the model task on `M` (the image's: [`ImageModel`]).
+pub type ModelTracker<M = ImageModel, const N: usize = IMAGE_MODEL_STATES> =
+    ModelMarginTracker<ModelFloat, M, N>;
 
 /// The background model task: the core's incremental [`ModelMarginTracker`] on the linearised
 /// plant *without* the MR damper (c = 0: the conservative envelope, the damper only adds
 /// damping), for the image's [`ImageModel`].
-pub struct ModelTask {
-    tracker: ImageTracker,
+pub struct ModelTask<M: LinearModel<N> = ImageModel, const N: usize = IMAGE_MODEL_STATES> {
+    tracker: ModelTracker<M, N>,
 }
 
-impl ModelTask {
-    /// The tracker for `params` (through [`ImageModel`]) with [`model_config`].
-    pub fn new(params: PlantParams) -> Self {
+impl<M: LinearModel<N>, const N: usize> ModelTask<M, N> {
+    /// The tracker for the model `model` with [`model_config`].
+    pub fn new(model: M) -> Self {
         ModelTask {
-            tracker: ImageTracker::in_precision(image_model(params), model_config()),
+            tracker: ModelTracker::in_precision(model, model_config()),
         }
     }
 
@@ -311,7 +332,7 @@ impl ModelTask {
     }
 
     /// The tracker (counters, latest point).
-    pub fn tracker(&self) -> &ImageTracker {
+    pub fn tracker(&self) -> &ModelTracker<M, N> {
         &self.tracker
     }
 }
@@ -437,7 +458,7 @@ mod tests {
 
     #[test]
     fn model_margin_inside_and_below_the_window() {
-        use shimmy_core::params::kmh_to_mps;
+        use shimmy_core::params::{kmh_to_mps, PlantParams};
         let mut m = ModelTask::new(PlantParams::nominal());
         let mut run = |t: f64, v: f64| {
             for _ in 0..200 {

@@ -56,22 +56,24 @@ mod host {
     use super::sample_set;
     use crate::control::{supervised_step, Health};
     use crate::monitoring::{
-        safe_controller_for, DataMargin, MeterCadence, MeterSample, ModelTask,
+        safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use heapless::Deque;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
     use shimmy_core::estimator::model_margin::ModelMargin;
     use shimmy_core::estimator::pipeline::PipelineParams;
-    use shimmy_core::params::PlantParams;
+    use shimmy_core::model::LinearModel;
     use shimmy_core::supervisor::checks::Supervisor;
     use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
     use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
-    use shimmy_core::vehicle::Vehicle;
+    use shimmy_core::vehicle::BoardVehicle;
     use shimmy_pil::{MarginFrame, ModelFrame, StepReport, TargetFrame};
 
     /// The application's tasks on the host, one control period per [`HostApp::period`], with the
-    /// state the RTIC app shares between them (`main.rs`: `Shared`, `Local`).
-    pub struct HostApp {
+    /// state the RTIC app shares between them (`main.rs`: `Shared`, `Local`), for a vehicle
+    /// whose linear model is `M` (`N` states): the image is built for one model (cargo feature
+    /// `model-truck`), the host build runs any.
+    pub struct HostApp<M: LinearModel<N>, const N: usize> {
         ctrl: SafeController,
         health: Health,
         step: u32,
@@ -79,32 +81,37 @@ mod host {
         /// The SPSC queue of the app (capacity 31).
         queue: Deque<MeterSample, 31>,
         data: DataMargin,
-        model_task: ModelTask,
+        model_task: ModelTask<M, N>,
         /// Every model margin published so far, in order (cycle n at index n - 1).
         published: Vec<ModelMargin>,
         now: (f64, f32),
         margin: MarginStatus,
     }
 
-    impl HostApp {
+    impl<M: LinearModel<N>, const N: usize> HostApp<M, N> {
         /// The application as `init` leaves it after a power-on (no latched fault) with
-        /// `vehicle` loaded (the image under PIL boots with an empty RAM flash: the compiled-in
-        /// [`Vehicle::nominal`]).
-        pub fn new(vehicle: &Vehicle) -> Result<Self, ConfigError> {
+        /// `vehicle` loaded (the image under PIL boots with an empty RAM flash: its compiled-in
+        /// vehicle, [`BoardVehicle::compiled_in`]).
+        pub fn new<V: BoardVehicle<N, Model = M> + BoardCalibration>(
+            vehicle: &V,
+        ) -> Result<Self, ConfigError> {
             Self::with_parts(
                 safe_controller_for(vehicle),
-                &vehicle.pipeline_params(),
-                vehicle.plant,
+                &vehicle.margin_pipeline(),
+                vehicle.wheel_order_radius_m(),
+                vehicle.model(),
             )
         }
 
         /// The application around `ctrl` (its controller, gains and supervisor), the data path
-        /// with `pipeline` and the model task on `model_plant`: [`Self::new`] takes all three
-        /// from one vehicle; the simulator's studies also run other controllers or gains.
+        /// with `pipeline` and the wheel order's rolling radius `radius_m`, and the model task
+        /// on `model`: [`Self::new`] takes them all from one vehicle; the simulator's studies
+        /// also run other controllers or gains.
         pub fn with_parts(
             ctrl: SafeController,
             pipeline: &PipelineParams,
-            model_plant: PlantParams,
+            radius_m: f32,
+            model: M,
         ) -> Result<Self, ConfigError> {
             Ok(HostApp {
                 ctrl,
@@ -112,8 +119,8 @@ mod host {
                 step: 0,
                 cadence: MeterCadence::default(),
                 queue: Deque::new(),
-                data: DataMargin::with_params(pipeline)?,
-                model_task: ModelTask::new(model_plant),
+                data: DataMargin::with_params(pipeline, radius_m)?,
+                model_task: ModelTask::new(model),
                 published: Vec::new(),
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,

@@ -7,7 +7,8 @@
 //! what its lower-priority tasks produced before the next step (the meter task's
 //! [`MarginFrame`]s and [`TargetFrame::MeterRun`], the background loop's [`ModelFrame`]s).
 //! The host sends the next sensor frame only after the step report, so a step never waits on
-//! the meter or the model loop. [`HostFrame::Finish`] ends the run; the image answers with
+//! the meter or the model loop. Before the first step the image sends [`TargetFrame::Hello`]
+//! (the vehicle model it is built for). [`HostFrame::Finish`] ends the run; the image answers with
 //! [`TargetFrame::Finished`] (the instructions it executed) and exits.
 //!
 //! Encoding: a 2-byte little-endian body length, then the postcard body (floats as their IEEE
@@ -95,6 +96,13 @@ pub enum TargetFrame {
         /// Instructions the image executed since reset (the virtual time in ns under `-icount
         /// shift=0`: the PIL build never halts, see `firmware/src/board/pil.rs`).
         instructions: u64,
+    },
+    /// The image's first frame, sent once its link is open: what it is built for, so the host
+    /// closes the loop only on the vehicle model the image runs.
+    Hello {
+        /// The schema id of the image's vehicle record (`shimmy_core::vehicle::
+        /// record_schema_of`: one per vehicle model and field table).
+        vehicle_schema: u32,
     },
 }
 

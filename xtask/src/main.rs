@@ -127,6 +127,7 @@ const FIRMWARE_IMAGES: &[(&[&str], &[&str])] = &[
     (&["qemu", "stack-guard-test"], &["stack-guard"]),
     (&["qemu", "link-e2e"], &[FIRMWARE]),
     (&["pil"], &[FIRMWARE]),
+    (&["pil", TRUCK_MODEL], &[FIRMWARE]),
     (&[TRUCK_MODEL], &[FIRMWARE]),
 ];
 
@@ -528,9 +529,13 @@ fn host_reference_bench() -> Result<(), String> {
     ])
 }
 
-/// The scenario of the PIL check: 12 s through the Hopf window onset with a pothole and an
-/// injected encoder fault.
-const PIL_SCENARIO: &str = "host-sim/scenarios/pil/demo.toml";
+/// The scenarios of the PIL check, each with the features of its image: 12 s through the Hopf
+/// window onset with a pothole and an injected encoder fault, on the car and on the mining
+/// truck.
+const PIL_SCENARIOS: [(&str, &[&str]); 2] = [
+    ("host-sim/scenarios/pil/demo.toml", &["pil"]),
+    ("host-sim/scenarios/pil/truck.toml", &["pil", TRUCK_MODEL]),
+];
 
 /// Processor in the loop: the application image built with the `pil` feature closes the loop
 /// with the simulator's plant under QEMU (`shimmy-sim pil`), and the run must agree bit for bit
@@ -540,14 +545,43 @@ const PIL_SCENARIO: &str = "host-sim/scenarios/pil/demo.toml";
 fn pil() -> Step {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
-    let elf = build_firmware(FIRMWARE, &["pil"])?;
     let sim = host_build()?.join("shimmy-sim");
-    run(Command::new(sim)
-        .args(["pil", PIL_SCENARIO, "--elf"])
-        .arg(&elf)
-        .args(["--check-sil", "--out", "target/xtask/pil"])
-        .current_dir(root()))?;
-    Ok(format!("{PIL_SCENARIO}: PIL = SIL bit for bit"))
+    let mut done = Vec::new();
+    let mut images = Vec::new();
+    for (scenario, features) in PIL_SCENARIOS {
+        let elf = build_firmware(FIRMWARE, features)?;
+        images.push(elf.clone());
+        let name = Path::new(scenario)
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        run(Command::new(&sim)
+            .args(["pil", scenario, "--elf"])
+            .arg(&elf)
+            .args(["--check-sil", "--out"])
+            .arg(format!("target/xtask/pil/{name}"))
+            .current_dir(root()))?;
+        done.push(scenario);
+    }
+    // The negative check: the truck's scenario on the car's image is refused at the image's
+    // hello, naming the model the image is built for.
+    let (truck, _) = PIL_SCENARIOS[1];
+    let out = Command::new(&sim)
+        .args(["pil", truck, "--elf"])
+        .arg(&images[0])
+        .args(["--out", "target/xtask/pil/refused"])
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("running shimmy-sim: {e}"))?;
+    let err = String::from_utf8_lossy(&out.stderr);
+    if out.status.success() || !err.contains("is built for the car-4dof model") {
+        return Err(format!(
+            "the truck's scenario on the car's image was not refused at its hello: {err}"
+        ));
+    }
+    Ok(format!(
+        "{}: PIL = SIL bit for bit; the truck's scenario on the car's image refused",
+        done.join(", ")
+    ))
 }
 
 /// The truck-model image's benchmark, every row against the truck image's budgets (the bench's

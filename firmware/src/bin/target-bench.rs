@@ -18,6 +18,7 @@
 mod bench {
     use core::hint::black_box;
     use core::sync::atomic::{AtomicU32, Ordering};
+    use shimmy_core::vehicle::BoardVehicle;
     use shimmy_firmware::runtime::{finish, Outcome};
 
     /// Budget of one control step [instructions] (DESIGN: 1 kHz loop on a 168 MHz M4).
@@ -319,6 +320,11 @@ mod bench {
 
     // ---- the entries ----------------------------------------------------------------------
 
+    /// The image's compiled-in vehicle (the car's nominal one; the truck image's `truck-full`).
+    fn image_vehicle() -> shimmy_firmware::monitoring::ImageVehicle {
+        shimmy_firmware::monitoring::ImageVehicle::compiled_in()
+    }
+
     /// A deterministic shimmy-like yaw at step `k`: a 7 Hz oscillation with a slowly varying
     /// amplitude plus pseudo-random noise (an LCG), so the RLS sees real excitation.
     fn yaw(k: u32, seed: &mut u32) -> (f32, f32) {
@@ -547,7 +553,7 @@ mod bench {
         let mut watch = StandstillWatch::new();
         watch.observe(0.0, 0.0, 0.0);
         if let Some(token) = watch.check(2.0) {
-            let _ = store.save_config(&shimmy_core::vehicle::Vehicle::nominal(), &token);
+            let _ = store.save_config(&image_vehicle(), &token);
         }
         for k in 0..entries {
             store.append(&shimmy_entry(k));
@@ -611,10 +617,7 @@ mod bench {
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
-        let mut link = LinkState::new(
-            &ResetRecord::fresh().sealed(),
-            shimmy_core::vehicle::Vehicle::nominal(),
-        );
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
         let h = Health::default();
         let mut seed = 7;
         let mut worst = 0;
@@ -652,10 +655,7 @@ mod bench {
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
-        let mut link = LinkState::new(
-            &ResetRecord::fresh().sealed(),
-            shimmy_core::vehicle::Vehicle::nominal(),
-        );
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
         let mut episodes = EpisodeRecorder::new();
         let h = Health::default();
         let mut seed = 7;
@@ -702,10 +702,7 @@ mod bench {
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
-        let mut link = LinkState::new(
-            &ResetRecord::fresh().sealed(),
-            shimmy_core::vehicle::Vehicle::nominal(),
-        );
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
         let mut dev = Device::new();
         let mut reply = [0u8; REPLY_BYTES];
         let mut req = [0u8; MAX_FRAME + 1];
@@ -749,18 +746,14 @@ mod bench {
     /// runs it (`background::PassGate`, 100 Hz): the store's pass while moving (no entry, no
     /// new fault), the check for a host-written vehicle, a model call between two cycles.
     fn idle_pass() -> u32 {
-        use shimmy_core::params::PlantParams;
         use shimmy_core::supervisor::faults::FaultSet;
         use shimmy_firmware::fault_memory::ResetRecord;
         use shimmy_firmware::link::LinkState;
         use shimmy_firmware::monitoring::ModelTask;
         use shimmy_firmware::store::{Motion, StoreTask};
         let mut task = StoreTask::new(bench_store(0), FaultSet::EMPTY);
-        let mut link = LinkState::new(
-            &ResetRecord::fresh().sealed(),
-            shimmy_core::vehicle::Vehicle::nominal(),
-        );
-        let mut model = ModelTask::new(PlantParams::nominal());
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut model = ModelTask::new(image_vehicle().model());
         let v = 15.0;
         // the cold first cycle completes; the calls measured come before the next one is due
         let mut t = 0.0;
@@ -792,10 +785,9 @@ mod bench {
     /// A wake of the background loop with nothing new (the other ~1 kHz wakes): the gate's
     /// check, which sends it back to sleep.
     fn idle_wake() -> u32 {
-        use shimmy_core::params::PlantParams;
         use shimmy_firmware::background::PassGate;
         use shimmy_firmware::monitoring::ModelTask;
-        let model = ModelTask::new(PlantParams::nominal());
+        let model = ModelTask::new(image_vehicle().model());
         let mut gate = PassGate::new();
         let t = 1.25;
         gate.due(t, false);
@@ -818,10 +810,7 @@ mod bench {
         use shimmy_link::device::{Device, REPLY_BYTES};
         use shimmy_link::frame::{encode, MAX_FRAME};
         use shimmy_link::wire::{Request, PROTOCOL_HEADER};
-        let mut link = LinkState::new(
-            &ResetRecord::fresh().sealed(),
-            shimmy_core::vehicle::Vehicle::nominal(),
-        );
+        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
         let mut dev = Device::new();
         let mut req = [0u8; MAX_FRAME + 1];
         let Ok(n) = encode(PROTOCOL_HEADER, &Request::GetConfig, &mut req) else {
@@ -918,14 +907,14 @@ mod bench {
     /// bounds the cycle from above), through the nominal Hopf onset at 29.35 km/h. Each call is
     /// measured; a cycle's count is the sum of its calls. Computed once.
     fn tracker_counts() -> (u32, u32, u32) {
-        use shimmy_core::params::{kmh_to_mps, PlantParams};
+        use shimmy_core::params::kmh_to_mps;
         use shimmy_firmware::monitoring::{ModelTask, MODEL_REFRESH_S};
         static DONE: AtomicU32 = AtomicU32::new(0);
         static CALL: AtomicU32 = AtomicU32::new(0);
         static COLD: AtomicU32 = AtomicU32::new(0);
         static CYCLE: AtomicU32 = AtomicU32::new(0);
         if DONE.load(Ordering::Relaxed) == 0 {
-            let mut m = ModelTask::new(PlantParams::nominal());
+            let mut m = ModelTask::new(image_vehicle().model());
             let (mut call, mut cold, mut cycle) = (0u32, 0u32, 0u32);
             for c in 0..13u32 {
                 let t = c as f64 * f64::from(MODEL_REFRESH_S);

@@ -17,6 +17,7 @@
 use super::parts::BoardParts;
 use crate::drivers::coil_pwm::CoilDriver;
 use crate::hal::pac;
+use crate::monitoring::ImageVehicle;
 use crate::periph::{ControlTimer, LinkPort, Watchdog};
 use crate::runtime::{finish, Outcome};
 use crate::sensors::SampleSet;
@@ -27,6 +28,7 @@ use shimmy_core::estimator::fusion::MarginReport;
 use shimmy_core::estimator::model_margin::ModelPoint;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
+use shimmy_core::vehicle::record_schema_of;
 use shimmy_pil::{
     body_len, decode, encode, HostFrame, MarginFrame, ModelFrame, StepReport, TargetFrame,
     HEADER_BYTES, MAX_FRAME,
@@ -140,6 +142,9 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> (Board, LinkPort) {
         Ok(c) => c,
         Err(e) => match e {},
     };
+    send(&TargetFrame::Hello {
+        vehicle_schema: record_schema_of::<ImageVehicle>(),
+    });
     defmt::info!("pil: link open, waiting for the host's frames");
     let board = Board {
         sensors: BoardSensors {

@@ -10,7 +10,7 @@
 //!   erases never holds the newest state (two pages at least). The log's queue type, so its
 //!   code is in the image once.
 //!   [`Store::load_config`] never fails: a missing, unreadable or invalid record gives the
-//!   compiled-in [`Vehicle::nominal`](shimmy_core::vehicle::Vehicle::nominal) and says why ([`ConfigSource`]), so the caller can report
+//!   compiled-in vehicle ([`BoardVehicle::compiled_in`](shimmy_core::vehicle::BoardVehicle::compiled_in): the car's `Vehicle::nominal`, the truck image's `truck-full`) and says why ([`ConfigSource`]), so the caller can report
 //!   it as a fault; nothing is half-applied.
 //! - Event log: [`LogEntry`]s (shimmy episodes, latched faults, boots) in a `sequential-storage`
 //!   queue, oldest first; when it is full the oldest go first.

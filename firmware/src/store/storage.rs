@@ -6,6 +6,7 @@ use super::log::FaultEntry;
 use super::log::{BootEntry, LogEntry, Unreadable, ENTRY_MAX_BYTES};
 use super::standstill::Standstill;
 use crate::fault_memory::ResetCause;
+use crate::monitoring::ImageVehicle;
 use core::future::Future;
 use core::ops::Range;
 use core::pin::pin;
@@ -13,7 +14,9 @@ use core::task::{Context, Poll, Waker};
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::queue::{QueueConfig, QueueStorage};
-use shimmy_core::vehicle::{RecordError, Vehicle, RECORD_MAX_BYTES};
+use shimmy_core::vehicle::{
+    decode_record, encode_record, BoardVehicle, RecordError, RecordVehicle, RECORD_MAX_BYTES,
+};
 
 /// Log entries kept in RAM while an append waits for a standstill erase.
 pub const PENDING: usize = 16;
@@ -186,8 +189,9 @@ pub enum ConfigSource {
 /// The configuration to run with, and where it came from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ConfigLoad {
-    /// The vehicle (the stored one, or [`Vehicle::nominal`]).
-    pub vehicle: Vehicle,
+    /// The vehicle (the stored one, or the image's compiled-in one,
+    /// [`BoardVehicle::compiled_in`]).
+    pub vehicle: ImageVehicle,
     /// Why this one.
     pub source: ConfigSource,
 }
@@ -336,13 +340,13 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// The vehicle to run with (never fails; see [`ConfigLoad`]).
     pub fn load_config(&mut self) -> ConfigLoad {
         let nominal = |source| ConfigLoad {
-            vehicle: Vehicle::nominal(),
+            vehicle: ImageVehicle::compiled_in(),
             source,
         };
         let mut state = [0u8; STATE_MAX_BYTES];
         match self.read_state(&mut state) {
             Ok(n) => match state.get(STATE_HEADER_BYTES..n) {
-                Some(record) if !record.is_empty() => match Vehicle::decode_record(record) {
+                Some(record) if !record.is_empty() => match decode_record::<ImageVehicle>(record) {
                     Ok(vehicle) => ConfigLoad {
                         vehicle,
                         source: ConfigSource::Stored,
@@ -427,14 +431,14 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     /// and nothing is written). Atomic: after a power cut the board has the old or the new one.
     pub fn save_config(
         &mut self,
-        vehicle: &Vehicle,
+        vehicle: &ImageVehicle,
         token: &Standstill<'_>,
     ) -> Result<(), StoreError> {
         vehicle
-            .validate()
+            .check_all()
             .map_err(|e| StoreError::Record(RecordError::Invalid(e)))?;
         self.flash.open(token);
-        let result = self.store_record(|record| vehicle.encode_record(record));
+        let result = self.store_record(|record| encode_record(vehicle, record));
         self.flash.close();
         result
     }

@@ -6,7 +6,7 @@ use crate::store::drive;
 use crate::store::{RamFlash, ShimmyEntry, StandstillWatch, StoreTask};
 use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-use shimmy_core::vehicle::FIELDS;
+use shimmy_core::vehicle::{Vehicle, FIELDS};
 
 /// Small pages so a handful of writes fill one and force the page turns of both queues (each with an erase) under the cut.
 const PAGE: usize = 2048;

@@ -566,8 +566,8 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     if let Some(i) = a.on_current_a {
         crate::sim::arg_range::check_current("--on-current-a", i, &model_family.parts)?;
     }
-    // The margin-scheduled arm reads the firmware's margin report, whose host build runs the
-    // car's model task: on another model it is left out, and said so.
+    // The margin-scheduled arm reads the firmware's margin report, which exists for the models
+    // a firmware image is built for: on another model it is left out, and said so.
     let controllers: Vec<&String> = a
         .controllers
         .iter()
@@ -575,8 +575,8 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
             let keep = n.as_str() != "margin-asmc" || model_family.model.host_app_model().is_some();
             if !keep {
                 println!(
-                    "margin-asmc left out: its margin report comes from the firmware's host build, which runs the {} model task, not the {}",
-                    PlantParams::NAME,
+                    "margin-asmc left out: its margin report comes from the firmware, which is built for the {} models, not the {}",
+                    crate::model::family::image_models(),
                     <M::Linear as LinearModel<N>>::NAME
                 );
             }

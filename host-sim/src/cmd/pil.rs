@@ -5,14 +5,19 @@
 //! share at 168 MHz. `--check-sil` runs the scenario again with the firmware's application
 //! natively and fails unless both runs agree bit for bit.
 
+use crate::model::family::image_models;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop;
-use crate::sim::pil::{check_firmware_matches, compare, costs, PilFirmware, SilFirmware, TaskCost};
-use crate::sim::scenario;
-use crate::sim::scenario_file;
+use crate::sim::pil::{
+    check_firmware_matches, compare, costs, PilFirmware, PilModel, SilFirmware, TaskCost,
+};
+use crate::sim::scenario::{self, ScenarioSpec};
+use crate::sim::scenario_file::{self, AnyScenario};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use shimmy_core::model::LinearModel;
+use shimmy_core::vehicle::record_schema_of;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -22,12 +27,15 @@ const CPU_HZ: f64 = 168e6;
 /// Options of `shimmy-sim pil`.
 #[derive(Args, Debug)]
 pub struct PilArgs {
-    /// Scenario file (TOML, as for `run`); the image is built for the default vehicle with
-    /// the ASMC controller, so the scenario must believe that vehicle.
+    /// Scenario file (TOML, as for `run`) of the car or the mining truck; the image is built
+    /// for its model's default vehicle (`nominal`, `truck-full`) with the margin-scheduled
+    /// ASMC, so the scenario must believe that vehicle.
     pub scenario: PathBuf,
-    /// The firmware image built with the `pil` feature (`cargo xtask pil` builds it there).
-    #[arg(long, default_value = "target/xtask/shimmy-firmware.pil.elf")]
-    pub elf: PathBuf,
+    /// The firmware image built with the `pil` feature for the scenario's model (`cargo xtask
+    /// pil` builds both; default target/xtask/shimmy-firmware.pil.elf for the car,
+    /// target/xtask/shimmy-firmware.pil+model-truck.elf for the truck).
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
     /// Output folder (overrides the file's `output.dir`; default `out/pil/<name>`).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -50,12 +58,25 @@ fn cost_table(name: &str, t: &TaskCost, sim_s: f64) -> String {
 
 /// The command.
 pub fn command(a: &PilArgs) -> Result<()> {
-    let spec = scenario_file::load(&a.scenario)?;
+    match scenario_file::load_any(&a.scenario)? {
+        AnyScenario::Car(spec) => run_spec(a, spec),
+        AnyScenario::Truck(spec) => run_spec(a, spec),
+        AnyScenario::Trailer(_) => bail!(
+            "scenario file {}: its vehicle is a {}; the firmware is built for the {} models",
+            a.scenario.display(),
+            shimmy_core::trailer::TrailerParams::NAME,
+            image_models()
+        ),
+    }
+}
+
+/// The command on a scenario of a model the firmware is built for.
+fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N>) -> Result<()> {
     let arm = spec
         .arm()
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let cfg = scenario::loop_config(&spec, arm);
-    check_firmware_matches(&cfg, spec.model())
+    check_firmware_matches(&cfg, &spec.model_family())
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let out = a
@@ -64,16 +85,19 @@ pub fn command(a: &PilArgs) -> Result<()> {
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    if !a.elf.exists() {
+    let elf = a.elf.clone().unwrap_or_else(|| PathBuf::from(M::ELF));
+    if !elf.exists() {
         bail!(
             "PIL image {} not found: build it with `cargo xtask pil` (or `cargo build --release \
-             -p shimmy-firmware --target thumbv7em-none-eabihf --features pil`) and pass --elf",
-            a.elf.display()
+             -p shimmy-firmware --target thumbv7em-none-eabihf --features pil`, with \
+             `model-truck` for the truck) and pass --elf",
+            elf.display()
         );
     }
 
     let wall = Instant::now();
-    let mut fw = PilFirmware::start(&a.elf).map_err(anyhow::Error::msg)?;
+    let mut fw =
+        PilFirmware::start(&elf, record_schema_of::<M::Board>()).map_err(anyhow::Error::msg)?;
     let r = closed_loop::run_on(&cfg, &mut spec.scenario.clone(), None, &mut fw)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let run = fw.finish().map_err(anyhow::Error::msg)?;
@@ -146,7 +170,8 @@ pub fn command(a: &PilArgs) -> Result<()> {
     );
 
     if a.check_sil {
-        let mut sil = SilFirmware::new(Some(&run.periods)).map_err(anyhow::Error::msg)?;
+        let mut sil = SilFirmware::<M::Linear, N>::new::<M::Board>(Some(&run.periods))
+            .map_err(anyhow::Error::msg)?;
         let rs = closed_loop::run_on(&cfg, &mut spec.scenario.clone(), None, &mut sil)
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         let agreement = compare(&run.periods, &sil.periods())

@@ -607,7 +607,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
         }
     }
 
-    fn host_app_model(&self) -> Option<shimmy_core::params::PlantParams> {
+    fn host_app_model(&self) -> Option<(Self::Linear, f32)> {
         None
     }
 

@@ -80,11 +80,13 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     /// The controller's nominal plant (I_k, c_k, l_t: the ASMC's model).
     fn nominal_plant(&self) -> NominalPlant;
 
-    /// The car plant the host build of the firmware's application (`shimmy_firmware::pil::
-    /// HostApp`) runs its model task on, if it runs this model: the image's model task is
-    /// compiled for one model (cargo feature `model-truck`), the host build is the car's. `None`:
-    /// no margin report in the closed loop (the margin-scheduled controller is not available).
-    fn host_app_model(&self) -> Option<PlantParams>;
+    /// The linear model the host build of the firmware's application (`shimmy_firmware::pil::
+    /// HostApp`) runs its model task on and the rolling radius its meter's wheel order takes
+    /// (`shimmy_firmware::monitoring::BoardCalibration`), if the firmware is built for this
+    /// model (the car; the mining truck, cargo feature `model-truck`). `None`: no board image
+    /// for this model, so no margin report in the closed loop (the margin-scheduled
+    /// controller is not available).
+    fn host_app_model(&self) -> Option<(Self::Linear, f32)>;
 
     /// Factor on the kingpin yaw torques of a scenario's disturbances (road noise, imbalance,
     /// potholes, kicks), which scenario files give for the car: the road acts through the
@@ -102,6 +104,16 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
 
     /// A copy with the parameter `name` set to `value`, or an error naming it and its range.
     fn with_param(&self, name: &str, value: f64) -> Result<Self>;
+}
+
+/// The models a firmware image is built for (those with a [`SimModel::host_app_model`]), for
+/// messages.
+pub fn image_models() -> String {
+    format!(
+        "{} and {}",
+        <PlantParams as LinearModel<{ shimmy_core::plant::N_STATES }>>::NAME,
+        <shimmy_core::truck::TruckParams as LinearModel<{ shimmy_core::truck::N_STATES }>>::NAME
+    )
 }
 
 /// A parameter of a model by name, for axes and tables.

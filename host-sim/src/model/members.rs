@@ -9,7 +9,9 @@ use shimmy_core::model::LinearModel;
 use shimmy_core::params::{kmh_to_mps, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{hopf_crossings, CrossingKind};
 use shimmy_core::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
+use shimmy_core::truck_vehicle::TruckVehicle;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_firmware::monitoring::BoardCalibration;
 
 use super::damper_equiv::damper_equivalent;
 use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
@@ -114,8 +116,8 @@ impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
         NominalPlant::from_params(self)
     }
 
-    fn host_app_model(&self) -> Option<PlantParams> {
-        Some(*self)
+    fn host_app_model(&self) -> Option<(PlantParams, f32)> {
+        Some((*self, Vehicle::with_plant(*self).wheel_order_radius_m()))
     }
 
     fn yaw_torque_scale(&self) -> f64 {
@@ -186,19 +188,19 @@ impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     }
 
     fn nominal_plant(&self) -> NominalPlant {
-        NominalPlant {
-            i_k_kgm2: self.i_k as f32,
-            c_k_nms_per_rad: self.c_k as f32,
-            l_t_m: self.l_t as f32,
-        }
+        TruckParams::nominal_plant(self)
     }
 
     fn yaw_torque_scale(&self) -> f64 {
         (self.e + self.t_p) * self.point_or_tyres_only().c_a / reference_tyre_yaw_stiffness()
     }
 
-    fn host_app_model(&self) -> Option<PlantParams> {
-        None
+    fn host_app_model(&self) -> Option<(TruckParams, f32)> {
+        let board = TruckVehicle {
+            truck: *self,
+            parts: truck_parts(),
+        };
+        Some((*self, board.wheel_order_radius_m()))
     }
 
     fn params() -> Vec<ParamInfo> {
@@ -318,40 +320,18 @@ pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> 
 /// not another coil); the ASMC's gains are angular accelerations of the wheel, its force comes
 /// from the nominal plant's 2 I_k / l_t; the warning thresholds are the truck's own
 /// ([`TruckParams::warning_thresholds`]).
-pub fn truck_parts() -> Result<Vehicle> {
-    let mut v = car_parts_with_damper_scaled(truck_damper_scale()?);
-    v.thresholds = TruckParams::warning_thresholds();
-    Ok(v)
+///
+/// The core keeps the factor as [`TRUCK_DAMPER_SCALE`] (the truck image's compiled-in vehicle
+/// is built from it); the test `the_cores_truck_damper_scale_is_the_computed_one` holds the two
+/// equal.
+pub fn truck_parts() -> Vehicle {
+    TruckVehicle::default_parts()
 }
 
 /// The car's reference shared sections with every force coefficient of the damper (the
 /// Spencer model's and the firmware's Bingham model's) and the skyhook coefficient times `s`.
 pub fn car_parts_with_damper_scaled(s: f64) -> Vehicle {
-    let mut v = Vehicle::from_set(ParamSet::Nominal);
-    let sp = &mut v.damper.spencer;
-    for c in [
-        &mut sp.c0a,
-        &mut sp.c0b,
-        &mut sp.k0,
-        &mut sp.c1a,
-        &mut sp.c1b,
-        &mut sp.k1,
-        &mut sp.alpha_a,
-        &mut sp.alpha_b,
-    ] {
-        *c *= s;
-    }
-    let m = &mut v.damper.model;
-    for c in [
-        &mut m.f_ca_n,
-        &mut m.f_cb_n_per_a,
-        &mut m.c_a_ns_per_m,
-        &mut m.c_b_ns_per_m_a,
-    ] {
-        *c *= s as f32;
-    }
-    v.controller.skyhook_ns_per_m *= s as f32;
-    v
+    Vehicle::from_set(ParamSet::Nominal).with_damper_scaled(s)
 }
 
 #[cfg(test)]
@@ -367,7 +347,7 @@ mod tests {
     fn the_trucks_damper_is_sized_as_the_cars() {
         let car = Vehicle::from_set(ParamSet::Nominal);
         let truck = TruckSet::Full.params();
-        let parts = truck_parts().unwrap();
+        let parts = truck_parts();
         let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
         let deg = crate::model::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
         let car_2a = damper_equivalent(&car.plant, &car.damper.spencer, 2.0, deg, v0, v1).unwrap();
@@ -406,6 +386,18 @@ mod tests {
             car.damper.model.c_b_ns_per_m_a * s
         );
         parts.validate().unwrap();
+    }
+
+    /// The core's compiled-in factor (the truck image's default vehicle) is the sizing
+    /// computed here, to the last bits.
+    #[test]
+    fn the_cores_truck_damper_scale_is_the_computed_one() {
+        use shimmy_core::truck_vehicle::TRUCK_DAMPER_SCALE;
+        let computed = truck_damper_scale().unwrap();
+        assert!(
+            (TRUCK_DAMPER_SCALE / computed - 1.0).abs() < 1e-12,
+            "core {TRUCK_DAMPER_SCALE:?}, computed {computed:?}: update TRUCK_DAMPER_SCALE"
+        );
     }
 
     /// The family's car plant is the car's simulator unchanged: the same state after the same

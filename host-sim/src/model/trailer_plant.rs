@@ -17,7 +17,6 @@ use nalgebra::SVector;
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
-use shimmy_core::params::PlantParams;
 use shimmy_core::trailer::{
     TrailerFieldError, TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, TRAILER_FIELDS, Y,
 };
@@ -423,7 +422,7 @@ impl SimModel<N_STATES> for TrailerParams {
         }
     }
 
-    fn host_app_model(&self) -> Option<PlantParams> {
+    fn host_app_model(&self) -> Option<(Self::Linear, f32)> {
         None
     }
 

@@ -36,6 +36,7 @@ use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
 use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::model::LinearModel;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
@@ -585,9 +586,9 @@ impl FirmwareStep for InProcess {
 /// The firmware's application tasks in this process (`HostApp`: the control step, the meter
 /// task after every 10th sample, the model loop with each cycle done at once): the
 /// margin-scheduled controller reads the meter task's report as on the board.
-struct InApp(Box<HostApp>);
+struct InApp<L: LinearModel<N>, const N: usize>(Box<HostApp<L, N>>);
 
-impl FirmwareStep for InApp {
+impl<L: LinearModel<N>, const N: usize> FirmwareStep for InApp<L, N> {
     type Error = std::convert::Infallible;
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
         Ok(self.0.period(frame, None, &mut |_| {}))
@@ -630,12 +631,13 @@ pub fn run<M: SimModel<N>, const N: usize>(
     };
     let safe = SafeController::new(kind, cfg.control, cfg.supervisor);
     let (model, pipeline) = cfg.margin_model;
-    // The host build of the firmware's application runs the car's model task; another model
-    // has no margin report in the loop (its commands reject the margin-scheduled arm).
+    // The host build of the firmware's application runs the model task of a model the
+    // firmware is built for; another model has no margin report in the loop (its commands
+    // reject the margin-scheduled arm).
     let app = model
         .host_app_model()
         .filter(|_| cfg.margin_in_loop())
-        .map(|plant| HostApp::with_parts(safe.clone(), &pipeline, plant));
+        .map(|(model, radius_m)| HostApp::with_parts(safe.clone(), &pipeline, radius_m, model));
     let r = match app {
         Some(app) => match app {
             Ok(app) => run_loop(cfg, scenario, observer, &mut InApp(Box::new(app))),

@@ -13,14 +13,18 @@
 //! - [`SilFirmware`]: the same application's tasks natively (`shimmy_firmware::pil::HostApp`),
 //!   the software-in-the-loop side; [`compare`] checks the two runs bit for bit.
 
+use crate::model::family::FamilyVehicle;
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
-use shimmy_core::control::ControlParams;
+use crate::sim::vehicle_file::FileModel;
+use shimmy_core::model::LinearModel;
+use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
-use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
-use shimmy_core::vehicle::Vehicle;
-use shimmy_firmware::monitoring::CONTROLLER;
+use shimmy_core::truck::TruckParams;
+use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
+use shimmy_core::vehicle::{BoardVehicle, Vehicle};
+use shimmy_firmware::monitoring::{BoardCalibration, CONTROLLER};
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
     body_len, decode, encode, HostFrame, StepReport, TargetFrame, HEADER_BYTES, MAX_FRAME,
@@ -44,11 +48,48 @@ const LAST_FRAMES: usize = 12;
 /// Decoded log lines shown with a hang or crash.
 const LAST_LOG_LINES: usize = 40;
 
+/// A vehicle model a PIL image is built for (the firmware's cargo feature `model-truck` picks
+/// the truck): the vehicle its image stores and boots with, and where `cargo xtask pil` puts
+/// the image.
+pub trait PilModel<const N: usize>: FileModel<N> {
+    /// The image's vehicle (its record, its compiled-in default).
+    type Board: BoardVehicle<N, Model = Self::Linear> + BoardCalibration;
+    /// The image `cargo xtask pil` builds for this model.
+    const ELF: &'static str;
+    /// The simulator's vehicle of this model as the image's.
+    fn board_vehicle(v: &FamilyVehicle<Self>) -> Self::Board;
+}
+
+impl PilModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+    type Board = Vehicle;
+    const ELF: &'static str = "target/xtask/shimmy-firmware.pil.elf";
+    fn board_vehicle(v: &FamilyVehicle<Self>) -> Vehicle {
+        Vehicle {
+            plant: v.model,
+            ..v.parts
+        }
+    }
+}
+
+impl PilModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+    type Board = TruckVehicle;
+    const ELF: &'static str = "target/xtask/shimmy-firmware.pil+model-truck.elf";
+    fn board_vehicle(v: &FamilyVehicle<Self>) -> TruckVehicle {
+        TruckVehicle {
+            truck: v.model,
+            parts: v.parts,
+        }
+    }
+}
+
 /// The image runs the firmware's own controller and parameters
-/// (`shimmy_firmware::monitoring::CONTROLLER`, the margin-scheduled ASMC; the nominal vehicle:
-/// its controller, supervisor and model-margin plant): a loop whose firmware believes anything
-/// else (`believed`) cannot be closed by it.
-pub fn check_firmware_matches(cfg: &LoopConfig, believed: &Vehicle) -> Result<(), String> {
+/// (`shimmy_firmware::monitoring::CONTROLLER`, the margin-scheduled ASMC; its compiled-in
+/// vehicle, [`BoardVehicle::compiled_in`]: its controller, supervisor and model-margin model):
+/// a loop whose firmware believes anything else (`believed`) cannot be closed by it.
+pub fn check_firmware_matches<M: PilModel<N>, const N: usize>(
+    cfg: &LoopConfig<M, N>,
+    believed: &FamilyVehicle<M>,
+) -> Result<(), String> {
     let image = Arm::Mr(CONTROLLER);
     if cfg.arm != image {
         return Err(format!(
@@ -57,17 +98,26 @@ pub fn check_firmware_matches(cfg: &LoopConfig, believed: &Vehicle) -> Result<()
             image.name()
         ));
     }
-    if *believed != Vehicle::nominal()
-        || cfg.control != ControlParams::default()
-        || cfg.supervisor != SupervisorParams::default()
+    let compiled_in = M::Board::compiled_in();
+    if M::board_vehicle(believed) != compiled_in
+        || cfg.control != compiled_in.controller_params()
+        || cfg.supervisor != compiled_in.parts().supervisor_params()
     {
-        return Err(
-            "fields `[model]` (else `[plant]`): the firmware must believe the default \
-             (nominal) vehicle the image is built with"
-                .into(),
-        );
+        return Err(format!(
+            "fields `[model]` (else `[plant]`): the firmware must believe the default {} \
+             vehicle the image is built with",
+            <M::Linear as LinearModel<N>>::NAME
+        ));
     }
     Ok(())
+}
+
+/// The vehicle model of a record schema id, for messages.
+fn schema_model(schema: u32) -> String {
+    record_model(schema).map_or_else(
+        || format!("unknown (schema {schema:#010x})"),
+        str::to_string,
+    )
 }
 
 /// What the image sent in one control period: its step report, then the frames of its
@@ -364,16 +414,36 @@ fn cpu_s(who: libc::c_int) -> f64 {
 }
 
 impl PilFirmware {
-    /// Starts the image `elf` (a `pil` build).
-    pub fn start(elf: &Path) -> Result<Self, String> {
+    /// Starts the image `elf` (a `pil` build) and takes its hello: the image must be built for
+    /// the vehicle model whose record has the schema id `vehicle_schema`.
+    pub fn start(elf: &Path, vehicle_schema: u32) -> Result<Self, String> {
         let host_cpu_at_start_s = cpu_s(libc::RUSAGE_SELF);
-        Ok(PilFirmware {
+        let mut fw = PilFirmware {
             qemu: Qemu::start(elf)?,
             periods: Vec::new(),
             last: VecDeque::new(),
             finished: None,
             host_cpu_at_start_s,
-        })
+        };
+        let first = fw.qemu.next().map_err(|e| fw.failure(&e))?;
+        fw.remember(Seen::Received(first));
+        match first {
+            TargetFrame::Hello { vehicle_schema: s } if s == vehicle_schema => Ok(fw),
+            TargetFrame::Hello { vehicle_schema: s } => Err(format!(
+                "the PIL image {} is built for the {} model, the scenario's vehicle is a {}: \
+                 pass the image built for it (`cargo xtask pil` builds the car's as {} and the \
+                 truck's as {})",
+                elf.display(),
+                schema_model(s),
+                schema_model(vehicle_schema),
+                PlantParams::ELF,
+                TruckParams::ELF
+            )),
+            other => Err(fw.failure(&format!(
+                "the image's first frame is not its hello but {}",
+                summary(&other)
+            ))),
+        }
     }
 
     fn remember(&mut self, what: Seen) {
@@ -505,6 +575,12 @@ fn summary(f: &TargetFrame) -> String {
         TargetFrame::Finished { instructions } => {
             format!("finished after {instructions} instructions")
         }
+        TargetFrame::Hello { vehicle_schema } => {
+            format!(
+                "hello: built for the {} model",
+                schema_model(*vehicle_schema)
+            )
+        }
     }
 }
 
@@ -538,18 +614,20 @@ impl FirmwareStep for PilFirmware {
 /// margin each meter run fuses is taken from the PIL run's frames when given (when a cycle of
 /// the background loop completes depends on its instruction count, known only on the target;
 /// the values are computed here).
-pub struct SilFirmware<'a> {
-    app: HostApp,
+pub struct SilFirmware<'a, L: LinearModel<N>, const N: usize> {
+    app: HostApp<L, N>,
     pil: Option<&'a [Period]>,
     periods: Vec<Period>,
 }
 
-impl<'a> SilFirmware<'a> {
-    /// The application after a power-on; `pil`: the PIL run to take the model timing from.
-    pub fn new(pil: Option<&'a [Period]>) -> Result<Self, String> {
+impl<'a, L: LinearModel<N>, const N: usize> SilFirmware<'a, L, N> {
+    /// The application after a power-on with the compiled-in vehicle of `V` (the image boots
+    /// with an empty RAM flash); `pil`: the PIL run to take the model timing from.
+    pub fn new<V: BoardVehicle<N, Model = L> + BoardCalibration>(
+        pil: Option<&'a [Period]>,
+    ) -> Result<Self, String> {
         Ok(SilFirmware {
-            // The image boots with an empty RAM flash: the compiled-in vehicle.
-            app: HostApp::new(&Vehicle::nominal())
+            app: HostApp::new(&V::compiled_in())
                 .map_err(|e| format!("estimator configuration: {e:?}"))?,
             pil,
             periods: Vec::new(),
@@ -562,7 +640,7 @@ impl<'a> SilFirmware<'a> {
     }
 }
 
-impl FirmwareStep for SilFirmware<'_> {
+impl<L: LinearModel<N>, const N: usize> FirmwareStep for SilFirmware<'_, L, N> {
     type Error = String;
 
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
@@ -864,12 +942,12 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
         let mut spec = scenario_file::load(&path).expect("valid demo");
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
-        assert_eq!(check_firmware_matches(&cfg, spec.model()), Ok(()));
+        assert_eq!(check_firmware_matches(&cfg, &spec.model_family()), Ok(()));
         assert!(!spec.faults.is_empty() && spec.duration_s >= 10.0);
         for other in ["smc", "asmc"] {
             spec.controller = other.into();
             let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
-            let e = check_firmware_matches(&cfg, spec.model()).expect_err(other);
+            let e = check_firmware_matches(&cfg, &spec.model_family()).expect_err(other);
             assert!(
                 e.contains("controller.kind") && e.contains("margin-asmc"),
                 "{e}"
@@ -878,7 +956,7 @@ mod tests {
         spec.controller = "margin-asmc".into();
         spec.model_vehicle = Some(crate::sim::vehicle_file::load("hard").expect("named set"));
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
-        let e = check_firmware_matches(&cfg, spec.model()).expect_err("hard");
+        let e = check_firmware_matches(&cfg, &spec.model_family()).expect_err("hard");
         assert!(e.contains("[model]"), "{e}");
     }
 
@@ -894,7 +972,7 @@ mod tests {
         spec.duration_s = 3.0;
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         let own = closed_loop::run(&cfg, &mut spec.scenario.clone(), None).expect("run");
-        let mut sil = SilFirmware::new(None).expect("app");
+        let mut sil = SilFirmware::new::<Vehicle>(None).expect("app");
         let app = run_on(&cfg, &mut spec.scenario.clone(), None, &mut sil).expect("run");
         let bits = |r: &closed_loop::LoopResult| -> Vec<u64> {
             r.series.cmd_a.iter().map(|x| x.to_bits()).collect()

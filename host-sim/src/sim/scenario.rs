@@ -162,9 +162,9 @@ impl<M: SimModel<N>, const N: usize> ScenarioSpec<M, N> {
         if self.controller == "margin-asmc" && self.model_family().model.host_app_model().is_none()
         {
             bail!(
-                "controller `margin-asmc` reads the firmware's margin report, whose host build \
-                 runs the {} model task; this vehicle is a {}: choose another controller",
-                PlantParams::NAME,
+                "controller `margin-asmc` reads the firmware's margin report; the firmware is \
+                 built for the {} models, this vehicle is a {}: choose another controller",
+                crate::model::family::image_models(),
                 <M::Linear as LinearModel<N>>::NAME
             );
         }

@@ -1115,8 +1115,9 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
     }
 
     /// The truck's shipped scenarios parse as truck scenarios; the car-only loader and a truck
-    /// scenario with a driver torque or with the margin-scheduled controller (whose report the
-    /// host build of the firmware runs on the car's model only) are rejected, naming why.
+    /// scenario with a driver torque are rejected, naming why; the margin-scheduled controller
+    /// (whose report exists for the models a firmware image is built for) is taken for the
+    /// truck and refused for the trailer.
     #[test]
     fn the_trucks_shipped_scenarios_are_truck_scenarios() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -1142,9 +1143,15 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             "{truck}[driver]\nslalom = {{ amplitude_nm = 2.0, freq_hz = 0.5, start_s = 0.0 }}\n"
         ));
         assert!(msg.contains("field `driver`"), "{msg}");
-        let msg = e(format!("{truck}[controller]\nkind = \"margin-asmc\"\n"));
+        let margin_asmc = "[controller]\nkind = \"margin-asmc\"\n";
+        assert!(matches!(
+            parse_any_in(&format!("{truck}{margin_asmc}"), "t", Path::new("")),
+            Ok(AnyScenario::Truck(_))
+        ));
+        let trailer = truck.replace("\"truck-full\"", "\"trailer\"");
+        let msg = e(format!("{trailer}{margin_asmc}"));
         assert!(
-            msg.contains("margin-asmc") && msg.contains("car-4dof"),
+            msg.contains("margin-asmc") && msg.contains("mining-truck-5dof"),
             "{msg}"
         );
         let msg = e(format!("{truck}[model]\nvehicle = \"nominal\"\n"));

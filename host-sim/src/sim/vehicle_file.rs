@@ -144,7 +144,7 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     if let Some(set) = TruckSet::from_name(spec) {
         return Ok(ModelVehicle::Truck(FamilyVehicle {
             model: set.params(),
-            parts: truck_parts()?,
+            parts: truck_parts(),
         }));
     }
     if let Some(set) = DualAxleSet::from_name(spec) {
@@ -303,7 +303,7 @@ fn parse_member<T>(
 /// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
 /// sections (from [`truck_parts`]).
 fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
-    let mut parts = truck_parts()?;
+    let mut parts = truck_parts();
     let model = parse_member(
         table,
         &MemberFile {

@@ -172,8 +172,9 @@ fn compute_on<M: SimModel<N>, const N: usize>(
     if arms.contains(&Arm::Mr(ControllerKind::MarginAsmc)) && base.model.host_app_model().is_none()
     {
         bail!(
-            "--controllers margin-asmc: the host build of the firmware's margin report runs the \
-             car's model task only"
+            "--controllers margin-asmc: the firmware's margin report exists for the {} models \
+             only",
+            crate::model::family::image_models()
         );
     }
     super::args::check(a)?;
