@@ -65,7 +65,7 @@ impl BoardCalibration for Vehicle {
 }
 
 impl BoardCalibration for shimmy_core::truck_vehicle::TruckVehicle {
-    /// The truck's loaded rolling radius (its 40.00R57 tyres, ~1.8 m): with the car's 0.35 m
+    /// The truck's loaded rolling radius (its 40.00R57 tyres, 1.72 m): with the car's 0.35 m
     /// the wheel order would sweep through the truck's ~3 Hz shimmy at 20-30 km/h.
     /// TODO(vehicle): the truck board's own tone-wheel calibration, as for the car.
     fn wheel_order_radius_m(&self) -> f32 {

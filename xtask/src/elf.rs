@@ -50,11 +50,15 @@ pub const CAR_BUDGET: Budget = Budget {
 
 /// The truck image's budget (cargo feature `model-truck`): the same chip and headroom rule as
 /// the car's, set from its measurement (`cargo xtask size`): flash 126,900 B, static RAM
-/// 14,568 B, its 12-state model's monomorphised code 5,576 B more than the car image. Flash
-/// 125 KiB (1,100 B, 0.9 % of headroom); static RAM the car's 24 KiB.
+/// 14,568 B, its 12-state model's monomorphised code 5,576 B more than the car image: 125 KiB.
+/// Raised to 129 KiB when the image began to store, load and serve the truck's own vehicle
+/// record instead of the car's: 126,996 -> 131,724 B (sized symbols +4,725 B: the truck
+/// record's decoder, field access, checks, encoder, schema and compiled-in vehicle ~4.0 KB,
+/// the struts' operating point out of line now that the checks call it as well), 372 B of
+/// headroom; static RAM the car's 24 KiB.
 pub const TRUCK_BUDGET: Budget = Budget {
     image: "the truck image",
-    flash: 125 * 1024,
+    flash: 129 * 1024,
     ram: RAM_BUDGET,
 };
 

@@ -18,8 +18,9 @@
 mod app {
     use cortex_m_rt::entry;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-    use shimmy_core::vehicle::Vehicle;
+    use shimmy_core::vehicle::{BoardVehicle, RecordVehicle};
     use shimmy_firmware::fault_memory::{persist, ResetCause, ResetRecord};
+    use shimmy_firmware::monitoring::ImageVehicle;
     use shimmy_firmware::runtime::{finish, Outcome};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
     use shimmy_firmware::store::{drive, ConfigSource, LogEntry, Motion, StoreTask};
@@ -31,13 +32,19 @@ mod app {
         }
     }
 
-    /// The vehicle boot 1 saves: the nominal one with another kingpin inertia and coil rating.
-    fn configured() -> Vehicle {
-        let mut v = Vehicle::nominal();
-        let set = v
-            .set("plant", "i_k", 9.0)
-            .and_then(|_| v.set("damper", "rated_current_a", 2.5));
-        check(set.is_ok(), "the test vehicle is valid");
+    /// The vehicle boot 1 saves: the image's compiled-in one (the car's nominal, the truck
+    /// image's `truck-full`) with its model's first value 1 % larger and another coil rating,
+    /// one value of each part of the record.
+    fn configured() -> ImageVehicle {
+        let mut v = ImageVehicle::compiled_in();
+        let rating = (0..ImageVehicle::values()).find(|&i| {
+            ImageVehicle::describe(i)
+                .is_some_and(|(s, n, _)| s == "damper" && n == "rated_current_a")
+        });
+        let first = v.read_value(0) * 1.01;
+        let set = v.write_value(0, first).is_ok()
+            && rating.is_some_and(|i| v.write_value(i, 2.5).is_ok());
+        check(set, "the test vehicle is valid");
         v
     }
 
@@ -137,7 +144,7 @@ mod app {
                     "boot 1: no record, the defaults, a fault",
                 );
                 check(
-                    report.config.vehicle == Vehicle::nominal(),
+                    report.config.vehicle == ImageVehicle::compiled_in(),
                     "boot 1: the defaults",
                 );
                 // Standing for 2 s with the coil off: the token, and the write.
@@ -162,10 +169,12 @@ mod app {
                         && report.config.vehicle == configured(),
                     "boot 2: the saved vehicle is loaded",
                 );
+                let mut loaded = report.config.vehicle;
                 defmt::info!(
-                    "boot 2: configuration loaded (i_k {=f64} kg m^2, coil {=f32} A); driving",
-                    report.config.vehicle.plant.i_k,
-                    report.config.vehicle.rated_current_a()
+                    "boot 2: configuration loaded ({=str} {=f64}, coil {=f32} A); driving",
+                    ImageVehicle::describe(0).map_or("?", |(_, name, _)| name),
+                    loaded.read_value(0),
+                    loaded.parts().rated_current_a()
                 );
                 let d = drive::run(&mut task);
                 check(

@@ -536,7 +536,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
 
 /// The commands that run a truck vehicle, for messages.
 pub const TRUCK_COMMANDS: &str = "params, stability, sensitivity, gas-charge, bifurcation, \
-     sweep, margin, faults, run, meter-accuracy, mismatch, report, compare, analyze, device and \
+     sweep, margin, faults, run, meter-accuracy, mismatch, report, compare, analyze, device, pil and \
      the demo";
 
 /// The message of a car-only command given another model.

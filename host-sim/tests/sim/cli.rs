@@ -474,7 +474,7 @@ fn a_truck_on_a_car_only_command_is_rejected_naming_the_models() {
         &[
             "mining-truck-5dof",
             "car-4dof",
-            "compare, analyze, device and the demo",
+            "compare, analyze, device, pil and the demo",
         ],
     );
     let dir = temp_dir();
