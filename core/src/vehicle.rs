@@ -235,6 +235,29 @@ impl Vehicle {
         }
     }
 
+    /// The controller's parameters ([`Self::control_params`]) with the nominal plant
+    /// `nominal` of another model (this vehicle's shared sections on that model).
+    pub fn control_params_with(&self, nominal: NominalPlant) -> ControlParams {
+        ControlParams {
+            nominal,
+            ..self.control_params()
+        }
+    }
+
+    /// The margin pipeline's parameters ([`Self::pipeline_params`]) on the model `model`: the
+    /// mode meter slowed to its shimmy mode ([`LinearModel::meter_time_scale`]; 1 for the car,
+    /// which leaves every value as it is).
+    pub fn pipeline_params_for<M: LinearModel<N>, const N: usize>(
+        &self,
+        model: &M,
+    ) -> PipelineParams {
+        let pp = self.pipeline_params();
+        PipelineParams {
+            estimator: pp.estimator.time_scaled(model.meter_time_scale()),
+            ..pp
+        }
+    }
+
     /// Sets the field `section.name` to `value` after checking it against the field's range.
     pub fn set(&mut self, section: &str, name: &str, value: f64) -> Result<(), SetError> {
         let field = find_field(section, name).ok_or(SetError::UnknownField)?;
@@ -1450,24 +1473,15 @@ pub trait BoardVehicle<const N: usize>: RecordVehicle + PartialEq {
     /// The controller's nominal plant (I_k, c_k, l_t: the ASMC's model) of [`Self::model`].
     fn nominal_plant(&self) -> NominalPlant;
 
-    /// The controller's parameters: the shared sections' ([`Vehicle::control_params`]) with
-    /// the model's nominal plant.
+    /// The controller's parameters: the shared sections' with the model's nominal plant
+    /// ([`Vehicle::control_params_with`]).
     fn controller_params(&self) -> ControlParams {
-        ControlParams {
-            nominal: self.nominal_plant(),
-            ..self.parts().control_params()
-        }
+        self.parts().control_params_with(self.nominal_plant())
     }
 
-    /// The margin pipeline's parameters ([`Vehicle::pipeline_params`]) with the mode meter
-    /// slowed to the model's shimmy mode ([`LinearModel::meter_time_scale`]; 1 for the car,
-    /// which leaves every value as it is).
+    /// The margin pipeline's parameters for the model ([`Vehicle::pipeline_params_for`]).
     fn margin_pipeline(&self) -> PipelineParams {
-        let pp = self.parts().pipeline_params();
-        PipelineParams {
-            estimator: pp.estimator.time_scaled(self.model().meter_time_scale()),
-            ..pp
-        }
+        self.parts().pipeline_params_for(&self.model())
     }
 }
 

@@ -72,6 +72,7 @@ impl BoardCalibration for shimmy_core::truck_vehicle::TruckVehicle {
         self.truck.r as f32
     }
 }
+
 /// Capacity of the monitor's event log.
 pub const EVENT_LOG: usize = 8;
 /// Requirement on the model margin's refresh period, s: a new cycle starts every this long and

@@ -201,10 +201,7 @@ impl<M> FamilyVehicle<M> {
     where
         M: SimModel<N>,
     {
-        ControlParams {
-            nominal: self.model.nominal_plant(),
-            ..self.parts.control_params()
-        }
+        self.parts.control_params_with(self.model.nominal_plant())
     }
 
     /// The supervisor's thresholds ([`Vehicle::supervisor_params`]).
@@ -219,13 +216,7 @@ impl<M> FamilyVehicle<M> {
     where
         M: SimModel<N>,
     {
-        let pp = self.parts.pipeline_params();
-        PipelineParams {
-            estimator: pp
-                .estimator
-                .time_scaled(self.model.linear().meter_time_scale()),
-            ..pp
-        }
+        self.parts.pipeline_params_for(&self.model.linear())
     }
 }
 

@@ -321,9 +321,10 @@ pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> 
 /// from the nominal plant's 2 I_k / l_t; the warning thresholds are the truck's own
 /// ([`TruckParams::warning_thresholds`]).
 ///
-/// The core keeps the factor as [`TRUCK_DAMPER_SCALE`] (the truck image's compiled-in vehicle
-/// is built from it); the test `the_cores_truck_damper_scale_is_the_computed_one` holds the two
-/// equal.
+/// The core keeps the factor as
+/// [`TRUCK_DAMPER_SCALE`](shimmy_core::truck_vehicle::TRUCK_DAMPER_SCALE) (the truck image's
+/// compiled-in vehicle is built from it); the test
+/// `the_cores_truck_damper_scale_is_the_computed_one` holds the two equal.
 pub fn truck_parts() -> Vehicle {
     TruckVehicle::default_parts()
 }
