@@ -214,7 +214,7 @@ pub fn record_model(schema: u32) -> Option<&'static str> {
 mod tests {
     use super::*;
     use crate::vehicle::{
-        decode_record, encode_record, record_schema, record_schema_of, RecordError,
+        decode_record, encode_record, record_index, record_schema, record_schema_of, RecordError,
         RECORD_HEADER_BYTES, RECORD_MAX_BYTES, RECORD_MAX_FIELDS,
     };
 
@@ -328,9 +328,7 @@ mod tests {
             other => panic!("{other:?}"),
         }
         // the shared hysteresis rule: zeta_low_off below zeta_low_on
-        let off = (0..TruckVehicle::values())
-            .position(|i| TruckVehicle::describe(i) == Some(("thresholds", "zeta_low_off", "-")))
-            .unwrap();
+        let off = record_index::<TruckVehicle>("thresholds", "zeta_low_off").unwrap();
         match with(off, 0.0) {
             Err(RecordError::Invalid(e)) => {
                 assert_eq!(e.path(), ("thresholds", "zeta_low_off"));

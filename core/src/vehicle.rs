@@ -1339,6 +1339,11 @@ pub fn record_schema_of<V: RecordVehicle>() -> u32 {
     schema_of((0..V::values()).filter_map(V::describe))
 }
 
+/// The index of the field `section.name` in the model `V`'s record, if it has one.
+pub fn record_index<V: RecordVehicle>(section: &str, name: &str) -> Option<usize> {
+    (0..V::values()).find(|&i| V::describe(i).is_some_and(|(s, n, _)| s == section && n == name))
+}
+
 /// The value `value` of the field `section.name` of the model `V`'s record checked against
 /// that field's range (the error names the field and its range); `None` when `V`'s record has
 /// no such field. For messages about a record the other side refused.
@@ -1347,8 +1352,7 @@ pub fn check_record_value<V: RecordVehicle>(
     name: &str,
     value: f64,
 ) -> Option<Result<(), VehicleError>> {
-    let i = (0..V::values())
-        .find(|&i| V::describe(i).is_some_and(|(s, n, _)| s == section && n == name))?;
+    let i = record_index::<V>(section, name)?;
     Some(V::record_base().write_value(i, value))
 }
 

@@ -18,7 +18,7 @@
 mod app {
     use cortex_m_rt::entry;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-    use shimmy_core::vehicle::{BoardVehicle, RecordVehicle};
+    use shimmy_core::vehicle::{record_index, BoardVehicle, RecordVehicle};
     use shimmy_firmware::fault_memory::{persist, ResetCause, ResetRecord};
     use shimmy_firmware::monitoring::ImageVehicle;
     use shimmy_firmware::runtime::{finish, Outcome};
@@ -37,10 +37,7 @@ mod app {
     /// one value of each part of the record.
     fn configured() -> ImageVehicle {
         let mut v = ImageVehicle::compiled_in();
-        let rating = (0..ImageVehicle::values()).find(|&i| {
-            ImageVehicle::describe(i)
-                .is_some_and(|(s, n, _)| s == "damper" && n == "rated_current_a")
-        });
+        let rating = record_index::<ImageVehicle>("damper", "rated_current_a");
         let first = v.read_value(0) * 1.01;
         let set = v.write_value(0, first).is_ok()
             && rating.is_some_and(|i| v.write_value(i, 2.5).is_ok());

@@ -7,7 +7,7 @@
 use anyhow::Result;
 use shimmy_core::truck_vehicle::TruckVehicle;
 use shimmy_core::vehicle::{
-    encode_record, find_field, record_schema_of, RecordVehicle, Vehicle, FIELDS,
+    encode_record, find_field, record_index, record_schema_of, Vehicle, FIELDS,
     RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
 use shimmy_link::frame::{self, MAX_FRAME};
@@ -349,9 +349,7 @@ fn a_vehicle_of_the_other_model_is_refused_naming_both_models() {
     // a truck field far out of its range, in a truck record
     let mut rec = [0u8; RECORD_MAX_BYTES];
     let n = encode_record(&before, &mut rec).unwrap();
-    let i = (0..TruckVehicle::values())
-        .position(|i| TruckVehicle::describe(i).is_some_and(|d| d.1 == "hps_v0_m3"))
-        .unwrap();
+    let i = record_index::<TruckVehicle>("truck", "hps_v0_m3").unwrap();
     let at = RECORD_HEADER_BYTES + 8 * i;
     rec[at..at + 8].copy_from_slice(&5.0f64.to_le_bytes());
     let e = c.set_record(&rec[..n]).unwrap_err().to_string();
