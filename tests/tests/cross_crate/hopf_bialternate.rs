@@ -2,9 +2,9 @@
 //! eigenvalue-free test: the bialternate product 2A (.) I has eigenvalues lambda_i + lambda_j
 //! (i < j), so det(2A (.) I) = prod_{i<j}(lambda_i + lambda_j) changes sign where a complex pair
 //! crosses the imaginary axis (and at neutral saddles, which we exclude by checking the bracket
-//! is small and the crossing mode is oscillatory). The determinant is taken with faer's LU from
-//! the matrix entries alone and its sign change is bisected independently.
-use faer::Mat;
+//! is small and the crossing mode is oscillatory). The determinant is taken with nalgebra's LU
+//! (partial pivoting) from the matrix entries alone and its sign change is bisected independently.
+use nalgebra::DMatrix;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::plant::{linearise, N_STATES};
 use shimmy_core::stability::{hopf_crossings, DEFAULT_TOL_MPS};
@@ -15,7 +15,7 @@ fn bialternate_det(p: &PlantParams, v_mps: f64, c: f64) -> f64 {
     let n = N_STATES;
     let idx: Vec<(usize, usize)> = (1..n).flat_map(|p| (0..p).map(move |q| (p, q))).collect();
     let m = idx.len();
-    let b = Mat::<f64>::from_fn(m, m, |row, col| {
+    let b = DMatrix::<f64>::from_fn(m, m, |row, col| {
         let (p, q) = idx[row];
         let (r, s) = idx[col];
         if r == p && s == q {
@@ -32,7 +32,7 @@ fn bialternate_det(p: &PlantParams, v_mps: f64, c: f64) -> f64 {
             0.0
         }
     });
-    b.determinant()
+    b.lu().determinant()
 }
 
 #[test]

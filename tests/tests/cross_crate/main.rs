@@ -5,7 +5,7 @@
 
 mod architecture;
 mod conformance;
-mod eigen_vs_faer;
+mod eigen_vs_nalgebra;
 mod failsafe_current;
 mod hopf_bialternate;
 mod linear_vs_nonlinear;
