@@ -46,8 +46,9 @@ mod link_e2e;
 mod python;
 mod qemu;
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode};
+use std::process::{Command, ExitCode, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::thread::JoinHandle;
@@ -210,7 +211,7 @@ fn cargo_rebuilt(args: &[&str]) -> Result<Vec<String>, String> {
     let out = with_host_lints(&mut Command::new(cargo))
         .args(args)
         .arg("--message-format=json-render-diagnostics")
-        .stderr(std::process::Stdio::inherit())
+        .stderr(lane_output())
         .current_dir(root())
         .output()
         .map_err(|e| format!("cannot run cargo: {e}"))?;
@@ -242,17 +243,21 @@ fn rebuilt_packages(json_lines: &str) -> Vec<String> {
 
 /// Runs every check, keeps going after a failure so the summary shows all of them, and fails
 /// if any failed.
+///
+/// Two lanes run side by side, because each leaves a core idle much of the time (the host
+/// build's last crates and a fat-LTO link compile on one core): the host lane (the host build,
+/// its tests, the Python module, the FMU, rustdoc) on a second thread, its output in
+/// [`HOST_LANE_LOG`] and printed when it ends, and the firmware lane (clippy for the target,
+/// the images, the QEMU steps) on this one. The two never wait for each other's cargo lock: the
+/// host lane builds in `target/debug`, the firmware lane only in the release profile
+/// (`target/release` for its build scripts). The steps that need both (conformance, the host
+/// link, PIL) run after both lanes.
 fn test() -> Result<(), String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     ensure_scipy()?;
     fmu::ensure_libclang()?;
-    let steps: Vec<(&str, StepFn)> = vec![
-        ("cargo fmt --check", || {
-            cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
-        }),
-        ("clippy (firmware, thumbv7em)", clippy_firmware),
-        ("rustdoc (workspace, -D warnings)", rustdoc),
+    let host_steps: Vec<(&str, StepFn)> = vec![
         (
             "host build with clippy -D warnings (all targets, Python module, FMU)",
             || host_build().map(|_| "one feature resolution for every host step".into()),
@@ -263,6 +268,13 @@ fn test() -> Result<(), String> {
             "FMU (fmi-export, fmpy validation, co-simulation)",
             fmu::tests,
         ),
+        ("rustdoc (workspace, -D warnings)", rustdoc),
+    ];
+    let firmware_steps: Vec<(&str, StepFn)> = vec![
+        ("cargo fmt --check", || {
+            cargo(&["fmt", "--all", "--check"]).map(|_| String::new())
+        }),
+        ("clippy (firmware, thumbv7em)", clippy_firmware),
         (
             "firmware release builds (one cargo call per feature set)",
             || {
@@ -308,10 +320,6 @@ fn test() -> Result<(), String> {
         ("stack overflow caught by the guard (QEMU)", stack_guard),
         ("fault memory across resets (QEMU)", reset_memory),
         ("flash store across resets (QEMU)", store_check),
-        (
-            "host/target conformance (trace replay, bit-identical)",
-            conformance::step,
-        ),
         ("on-target benchmark budgets (QEMU -icount)", bench),
         (
             "an over-budget benchmark entry fails the run",
@@ -335,6 +343,12 @@ fn test() -> Result<(), String> {
             let story = qemu::check_supervisor(&run.log)?;
             Ok(format!("{} log lines; {story}", run.log.len()))
         }),
+    ];
+    let joint_steps: Vec<(&str, StepFn)> = vec![
+        (
+            "host/target conformance (trace replay, bit-identical)",
+            conformance::step,
+        ),
         (
             "host link under QEMU (shimmy-sim device over TCP)",
             link_e2e::step,
@@ -342,19 +356,35 @@ fn test() -> Result<(), String> {
         ("processor in the loop, PIL = SIL bit for bit (QEMU)", pil),
     ];
 
-    let mut results = Vec::new();
-    let mut record = |name, outcome: Step, secs| {
-        if let Err(e) = &outcome {
-            eprintln!("FAILED: {name}: {e}");
+    let log = root().join(HOST_LANE_LOG);
+    let lane_log = log.clone();
+    let host_count = host_steps.len();
+    let host_lane = std::thread::spawn(move || -> Result<Vec<Outcome>, String> {
+        if let Some(dir) = lane_log.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
         }
-        results.push((name, outcome, secs));
-    };
-    for (name, step) in steps {
-        println!("\n==> {name}");
-        let start = Instant::now();
-        let outcome = step();
-        record(name, outcome, start.elapsed().as_secs_f64());
+        let file = std::fs::File::create(&lane_log)
+            .map_err(|e| format!("create {}: {e}", lane_log.display()))?;
+        LANE_LOG.set(Some(file));
+        Ok(run_steps(host_steps))
+    });
+    println!(
+        "\n==> host lane: {host_count} steps beside the firmware steps (log: {HOST_LANE_LOG})"
+    );
+    let mut results = run_steps(firmware_steps);
+    let host = host_lane
+        .join()
+        .unwrap_or_else(|_| Err("the host lane's thread panicked".into()));
+    println!("\n==> host lane, its log ({HOST_LANE_LOG}):");
+    match std::fs::read_to_string(&log) {
+        Ok(text) => print!("{text}"),
+        Err(e) => println!("(cannot read it: {e})"),
     }
+    match host {
+        Ok(host) => results.extend(host),
+        Err(e) => results.push(("host lane", Err(e), 0.0)),
+    }
+    results.extend(run_steps(joint_steps));
     let fuzz_run = FUZZ_RUN.lock().ok().and_then(|mut h| h.take());
     if let Some(run) = fuzz_run {
         let name = "fuzz safe_step run (time waited for it here)";
@@ -363,7 +393,7 @@ fn test() -> Result<(), String> {
         let outcome = run
             .join()
             .unwrap_or_else(|_| Err("the fuzz thread panicked".into()));
-        record(name, outcome, start.elapsed().as_secs_f64());
+        results.push((name, outcome, start.elapsed().as_secs_f64()));
     }
 
     println!("\n==> summary");
@@ -382,6 +412,55 @@ fn test() -> Result<(), String> {
     }
 }
 
+/// The host lane's output in a `cargo xtask test` (relative to the workspace root).
+const HOST_LANE_LOG: &str = "target/xtask/host-lane.log";
+
+/// A step's name, what it ended with, and its wall time in s.
+type Outcome = (&'static str, Step, f64);
+
+/// Runs `steps` in order on this thread, each after a header ([`say`]), and keeps going after
+/// a failure.
+fn run_steps(steps: Vec<(&'static str, StepFn)>) -> Vec<Outcome> {
+    steps
+        .into_iter()
+        .map(|(name, step)| {
+            say(&format!("\n==> {name}"));
+            let start = Instant::now();
+            let outcome = step();
+            if let Err(e) = &outcome {
+                say(&format!("FAILED: {name}: {e}"));
+            }
+            (name, outcome, start.elapsed().as_secs_f64())
+        })
+        .collect()
+}
+
+thread_local! {
+    /// The log of the lane this thread runs (`cargo xtask test`'s host lane); `None`: the
+    /// terminal.
+    static LANE_LOG: std::cell::RefCell<Option<std::fs::File>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Where the commands of this thread write: its lane's log, or the terminal.
+fn lane_output() -> Stdio {
+    LANE_LOG.with_borrow(|log| {
+        log.as_ref()
+            .and_then(|f| f.try_clone().ok())
+            .map_or_else(Stdio::inherit, Stdio::from)
+    })
+}
+
+/// One line of this thread's progress, into its lane's log or onto the terminal.
+fn say(line: &str) {
+    LANE_LOG.with_borrow_mut(|log| match log {
+        Some(f) => {
+            // A lost progress line is not worth failing a step for.
+            let _ = writeln!(f, "{line}");
+        }
+        None => println!("{line}"),
+    });
+}
+
 /// The API docs build without a warning: every public item documented, every intra-doc link
 /// resolves (a unit written as `[rad]` would read as a broken link).
 fn rustdoc() -> Step {
@@ -393,9 +472,20 @@ fn rustdoc() -> Step {
     Ok(String::new())
 }
 
+/// Clippy on the firmware for the target, per feature set. In the release profile: its build
+/// scripts and proc macros are the release images' (`target/release`), and it never waits for
+/// the host lane's lock on `target/debug` ([`test`]).
 fn clippy_firmware() -> Step {
     for features in ["", "qemu,deliberate-failure", "pil", TRUCK_MODEL] {
-        let mut args = vec!["clippy", "-p", FIRMWARE, "--target", TARGET, "--bins"];
+        let mut args = vec![
+            "clippy",
+            "--release",
+            "-p",
+            FIRMWARE,
+            "--target",
+            TARGET,
+            "--bins",
+        ];
         if !features.is_empty() {
             args.extend(["--features", features]);
         }
@@ -747,6 +837,8 @@ fn apt_install(package: &str, missing: &str, hint: &str) -> Result<(), String> {
 fn run(cmd: &mut Command) -> Result<(), String> {
     let shown = format!("{cmd:?}");
     let status = cmd
+        .stdout(lane_output())
+        .stderr(lane_output())
         .status()
         .map_err(|e| format!("cannot start {shown}: {e}"))?;
     if status.success() {
