@@ -3,7 +3,8 @@
 //! ```text
 //! cargo xtask test               host tests, fmt, clippy (host build + target), the Python module's
 //!                                and the FMU's tests, firmware build + size, on-target tests
-//!                                under QEMU (and proof that a failing one fails)
+//!                                under QEMU (and proof that a failing one fails); in two lanes
+//!                                side by side (host, firmware), see `test`
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
 //! cargo xtask size               release firmware build and its flash/RAM table, checked
@@ -474,7 +475,7 @@ fn rustdoc() -> Step {
 
 /// Clippy on the firmware for the target, per feature set. In the release profile: its build
 /// scripts and proc macros are the release images' (`target/release`), and it never waits for
-/// the host lane's lock on `target/debug` ([`test`]).
+/// the host lane's lock on `target/debug` ([`test()`]).
 fn clippy_firmware() -> Step {
     for features in ["", "qemu,deliberate-failure", "pil", TRUCK_MODEL] {
         let mut args = vec![
