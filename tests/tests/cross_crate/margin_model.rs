@@ -1,7 +1,7 @@
 //! The incremental model margin (`ModelMarginTracker`) against independent computations:
 //! nalgebra's dense Schur solve for the modes (`eigen_vs_nalgebra::reference_eigenvalues`), and
-//! a dense max-Re sweep (those eigenvalues on a 0.01 km/h grid) for the Hopf speeds; plus its work bound (<= 1 eigen-solve per call, a full
-//! update within 100 calls).
+//! a dense max-Re sweep (those eigenvalues on a 0.01 km/h grid) for the Hopf speeds; plus its
+//! work bound (<= 1 eigen-solve per call, a full update within 100 calls).
 use super::eigen_vs_nalgebra::reference_eigenvalues;
 use shimmy_core::eigen::SolveFloat;
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
