@@ -728,6 +728,7 @@ fn size() -> Result<(), String> {
     println!("{}", elf::source_table(&elf, 30)?);
     report.check_fits()?;
     report.check_budget(&elf::CAR_BUDGET)?;
+    elf::check_unwanted(&elf)?;
     println!("xtask: {}", truck_image_size()?);
     Ok(())
 }
@@ -740,6 +741,7 @@ fn truck_image_size() -> Result<String, String> {
     println!("{TRUCK_MODEL} image:\n{report}");
     report.check_fits()?;
     report.check_budget(&elf::TRUCK_BUDGET)?;
+    elf::check_unwanted(&elf)?;
     Ok(format!(
         "{TRUCK_MODEL} image: {}, within its budget",
         report.one_line()
