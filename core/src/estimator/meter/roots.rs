@@ -130,17 +130,17 @@ fn distinct<T: Real>(r: &[Cx<T>]) -> bool {
 
 fn cold_start<T: Real>(c: &[T], roots: &mut [Cx<T>; MAX_ORDER]) {
     let p = c.len();
-    // Radius: geometric mean of the root magnitudes |c_p|^(1/p), kept away from 0. Computed
-    // once per cold start (rare: reset or lost track), transcendentals in T (`Real::eval`).
+    // Radius: geometric mean of the root magnitudes |c_p|^(1/p), kept away from 0 (NaN too).
+    // Computed once per cold start (rare: reset or lost track), in T throughout: on the
+    // target no soft-float f64 (`cargo xtask size`), the f64 twin as before.
     // as exp(ln|c_p| / p): no pow function linked for it (1.4 KB of flash)
-    let ln_c = T::eval(libm::fabs(c[p - 1].to_f64()), T::ln);
-    let r0 = T::eval(ln_c / p as f64, T::exp).max(0.5);
+    let n = T::from_f32(p as f32);
+    let (half, r0) = (T::from_f64(0.5), (c[p - 1].abs().ln() / n).exp());
+    let r0 = if r0 > half { r0 } else { half };
+    let two_pi = T::from_f64(2.0 * core::f64::consts::PI);
     for (k, r) in roots.iter_mut().take(p).enumerate() {
-        let a = 0.4 + 2.0 * core::f64::consts::PI * k as f64 / p as f64;
-        *r = Cx::new(
-            T::from_f64(r0 * T::eval(a, T::cos)),
-            T::from_f64(r0 * T::eval(a, T::sin)),
-        );
+        let a = T::from_f64(0.4) + two_pi * T::from_f32(k as f32) / n;
+        *r = Cx::new(r0 * a.cos(), r0 * a.sin());
     }
 }
 
