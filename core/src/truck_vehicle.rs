@@ -119,7 +119,7 @@ impl RecordVehicle for TruckVehicle {
             Some(f) => Some((TRUCK_SECTION, f.name, f.unit)),
             None => Self::shared()
                 .get(i - TRUCK_FIELDS.len())
-                .map(|f| (f.section, f.name, f.unit)),
+                .map(|f| (f.section(), f.name, f.unit())),
         }
     }
 
@@ -145,11 +145,11 @@ impl RecordVehicle for TruckVehicle {
                 .set(f.name, x)
                 .map_err(|e| truck_error(e, &self.truck)),
             None => match Self::shared().get(i - TRUCK_FIELDS.len()) {
-                Some(f) => self.parts.set(f.section, f.name, x).map_err(|e| match e {
+                Some(f) => self.parts.set(f.section(), f.name, x).map_err(|e| match e {
                     crate::vehicle::SetError::Invalid(v) => v,
                     // The table's own names: always found.
                     crate::vehicle::SetError::UnknownField => VehicleError {
-                        section: f.section,
+                        section: f.section(),
                         name: f.name,
                         value: x,
                         problem: Problem::Inconsistent("no such field"),
@@ -229,8 +229,12 @@ mod tests {
 
     #[test]
     fn the_record_is_the_trucks_fields_then_every_shared_one() {
-        assert!(FIELDS[..PLANT_FIELDS].iter().all(|f| f.section == "plant"));
-        assert!(FIELDS[PLANT_FIELDS..].iter().all(|f| f.section != "plant"));
+        assert!(FIELDS[..PLANT_FIELDS]
+            .iter()
+            .all(|f| f.section() == "plant"));
+        assert!(FIELDS[PLANT_FIELDS..]
+            .iter()
+            .all(|f| f.section() != "plant"));
         assert_eq!(TruckVehicle::values(), RECORD_MAX_FIELDS);
         assert!(Vehicle::values() <= RECORD_MAX_FIELDS);
         assert_eq!(TruckVehicle::describe(0), Some(("truck", "i_k", "kg m^2")));

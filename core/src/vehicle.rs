@@ -303,15 +303,75 @@ pub const SECTIONS: [&str; 6] = [
     "thresholds",
 ];
 
+/// The units of the vehicle fields (`-` for none), in no particular order: a field names its
+/// unit by its index here ([`Field::unit`]).
+pub const UNITS: [&str; 26] = [
+    "-",
+    "1/m^2",
+    "1/s",
+    "A",
+    "A/s",
+    "Hz",
+    "LSB",
+    "N",
+    "N s/(m A)",
+    "N s/m",
+    "N/(m A)",
+    "N/A",
+    "N/m",
+    "Ohm",
+    "bit",
+    "m",
+    "m/s",
+    "rad",
+    "rad/s",
+    "rad/s^2",
+    "rad/s^2 per rad",
+    "s",
+    "N m s/rad",
+    "N m/rad",
+    "N/rad",
+    "kg m^2",
+];
+
+/// The index of `name` in `table`, for the field table's constant initialiser: a name that is
+/// not in the table stops the build there (a panic in constant evaluation).
+const fn index_in(table: &[&str], name: &str) -> u8 {
+    let mut i = 0;
+    while i < table.len() && !same_str(table[i], name) {
+        i += 1;
+    }
+    assert!(
+        i < table.len(),
+        "a vehicle field's section or unit is missing from SECTIONS or UNITS"
+    );
+    i as u8
+}
+
+/// `a == b` in a constant.
+const fn same_str(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut k = 0;
+    while k < a.len() && a[k] == b[k] {
+        k += 1;
+    }
+    k == a.len()
+}
+
 /// One scalar of a [`Vehicle`]: where it lives, its unit, its plausible range and what it is.
 #[derive(Clone, Copy, Debug)]
 pub struct Field {
-    /// Section of the vehicle file (one of [`SECTIONS`]).
-    pub section: &'static str,
+    /// Section of the vehicle file: its index in [`SECTIONS`] ([`Field::section`]). An index
+    /// and not a `&str`, like the unit's: 16 B less per field, ~1.4 KB of the firmware image's
+    /// table (`cargo xtask size`).
+    section_id: u8,
     /// Field name inside the section.
     pub name: &'static str,
-    /// SI unit (`-` for none).
-    pub unit: &'static str,
+    /// SI unit: its index in [`UNITS`] ([`Field::unit`]).
+    unit_id: u8,
     /// Smallest allowed value (included).
     pub lo: f64,
     /// Largest allowed value (included).
@@ -362,13 +422,23 @@ impl Slot<'_> {
 }
 
 impl Field {
+    /// Section of the vehicle file (one of [`SECTIONS`]).
+    pub fn section(&self) -> &'static str {
+        SECTIONS[usize::from(self.section_id)]
+    }
+
+    /// SI unit (`-` for none; one of [`UNITS`]).
+    pub fn unit(&self) -> &'static str {
+        UNITS[usize::from(self.unit_id)]
+    }
+
     /// `value` is finite, inside `[lo, hi]` and whole if it must be.
     pub fn check(&self, value: f64) -> Result<(), VehicleError> {
         let problem = if !(self.lo..=self.hi).contains(&value) {
             Problem::OutOfRange {
                 lo: self.lo,
                 hi: self.hi,
-                unit: self.unit,
+                unit: self.unit(),
             }
         } else if self.integer && value != libm::round(value) {
             Problem::NotInteger {
@@ -379,7 +449,7 @@ impl Field {
             return Ok(());
         };
         Err(VehicleError {
-            section: self.section,
+            section: self.section(),
             name: self.name,
             value,
             problem,
@@ -466,7 +536,7 @@ pub enum SetError {
 pub fn find_field(section: &str, name: &str) -> Option<&'static Field> {
     FIELDS
         .iter()
-        .find(|f| f.section == section && f.name == name)
+        .find(|f| f.section() == section && f.name == name)
 }
 
 /// A rule between fields, reported against the field `section.name` (whose value is `value`).
@@ -602,9 +672,9 @@ impl Place for u8 {
 macro_rules! plant_field {
     ($p:ident, $doc:literal) => {
         Field {
-            section: "plant",
+            section_id: index_in(&SECTIONS, "plant"),
             name: Param::$p.name(),
-            unit: Param::$p.unit(),
+            unit_id: index_in(&UNITS, Param::$p.unit()),
             lo: Param::$p.range().0,
             hi: Param::$p.range().1,
             integer: false,
@@ -627,9 +697,9 @@ macro_rules! field {
     (@ $section:literal, $name:literal, $unit:literal, $lo:expr, $hi:expr, $int:expr,
      $doc:literal, |$v:ident| $place:expr) => {
         Field {
-            section: $section,
+            section_id: index_in(&SECTIONS, $section),
             name: $name,
-            unit: $unit,
+            unit_id: index_in(&UNITS, $unit),
             lo: $lo,
             hi: $hi,
             integer: $int,
@@ -669,9 +739,9 @@ pub static FIELDS: &[Field] = &[
     plant_field!(CS, "Magic-Formula shape factor C_s"),
     // The physical damper (Spencer modified Bouc-Wen, `mr_damper`).
     Field {
-        section: "damper",
+        section_id: index_in(&SECTIONS, "damper"),
         name: "rated_current_a",
-        unit: "A",
+        unit_id: index_in(&UNITS, "A"),
         lo: 0.1,
         hi: 10.0,
         integer: false,
@@ -1301,7 +1371,7 @@ impl RecordVehicle for Vehicle {
     }
 
     fn describe(i: usize) -> Option<(&'static str, &'static str, &'static str)> {
-        FIELDS.get(i).map(|f| (f.section, f.name, f.unit))
+        FIELDS.get(i).map(|f| (f.section(), f.name, f.unit()))
     }
 
     fn record_base() -> Self {
@@ -1572,16 +1642,37 @@ mod tests {
     }
 
     #[test]
+    fn sections_and_units_are_looked_up_in_their_tables() {
+        assert_eq!(index_in(&SECTIONS, "thresholds"), 5);
+        assert_eq!(
+            UNITS[usize::from(index_in(&UNITS, "N s/(m A)"))],
+            "N s/(m A)"
+        );
+        // every unit of the table is some field's (no dead entry), and only once
+        for (i, u) in UNITS.iter().enumerate() {
+            assert!(FIELDS.iter().any(|f| f.unit() == *u), "unused unit {u}");
+            assert!(!UNITS[..i].contains(u), "{u} twice");
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "missing from SECTIONS or UNITS")]
+    fn a_unit_outside_the_table_is_rejected() {
+        // in the field table's initialiser this stops the build
+        index_in(&UNITS, "furlong");
+    }
+
+    #[test]
     fn every_field_round_trips_and_the_table_has_no_duplicates() {
         for (i, f) in FIELDS.iter().enumerate() {
-            assert!(SECTIONS.contains(&f.section), "{}", f.name);
+            assert!(SECTIONS.contains(&f.section()), "{}", f.name);
             assert!(f.lo <= f.hi, "{}", f.name);
             assert!(FIELDS[..i]
                 .iter()
-                .all(|g| (g.section, g.name) != (f.section, f.name)));
+                .all(|g| (g.section(), g.name) != (f.section(), f.name)));
             let mut v = Vehicle::nominal();
             let x = if f.integer { f.hi } else { 0.5 * (f.lo + f.hi) };
-            v.set(f.section, f.name, x).unwrap();
+            v.set(f.section(), f.name, x).unwrap();
             assert!((v.get(f) - x).abs() <= 1e-6 * x.abs(), "{}", f.name);
         }
         // Every plant parameter is in the table once.
@@ -1664,7 +1755,7 @@ mod tests {
                 back.get(field).to_bits(),
                 original.get(field).to_bits(),
                 "{}.{}",
-                field.section,
+                field.section(),
                 field.name
             );
         }
@@ -1699,7 +1790,7 @@ mod tests {
             .copy_from_slice(&1.0e9f64.to_le_bytes());
         match Vehicle::decode_record(&out_of_range[..n]) {
             Err(RecordError::Invalid(e)) => {
-                assert_eq!(e.path(), (FIELDS[0].section, FIELDS[0].name))
+                assert_eq!(e.path(), (FIELDS[0].section(), FIELDS[0].name))
             }
             other => panic!("{other:?}"),
         }
@@ -1708,7 +1799,10 @@ mod tests {
     #[test]
     fn the_schema_id_changes_with_the_table() {
         // The same table with its first two fields swapped.
-        let mut table: Vec<_> = FIELDS.iter().map(|f| (f.section, f.name, f.unit)).collect();
+        let mut table: Vec<_> = FIELDS
+            .iter()
+            .map(|f| (f.section(), f.name, f.unit()))
+            .collect();
         assert_eq!(schema_of(table.iter().copied()), record_schema());
         table.swap(0, 1);
         assert_ne!(schema_of(table.iter().copied()), record_schema());

@@ -100,7 +100,7 @@ impl Vehicle {
     fn fields(&self) -> BTreeMap<String, f64> {
         FIELDS
             .iter()
-            .map(|f| (format!("{}.{}", f.section, f.name), self.inner.get(f)))
+            .map(|f| (format!("{}.{}", f.section(), f.name), self.inner.get(f)))
             .collect()
     }
 
@@ -164,9 +164,9 @@ fn field_table(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
         .iter()
         .map(|f| {
             let d = PyDict::new(py);
-            d.set_item("section", f.section)?;
+            d.set_item("section", f.section())?;
             d.set_item("name", f.name)?;
-            d.set_item("unit", f.unit)?;
+            d.set_item("unit", f.unit())?;
             d.set_item("lo", f.lo)?;
             d.set_item("hi", f.hi)?;
             d.set_item("integer", f.integer)?;

@@ -35,7 +35,7 @@ fn vehicle(k: u32) -> Vehicle {
     let f = &FIELDS[0];
     let mut v = Vehicle::nominal();
     let frac = 0.1 + 0.8 * f64::from(k % 17) / 17.0;
-    v.set(f.section, f.name, f.lo + (f.hi - f.lo) * frac)
+    v.set(f.section(), f.name, f.lo + (f.hi - f.lo) * frac)
         .unwrap();
     v
 }

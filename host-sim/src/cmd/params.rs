@@ -57,12 +57,12 @@ pub fn command(spec: &str) -> Result<()> {
     };
     for section in sections {
         println!("[{section}]");
-        for f in FIELDS.iter().filter(|f| f.section == *section) {
+        for f in FIELDS.iter().filter(|f| f.section() == *section) {
             println!(
                 "  {:<22} = {:>14.6} {:<16} ({} ..= {})",
                 f.name,
                 v.get(f),
-                f.unit,
+                f.unit(),
                 f.lo,
                 f.hi
             );

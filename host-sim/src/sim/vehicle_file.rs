@@ -581,8 +581,8 @@ pub fn truck_to_toml(v: &FamilyVehicle<TruckParams>) -> String {
 fn push_sections(out: &mut String, v: &Vehicle, sections: &[&str]) {
     for section in sections {
         out.push_str(&format!("\n[{section}]\n"));
-        for f in FIELDS.iter().filter(|f| f.section == *section) {
-            out.push_str(&format!("{} = {:?}  # {}\n", f.name, v.get(f), f.unit));
+        for f in FIELDS.iter().filter(|f| f.section() == *section) {
+            out.push_str(&format!("{} = {:?}  # {}\n", f.name, v.get(f), f.unit()));
         }
     }
 }
@@ -612,7 +612,7 @@ pub fn set_field(v: &mut Vehicle, section: &str, shown_as: &str, name: &str, x: 
 pub fn field_names(section: &str) -> Vec<&'static str> {
     FIELDS
         .iter()
-        .filter(|f| f.section == section)
+        .filter(|f| f.section() == section)
         .map(|f| f.name)
         .collect()
 }
@@ -635,7 +635,7 @@ pub fn field_table_markdown() -> String {
         out.push_str(&format!(
             "\n### `[{section}]`\n\n| field | unit | default | allowed | meaning |\n|---|---|---:|---|---|\n"
         ));
-        for f in FIELDS.iter().filter(|f| f.section == section) {
+        for f in FIELDS.iter().filter(|f| f.section() == section) {
             let allowed = if f.integer {
                 format!("{} ..= {}, whole", f.lo, f.hi)
             } else {
@@ -644,7 +644,7 @@ pub fn field_table_markdown() -> String {
             out.push_str(&format!(
                 "| `{}` | {} | {} | {allowed} | {} |\n",
                 f.name,
-                f.unit,
+                f.unit(),
                 format_default(nominal.get(f)),
                 f.doc
             ));
@@ -813,7 +813,7 @@ mod tests {
                     back.get(f).to_bits(),
                     v.get(f).to_bits(),
                     "{}.{}",
-                    f.section,
+                    f.section(),
                     f.name
                 );
             }

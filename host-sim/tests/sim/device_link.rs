@@ -131,7 +131,7 @@ fn the_simulated_drive_logs_its_shimmy_episode_and_its_fault_and_config_round_tr
             back.get(f).to_bits(),
             v.get(f).to_bits(),
             "{}.{}",
-            f.section,
+            f.section(),
             f.name
         );
     }
