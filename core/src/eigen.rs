@@ -11,6 +11,7 @@ use nalgebra::Complex;
 
 mod hessenberg_qr;
 
+pub use crate::float::{widened, SolveFloat, VectorIn};
 use crate::model::LinearModel;
 pub use crate::model::{ComplexVector, Matrix, ModeShape, ModeShapeInfo};
 use crate::plant::N_STATES;
@@ -52,64 +53,6 @@ pub enum EigenError {
     /// No eigenvalue matched the request (e.g. no oscillatory mode).
     #[error("no eigenvalue matches the request (e.g. no oscillatory mode)")]
     NoMode,
-}
-
-/// Float type of the eigen-solves and eigenvectors, chosen at compile time (a type parameter,
-/// not a run-time setting), so an image links only the precision it uses: the firmware solves
-/// in f32 on the FPU and carries no f64 Schur or LU code; the host and simulator use f64.
-///
-/// f32: A is formed in f64, rounded to f32, balanced (exact power-of-two scaling) and solved in
-/// f32: ~20x fewer instructions on the M4 than soft-float f64. Balancing is what makes this
-/// accurate enough (`docs/margin-estimator.md`: unscaled f32 loses ~0.04 in zeta); the
-/// tracker's critical speeds still meet 0.05 km/h (tests/tests/cross_crate/margin_model.rs).
-pub trait SolveFloat: nalgebra::RealField + Copy + crate::sqrt::Sqrt + sealed::Sealed {
-    /// Name for reports ("f32", "f64").
-    const NAME: &'static str;
-    /// Machine epsilon: the QR deflation threshold.
-    const EPS: Self;
-    /// Largest entry magnitude accepted (far inside the type's range, so balancing norms and
-    /// the QR sweeps cannot overflow).
-    const MAX_ABS_ENTRY: f64;
-    /// Shift of inverse iteration off the eigenvalue, relative to max |a_ij|: keeps
-    /// (A - mu I) from being exactly singular, also after rounding A's entries to this type.
-    const SHIFT_REL: f64;
-    /// Rounds an f64 to this type.
-    fn of_f64(x: f64) -> Self;
-    /// Widens to f64 (exact).
-    fn to_f64(self) -> f64;
-}
-
-mod sealed {
-    pub trait Sealed {}
-    impl Sealed for f32 {}
-    impl Sealed for f64 {}
-}
-
-impl SolveFloat for f64 {
-    const NAME: &'static str = "f64";
-    const EPS: f64 = f64::EPSILON;
-    const MAX_ABS_ENTRY: f64 = 1e150;
-    const SHIFT_REL: f64 = 1e-11;
-    fn of_f64(x: f64) -> Self {
-        x
-    }
-    fn to_f64(self) -> f64 {
-        self
-    }
-}
-
-impl SolveFloat for f32 {
-    const NAME: &'static str = "f32";
-    const EPS: f32 = f32::EPSILON;
-    const MAX_ABS_ENTRY: f64 = 1e30;
-    // eps_f32 ~ 1e-7 relative: the shift must survive the rounding of A's entries.
-    const SHIFT_REL: f64 = 1e-6;
-    fn of_f64(x: f64) -> Self {
-        x as f32
-    }
-    fn to_f64(self) -> f64 {
-        f64::from(self)
-    }
 }
 
 /// Eigenvalues of `a` in f64 with the default iteration bound and eps = f64::EPSILON.
@@ -296,14 +239,22 @@ fn inverse_iteration<T: SolveFloat, const N: usize>(
     lambda: Complex<f64>,
     left: bool,
 ) -> Result<ComplexVector<N>, EigenError> {
+    let v = iterate_shifted::<T, N>(a, shift::<T, N>(a, lambda)?, left)?;
+    Ok(phase_normalised(widened(&v)))
+}
+
+/// The shift mu of inverse iteration for `lambda`: `T::SHIFT_REL` max|a_ij| off it, so that
+/// (A - mu I) is not exactly singular; [`EigenError::NonFinite`] for non-finite input.
+fn shift<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
+    lambda: Complex<f64>,
+) -> Result<Complex<f64>, EigenError> {
     let amax = abs_max(a);
     if !amax.is_finite() || !(lambda.re.is_finite() && lambda.im.is_finite()) {
         return Err(EigenError::NonFinite);
     }
     let scale = amax.max(1.0);
-    let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
-    let v = iterate_shifted::<T, N>(a, mu, left)?;
-    Ok(phase_normalised(v))
+    Ok(lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL))
 }
 
 /// Right and left eigenvectors of `a` for `lambda` from **one** complex LU of (A - mu I) in
@@ -319,13 +270,16 @@ pub fn eigenvectors_of<T: SolveFloat, const N: usize>(
     a: &Matrix<N>,
     lambda: Complex<f64>,
 ) -> Result<(ComplexVector<N>, ComplexVector<N>), EigenError> {
-    let amax = abs_max(a);
-    if !amax.is_finite() || !(lambda.re.is_finite() && lambda.im.is_finite()) {
-        return Err(EigenError::NonFinite);
-    }
-    let scale = amax.max(1.0);
-    let mu = lambda + Complex::new(scale * T::SHIFT_REL, scale * T::SHIFT_REL);
-    let lu = shifted_lu::<T, N>(a, mu)?;
+    let (v, w) = eigenvectors_in::<T, N>(a, lambda)?;
+    Ok((widened(&v), widened(&w)))
+}
+
+/// [`eigenvectors_of`] in `T`, as the iteration leaves them (for [`LinearModel::classify_in`]).
+pub fn eigenvectors_in<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
+    lambda: Complex<f64>,
+) -> Result<(VectorIn<T, N>, VectorIn<T, N>), EigenError> {
+    let lu = shifted_lu::<T, N>(a, shift::<T, N>(a, lambda)?)?;
     let t = T::of_f64;
     let start: [Complex<T>; N] =
         core::array::from_fn(|i| Complex::new(t(1.0 + 0.1 * i as f64), t(0.05 * i as f64)));
@@ -334,10 +288,7 @@ pub fn eigenvectors_of<T: SolveFloat, const N: usize>(
         v = unit_array(lu.solve(&v))?;
         w = unit_array(lu.solve_adjoint(&w))?;
     }
-    let wide = |x: [Complex<T>; N]| {
-        ComplexVector::<N>::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
-    };
-    Ok((wide(v), wide(w)))
+    Ok((v, w))
 }
 
 /// `x / |x|` of an array, or [`EigenError::Singular`] when |x| is 0 or not finite.
@@ -487,12 +438,12 @@ fn phase_normalised<const N: usize>(v: ComplexVector<N>) -> ComplexVector<N> {
 }
 
 /// Three steps of inverse iteration with (A - mu I) factored in `T` (its adjoint when `left`:
-/// (A - lambda I)^H w = 0 is the left eigenvector); the result is widened to f64.
+/// (A - lambda I)^H w = 0 is the left eigenvector); unit 2-norm, in `T`.
 fn iterate_shifted<T: SolveFloat, const N: usize>(
     a: &Matrix<N>,
     mu: Complex<f64>,
     left: bool,
-) -> Result<ComplexVector<N>, EigenError> {
+) -> Result<VectorIn<T, N>, EigenError> {
     let lu = shifted_lu::<T, N>(a, mu)?;
     let t = T::of_f64;
     // A fixed start vector with varied entries (not orthogonal to any eigenvector in practice).
@@ -505,9 +456,7 @@ fn iterate_shifted<T: SolveFloat, const N: usize>(
             lu.solve(&v)
         })?;
     }
-    Ok(ComplexVector::<N>::from_fn(|i, _| {
-        Complex::new(v[i].re.to_f64(), v[i].im.to_f64())
-    }))
+    Ok(v)
 }
 
 /// The LU of (A - mu I) in `T`.
@@ -849,8 +798,9 @@ pub fn mode_shape_of<T: SolveFloat, M: LinearModel<N>, const N: usize>(
     a: &Matrix<N>,
     lambda: Complex<f64>,
 ) -> Result<ModeShapeInfo, EigenError> {
-    let v = eigenvector_of::<T, N>(a, lambda)?;
-    Ok(m.classify(&v))
+    // in T, as the iteration leaves the vector (the shape does not depend on its phase)
+    let v = iterate_shifted::<T, N>(a, shift::<T, N>(a, lambda)?, false)?;
+    Ok(m.classify_in(&v))
 }
 
 #[cfg(test)]
@@ -858,6 +808,31 @@ mod tests {
     use super::*;
     use crate::params::ParamSet;
     use crate::plant::linearise;
+
+    #[test]
+    fn the_f32_mode_shape_is_the_f64_one() {
+        // The firmware classifies its f32 eigenvectors in f32 (`LinearModel::classify_in`);
+        // against the f64 vector's classification in f64, on every oscillatory mode of the
+        // three parameter sets over 0.5-60 m/s.
+        let mut modes = 0;
+        for set in ParamSet::ALL {
+            let p = set.params();
+            for k in 1..=120 {
+                let a = linearise(&p, 0.5 * f64::from(k), 0.0);
+                for l in eigenvalues(&a).unwrap().iter().filter(|l| l.im > 0.0) {
+                    let (wide, narrow) = (
+                        mode_shape(&p, &a, *l).unwrap(),
+                        mode_shape_of::<f32, _, N_STATES>(&p, &a, *l).unwrap(),
+                    );
+                    assert_eq!(wide.shape, narrow.shape, "{set:?} at {k}: {l}");
+                    let d = (wide.wheel_energy_frac - narrow.wheel_energy_frac).abs();
+                    assert!(d < 1e-3, "{set:?} at {k}: wheel energy share off by {d}");
+                    modes += 1;
+                }
+            }
+        }
+        assert!(modes > 1000, "{modes}");
+    }
 
     #[test]
     fn nan_and_inf_are_errors_not_hangs() {

@@ -52,6 +52,7 @@ pub mod eigen;
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 pub mod estimator;
+pub mod float;
 pub mod model;
 pub mod mr_damper;
 pub mod params;

@@ -14,6 +14,7 @@
 //! dual-front-axle truck ([`crate::dual_axle::DualAxleParams`], 20 states) and the 2-DOF
 //! trailer on a compliant hitch ([`crate::trailer::TrailerParams`], 5 states).
 
+use crate::float::{widened, SolveFloat};
 use nalgebra::{Complex, SMatrix, SVector};
 
 /// A real N x N matrix (a state matrix or its speed derivative).
@@ -52,6 +53,15 @@ pub trait LinearModel<const N: usize> {
     /// The shape of the mode with right eigenvector `v`: which motion dominates, by modal
     /// kinetic energy; [`ModeShape::is_shimmy`] marks the shimmy mode (the trailer's: sway).
     fn classify(&self, v: &ComplexVector<N>) -> ModeShapeInfo;
+
+    /// [`Self::classify`] of an eigenvector in the solver's precision `T`, as the eigen
+    /// solver leaves it: the firmware's tracker classifies its f32 vectors without soft-float
+    /// f64 (the car's classification in f32 is ~1 KB less flash, `cargo xtask size`). By
+    /// default the vector is widened to f64 and classified there; a member overrides it with
+    /// its classification written once, generic over `T`.
+    fn classify_in<T: SolveFloat>(&self, v: &[Complex<T>; N]) -> ModeShapeInfo {
+        self.classify(&widened(v))
+    }
 
     /// How many times slower the model's shimmy (or sway) mode is than the car's ~6 Hz shimmy
     /// the mode meter is tuned for: the data-driven meter on this model runs

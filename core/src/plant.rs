@@ -19,8 +19,9 @@
 //!
 //! Everything here is `no_std`, allocation-free and cheap (a few hundred flops).
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::{Complex, SMatrix, SVector};
 
+use crate::float::SolveFloat;
 use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
 use crate::params::PlantParams;
 
@@ -231,6 +232,10 @@ impl LinearModel<N_STATES> for PlantParams {
     fn classify(&self, v: &ComplexVector<N_STATES>) -> ModeShapeInfo {
         classify(v, self.i_k, self.i_phi, self.j_sw, self.i_s)
     }
+
+    fn classify_in<T: SolveFloat>(&self, v: &[Complex<T>; N_STATES]) -> ModeShapeInfo {
+        classify_in(v, [self.i_k, self.i_phi, self.j_sw, self.i_s])
+    }
 }
 
 /// Classifies the mode with eigenvector `v` (of A) using the modal kinetic energy
@@ -243,37 +248,41 @@ pub fn classify(
     j_sw: f64,
     i_s: f64,
 ) -> ModeShapeInfo {
+    classify_in(&core::array::from_fn(|i| v[i]), [i_k, i_phi, j_sw, i_s])
+}
+
+/// [`classify`] in the eigenvector's own precision `T`, with the inertias and the steering
+/// ratio `[i_k, i_phi, j_sw, i_s]` (in f64 the same operations as ever).
+pub fn classify_in<T: SolveFloat>(v: &[Complex<T>; N_STATES], m: [f64; 4]) -> ModeShapeInfo {
+    let t = T::of_f64;
+    let [i_k, i_phi, j_sw, i_s] = m.map(t);
+    let (zero, inf) = (T::zero(), t(f64::INFINITY));
     let e_wheel = i_k * (v[DPSI_L].norm_sqr() + v[DPSI_R].norm_sqr());
     let e_phi = i_phi * v[DPHI].norm_sqr();
     let e_sw = j_sw * v[DTHETA_SW].norm_sqr();
     let e_tot = e_wheel + e_phi + e_sw;
-    let (fw, fp, fs) = if e_tot > 0.0 {
+    let (fw, fp, fs) = if e_tot > zero {
         (e_wheel / e_tot, e_phi / e_tot, e_sw / e_tot)
     } else {
-        (0.0, 0.0, 0.0)
+        (zero, zero, zero)
     };
     // magnitudes as the square root of the largest |c|^2 (one sqrt, not a hypot per entry)
-    let wheel_amp = libm::sqrt(v[PSI_L].norm_sqr().max(v[PSI_R].norm_sqr()));
-    let disp = libm::sqrt(
-        v[PSI_L]
-            .norm_sqr()
-            .max(v[PSI_R].norm_sqr())
-            .max(v[PHI].norm_sqr())
-            .max(v[THETA_SW].norm_sqr() / (i_s * i_s)),
-    );
-    let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
-    let tyre_ratio = if disp > 0.0 {
-        tyre / disp
+    let wheel2 = larger(v[PSI_L].norm_sqr(), v[PSI_R].norm_sqr());
+    let wheel_amp = wheel2.sqrt_rounded();
+    let disp = larger(
+        larger(wheel2, v[PHI].norm_sqr()),
+        v[THETA_SW].norm_sqr() / (i_s * i_s),
+    )
+    .sqrt_rounded();
+    let tyre = larger(v[A_L].norm_sqr(), v[A_R].norm_sqr()).sqrt_rounded();
+    let tyre_ratio = if disp > zero { tyre / disp } else { inf };
+    let steering_wheel_ratio = if wheel_amp > zero {
+        v[THETA_SW].norm_sqr().sqrt_rounded() / (i_s * wheel_amp)
     } else {
-        f64::INFINITY
-    };
-    let steering_wheel_ratio = if wheel_amp > 0.0 {
-        libm::sqrt(v[THETA_SW].norm_sqr()) / (i_s * wheel_amp)
-    } else {
-        f64::INFINITY
+        inf
     };
     let wheel_phase_rad = wheel_phase_rad(v[PSI_L], v[PSI_R]);
-    let shape = if tyre_ratio > 3.0 || e_tot == 0.0 {
+    let shape = if tyre_ratio > t(3.0) || e_tot == zero {
         ModeShape::TyreLag
     } else if fw >= fp && fw >= fs {
         wheel_yaw_shape(v[PSI_L], v[PSI_R])
@@ -284,29 +293,39 @@ pub fn classify(
     };
     ModeShapeInfo {
         shape,
-        wheel_energy_frac: fw,
-        tramp_energy_frac: fp,
-        steering_wheel_energy_frac: fs,
-        steering_wheel_ratio,
+        wheel_energy_frac: fw.to_f64(),
+        tramp_energy_frac: fp.to_f64(),
+        steering_wheel_energy_frac: fs.to_f64(),
+        steering_wheel_ratio: steering_wheel_ratio.to_f64(),
         wheel_phase_rad,
-        tyre_ratio,
+        tyre_ratio: tyre_ratio.to_f64(),
+    }
+}
+
+/// The larger of `a` and `b` (as `f64::max` for numbers; the squared magnitudes here are).
+fn larger<T: PartialOrd>(a: T, b: T) -> T {
+    if b > a {
+        b
+    } else {
+        a
     }
 }
 
 /// Phase of the right wheel's yaw `psi_r` relative to the left one's `psi_l`, rad. In f32
 /// (scaled into its range): ample for a phase, and the firmware links no f64 atan.
-pub fn wheel_phase_rad(psi_l: nalgebra::Complex<f64>, psi_r: nalgebra::Complex<f64>) -> f64 {
+pub fn wheel_phase_rad<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> f64 {
     let rel = psi_r * psi_l.conj();
-    let m = libm::fabs(rel.re).max(libm::fabs(rel.im));
-    if m > 0.0 {
-        libm::atan2f((rel.im / m) as f32, (rel.re / m) as f32) as f64
+    let m = larger(rel.re.abs(), rel.im.abs());
+    if m > T::zero() {
+        let f = |x: T| (x / m).to_f64() as f32;
+        f64::from(libm::atan2f(f(rel.im), f(rel.re)))
     } else {
         0.0
     }
 }
 
 /// In-phase (the shimmy mode) or anti-phase wheel yaw, from the two wheels' components.
-pub fn wheel_yaw_shape(psi_l: nalgebra::Complex<f64>, psi_r: nalgebra::Complex<f64>) -> ModeShape {
+pub fn wheel_yaw_shape<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> ModeShape {
     if (psi_l + psi_r).norm_sqr() >= (psi_l - psi_r).norm_sqr() {
         ModeShape::InPhaseWheelYaw
     } else {

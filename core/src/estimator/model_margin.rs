@@ -698,19 +698,22 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     fn shimmy(&mut self, a: &Matrix<N>) {
         let v = self.work.speed_mps;
         let lambda = self.shimmy_start;
-        let ep = match eigen::eigenvectors_of::<T, N>(a, lambda) {
-            Ok((right, left)) => Some(Eigenpair {
-                lambda,
-                right,
-                left,
-                iterations: 0,
-            }),
+        // classified in T, as the solve leaves the vector (no soft-float f64 on the target)
+        let (ep, shape_ok) = match eigen::eigenvectors_in::<T, N>(a, lambda) {
+            Ok((right, left)) => (
+                Some(Eigenpair {
+                    lambda,
+                    right: eigen::widened(&right),
+                    left: eigen::widened(&left),
+                    iterations: 0,
+                }),
+                self.p.classify_in(&right).shape.is_shimmy(),
+            ),
             Err(_) => {
                 self.error();
-                None
+                (None, false)
             }
         };
-        let shape_ok = ep.is_some_and(|ep| self.p.classify(&ep.right).shape.is_shimmy());
         if self.shimmy_from_track && !shape_ok {
             // lost the branch: the next call solves again and selects by shape
             self.shimmy_track = None;
