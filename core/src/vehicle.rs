@@ -536,7 +536,9 @@ pub enum SetError {
 pub fn find_field(section: &str, name: &str) -> Option<&'static Field> {
     FIELDS
         .iter()
-        .find(|f| f.section() == section && f.name == name)
+        // the name first: it tells the fields apart nearly always, the section lookup is then
+        // paid once (a truck record's load 308,933 -> 205,598 instructions, `cargo xtask bench`)
+        .find(|f| f.name == name && f.section() == section)
 }
 
 /// A rule between fields, reported against the field `section.name` (whose value is `value`).
