@@ -234,6 +234,16 @@ pub fn left_eigenvector_of<T: SolveFloat, const N: usize>(
     inverse_iteration::<T, N>(a, lambda, true)
 }
 
+/// [`eigenvector_of`] in `T` and in the phase the iteration leaves it (unit 2-norm): a start
+/// for [`refine_eigenpair`], whose result does not depend on the start's phase, without the
+/// rotation's soft-float f64 on the target.
+pub fn eigenvector_in<T: SolveFloat, const N: usize>(
+    a: &Matrix<N>,
+    lambda: Complex<f64>,
+) -> Result<VectorIn<T, N>, EigenError> {
+    iterate_shifted::<T, N>(a, shift::<T, N>(a, lambda)?, false)
+}
+
 fn inverse_iteration<T: SolveFloat, const N: usize>(
     a: &Matrix<N>,
     lambda: Complex<f64>,
@@ -799,8 +809,7 @@ pub fn mode_shape_of<T: SolveFloat, M: LinearModel<N>, const N: usize>(
     lambda: Complex<f64>,
 ) -> Result<ModeShapeInfo, EigenError> {
     // in T, as the iteration leaves the vector (the shape does not depend on its phase)
-    let v = iterate_shifted::<T, N>(a, shift::<T, N>(a, lambda)?, false)?;
-    Ok(m.classify_in(&v))
+    Ok(m.classify_in(&eigenvector_in::<T, N>(a, lambda)?))
 }
 
 #[cfg(test)]

@@ -541,8 +541,10 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
 
     /// Newton on the eigenpair of A(v) near `lambda`, from its inverse-iteration vector.
     fn eigenpair(&mut self, a: &Matrix<N>, lambda: Complex<f64>) -> Option<Eigenpair<N>> {
-        let r = eigen::eigenvector_of::<T, N>(a, lambda)
-            .and_then(|v0| eigen::refine_eigenpair::<T, N>(a, lambda, &v0, EIGEN_NEWTON_ITERS));
+        // the start in the phase the iteration leaves it: the refined pair does not depend on it
+        let r = eigen::eigenvector_in::<T, N>(a, lambda).and_then(|v0| {
+            eigen::refine_eigenpair::<T, N>(a, lambda, &eigen::widened(&v0), EIGEN_NEWTON_ITERS)
+        });
         match r {
             Ok(ep) => {
                 self.work.newton_iterations = self
