@@ -198,6 +198,99 @@ impl fmt::Display for MemoryReport {
     }
 }
 
+/// Whether `name` is one of the soft-float f64 helpers of the ARM EABI (`__aeabi_dadd`,
+/// `__aeabi_f2d`, ...): the M4F's FPU is single precision, every f64 operation is a call.
+fn is_soft_f64(name: &str) -> bool {
+    let Some(op) = name.strip_prefix("__aeabi_") else {
+        return false;
+    };
+    op.starts_with('d') && !op.starts_with("div")
+        || ["f2d", "i2d", "ui2d", "l2d", "ul2d"].contains(&op)
+}
+
+/// The target of a Thumb-2 `BL` at `addr` made of the halfwords `hw1`, `hw2` (encoding T1),
+/// or `None` when they are not one.
+fn bl_target(addr: u64, hw1: u16, hw2: u16) -> Option<u64> {
+    if hw1 & 0xF800 != 0xF000 || hw2 & 0xD000 != 0xD000 {
+        return None;
+    }
+    let s = u32::from(hw1 >> 10) & 1;
+    let (j1, j2) = (u32::from(hw2 >> 13) & 1, u32::from(hw2 >> 11) & 1);
+    let (i1, i2) = (!(j1 ^ s) & 1, !(j2 ^ s) & 1);
+    let imm = (s << 24)
+        | (i1 << 23)
+        | (i2 << 22)
+        | (u32::from(hw1 & 0x3FF) << 12)
+        | (u32::from(hw2 & 0x7FF) << 1);
+    // sign-extend the 25-bit offset
+    let offset = i64::from(((imm << 7) as i32) >> 7);
+    Some((addr as i64 + 4 + offset) as u64)
+}
+
+/// Calls to the soft-float f64 helpers ([`is_soft_f64`]) in the image's code, per calling
+/// function, most first (a `BL` scan of every sized code symbol): how much f64 arithmetic is
+/// left for the single-precision FPU to not do.
+pub fn soft_f64_calls(path: &Path) -> Result<Vec<(String, usize)>, String> {
+    use object::{ObjectSymbol, SymbolKind};
+    use std::collections::{BTreeMap, BTreeSet};
+    let data = std::fs::read(path).map_err(|e| format!("read {}: {e}", path.display()))?;
+    let file = object::File::parse(&*data).map_err(|e| format!("parse ELF: {e}"))?;
+    let code: Vec<(u64, u64, String)> = file
+        .symbols()
+        .filter(|s| s.kind() == SymbolKind::Text && s.size() > 0)
+        .map(|s| located_symbol(&s))
+        .filter(|(a, _, _)| within(*a, FLASH))
+        .collect();
+    let helpers: BTreeSet<u64> = code
+        .iter()
+        .filter(|(_, _, n)| is_soft_f64(n))
+        .map(|(a, _, _)| *a)
+        .collect();
+    let text = file
+        .section_by_name(".text")
+        .ok_or("the ELF has no .text section")?;
+    let bytes = text.data().map_err(|e| format!(".text: {e}"))?;
+    let base = text.address();
+    let halfword = |a: u64| -> Option<u16> {
+        let i = usize::try_from(a.checked_sub(base)?).ok()?;
+        Some(u16::from_le_bytes([*bytes.get(i)?, *bytes.get(i + 1)?]))
+    };
+    let mut calls: BTreeMap<String, usize> = BTreeMap::new();
+    for (addr, size, name) in &code {
+        let mut a = *addr;
+        while a + 4 <= addr + size {
+            let hit = match (halfword(a), halfword(a + 2)) {
+                (Some(h1), Some(h2)) => bl_target(a, h1, h2).filter(|t| helpers.contains(t)),
+                _ => None,
+            };
+            if hit.is_some() {
+                *calls.entry(name.clone()).or_default() += 1;
+                a += 4;
+            } else {
+                a += 2;
+            }
+        }
+    }
+    let mut out: Vec<(String, usize)> = calls.into_iter().collect();
+    out.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    Ok(out)
+}
+
+/// The `cargo xtask size` lines of [`soft_f64_calls`]: the total and the `n` largest callers.
+pub fn soft_f64_table(path: &Path, n: usize) -> Result<String, String> {
+    let calls = soft_f64_calls(path)?;
+    let total: usize = calls.iter().map(|c| c.1).sum();
+    let mut out = format!("soft-float f64 call sites: {total} (largest callers)\n");
+    for (name, k) in calls.iter().take(n) {
+        // the end of a long name: its method
+        let skip = name.chars().count().saturating_sub(100);
+        let short: String = name.chars().skip(skip).collect();
+        let more = if skip > 0 { "..." } else { "" };
+        out.push_str(&format!("  {k:>6}  {more}{short}\n"));
+    }
+    Ok(out)
+}
+
 /// The largest flash symbols of an ELF (`cargo bloat`-style) and the flash bytes per crate
 /// (first path segment of the demangled name; `?` for symbols without one).
 pub fn top_symbols(path: &Path, n: usize) -> Result<String, String> {
@@ -656,6 +749,18 @@ mod tests {
             assert!(report(b.flash + 1, 0).check_budget(&b).is_err());
             assert!(report(0, b.ram + 1).check_budget(&b).is_err());
         }
+    }
+
+    #[test]
+    fn thumb_bl_targets_decode_both_ways() {
+        // BL from 0x0800_8000 to 0x0800_8100: offset 0xFC (S = 0, J1 = J2 = 1)
+        assert_eq!(bl_target(0x0800_8000, 0xF000, 0xF87E), Some(0x0800_8100));
+        // and back to 0x0800_7F00: offset -0x104 (S = 1, J1 = J2 = 1, imm10 = 0x3FF)
+        assert_eq!(bl_target(0x0800_8000, 0xF7FF, 0xFF7E), Some(0x0800_7F00));
+        // a 16-bit instruction pair is not a BL
+        assert_eq!(bl_target(0x0800_8000, 0x4770, 0xBF00), None);
+        assert!(is_soft_f64("__aeabi_dadd") && is_soft_f64("__aeabi_f2d"));
+        assert!(!is_soft_f64("__aeabi_memcpy") && !is_soft_f64("__aeabi_fadd"));
     }
 
     #[test]

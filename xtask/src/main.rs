@@ -726,6 +726,7 @@ fn size() -> Result<(), String> {
     println!("{}", elf::top_symbols(&elf, 25)?);
     println!("{}", elf::attribution(&elf, 12)?);
     println!("{}", elf::source_table(&elf, 30)?);
+    println!("{}", elf::soft_f64_table(&elf, 12)?);
     report.check_fits()?;
     report.check_budget(&elf::CAR_BUDGET)?;
     elf::check_unwanted(&elf)?;
