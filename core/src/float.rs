@@ -23,6 +23,9 @@ pub trait SolveFloat: nalgebra::RealField + Copy + crate::sqrt::Sqrt + sealed::S
     /// Shift of inverse iteration off the eigenvalue, relative to max |a_ij|: keeps
     /// (A - mu I) from being exactly singular, also after rounding A's entries to this type.
     const SHIFT_REL: f64;
+    /// Newton on an eigenpair has converged when the eigenvalue's correction is below this
+    /// times |lambda| + 1 (each iteration's residual in this type).
+    const NEWTON_TOL: f64;
     /// Rounds an f64 to this type.
     fn of_f64(x: f64) -> Self;
     /// Widens to f64 (exact).
@@ -40,6 +43,7 @@ impl SolveFloat for f64 {
     const EPS: f64 = f64::EPSILON;
     const MAX_ABS_ENTRY: f64 = 1e150;
     const SHIFT_REL: f64 = 1e-11;
+    const NEWTON_TOL: f64 = 1e-10;
     fn of_f64(x: f64) -> Self {
         x
     }
@@ -54,6 +58,7 @@ impl SolveFloat for f32 {
     const MAX_ABS_ENTRY: f64 = 1e30;
     // eps_f32 ~ 1e-7 relative: the shift must survive the rounding of A's entries.
     const SHIFT_REL: f64 = 1e-6;
+    const NEWTON_TOL: f64 = 1e-5;
     fn of_f64(x: f64) -> Self {
         x as f32
     }

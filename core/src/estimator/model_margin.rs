@@ -9,8 +9,8 @@
 //!    the start of the shimmy mode: the eigenvalue nearest the one tracked from the last cycle
 //!    (predicted to V with its d lambda/dV), or, cold, [`ModeSelect::Shimmy`] (least-damped
 //!    in-phase wheel-yaw pair by mode shape; the ~47 Hz anti-phase track-rod mode is not it);
-//! 2. `Shimmy`: Newton on the eigenpair ([`eigen::refine_eigenpair`], mixed precision, f64
-//!    accurate) from the inverse-iteration vector; its shape must still be in-phase wheel yaw
+//! 2. `Shimmy`: Newton on the eigenpair ([`eigen::refine_eigenpair`], in the tracker's
+//!    precision) from the inverse-iteration vector; its shape must still be in-phase wheel yaw
 //!    (else the cold selection); d zeta/dV from the left/right eigenvectors and the exact dA/dV;
 //! 3. `Track`: each known Hopf crossing V* by Newton on the Hopf condition Re s(V*) = 0, with
 //!    dRe s/dV from the eigenpair at V* (one call per Newton step), warm-started at the last

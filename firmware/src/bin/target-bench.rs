@@ -184,7 +184,7 @@ mod bench {
             run: linearise_only,
         },
         Entry {
-            name: "eigenpair Newton step (f32 LU, f64 residual), warm",
+            name: "eigenpair Newton step (f32, residual too), warm",
             budget: Budget::None,
             run: newton_f32,
         },
