@@ -32,7 +32,7 @@ fn vehicle(k: u8) -> Vehicle {
     let mut v = Vehicle::nominal();
     let frac = 0.2 + 0.6 * f64::from(k) / 255.0;
     // The first fields are plant parameters without cross rules: any value in range is valid.
-    v.set(f.section, f.name, f.lo + (f.hi - f.lo) * frac)
+    v.set(f.section(), f.name, f.lo + (f.hi - f.lo) * frac)
         .expect("in range");
     v
 }
