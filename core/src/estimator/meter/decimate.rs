@@ -2,18 +2,18 @@
 //!
 //! The anti-alias filter is an 8th-order inverse-Chebyshev (Chebyshev II) low-pass made of four
 //! biquads (bilinear transform pre-warped at the stop-band edge; coefficients computed at
-//! construction in the filter's own precision, never typed in). Only what would fold INTO the
-//! shimmy band must be removed: after decimation to f_out, input content at f folds to |f - m
-//! f_out|, so the stop band starts at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band)
-//! with >= 60 dB attenuation there and above. Content between 50 and 80 Hz folds to 20-50 Hz,
-//! outside the band. The pass band is maximally flat: < 1e-5 dB down at 20 Hz, -0.009 dB at 40 Hz,
-//! -0.65 dB at 50 Hz, -3 dB at ~54.6 Hz. A flat pass band up to the output Nyquist matters for the
-//! mode meter: an 8th-order Butterworth cut at 30 Hz (the first design) leaves a deep spectral
-//! roll-off between 30 and 50 Hz that a low-order AR model cannot represent; in an exploratory run
-//! (AR(6), 100 Hz) it biased the 8 Hz damping by +0.035 (0.05 -> 0.085) and the 18 Hz one by -0.05;
-//! with this filter the bias is within the accuracy-test tolerances. `AntiAliasFilter::gain_db`
-//! evaluates the implemented response and a unit test checks it against the closed-form
-//! Chebyshev-II magnitude.
+//! construction in f64 arithmetic with the transcendentals in the filter's precision, never
+//! typed in). Only what would fold INTO the shimmy band must be removed:
+//! after decimation to f_out, input content at f folds to |f - m f_out|, so the stop band starts
+//! at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB attenuation there
+//! and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band. The pass band is
+//! maximally flat: < 1e-5 dB down at 20 Hz, -0.009 dB at 40 Hz, -0.65 dB at 50 Hz, -3 dB at
+//! ~54.6 Hz. A flat pass band up to the output Nyquist matters for the mode meter: an 8th-order
+//! Butterworth cut at 30 Hz (the first design) leaves a deep spectral roll-off between 30 and
+//! 50 Hz that a low-order AR model cannot represent; in an exploratory run (AR(6), 100 Hz) it
+//! biased the 8 Hz damping by +0.035 (0.05 -> 0.085) and the 18 Hz one by -0.05; with this
+//! filter the bias is within the accuracy-test tolerances. `AntiAliasFilter::gain_db` evaluates the implemented response and a unit
+//! test checks it against the closed-form Chebyshev-II magnitude.
 
 use super::real::Real;
 
@@ -75,38 +75,38 @@ impl<T: Real> AntiAliasFilter<T> {
         if !(f_stop_hz > 0.0 && fs_hz > 0.0 && f_stop_hz < 0.5 * fs_hz && atten_db > 0.0) {
             return None;
         }
-        // In the filter's own precision throughout: on the target (f32) no soft-float f64, whose
-        // calls were ~1 KB of flash here (`cargo xtask size`); the f64 twin computes as before.
-        // The f32 design keeps the stated response (`f32_design_keeps_the_stated_response`).
-        let t = T::from_f64;
-        let two = t(2.0);
-        let n = T::from_f32((2 * AA_SECTIONS) as f32);
-        let pi = t(core::f64::consts::PI);
-        let k2 = two * t(fs_hz);
-        let ws = k2 * (pi * t(f_stop_hz) / t(fs_hz)).tan();
+        let n = (2 * AA_SECTIONS) as f64;
+        let k2 = 2.0 * fs_hz;
+        // Transcendentals in the filter's own precision (see `Real::eval`).
+        let ws = k2 * T::eval(core::f64::consts::PI * f_stop_hz / fs_hz, T::tan);
         let eps =
-            T::ONE / ((t(atten_db) / t(10.0) * t(core::f64::consts::LN_10)).exp() - T::ONE).sqrt();
-        let mu = (T::ONE / eps).asinh() / n;
-        let (sinh_mu, cosh_mu) = (mu.sinh(), mu.cosh());
+            1.0 / libm::sqrt(T::eval(atten_db / 10.0 * core::f64::consts::LN_10, T::exp) - 1.0);
+        let mu = T::eval(1.0 / eps, T::asinh) / n;
         let mut sections = [Biquad::default(); AA_SECTIONS];
         for (i, sec) in sections.iter_mut().enumerate() {
-            let th = pi * T::from_f32((2 * i + 1) as f32) / (two * n);
-            let cos_th = th.cos();
+            let th = core::f64::consts::PI * (2 * i + 1) as f64 / (2.0 * n);
             // Chebyshev-I pole, its reciprocal (scaled to ws) is the Chebyshev-II pole.
-            let (pr, pi_) = (-sinh_mu * th.sin(), cosh_mu * cos_th);
-            let m2 = pr * pr + pi_ * pi_;
-            let (qr, qi) = (ws * pr / m2, -ws * pi_ / m2);
-            let a1 = -two * qr; // s^2 + a1 s + a0
+            let (pr, pi) = (
+                -T::eval(mu, T::sinh) * T::eval(th, T::sin),
+                T::eval(mu, T::cosh) * T::eval(th, T::cos),
+            );
+            let m2 = pr * pr + pi * pi;
+            let (qr, qi) = (ws * pr / m2, -ws * pi / m2);
+            let a1 = -2.0 * qr; // s^2 + a1 s + a0
             let a0 = qr * qr + qi * qi;
-            let wz = ws / cos_th; // zeros at +-j wz
+            let wz = ws / T::eval(th, T::cos); // zeros at +-j wz
             let wz2 = wz * wz;
             let g = a0 / wz2; // unit DC gain
-            let kk = k2 * k2;
-            let d0 = kk + a1 * k2 + a0;
-            let b0 = g * (kk + wz2) / d0;
+            let d0 = k2 * k2 + a1 * k2 + a0;
+            let nb = [
+                g * (k2 * k2 + wz2) / d0,
+                g * 2.0 * (wz2 - k2 * k2) / d0,
+                g * (k2 * k2 + wz2) / d0,
+            ];
+            let na = [2.0 * (a0 - k2 * k2) / d0, (k2 * k2 - a1 * k2 + a0) / d0];
             *sec = Biquad {
-                b: [b0, g * two * (wz2 - kk) / d0, b0],
-                a: [two * (a0 - kk) / d0, (kk - a1 * k2 + a0) / d0],
+                b: [T::from_f64(nb[0]), T::from_f64(nb[1]), T::from_f64(nb[2])],
+                a: [T::from_f64(na[0]), T::from_f64(na[1])],
                 s: [T::ZERO; 2],
             };
         }
