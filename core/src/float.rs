@@ -4,9 +4,10 @@
 
 use nalgebra::{Complex, SVector};
 
-/// Float type of the eigen-solves, eigenvectors and mode shapes, chosen at compile time (a type parameter,
-/// not a run-time setting), so an image links only the precision it uses: the firmware solves
-/// in f32 on the FPU and carries no f64 Schur or LU code; the host and simulator use f64.
+/// Float type of the eigen-solves, eigenvectors and mode shapes, chosen at compile time (a type
+/// parameter, not a run-time setting), so an image links only the precision it uses: the
+/// firmware solves in f32 on the FPU and carries no f64 Schur or LU code; the host and the
+/// simulator use f64.
 ///
 /// f32: A is formed in f64, rounded to f32, balanced (exact power-of-two scaling) and solved in
 /// f32: ~20x fewer instructions on the M4 than soft-float f64. Balancing is what makes this
