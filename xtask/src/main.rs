@@ -451,8 +451,9 @@ fn lane_output() -> Stdio {
     })
 }
 
-/// One line of this thread's progress, into its lane's log or onto the terminal.
-fn say(line: &str) {
+/// One line of this thread's progress, into its lane's log or onto the terminal (the steps'
+/// own modules report through it too, so a line of the host lane lands in its log).
+pub fn say(line: &str) {
     LANE_LOG.with_borrow_mut(|log| match log {
         Some(f) => {
             // A lost progress line is not worth failing a step for.

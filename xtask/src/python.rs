@@ -40,7 +40,10 @@ pub fn ensure_packages(python: &Path, packages: &[(&str, &str)]) -> Result<(), S
     if missing.is_empty() {
         return Ok(());
     }
-    println!("xtask: installing {} with pip", missing.join(", "));
+    crate::say(&format!(
+        "xtask: installing {} with pip",
+        missing.join(", ")
+    ));
     run(Command::new(python)
         .args(["-m", "pip", "install", "--quiet"])
         .args(&missing))
@@ -110,7 +113,7 @@ pub fn wheel_tests() -> Step {
     // interpreter): installed into the venv even when the system has one.
     let maturin = python.with_file_name("maturin");
     if !maturin.exists() {
-        println!("xtask: installing maturin into the venv with pip");
+        crate::say("xtask: installing maturin into the venv with pip");
         run(Command::new(&python).args([
             "-m",
             "pip",
