@@ -205,8 +205,7 @@ fn is_soft_f64(name: &str) -> bool {
     let Some(op) = name.strip_prefix("__aeabi_") else {
         return false;
     };
-    op.starts_with('d') && !op.starts_with("div")
-        || ["f2d", "i2d", "ui2d", "l2d", "ul2d"].contains(&op)
+    op.starts_with('d') || ["f2d", "i2d", "ui2d", "l2d", "ul2d"].contains(&op)
 }
 
 /// The target of a Thumb-2 `BL` at `addr` made of the halfwords `hw1`, `hw2` (encoding T1),
