@@ -660,10 +660,11 @@ impl<const N: usize> Eigenpair<N> {
     /// d lambda / dp = w^H (dA/dp) v / (w^H v) for a simple eigenvalue (first-order
     /// perturbation); `None` when w^H v vanishes (defective or not converged).
     pub fn derivative(&self, da: &Matrix<N>) -> Option<Complex<f64>> {
+        let right: VectorIn<f64, N> = core::array::from_fn(|i| self.right[i]);
         let num = self
             .left
             .iter()
-            .zip(real_times(da, &self.right).iter())
+            .zip(real_times(|i, j| da[(i, j)], &right).iter())
             .fold(Complex::new(0.0, 0.0), |acc, (w, dv)| acc + w.conj() * dv);
         let den = self
             .left
@@ -720,15 +721,8 @@ pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
     let tol = t(T::NEWTON_TOL);
     for k in 0..max_iter {
         // residual in T
-        let r: VectorIn<T, N> = core::array::from_fn(|i| {
-            let mut y = zero;
-            for (aij, vj) in at[i].iter().zip(v.iter()) {
-                if *aij != T::zero() {
-                    y += *vj * *aij;
-                }
-            }
-            y - v[i] * lambda
-        });
+        let av = real_times(|i, j| at[i][j], &v);
+        let r: VectorIn<T, N> = core::array::from_fn(|i| av[i] - v[i] * lambda);
         let rb = c
             .iter()
             .zip(v.iter())
@@ -784,19 +778,22 @@ pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
     Err(EigenError::NotConverged)
 }
 
-/// A x for real A and complex x, skipping A's zeros (A(V) is about half zeros, dA/dV almost
-/// all): soft-float f64 on the M4, so the skipped work matters.
-fn real_times<const N: usize>(a: &Matrix<N>, x: &ComplexVector<N>) -> ComplexVector<N> {
-    let mut y = ComplexVector::<N>::zeros();
-    for (i, yi) in y.iter_mut().enumerate() {
+/// A x for real A (entry (i, j) from `a`) and complex x, skipping A's zeros (A(V) is about
+/// half zeros, dA/dV almost all): soft-float f64 on the M4, so the skipped work matters.
+fn real_times<T: SolveFloat, const N: usize>(
+    a: impl Fn(usize, usize) -> T,
+    x: &VectorIn<T, N>,
+) -> VectorIn<T, N> {
+    core::array::from_fn(|i| {
+        let mut y = Complex::new(T::zero(), T::zero());
         for (j, xj) in x.iter().enumerate() {
-            let aij = a[(i, j)];
-            if aij != 0.0 {
-                *yi += xj * aij;
+            let aij = a(i, j);
+            if aij != T::zero() {
+                y += *xj * aij;
             }
         }
-    }
-    y
+        y
+    })
 }
 
 /// The car's mode classification ([`crate::plant::classify`]), kept here for its callers.
