@@ -11,7 +11,7 @@ use nalgebra::Complex;
 
 mod hessenberg_qr;
 
-pub use crate::float::{widened, SolveFloat, VectorIn};
+pub use crate::float::{narrowed, widened, widened_complex, SolveFloat, VectorIn};
 use crate::model::LinearModel;
 pub use crate::model::{ComplexVector, Matrix, ModeShape, ModeShapeInfo};
 use crate::plant::N_STATES;
@@ -642,40 +642,47 @@ impl<T: SolveFloat, const N: usize> BorderedLu<T, N> {
     }
 }
 
-/// An eigenpair with its left eigenvector, from [`refine_eigenpair`] (f64); N states (the
-/// car's 10 by default).
+/// An eigenpair with its left eigenvector, from [`refine_eigenpair`], in the precision `T` the
+/// Newton computed it in (f32 on the target: no soft-float f64 to widen, scale or
+/// differentiate it); N states (the car's 10 by default).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Eigenpair<const N: usize = N_STATES> {
+pub struct Eigenpair<T: SolveFloat = f64, const N: usize = N_STATES> {
     /// The eigenvalue.
-    pub lambda: Complex<f64>,
+    pub lambda: Complex<T>,
     /// Right eigenvector (A v = lambda v), scaled so that c^H v = 1 for the start vector c.
-    pub right: ComplexVector<N>,
+    pub right: VectorIn<T, N>,
     /// Left eigenvector (w^H A = lambda w^H), arbitrary scale.
-    pub left: ComplexVector<N>,
+    pub left: VectorIn<T, N>,
     /// Newton iterations used (each one complex LU of the bordered system).
     pub iterations: u8,
 }
 
-impl<const N: usize> Eigenpair<N> {
+impl<T: SolveFloat, const N: usize> Eigenpair<T, N> {
+    /// The eigenvalue widened to f64 (exact).
+    pub fn lambda_f64(&self) -> Complex<f64> {
+        widened_complex(self.lambda)
+    }
+
     /// d lambda / dp = w^H (dA/dp) v / (w^H v) for a simple eigenvalue (first-order
-    /// perturbation); `None` when w^H v vanishes (defective or not converged).
-    pub fn derivative(&self, da: &Matrix<N>) -> Option<Complex<f64>> {
-        let right: VectorIn<f64, N> = core::array::from_fn(|i| self.right[i]);
+    /// perturbation), in `T` with dA/dp's entries rounded to `T`; `None` when w^H v vanishes
+    /// (defective or not converged).
+    pub fn derivative(&self, da: &Matrix<N>) -> Option<Complex<T>> {
+        let zero = Complex::new(T::zero(), T::zero());
         let num = self
             .left
             .iter()
-            .zip(real_times(|i, j| da[(i, j)], &right).iter())
-            .fold(Complex::new(0.0, 0.0), |acc, (w, dv)| acc + w.conj() * dv);
+            .zip(real_times(|i, j| T::of_f64(da[(i, j)]), &self.right).iter())
+            .fold(zero, |acc, (w, dv)| acc + w.conj() * *dv);
         let den = self
             .left
             .iter()
             .zip(self.right.iter())
-            .fold(Complex::new(0.0, 0.0), |acc, (w, v)| acc + w.conj() * v);
-        if den.re == 0.0 && den.im == 0.0 {
+            .fold(zero, |acc, (w, v)| acc + w.conj() * *v);
+        if den.re == T::zero() && den.im == T::zero() {
             return None;
         }
         let d = num / den;
-        (d.re.is_finite() && d.im.is_finite()).then_some(d)
+        (d.re.to_f64().is_finite() && d.im.to_f64().is_finite()).then_some(d)
     }
 }
 
@@ -696,28 +703,28 @@ impl<const N: usize> Eigenpair<N> {
 pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
     a: &Matrix<N>,
     lambda0: Complex<f64>,
-    v0: &ComplexVector<N>,
+    v0: &VectorIn<T, N>,
     max_iter: u8,
-) -> Result<Eigenpair<N>, EigenError> {
+) -> Result<Eigenpair<T, N>, EigenError> {
     let amax = abs_max(a);
+    let finite = |z: &Complex<T>| z.re.to_f64().is_finite() && z.im.to_f64().is_finite();
     if amax.is_nan()
         || amax > T::MAX_ABS_ENTRY
         || !(lambda0.re.is_finite() && lambda0.im.is_finite())
-        || v0.iter().any(|c| !(c.re.is_finite() && c.im.is_finite()))
+        || !v0.iter().all(finite)
     {
         return Err(EigenError::NonFinite);
     }
-    let n0 = v0.norm_squared();
-    if !(n0 > 0.0 && n0.is_finite()) {
+    let zero = Complex::new(T::zero(), T::zero());
+    let n0 = v0.iter().fold(T::zero(), |acc, z| acc + z.norm_sqr());
+    if !(n0 > T::zero() && n0.to_f64().is_finite()) {
         return Err(EigenError::Singular);
     }
     let t = T::of_f64;
-    let tc = |z: Complex<f64>| Complex::new(t(z.re), t(z.im));
-    let c: VectorIn<T, N> = core::array::from_fn(|i| tc(v0[i] / Complex::new(n0, 0.0)));
+    let c: VectorIn<T, N> = core::array::from_fn(|i| v0[i].unscale(n0));
     let at: [[T; N]; N] = core::array::from_fn(|i| core::array::from_fn(|j| t(a[(i, j)])));
     let (mut lambda, mut v): (Complex<T>, VectorIn<T, N>) =
-        (tc(lambda0), core::array::from_fn(|i| tc(v0[i])));
-    let zero = Complex::new(T::zero(), T::zero());
+        (Complex::new(t(lambda0.re), t(lambda0.im)), *v0);
     let tol = t(T::NEWTON_TOL);
     for k in 0..max_iter {
         // residual in T
@@ -739,7 +746,6 @@ pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
         }))?;
         let rhs = Ext::<Complex<T>, N>::from_fn(|row| if row < N { -r[row] } else { -rb });
         let x = lu.solve(&rhs);
-        let finite = |z: &Complex<T>| z.re.to_f64().is_finite() && z.im.to_f64().is_finite();
         if !x.head.iter().chain(core::iter::once(&x.tail)).all(finite) {
             return Err(EigenError::Singular);
         }
@@ -762,14 +768,13 @@ pub fn refine_eigenpair<T: SolveFloat, const N: usize>(
                 }
             });
             let y = lu.solve_adjoint(&e);
-            let wide = |z: Complex<T>| Complex::new(z.re.to_f64(), z.im.to_f64());
-            let left = ComplexVector::<N>::from_fn(|i, _| wide(y.get(i)));
-            if left.iter().any(|c| !(c.re.is_finite() && c.im.is_finite())) {
+            let left: VectorIn<T, N> = core::array::from_fn(|i| y.get(i));
+            if !left.iter().all(finite) {
                 return Err(EigenError::NonFiniteResult);
             }
             return Ok(Eigenpair {
-                lambda: wide(lambda),
-                right: widened(&v),
+                lambda,
+                right: v,
                 left,
                 iterations: k + 1,
             });
@@ -907,9 +912,9 @@ mod tests {
     }
 
     /// Newton from the previous speed's pair lands on the eigenvalue of the Schur solve at the
-    /// new speed to f64 accuracy, in both precisions (f32: the correction is solved in f32, the
-    /// residual formed in f64), with a left eigenvector that satisfies its definition and an
-    /// eigenvalue derivative that matches a central difference of Schur eigenvalues.
+    /// new speed to its precision's accuracy (f32: ~3e-7 relative, the whole Newton in f32),
+    /// with a left eigenvector that satisfies its definition and an eigenvalue derivative that
+    /// matches a central difference of Schur eigenvalues.
     #[test]
     fn newton_continues_an_eigenpair_to_its_precision() {
         fn check<T: SolveFloat>() {
@@ -923,21 +928,21 @@ mod tests {
             for v_new in [8.05, 8.5, 10.0] {
                 let a = linearise(&p, v_new, 0.0);
                 let exact = nearest(&eigenvalues(&a).unwrap(), l0);
-                let ep = refine_eigenpair::<T, _>(&a, l0, &v0, 6).unwrap();
-                let err = (ep.lambda - exact).norm() / exact.norm();
+                let ep = refine_eigenpair::<T, _>(&a, l0, &narrowed(&v0), 6).unwrap();
+                let err = (ep.lambda_f64() - exact).norm() / exact.norm();
                 // f32: measured 3.3e-7 at 8.05 m/s, a few of its epsilons
                 let etol = if T::NAME == "f32" { 1e-6 } else { 1e-11 };
                 assert!(err < etol, "{} V={v_new}: rel error {err:e}", T::NAME);
                 let ac = a.map(|x| Complex::new(x, 0.0));
-                let w = ep.left;
-                let rl = (w.adjoint() * ac - w.adjoint() * ep.lambda).norm() / w.norm();
+                let w = widened(&ep.left);
+                let rl = (w.adjoint() * ac - w.adjoint() * ep.lambda_f64()).norm() / w.norm();
                 let tol = if T::NAME == "f32" { 1e-4 } else { 1e-9 };
                 assert!(rl < tol * a.amax(), "{} left residual {rl:e}", T::NAME);
                 let h = 1e-4;
                 let lp = nearest(&eigenvalues(&linearise(&p, v_new + h, 0.0)).unwrap(), exact);
                 let lm = nearest(&eigenvalues(&linearise(&p, v_new - h, 0.0)).unwrap(), exact);
                 let fd = (lp - lm) / (2.0 * h);
-                let d = ep.derivative(&da).unwrap();
+                let d = widened_complex(ep.derivative(&da).unwrap());
                 let dtol = if T::NAME == "f32" { 1e-4 } else { 1e-6 };
                 assert!(
                     (d - fd).norm() < dtol * fd.norm().max(1.0),
@@ -975,7 +980,7 @@ mod tests {
         let l = least_damped_mode(&eigenvalues(&a).unwrap())
             .unwrap()
             .eigenvalue();
-        let v = eigenvector(&a, l).unwrap();
+        let v = narrowed::<f64, N_STATES>(&eigenvector(&a, l).unwrap());
         // one iteration from a start 5 % off cannot meet the 1e-10 correction bound
         assert_eq!(
             refine_eigenpair::<f64, _>(&a, l * 1.05, &v, 1),
@@ -983,13 +988,13 @@ mod tests {
         );
         assert!(refine_eigenpair::<f64, _>(&a, l * 1.05, &v, 8).is_ok());
         assert_eq!(
-            refine_eigenpair::<f64, _>(&a, l, &CVector::zeros(), 8),
+            refine_eigenpair::<f64, _>(&a, l, &narrowed(&CVector::zeros()), 8),
             Err(EigenError::Singular)
         );
         let mut bad = a;
         bad[(2, 3)] = f64::NAN;
         assert_eq!(
-            refine_eigenpair::<f32, _>(&bad, l, &v, 8),
+            refine_eigenpair::<f32, _>(&bad, l, &narrowed(&widened(&v)), 8),
             Err(EigenError::NonFinite)
         );
     }

@@ -75,3 +75,13 @@ pub type VectorIn<T, const N: usize> = [Complex<T>; N];
 pub fn widened<T: SolveFloat, const N: usize>(x: &VectorIn<T, N>) -> SVector<Complex<f64>, N> {
     SVector::<Complex<f64>, N>::from_fn(|i, _| Complex::new(x[i].re.to_f64(), x[i].im.to_f64()))
 }
+
+/// A complex number in `T` widened to f64 (exact).
+pub fn widened_complex<T: SolveFloat>(z: Complex<T>) -> Complex<f64> {
+    Complex::new(z.re.to_f64(), z.im.to_f64())
+}
+
+/// An f64 vector rounded to `T` (a start vector for the solvers in `T`).
+pub fn narrowed<T: SolveFloat, const N: usize>(x: &SVector<Complex<f64>, N>) -> VectorIn<T, N> {
+    core::array::from_fn(|i| Complex::new(T::of_f64(x[i].re), T::of_f64(x[i].im)))
+}

@@ -41,6 +41,7 @@ use core::marker::PhantomData;
 use nalgebra::Complex;
 
 use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, SolveFloat};
+use crate::float::widened_complex;
 use crate::model::LinearModel;
 use crate::params::PlantParams;
 use crate::plant::N_STATES;
@@ -540,11 +541,10 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// Newton on the eigenpair of A(v) near `lambda`, from its inverse-iteration vector.
-    fn eigenpair(&mut self, a: &Matrix<N>, lambda: Complex<f64>) -> Option<Eigenpair<N>> {
+    fn eigenpair(&mut self, a: &Matrix<N>, lambda: Complex<f64>) -> Option<Eigenpair<T, N>> {
         // the start in the phase the iteration leaves it: the refined pair does not depend on it
-        let r = eigen::eigenvector_in::<T, N>(a, lambda).and_then(|v0| {
-            eigen::refine_eigenpair::<T, N>(a, lambda, &eigen::widened(&v0), EIGEN_NEWTON_ITERS)
-        });
+        let r = eigen::eigenvector_in::<T, N>(a, lambda)
+            .and_then(|v0| eigen::refine_eigenpair::<T, N>(a, lambda, &v0, EIGEN_NEWTON_ITERS));
         match r {
             Ok(ep) => {
                 self.work.newton_iterations = self
@@ -704,9 +704,9 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         let (ep, shape_ok) = match eigen::eigenvectors_in::<T, N>(a, lambda) {
             Ok((right, left)) => (
                 Some(Eigenpair {
-                    lambda,
-                    right: eigen::widened(&right),
-                    left: eigen::widened(&left),
+                    lambda: Complex::new(T::of_f64(lambda.re), T::of_f64(lambda.im)),
+                    right,
+                    left,
                     iterations: 0,
                 }),
                 self.p.classify_in(&right).shape.is_shimmy(),
@@ -723,15 +723,15 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
             return;
         }
         let slope = ep.and_then(|ep| {
-            let dl = ep.derivative(&self.p.dlinearise_dv())?;
-            let m = Mode::from_eigenvalue(ep.lambda);
+            let dl = widened_complex(ep.derivative(&self.p.dlinearise_dv())?);
+            let m = Mode::from_eigenvalue(lambda);
             let wn = m.omega_n;
             if wn <= 0.0 {
                 return None;
             }
             let l = m.eigenvalue();
             // the +Im member: conjugate the derivative if Newton landed on the -Im one
-            let dl = if ep.lambda.im < 0.0 { dl.conj() } else { dl };
+            let dl = if lambda.im < 0.0 { dl.conj() } else { dl };
             let dr = (l.re * dl.re + l.im * dl.im) / wn;
             let dz = -(dl.re * wn - l.re * dr) / (wn * wn);
             dz.is_finite().then_some((m, dl, dz))
@@ -784,9 +784,10 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         }
         let a = self.p.linearise(k.speed_mps, self.work.c_damper_nspm);
         let step = self.eigenpair(&a, k.lambda).and_then(|ep| {
-            let ds = ep.derivative(&self.p.dlinearise_dv())?;
-            let dv = -ep.lambda.re / ds.re;
-            dv.is_finite().then_some((ep.lambda, ds, dv))
+            let ds = widened_complex(ep.derivative(&self.p.dlinearise_dv())?);
+            let l = ep.lambda_f64();
+            let dv = -l.re / ds.re;
+            dv.is_finite().then_some((l, ds, dv))
         });
         let Some((l, ds, dv)) = step else {
             return self.start_scan();

@@ -887,13 +887,14 @@ mod bench {
     /// meets the bound) including the left eigenvector.
     fn newton_f32() -> u32 {
         let (a, l, v) = shimmy_pair();
+        let v = shimmy_core::eigen::narrowed::<f32, _>(&v);
         let Ok(ep) = shimmy_core::eigen::refine_eigenpair::<f32, _>(&a, l, &v, 4) else {
             return u32::MAX;
         };
         measure(|| {
             let r = shimmy_core::eigen::refine_eigenpair::<f32, _>(
                 black_box(&a),
-                ep.lambda,
+                ep.lambda_f64(),
                 &ep.right,
                 1,
             );
