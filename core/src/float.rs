@@ -85,3 +85,8 @@ pub fn widened_complex<T: SolveFloat>(z: Complex<T>) -> Complex<f64> {
 pub fn narrowed<T: SolveFloat, const N: usize>(x: &SVector<Complex<f64>, N>) -> VectorIn<T, N> {
     core::array::from_fn(|i| Complex::new(T::of_f64(x[i].re), T::of_f64(x[i].im)))
 }
+
+/// A complex f64 rounded to `T`.
+pub fn narrowed_complex<T: SolveFloat>(z: Complex<f64>) -> Complex<T> {
+    Complex::new(T::of_f64(z.re), T::of_f64(z.im))
+}

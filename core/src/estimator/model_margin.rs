@@ -41,7 +41,7 @@ use core::marker::PhantomData;
 use nalgebra::Complex;
 
 use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, SolveFloat};
-use crate::float::widened_complex;
+use crate::float::{narrowed_complex, widened_complex};
 use crate::model::LinearModel;
 use crate::params::PlantParams;
 use crate::plant::N_STATES;
@@ -189,32 +189,33 @@ pub struct ModelMargin {
 }
 
 /// Brent's method split into propose / tell steps (same iteration as
-/// [`crate::stability::brent`]), so one function evaluation can be done per call.
+/// [`crate::stability::brent`]), so one function evaluation can be done per call; in the
+/// tracker's precision `T` (f32 on the target: no soft-float f64).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ResumableBrent {
-    a: f64,
-    b: f64,
-    c: f64,
-    fa: f64,
-    fb: f64,
-    fc: f64,
-    d: f64,
-    e: f64,
-    tol: f64,
+pub struct ResumableBrent<T: SolveFloat = f64> {
+    a: T,
+    b: T,
+    c: T,
+    fa: T,
+    fb: T,
+    fc: T,
+    d: T,
+    e: T,
+    tol: T,
 }
 
 /// What Brent wants next.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum BrentStep {
+pub enum BrentStep<T = f64> {
     /// Evaluate f here and call [`ResumableBrent::tell`].
-    Eval(f64),
+    Eval(T),
     /// Converged: (root, bracket lo, bracket hi).
-    Done(f64, f64, f64),
+    Done(T, T, T),
 }
 
-impl ResumableBrent {
+impl<T: SolveFloat> ResumableBrent<T> {
     /// Bracket [a, b] with fa fb <= 0.
-    pub fn new(a: f64, b: f64, fa: f64, fb: f64, tol: f64) -> Self {
+    pub fn new(a: T, b: T, fa: T, fb: T, tol: T) -> Self {
         Self {
             a,
             b,
@@ -229,7 +230,7 @@ impl ResumableBrent {
     }
 
     /// Current best estimate and bracket.
-    pub fn best(&self) -> (f64, f64, f64) {
+    pub fn best(&self) -> (T, T, T) {
         let (lo, hi) = if self.b < self.c {
             (self.b, self.c)
         } else {
@@ -239,18 +240,20 @@ impl ResumableBrent {
     }
 
     /// The next point to evaluate, or the converged root.
-    pub fn propose(&mut self) -> BrentStep {
-        if self.fa == 0.0 || self.fb == 0.0 {
-            let x = if self.fb == 0.0 { self.b } else { self.a };
+    pub fn propose(&mut self) -> BrentStep<T> {
+        let (zero, one, two) = (T::zero(), T::one(), T::of_f64(2.0));
+        let half = T::of_f64(0.5);
+        if self.fa == zero || self.fb == zero {
+            let x = if self.fb == zero { self.b } else { self.a };
             return BrentStep::Done(x, x, x);
         }
-        if (self.fb > 0.0) == (self.fc > 0.0) {
+        if (self.fb > zero) == (self.fc > zero) {
             self.c = self.a;
             self.fc = self.fa;
             self.d = self.b - self.a;
             self.e = self.d;
         }
-        if libm::fabs(self.fc) < libm::fabs(self.fb) {
+        if self.fc.abs() < self.fb.abs() {
             self.a = self.b;
             self.b = self.c;
             self.c = self.a;
@@ -258,31 +261,31 @@ impl ResumableBrent {
             self.fb = self.fc;
             self.fc = self.fa;
         }
-        let tol1 = 2.0 * f64::EPSILON * libm::fabs(self.b) + 0.5 * self.tol;
-        let xm = 0.5 * (self.c - self.b);
-        if libm::fabs(xm) <= tol1 {
+        let tol1 = two * T::EPS * self.b.abs() + half * self.tol;
+        let xm = half * (self.c - self.b);
+        if xm.abs() <= tol1 {
             let (x, lo, hi) = self.best();
             return BrentStep::Done(x, lo, hi);
         }
-        if libm::fabs(self.e) >= tol1 && libm::fabs(self.fa) > libm::fabs(self.fb) {
+        if self.e.abs() >= tol1 && self.fa.abs() > self.fb.abs() {
             let s = self.fb / self.fa;
             let (mut pp, mut q);
             if self.a == self.c {
-                pp = 2.0 * xm * s;
-                q = 1.0 - s;
+                pp = two * xm * s;
+                q = one - s;
             } else {
                 let qa = self.fa / self.fc;
                 let r = self.fb / self.fc;
-                pp = s * (2.0 * xm * qa * (qa - r) - (self.b - self.a) * (r - 1.0));
-                q = (qa - 1.0) * (r - 1.0) * (s - 1.0);
+                pp = s * (two * xm * qa * (qa - r) - (self.b - self.a) * (r - one));
+                q = (qa - one) * (r - one) * (s - one);
             }
-            if pp > 0.0 {
+            if pp > zero {
                 q = -q;
             }
-            pp = libm::fabs(pp);
-            let min1 = 3.0 * xm * q - libm::fabs(tol1 * q);
-            let min2 = libm::fabs(self.e * q);
-            if 2.0 * pp < min1.min(min2) {
+            pp = pp.abs();
+            let min1 = T::of_f64(3.0) * xm * q - (tol1 * q).abs();
+            let min2 = (self.e * q).abs();
+            if two * pp < min1.min(min2) {
                 self.e = self.d;
                 self.d = pp / q;
             } else {
@@ -295,9 +298,9 @@ impl ResumableBrent {
         }
         self.a = self.b;
         self.fa = self.fb;
-        self.b += if libm::fabs(self.d) > tol1 {
+        self.b += if self.d.abs() > tol1 {
             self.d
-        } else if xm > 0.0 {
+        } else if xm > zero {
             tol1
         } else {
             -tol1
@@ -306,12 +309,12 @@ impl ResumableBrent {
     }
 
     /// The value of f at the last proposed point.
-    pub fn tell(&mut self, fx: f64) {
+    pub fn tell(&mut self, fx: T) {
         self.fb = fx;
     }
 
     /// The bracket end above (`up`) or below the root, and f there.
-    pub fn end(&self, up: bool) -> (f64, f64) {
+    pub fn end(&self, up: bool) -> (T, T) {
         if (self.b > self.c) == up {
             (self.b, self.fb)
         } else {
@@ -321,19 +324,19 @@ impl ResumableBrent {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Search {
+enum Search<T: SolveFloat> {
     /// Probing away from V: last point and its g, next step.
-    Probe { x: f64, gx: f64, step: f64 },
+    Probe { x: T, gx: T, step: T },
     /// Refining a bracket; `pending` is the point proposed last (awaiting its g).
     Refine {
-        brent: ResumableBrent,
+        brent: ResumableBrent<T>,
         kind: CrossingKind,
-        pending: f64,
+        pending: T,
     },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Phase {
+enum Phase<T: SolveFloat> {
     Idle,
     Modes,
     /// Newton on the Hopf condition for known crossing `index`, step `iter`.
@@ -341,20 +344,20 @@ enum Phase {
         index: usize,
         iter: u8,
     },
-    Above(Search),
-    Below(Search),
+    Above(Search<T>),
+    Below(Search<T>),
     Publish,
 }
 
 /// A Hopf crossing known from a scan and tracked since: its speed and the crossing eigenvalue.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Known {
-    speed_mps: f64,
+struct Known<T: SolveFloat> {
+    speed_mps: T,
     /// The eigenvalue that crosses (Re ~ 0) at `speed_mps`.
-    lambda: Complex<f64>,
+    lambda: Complex<T>,
     kind: CrossingKind,
     /// Final bracket (scan) or last Newton step (tracked), m/s.
-    bracket_mps: f64,
+    bracket_mps: T,
     converged: bool,
     /// The damper coefficient it was found or last converged at: the crossings depend on c
     /// alone, so at the same c they are reused without work.
@@ -363,16 +366,18 @@ struct Known {
 
 /// The shimmy eigenvalue of the last cycle and its speed derivative (the predictor).
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct ShimmyTrack {
-    speed_mps: f64,
-    lambda: Complex<f64>,
-    dl_dv: Complex<f64>,
+struct ShimmyTrack<T: SolveFloat> {
+    speed_mps: T,
+    lambda: Complex<T>,
+    dl_dv: Complex<T>,
 }
 
 /// The incremental model-margin state machine. Call [`ModelMarginTracker::step`] every control
 /// tick; it returns `Some` when a cycle completes. `T` is the float type of the eigen-solves and
-/// eigenvector LUs (f64 by default; the firmware uses f32, f64 being software on the M4): a type
-/// parameter, so an image links only the precision it runs. `M` is the vehicle model with `N`
+/// eigenvector LUs, and of the speed search (Brent, the Newton on the Hopf condition, the
+/// tracked crossings): f64 by default; the firmware uses f32, f64 being software on the M4. A
+/// type parameter, so an image links only the precision it runs; the published [`ModelPoint`]
+/// is f64 either way. `M` is the vehicle model with `N`
 /// states (the car's [`PlantParams`] by default).
 #[derive(Clone, Debug)]
 pub struct ModelMarginTracker<
@@ -382,21 +387,21 @@ pub struct ModelMarginTracker<
 > {
     p: M,
     cfg: ModelMarginConfig,
-    phase: Phase,
+    phase: Phase<T>,
     work: ModelPoint,
     latest: Option<ModelPoint>,
     /// The cycle's shimmy start: the eigenvalue chosen from the Schur solve.
     shimmy_start: Complex<f64>,
     /// The start came from the track (its shape is checked) rather than the shape selection.
     shimmy_from_track: bool,
-    shimmy_track: Option<ShimmyTrack>,
+    shimmy_track: Option<ShimmyTrack<T>>,
     /// Every crossing in the search range, ascending, when `known_valid`.
-    known: heapless::Vec<Known, MAX_CROSSINGS>,
+    known: heapless::Vec<Known<T>, MAX_CROSSINGS>,
     /// The last scan covered the whole range at the current c and found at most
     /// [`MAX_CROSSINGS`].
     known_valid: bool,
     /// The crossing eigenvalue nearest Re = 0 seen while refining the current bracket.
-    refine_best: Option<(f64, Complex<f64>)>,
+    refine_best: Option<(T, Complex<T>)>,
     last_c: f64,
     cycle_start_s: Option<f64>,
     next_due_s: Option<f64>,
@@ -526,13 +531,13 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// The critical oscillatory eigenvalue at `v` (its Re is g(v)): one eigen-solve.
-    fn g(&mut self, v: f64) -> Option<Complex<f64>> {
-        let a = self.p.linearise(v, self.work.c_damper_nspm);
+    fn g(&mut self, v: T) -> Option<Complex<T>> {
+        let a = self.p.linearise(v.to_f64(), self.work.c_damper_nspm);
         match self
             .solve(&a)
             .and_then(|vals| eigen::critical_oscillatory_mode(&vals))
         {
-            Ok(m) if m.re.is_finite() => Some(m.eigenvalue()),
+            Ok(m) if m.re.is_finite() => Some(narrowed_complex(m.eigenvalue())),
             _ => {
                 self.error();
                 None
@@ -659,17 +664,17 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         self.work.max_re = eigen::max_real_part(&vals);
         // the tracked shimmy eigenvalue, predicted to V: the nearest +Im eigenvalue of the solve
         let tracked = self.shimmy_track.and_then(|tr| {
-            let pred = tr.lambda + tr.dl_dv * (v - tr.speed_mps);
+            let pred = tr.lambda + tr.dl_dv * (T::of_f64(v) - tr.speed_mps);
             vals.iter()
                 .filter(|l| l.im > 0.0 && eigen::is_oscillatory(**l))
-                .map(|l| ((*l - pred).norm_sqr(), *l))
-                .fold(None::<(f64, Complex<f64>)>, |best, c| match best {
+                .map(|l| ((narrowed_complex::<T>(*l) - pred).norm_sqr(), *l))
+                .fold(None::<(T, Complex<f64>)>, |best, c| match best {
                     Some(b) if b.0 <= c.0 => Some(b),
                     _ => Some(c),
                 })
                 // a start farther than 10 % of |lambda| from the prediction is another branch
-                // (squared magnitudes: no soft-float hypot per candidate)
-                .filter(|(d2, _)| *d2 <= 0.01 * pred.norm_sqr())
+                // (squared magnitudes: no hypot per candidate)
+                .filter(|(d2, _)| *d2 <= T::of_f64(0.01) * pred.norm_sqr())
                 .map(|(_, l)| l)
         });
         match tracked {
@@ -723,27 +728,26 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
             return;
         }
         let slope = ep.and_then(|ep| {
-            let dl = widened_complex(ep.derivative(&self.p.dlinearise_dv())?);
+            let dl = ep.derivative(&self.p.dlinearise_dv())?;
             let m = Mode::from_eigenvalue(lambda);
-            let wn = m.omega_n;
-            if wn <= 0.0 {
+            if m.omega_n <= 0.0 {
                 return None;
             }
-            let l = m.eigenvalue();
+            let (l, wn) = (narrowed_complex(m.eigenvalue()), T::of_f64(m.omega_n));
             // the +Im member: conjugate the derivative if Newton landed on the -Im one
             let dl = if lambda.im < 0.0 { dl.conj() } else { dl };
             let dr = (l.re * dl.re + l.im * dl.im) / wn;
             let dz = -(dl.re * wn - l.re * dr) / (wn * wn);
-            dz.is_finite().then_some((m, dl, dz))
+            dz.to_f64().is_finite().then_some((m, l, dl, dz))
         });
         match slope {
-            Some((m, dl, dz)) => {
+            Some((m, l, dl, dz)) => {
                 self.work.shimmy = m;
-                self.work.dzeta_dv_per_mps = dz;
+                self.work.dzeta_dv_per_mps = dz.to_f64();
                 self.work.slope_valid = true;
                 self.shimmy_track = self.work.shimmy_found.then_some(ShimmyTrack {
-                    speed_mps: v,
-                    lambda: m.eigenvalue(),
+                    speed_mps: T::of_f64(v),
+                    lambda: l,
                     dl_dv: dl,
                 });
             }
@@ -760,7 +764,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         };
     }
 
-    fn first_track(&mut self) -> Phase {
+    fn first_track(&mut self) -> Phase<T> {
         self.work.tracked = true;
         let c = self.work.c_damper_nspm;
         match self
@@ -774,7 +778,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// One Newton step on Re s(V*) = 0 for known crossing `index`.
-    fn track(&mut self, index: usize, iter: u8) -> Phase {
+    fn track(&mut self, index: usize, iter: u8) -> Phase<T> {
         let Some(k) = self.known.get(index).copied() else {
             return self.check_parity();
         };
@@ -782,36 +786,42 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
             // same plant, same crossing: nothing to do
             return self.next_track(index);
         }
-        let a = self.p.linearise(k.speed_mps, self.work.c_damper_nspm);
-        let step = self.eigenpair(&a, k.lambda).and_then(|ep| {
-            let ds = widened_complex(ep.derivative(&self.p.dlinearise_dv())?);
-            let l = ep.lambda_f64();
-            let dv = -l.re / ds.re;
-            dv.is_finite().then_some((l, ds, dv))
-        });
+        let a = self
+            .p
+            .linearise(k.speed_mps.to_f64(), self.work.c_damper_nspm);
+        let step = self
+            .eigenpair(&a, widened_complex(k.lambda))
+            .and_then(|ep| {
+                let ds = ep.derivative(&self.p.dlinearise_dv())?;
+                let dv = -ep.lambda.re / ds.re;
+                dv.to_f64().is_finite().then_some((ep.lambda, ds, dv))
+            });
         let Some((l, ds, dv)) = step else {
             return self.start_scan();
         };
         // the crossing moves with c only: a long step means another branch or a lost crossing
         // (min/max, not f64::clamp: its panic message would link float formatting, ~9 KB)
-        let dv = dv.min(self.cfg.max_step_mps).max(-self.cfg.max_step_mps);
+        let max_step = T::of_f64(self.cfg.max_step_mps);
+        let dv = dv.min(max_step).max(-max_step);
         let x = k.speed_mps + dv;
         // the kind follows from the sign of dRe s/dV
-        let kind = if ds.re > 0.0 {
+        let kind = if ds.re > T::zero() {
             CrossingKind::Onset
         } else {
             CrossingKind::Offset
         };
-        if !(V_SEARCH_MIN_MPS..=V_SEARCH_MAX_MPS).contains(&x) || kind != k.kind {
+        if !(T::of_f64(V_SEARCH_MIN_MPS)..=T::of_f64(V_SEARCH_MAX_MPS)).contains(&x)
+            || kind != k.kind
+        {
             return self.start_scan();
         }
-        let converged = libm::fabs(dv) <= self.cfg.tol_mps;
+        let converged = dv.abs() <= T::of_f64(self.cfg.tol_mps);
         if let Some(slot) = self.known.get_mut(index) {
             *slot = Known {
                 speed_mps: x,
                 lambda: l + ds * dv,
                 kind,
-                bracket_mps: libm::fabs(dv),
+                bracket_mps: dv.abs(),
                 converged,
                 c_nspm: self.work.c_damper_nspm,
             };
@@ -829,7 +839,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// After crossing `index`: the next one (skipping those known at this c), or the check.
-    fn next_track(&mut self, index: usize) -> Phase {
+    fn next_track(&mut self, index: usize) -> Phase<T> {
         let c = self.work.c_damper_nspm;
         match self
             .known
@@ -845,8 +855,8 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
 
     /// The known crossings must alternate in kind and agree with the sign of max Re at V from
     /// this cycle's Schur solve (unless V is within `parity_band_mps` of one); else scan.
-    fn check_parity(&mut self) -> Phase {
-        let v = self.work.speed_mps;
+    fn check_parity(&mut self) -> Phase<T> {
+        let v = T::of_f64(self.work.speed_mps);
         let alternate = self
             .known
             .windows(2)
@@ -854,7 +864,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         let near = self
             .known
             .iter()
-            .any(|k| libm::fabs(k.speed_mps - v) <= self.cfg.parity_band_mps);
+            .any(|k| (k.speed_mps - v).abs() <= T::of_f64(self.cfg.parity_band_mps));
         let below = self.known.iter().rev().find(|k| k.speed_mps < v);
         let above = self.known.iter().find(|k| k.speed_mps > v);
         let predicted_unstable = match (below, above) {
@@ -872,18 +882,18 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// Cold: forget the known crossings and scan the whole range.
-    fn start_scan(&mut self) -> Phase {
+    fn start_scan(&mut self) -> Phase<T> {
         self.work.tracked = false;
         self.known.clear();
         self.known_valid = true;
         self.start_search(true)
     }
 
-    fn start_search(&mut self, up: bool) -> Phase {
+    fn start_search(&mut self, up: bool) -> Phase<T> {
         let s = Search::Probe {
-            x: self.work.speed_mps,
-            gx: self.work.critical.re,
-            step: self.cfg.cold_step_mps,
+            x: T::of_f64(self.work.speed_mps),
+            gx: T::of_f64(self.work.critical.re),
+            step: T::of_f64(self.cfg.cold_step_mps),
         };
         if up {
             Phase::Above(s)
@@ -893,23 +903,24 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     }
 
     /// A side of the scan ended before its limit: the known crossings are not the whole range.
-    fn scan_cut(&mut self) -> Option<Search> {
+    fn scan_cut(&mut self) -> Option<Search<T>> {
         self.known_valid = false;
         None
     }
 
     /// One evaluation of a one-sided scan. `None` when this side is finished.
-    fn search(&mut self, s: Search, up: bool) -> Option<Search> {
+    fn search(&mut self, s: Search<T>, up: bool) -> Option<Search<T>> {
+        let zero = T::zero();
         let (lim, sgn) = if up {
-            (V_SEARCH_MAX_MPS, 1.0)
+            (T::of_f64(V_SEARCH_MAX_MPS), T::one())
         } else {
-            (V_SEARCH_MIN_MPS, -1.0)
+            (T::of_f64(V_SEARCH_MIN_MPS), -T::one())
         };
         // keep one call for the publication
         let out_of_budget = self.work.calls >= self.cfg.max_calls.saturating_sub(1);
         match s {
             Search::Probe { x, gx, step } => {
-                if (x - lim) * sgn >= 0.0 {
+                if (x - lim) * sgn >= zero {
                     return None;
                 }
                 if out_of_budget {
@@ -921,21 +932,21 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                     return self.scan_cut();
                 };
                 let gn = ln.re;
-                if (gn < 0.0) != (gx < 0.0) {
+                if (gn < zero) != (gx < zero) {
                     let (a, b, fa, fb) = if up { (x, xn, gx, gn) } else { (xn, x, gn, gx) };
-                    let kind = if fa < 0.0 {
+                    let kind = if fa < zero {
                         CrossingKind::Onset
                     } else {
                         CrossingKind::Offset
                     };
-                    self.refine_best = Some((libm::fabs(gn), ln));
-                    let brent = ResumableBrent::new(a, b, fa, fb, self.cfg.tol_mps);
+                    self.refine_best = Some((gn.abs(), ln));
+                    let brent = ResumableBrent::new(a, b, fa, fb, T::of_f64(self.cfg.tol_mps));
                     return self.refine(brent, kind, up);
                 }
                 Some(Search::Probe {
                     x: xn,
                     gx: gn,
-                    step: (2.0 * step).min(self.cfg.max_step_mps),
+                    step: (step + step).min(T::of_f64(self.cfg.max_step_mps)),
                 })
             }
             Search::Refine {
@@ -949,8 +960,8 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                 let Some(lp) = self.g(pending) else {
                     return self.scan_cut();
                 };
-                if self.refine_best.is_none_or(|(b, _)| libm::fabs(lp.re) < b) {
-                    self.refine_best = Some((libm::fabs(lp.re), lp));
+                if self.refine_best.is_none_or(|(b, _)| lp.re.abs() < b) {
+                    self.refine_best = Some((lp.re.abs(), lp));
                 }
                 brent.tell(lp.re);
                 self.refine(brent, kind, up)
@@ -962,13 +973,15 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
     /// crossing stored and the probing resumed beyond it.
     fn refine(
         &mut self,
-        mut brent: ResumableBrent,
+        mut brent: ResumableBrent<T>,
         kind: CrossingKind,
         up: bool,
-    ) -> Option<Search> {
+    ) -> Option<Search<T>> {
         match brent.propose() {
             BrentStep::Done(r, lo, hi) => {
-                let lambda = self.refine_best.map_or(Complex::new(0.0, 0.0), |(_, l)| l);
+                let lambda = self
+                    .refine_best
+                    .map_or(Complex::new(T::zero(), T::zero()), |(_, l)| l);
                 let known = Known {
                     speed_mps: r,
                     lambda,
@@ -988,7 +1001,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                 }
                 // Rebuilt, not `Vec::insert`: its overlapping shift links `memmove` (1.4 KB of
                 // flash; `cargo xtask size`).
-                let mut merged = heapless::Vec::<Known, MAX_CROSSINGS>::new();
+                let mut merged = heapless::Vec::<Known<T>, MAX_CROSSINGS>::new();
                 for (i, k) in self.known.iter().enumerate() {
                     if i == at {
                         let _ = merged.push(known);
@@ -1003,7 +1016,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
                 Some(Search::Probe {
                     x,
                     gx,
-                    step: self.cfg.cold_step_mps,
+                    step: T::of_f64(self.cfg.cold_step_mps),
                 })
             }
             BrentStep::Eval(p) => Some(Search::Refine {
@@ -1016,11 +1029,11 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
 
     /// The first known crossing above and below V into the point.
     fn publish_crossings(&mut self) {
-        let v = self.work.speed_mps;
-        let as_crossing = |k: &Known| Crossing {
-            speed_mps: k.speed_mps,
+        let v = T::of_f64(self.work.speed_mps);
+        let as_crossing = |k: &Known<T>| Crossing {
+            speed_mps: k.speed_mps.to_f64(),
             kind: k.kind,
-            bracket_mps: k.bracket_mps,
+            bracket_mps: k.bracket_mps.to_f64(),
             converged: k.converged,
         };
         self.work.above = self.known.iter().find(|k| k.speed_mps > v).map(as_crossing);
