@@ -26,11 +26,9 @@
 //!   driver's steering, for telemetry and the supervisor).
 //!
 //! The filters are designed for the nominal sample rate; the caller runs [`Conditioner::update`]
-//! once per sample. Coefficients are computed once in f64 at construction; the per-sample
-//! work is a dozen f32 multiply-adds, no transcendental functions. The design's tan, exp and cos
-//! are f64 series on their bounded argument ranges (`tan_design` and siblings): pure arithmetic,
-//! so the firmware links no f64 transcendental from libm (4.5 KB of flash, `cargo xtask size`),
-//! and within a few f64 ulps of libm, so the f32 coefficients are those of the libm design.
+//! once per sample. Coefficients are computed once in f32 at construction (the single-precision
+//! FPU's arithmetic, no f64 on the target), within 4 f32 ulps of the textbook f64 design (a unit
+//! test); the per-sample work is a dozen f32 multiply-adds, no transcendental functions.
 
 use core::f64::consts::PI;
 
@@ -81,22 +79,19 @@ impl Biquad {
     /// 2nd-order Butterworth section by the bilinear transform, pre-warped at `fc_hz`.
     /// An invalid corner (not in (0, fs/2)) gives the identity filter.
     pub fn butterworth(kind: BiquadKind, fc_hz: f32, fs_hz: f32) -> Self {
-        let (fc, fs) = (fc_hz as f64, fs_hz as f64);
-        if !(fc > 0.0 && fs > 0.0 && fc < 0.49 * fs) {
+        if !(fc_hz > 0.0 && fs_hz > 0.0 && fc_hz < 0.49 * fs_hz) {
             return Biquad::identity();
         }
-        let k = tan_design(PI * fc / fs);
-        let q = core::f64::consts::FRAC_1_SQRT_2;
-        let norm = 1.0 / (1.0 + k / q + k * k);
+        let k = crate::trig::tanf(core::f32::consts::PI * fc_hz / fs_hz);
+        let k_over_q = core::f32::consts::SQRT_2 * k; // q = 1/sqrt(2)
+        let norm = 1.0 / (1.0 + k_over_q + k * k);
         let (b0, b1, b2, dc) = match kind {
             BiquadKind::LowPass => (k * k * norm, 2.0 * k * k * norm, k * k * norm, 1.0),
             BiquadKind::HighPass => (norm, -2.0 * norm, norm, 0.0),
         };
-        let a1 = 2.0 * (k * k - 1.0) * norm;
-        let a2 = (1.0 - k / q + k * k) * norm;
         Biquad {
-            b: [b0 as f32, b1 as f32, b2 as f32],
-            a: [a1 as f32, a2 as f32],
+            b: [b0, b1, b2],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k_over_q + k * k) * norm],
             dc_gain: dc,
             s1: 0.0,
             s2: 0.0,
@@ -174,22 +169,28 @@ impl RateObserver {
     /// Observer with error poles at the discrete image of s^2 + 2 zeta w_b s + w_b^2.
     pub fn new(bandwidth_hz: f32, damping: f32, sample_rate_hz: f32) -> Self {
         let fs = if sample_rate_hz > 0.0 && sample_rate_hz.is_finite() {
-            sample_rate_hz as f64
+            sample_rate_hz
         } else {
             1000.0
         };
         let t = 1.0 / fs;
         // max/min instead of clamp: no panic on NaN bounds (panic-free check).
-        let wb = 2.0 * PI * (bandwidth_hz as f64).max(0.1).min(0.45 * fs);
-        let zeta = (damping as f64).clamp(0.1, 0.999);
-        let r = 1.0 / exp_design(zeta * wb * t);
-        let theta = wb * libm::sqrt(1.0 - zeta * zeta) * t;
-        let alpha = 1.0 - r * r;
-        let beta = 2.0 - alpha - 2.0 * r * cos_design(theta);
+        let wb = 2.0 * core::f32::consts::PI * bandwidth_hz.max(0.1).min(0.45 * fs);
+        let zeta = damping.clamp(0.1, 0.999);
+        // Pole radius r = exp(-zeta w_b T) and angle theta = w_b sqrt(1 - zeta^2) T. In the
+        // forms alpha = 1 - r^2 = (1 - r)(1 + r) and beta = 2 - alpha - 2 r cos theta =
+        // (1 - r)^2 + 4 r sin^2(theta / 2) every term is positive: f32 loses no digits to
+        // cancellation (beta is ~0.1 from terms of ~2 in the direct form).
+        let one_minus_r = -libm::expm1f(-zeta * wb * t);
+        let r = 1.0 - one_minus_r;
+        let half_theta = 0.5 * wb * libm::sqrtf(1.0 - zeta * zeta) * t;
+        let sin_half = crate::trig::sinf(half_theta);
+        let alpha = one_minus_r * (1.0 + r);
+        let beta = one_minus_r * one_minus_r + 4.0 * r * sin_half * sin_half;
         RateObserver {
-            alpha: alpha as f32,
-            beta_over_t: (beta / t) as f32,
-            t_s: t as f32,
+            alpha,
+            beta_over_t: beta * fs,
+            t_s: t,
             x: 0.0,
             v: 0.0,
         }
@@ -325,70 +326,68 @@ impl Conditioner {
     }
 }
 
-/// tan x for |x| < pi/2 (the pre-warp, x = pi fc / fs < 0.49 pi) by Lambert's continued fraction
-/// x / (1 - x^2 / (3 - x^2 / (5 - ...))), 20 levels: f64 accurate on that range.
-fn tan_design(x: f64) -> f64 {
-    let x2 = x * x;
-    let mut d = 0.0;
-    let mut k = 41.0;
-    while k >= 3.0 {
-        d = x2 / (k - d);
-        k -= 2.0;
-    }
-    x / (1.0 - d)
-}
-
-/// e^z for 0 <= z <= 3 (the observer's zeta w_b T <= 0.45 * 2 pi) by its Taylor series, 30
-/// terms of one sign (no cancellation), Horner.
-fn exp_design(z: f64) -> f64 {
-    let mut s = 1.0;
-    let mut n = 30.0;
-    while n >= 1.0 {
-        s = 1.0 + z * s / n;
-        n -= 1.0;
-    }
-    s
-}
-
-/// cos x for |x| <= 3 (the observer's w_b sqrt(1 - zeta^2) T) by its Taylor series, 20 terms.
-fn cos_design(x: f64) -> f64 {
-    let x2 = x * x;
-    let mut s = 1.0;
-    let mut n = 20.0;
-    while n >= 1.0 {
-        s = 1.0 - x2 * s / ((2.0 * n - 1.0) * (2.0 * n));
-        n -= 1.0;
-    }
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// The f64 reference designs, by the textbook formulas with libm's f64 functions.
+    fn butterworth_f64(high_pass: bool, fc: f64, fs: f64) -> ([f64; 3], [f64; 2]) {
+        let k = libm::tan(PI * fc / fs);
+        let norm = 1.0 / (1.0 + k * core::f64::consts::SQRT_2 + k * k);
+        let b = if high_pass {
+            [norm, -2.0 * norm, norm]
+        } else {
+            [k * k * norm, 2.0 * k * k * norm, k * k * norm]
+        };
+        let a = [
+            2.0 * (k * k - 1.0) * norm,
+            (1.0 - k * core::f64::consts::SQRT_2 + k * k) * norm,
+        ];
+        (b, a)
+    }
+
+    fn observer_f64(bw: f64, zeta: f64, fs: f64) -> (f64, f64) {
+        let t = 1.0 / fs;
+        let wb = 2.0 * PI * bw;
+        let r = libm::exp(-zeta * wb * t);
+        let theta = wb * libm::sqrt(1.0 - zeta * zeta) * t;
+        let alpha = 1.0 - r * r;
+        (alpha, (2.0 - alpha - 2.0 * r * libm::cos(theta)) / t)
+    }
+
+    /// Within `ulps` f32 ulps of the f64 value.
+    fn near(x: f32, reference: f64, ulps: f64) -> bool {
+        (f64::from(x) - reference).abs() <= ulps * f64::from(f32::EPSILON) * reference.abs()
+    }
+
     #[test]
-    fn design_series_match_libm_on_their_ranges() {
-        // Independent reference: libm's f64 functions. A few ulps keep the f32 coefficients
-        // those of the libm design (the demo's golden trace checks that end to end).
-        let close = |a: f64, b: f64| (a - b).abs() <= 8.0 * f64::EPSILON * b.abs().max(1.0);
-        for i in 0..=1000 {
-            let x = 0.49 * PI * i as f64 / 1000.0;
-            // near pi/2 the error is that of a few-ulp change of x, times tan's condition
-            // number 2x / sin 2x (21 at the 0.49 pi limit)
-            let cond = if x > 0.0 {
-                2.0 * x / libm::sin(2.0 * x)
-            } else {
-                1.0
-            };
-            let (t, t_ref) = (tan_design(x), libm::tan(x));
-            assert!(
-                (t - t_ref).abs() <= 8.0 * f64::EPSILON * cond * t_ref.abs().max(1.0),
-                "tan {x}: {t} vs {t_ref}"
-            );
-            let z = 3.0 * i as f64 / 1000.0;
-            assert!(close(exp_design(z), libm::exp(z)), "exp {z}");
-            assert!(close(cos_design(z), libm::cos(z)), "cos {z}");
-            assert!(close(1.0 / exp_design(z), libm::exp(-z)), "exp(-z) {z}");
+    fn f32_designs_are_the_f64_designs_to_a_few_ulps() {
+        // The designs run in f32 on the target: against the textbook formulas in f64 (libm),
+        // every coefficient within 4 f32 ulps, over corners and rates a vehicle file can set.
+        for fs in [500.0f32, 1000.0, 2000.0] {
+            for fc in [0.3f32, 1.5, 5.0, 40.0, 0.4 * fs] {
+                for (kind, hp) in [(BiquadKind::HighPass, true), (BiquadKind::LowPass, false)] {
+                    let q = Biquad::butterworth(kind, fc, fs);
+                    let (b, a) = butterworth_f64(hp, f64::from(fc), f64::from(fs));
+                    for (x, r) in q.b.iter().chain(&q.a).zip(b.iter().chain(&a)) {
+                        assert!(near(*x, *r, 4.0), "{kind:?} {fc}/{fs} Hz: {x} vs {r}");
+                    }
+                }
+            }
+            for (bw, zeta) in [(60.0f32, 0.8f32), (20.0, 0.3), (150.0, 0.95), (5.0, 0.7)] {
+                let o = RateObserver::new(bw, zeta, fs);
+                let (alpha, beta_t) = observer_f64(f64::from(bw), f64::from(zeta), f64::from(fs));
+                assert!(
+                    near(o.alpha, alpha, 4.0),
+                    "alpha {bw} {zeta} {fs}: {} vs {alpha}",
+                    o.alpha
+                );
+                assert!(
+                    near(o.beta_over_t, beta_t, 4.0),
+                    "beta/T {bw} {zeta} {fs}: {} vs {beta_t}",
+                    o.beta_over_t
+                );
+            }
         }
     }
 

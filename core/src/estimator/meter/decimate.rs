@@ -2,8 +2,7 @@
 //!
 //! The anti-alias filter is an 8th-order inverse-Chebyshev (Chebyshev II) low-pass made of four
 //! biquads (bilinear transform pre-warped at the stop-band edge; coefficients computed at
-//! construction in f64 arithmetic with the transcendentals in the filter's precision, never
-//! typed in). Only what would fold INTO the shimmy band must be removed:
+//! construction in the filter's precision, never typed in). Only what would fold INTO the shimmy band must be removed:
 //! after decimation to f_out, input content at f folds to |f - m f_out|, so the stop band starts
 //! at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB attenuation there
 //! and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band. The pass band is
@@ -71,42 +70,54 @@ impl<T: Real> AntiAliasFilter<T> {
     /// Designs the filter with stop band from `f_stop_hz` up, attenuated by at least
     /// `atten_db`, at sample rate `fs_hz` (bilinear transform pre-warped at `f_stop_hz`).
     /// Returns `None` unless 0 < f_stop < fs/2 and atten_db > 0.
+    ///
+    /// Computed in the filter's precision `T`, in the bilinear transform's own unit (analog
+    /// frequencies divided by 2 fs), where every intermediate is of order one: the f32 design
+    /// keeps its coefficients within a few ulps of the f64 design's (a unit test), and the
+    /// target links no f64 arithmetic for it.
     pub fn design(f_stop_hz: f64, atten_db: f64, fs_hz: f64) -> Option<Self> {
-        if !(f_stop_hz > 0.0 && fs_hz > 0.0 && f_stop_hz < 0.5 * fs_hz && atten_db > 0.0) {
+        let (f_stop, atten, fs) = (
+            T::from_f64(f_stop_hz),
+            T::from_f64(atten_db),
+            T::from_f64(fs_hz),
+        );
+        let half = T::from_f32(0.5);
+        if !(f_stop > T::ZERO && fs > T::ZERO && f_stop < half * fs && atten > T::ZERO) {
             return None;
         }
-        let n = (2 * AA_SECTIONS) as f64;
-        let k2 = 2.0 * fs_hz;
-        // Transcendentals in the filter's own precision (see `Real::eval`).
-        let ws = k2 * T::eval(core::f64::consts::PI * f_stop_hz / fs_hz, T::tan);
-        let eps =
-            1.0 / libm::sqrt(T::eval(atten_db / 10.0 * core::f64::consts::LN_10, T::exp) - 1.0);
-        let mu = T::eval(1.0 / eps, T::asinh) / n;
+        let pi = T::from_f64(core::f64::consts::PI);
+        let two = T::from_f32(2.0);
+        let n = T::from_f32((2 * AA_SECTIONS) as f32);
+        // Stop edge pre-warped, in units of 2 fs: tan(pi f_stop / fs).
+        let ws = (pi * f_stop / fs).tan();
+        // 1/eps^2 = 10^(A/10) - 1; mu = asinh(1/eps) / n.
+        let inv_eps = ((atten / T::from_f32(10.0) * T::from_f64(core::f64::consts::LN_10)).exp()
+            - T::ONE)
+            .sqrt();
+        let mu = inv_eps.asinh() / n;
+        let (sinh_mu, cosh_mu) = (mu.sinh(), mu.cosh());
         let mut sections = [Biquad::default(); AA_SECTIONS];
         for (i, sec) in sections.iter_mut().enumerate() {
-            let th = core::f64::consts::PI * (2 * i + 1) as f64 / (2.0 * n);
+            // theta = pi k / (2 n), k = 2 i + 1. cos theta as sin(pi (n - k) / (2 n)): near
+            // pi/2 the cosine of a rounded angle loses digits, the sine of its complement does not.
+            let k = 2 * i + 1;
+            let angle = |j: usize| pi * T::from_f32(j as f32) / (two * n);
+            let (sin_th, cos_th) = (angle(k).sin(), angle(2 * AA_SECTIONS - k).sin());
             // Chebyshev-I pole, its reciprocal (scaled to ws) is the Chebyshev-II pole.
-            let (pr, pi) = (
-                -T::eval(mu, T::sinh) * T::eval(th, T::sin),
-                T::eval(mu, T::cosh) * T::eval(th, T::cos),
-            );
-            let m2 = pr * pr + pi * pi;
-            let (qr, qi) = (ws * pr / m2, -ws * pi / m2);
-            let a1 = -2.0 * qr; // s^2 + a1 s + a0
+            let (pr, pim) = (-sinh_mu * sin_th, cosh_mu * cos_th);
+            let m2 = pr * pr + pim * pim;
+            let (qr, qi) = (ws * pr / m2, -ws * pim / m2);
+            let a1 = -two * qr; // s^2 + a1 s + a0, s in units of 2 fs
             let a0 = qr * qr + qi * qi;
-            let wz = ws / T::eval(th, T::cos); // zeros at +-j wz
+            let wz = ws / cos_th; // zeros at +-j wz
             let wz2 = wz * wz;
             let g = a0 / wz2; // unit DC gain
-            let d0 = k2 * k2 + a1 * k2 + a0;
-            let nb = [
-                g * (k2 * k2 + wz2) / d0,
-                g * 2.0 * (wz2 - k2 * k2) / d0,
-                g * (k2 * k2 + wz2) / d0,
-            ];
-            let na = [2.0 * (a0 - k2 * k2) / d0, (k2 * k2 - a1 * k2 + a0) / d0];
+                              // z-domain: s = (z - 1) / (z + 1), normalised a0 = 1.
+            let d0 = T::ONE + a1 + a0;
+            let bn = g * (T::ONE + wz2) / d0;
             *sec = Biquad {
-                b: [T::from_f64(nb[0]), T::from_f64(nb[1]), T::from_f64(nb[2])],
-                a: [T::from_f64(na[0]), T::from_f64(na[1])],
+                b: [bn, g * two * (wz2 - T::ONE) / d0, bn],
+                a: [two * (a0 - T::ONE) / d0, (T::ONE - a1 + a0) / d0],
                 s: [T::ZERO; 2],
             };
         }
@@ -276,6 +287,31 @@ mod tests {
             assert!((g - c).abs() < 0.01, "f={fr}: {g} vs {c}");
         }
         assert!(f.gain_db(20.0).abs() < 0.001);
+    }
+
+    #[test]
+    fn f32_design_is_the_f64_design_to_a_few_ulps() {
+        // The design runs in the filter's precision: in f32 every coefficient must still be
+        // the f64 design's, rounded, to within a few ulps (an f64 design of the old form, large
+        // intermediates of order (2 fs)^2, kept only ~4 digits in f32).
+        for (f_stop, atten, fs) in [
+            (80.0, 60.0, 1000.0),
+            (40.0, 60.0, 500.0),
+            (160.0, 40.0, 2000.0),
+        ] {
+            let d32 = AntiAliasFilter::<f32>::design(f_stop, atten, fs).unwrap();
+            let d64 = AntiAliasFilter::<f64>::design(f_stop, atten, fs).unwrap();
+            for (s32, s64) in d32.sections.iter().zip(&d64.sections) {
+                let (b32, a32) = s32.coeffs_f64();
+                let (b64, a64) = s64.coeffs_f64();
+                for (c32, c64) in b32.iter().chain(&a32).zip(b64.iter().chain(&a64)) {
+                    let ulp = f64::from(f32::EPSILON) * c64.abs().max(1e-30);
+                    let off = (c32 - c64).abs() / ulp;
+                    eprintln!("{f_stop} {c64:e}: {off:.1} ulp");
+                    assert!(off <= 8.0, "{f_stop} Hz: {c32} vs {c64} ({off:.1} ulp)");
+                }
+            }
+        }
     }
 
     #[test]

@@ -295,7 +295,7 @@ impl<T: Real> InnovationVariance<T> {
 struct Track<T> {
     roots: [Cx<T>; MAX_ORDER],
     roots_ok: bool,
-    last_freq_hz: Option<f64>,
+    last_freq_hz: Option<T>,
     est: ModeEstimate,
     innovation: InnovationVariance<T>,
     bias: ForgettingBias<T>,
@@ -703,12 +703,12 @@ impl<T: Real> MarginEstimator<T> {
                 }
                 match select_mode(
                     roots.get(..p).unwrap_or(&[]),
-                    fs,
-                    cfg.band_lo_hz as f64,
-                    cfg.band_hi_hz as f64,
+                    T::from_f64(fs),
+                    T::from_f32(cfg.band_lo_hz),
+                    T::from_f32(cfg.band_hi_hz),
                     tr.last_freq_hz,
-                    cfg.track_tol_hz as f64,
-                    cfg.track_zeta_tol as f64,
+                    T::from_f32(cfg.track_tol_hz),
+                    T::from_f32(cfg.track_zeta_tol),
                 ) {
                     None => EstimateStatus::NoModeInBand,
                     Some(m) => {
@@ -719,11 +719,11 @@ impl<T: Real> MarginEstimator<T> {
                         let cov_scale = tr.innovation.variance() / (T::ONE + rls.lambda());
                         let sigma =
                             zeta_sigma(a, raw, fs, |i, j| rls.p(extra + i, extra + j) * cov_scale)
-                                .map_or(f64::NAN, Real::to_f64);
-                        tr.est.zeta = m.zeta as f32;
-                        tr.est.freq_hz = m.freq_hz as f32;
-                        tr.est.wn_hz = m.wn_hz as f32;
-                        tr.est.sigma_zeta = sigma as f32;
+                                .map_or(f32::NAN, Real::to_f32);
+                        tr.est.zeta = m.zeta.to_f32();
+                        tr.est.freq_hz = m.freq_hz.to_f32();
+                        tr.est.wn_hz = m.wn_hz.to_f32();
+                        tr.est.sigma_zeta = sigma;
                         if rls.updates() < tr.warmup_updates {
                             EstimateStatus::WarmingUp
                         } else if frozen {

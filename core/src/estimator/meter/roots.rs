@@ -207,14 +207,15 @@ fn iterate<T: Real>(
 }
 
 /// One oscillatory mode of the identified model, in continuous time.
+/// In the precision `T` of the pole it was mapped from.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Mode {
+pub struct Mode<T = f64> {
     /// Damping ratio zeta = -Re(s)/|s| (negative when unstable).
-    pub zeta: f64,
+    pub zeta: T,
     /// Damped frequency Im(s) / 2 pi, Hz.
-    pub freq_hz: f64,
+    pub freq_hz: T,
     /// Natural frequency |s| / 2 pi, Hz.
-    pub wn_hz: f64,
+    pub wn_hz: T,
     /// Index of the root in the slice [`select_mode`] chose from (0 from [`mode_of_root`]).
     pub root_index: usize,
 }
@@ -222,10 +223,9 @@ pub struct Mode {
 /// Maps a discrete pole z (upper half plane) at sample rate `fs_hz` to a continuous mode via
 /// s = ln(z) fs, computed in the pole's float type. Returns `None` for |z| ~ 0 (s -> -inf) or
 /// a real pole.
-pub fn mode_of_root<T: Real>(z: Cx<T>, fs_hz: f64) -> Option<Mode> {
+pub fn mode_of_root<T: Real>(z: Cx<T>, fs: T) -> Option<Mode<T>> {
     let r2 = z.norm_sqr();
     if r2.is_finite() && z.im > T::ZERO && r2 > T::from_f64(1e-18) {
-        let fs = T::from_f64(fs_hz);
         // ln|z| = ln(|z|^2) / 2: no square root, no hypot
         let sr = T::from_f64(0.5) * r2.ln() * fs;
         let si = z.im.atan2(z.re) * fs;
@@ -233,9 +233,9 @@ pub fn mode_of_root<T: Real>(z: Cx<T>, fs_hz: f64) -> Option<Mode> {
         let two_pi = T::from_f64(2.0 * core::f64::consts::PI);
         if si > T::ZERO && mag.is_finite() {
             return Some(Mode {
-                zeta: (-sr / mag).to_f64(),
-                freq_hz: (si / two_pi).to_f64(),
-                wn_hz: (mag / two_pi).to_f64(),
+                zeta: -sr / mag,
+                freq_hz: si / two_pi,
+                wn_hz: mag / two_pi,
                 root_index: 0,
             });
         }
@@ -296,18 +296,19 @@ impl<T: Real> ForgettingBias<T> {
 
 /// Chooses the mode to report among the AR roots: the least-damped pair with damped frequency
 /// in `[f_lo, f_hi]`; for continuity a pair within `track_tol_hz` of the previous frequency is
-/// preferred when its damping is within `track_zeta_tol` of the least-damped one.
+/// preferred when its damping is within `track_zeta_tol` of the least-damped one. In the roots'
+/// precision `T` throughout (the target's f32: no soft-float f64 in the 100 Hz meter run).
 pub fn select_mode<T: Real>(
     roots: &[Cx<T>],
-    fs_hz: f64,
-    f_lo_hz: f64,
-    f_hi_hz: f64,
-    last_freq_hz: Option<f64>,
-    track_tol_hz: f64,
-    track_zeta_tol: f64,
-) -> Option<Mode> {
+    fs_hz: T,
+    f_lo_hz: T,
+    f_hi_hz: T,
+    last_freq_hz: Option<T>,
+    track_tol_hz: T,
+    track_zeta_tol: T,
+) -> Option<Mode<T>> {
     // Each root is mapped once (ln and atan2 are the costly part).
-    let mut in_band = [Mode::default(); MAX_ORDER];
+    let mut in_band = [Mode::<T>::default(); MAX_ORDER];
     let mut n = 0;
     for (i, z) in roots.iter().enumerate().take(MAX_ORDER) {
         if let Some(m) = mode_of_root(*z, fs_hz) {
@@ -327,12 +328,12 @@ pub fn select_mode<T: Real>(
     let Some(last) = last_freq_hz else {
         return Some(best);
     };
-    let mut tracked: Option<Mode> = None;
+    let mut tracked: Option<Mode<T>> = None;
     for m in modes {
-        let df = libm::fabs(m.freq_hz - last);
+        let df = (m.freq_hz - last).abs();
         if df <= track_tol_hz
             && m.zeta <= best.zeta + track_zeta_tol
-            && tracked.is_none_or(|t| df < libm::fabs(t.freq_hz - last))
+            && tracked.is_none_or(|t| df < (t.freq_hz - last).abs())
         {
             tracked = Some(*m);
         }
@@ -491,9 +492,9 @@ mod tests {
             aberth(&c64, &mut z64, false, 100).unwrap();
             aberth(&c32, &mut z32, false, 100).unwrap();
             let m64 = select_mode(&z64[..6], fs, 3.0, 20.0, None, 1.0, 0.02).unwrap();
-            let m32 = select_mode(&z32[..6], fs, 3.0, 20.0, None, 1.0, 0.02).unwrap();
-            worst = worst.max((m64.zeta - m32.zeta).abs());
-            assert!((m64.freq_hz - m32.freq_hz).abs() < 1e-3);
+            let m32 = select_mode(&z32[..6], fs as f32, 3.0, 20.0, None, 1.0, 0.02).unwrap();
+            worst = worst.max((m64.zeta - f64::from(m32.zeta)).abs());
+            assert!((m64.freq_hz - f64::from(m32.freq_hz)).abs() < 1e-3);
             // warm restart from the found roots converges at once in f32 too
             assert!(aberth(&c32, &mut z32, true, 100).unwrap() <= 3);
         }
