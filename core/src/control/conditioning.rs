@@ -174,7 +174,8 @@ impl RateObserver {
             1000.0
         };
         let t = 1.0 / fs;
-        // max/min instead of clamp: no panic on NaN bounds (panic-free check).
+        // max/min instead of clamp: no panic on NaN bounds (panic-free check); zeta's bounds
+        // are constants, so its clamp cannot panic.
         let wb = 2.0 * core::f32::consts::PI * bandwidth_hz.max(0.1).min(0.45 * fs);
         let zeta = damping.clamp(0.1, 0.999);
         // Pole radius r = exp(-zeta w_b T) and angle theta = w_b sqrt(1 - zeta^2) T. In the

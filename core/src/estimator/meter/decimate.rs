@@ -2,17 +2,17 @@
 //!
 //! The anti-alias filter is an 8th-order inverse-Chebyshev (Chebyshev II) low-pass made of four
 //! biquads (bilinear transform pre-warped at the stop-band edge; coefficients computed at
-//! construction in the filter's precision, never typed in). Only what would fold INTO the
-//! shimmy band must be removed: after decimation to f_out, input content at f folds to |f - m f_out|, so the stop band starts
-//! at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB attenuation there
-//! and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band. The pass band is
-//! maximally flat: < 1e-5 dB down at 20 Hz, -0.009 dB at 40 Hz, -0.65 dB at 50 Hz, -3 dB at
-//! ~54.6 Hz. A flat pass band up to the output Nyquist matters for the mode meter: an 8th-order
-//! Butterworth cut at 30 Hz (the first design) leaves a deep spectral roll-off between 30 and
-//! 50 Hz that a low-order AR model cannot represent; in an exploratory run (AR(6), 100 Hz) it
-//! biased the 8 Hz damping by +0.035 (0.05 -> 0.085) and the 18 Hz one by -0.05; with this
-//! filter the bias is within the accuracy-test tolerances. `AntiAliasFilter::gain_db` evaluates the implemented response and a unit
-//! test checks it against the closed-form Chebyshev-II magnitude.
+//! construction in the filter's precision, never typed in). Only what would fold INTO the shimmy
+//! band must be removed: after decimation to f_out, input content at f folds to |f - m f_out|, so
+//! the stop band starts at f_out - f_band_hi (80 Hz for 100 Hz out and a 20 Hz band) with >= 60 dB
+//! attenuation there and above. Content between 50 and 80 Hz folds to 20-50 Hz, outside the band.
+//! The pass band is maximally flat: < 1e-5 dB down at 20 Hz, -0.009 dB at 40 Hz, -0.65 dB at 50 Hz,
+//! -3 dB at ~54.6 Hz. A flat pass band up to the output Nyquist matters for the mode meter: an
+//! 8th-order Butterworth cut at 30 Hz (the first design) leaves a deep spectral roll-off between 30
+//! and 50 Hz that a low-order AR model cannot represent; in an exploratory run (AR(6), 100 Hz) it
+//! biased the 8 Hz damping by +0.035 (0.05 -> 0.085) and the 18 Hz one by -0.05; with this filter
+//! the bias is within the accuracy-test tolerances. `AntiAliasFilter::gain_db` evaluates the
+//! implemented response and a unit test checks it against the closed-form Chebyshev-II magnitude.
 
 use super::real::Real;
 
@@ -111,8 +111,8 @@ impl<T: Real> AntiAliasFilter<T> {
             let a0 = qr * qr + qi * qi;
             let wz = ws / cos_th; // zeros at +-j wz
             let wz2 = wz * wz;
-            let g = a0 / wz2; // unit DC gain
-                              // z-domain (s = (z - 1) / (z + 1) in this unit), normalised to a0 = 1
+            // unit DC gain; then the z-domain (s = (z - 1) / (z + 1) in this unit), a0 = 1
+            let g = a0 / wz2;
             let d0 = T::ONE + a1 + a0;
             let bn = g * (T::ONE + wz2) / d0;
             *sec = Biquad {

@@ -220,7 +220,7 @@ pub struct Mode<T = f64> {
     pub root_index: usize,
 }
 
-/// Maps a discrete pole z (upper half plane) at sample rate `fs_hz` to a continuous mode via
+/// Maps a discrete pole z (upper half plane) at sample rate `fs` (Hz) to a continuous mode via
 /// s = ln(z) fs, computed in the pole's float type. Returns `None` for |z| ~ 0 (s -> -inf) or
 /// a real pole.
 pub fn mode_of_root<T: Real>(z: Cx<T>, fs: T) -> Option<Mode<T>> {
