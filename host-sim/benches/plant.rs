@@ -6,7 +6,8 @@
 //!
 //! `closed_loop_demo_asmc_30s`: the demo's whole ASMC run (30 s ramp; sensors, the core's
 //! supervised controller and mode meter at 1 kHz) per iteration, once per plant integrator;
-//! simulated s per wall s = 30 s / (time per iteration).
+//! `closed_loop_demo_damper_off_30s`: its other arm (the damper passive at 0 A) at the default
+//! integrator. Simulated s per wall s = 30 s / (time per iteration).
 use criterion::{criterion_group, criterion_main, Criterion};
 use shimmy_core::params::{kmh_to_mps, PlantParams};
 use shimmy_sim::model::disturbance::initial_yaw;
@@ -82,6 +83,16 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    g.finish();
+    // The demo's other arm, at the default integrator: its run-time line sums both.
+    let mut g = c.benchmark_group("closed_loop_demo_damper_off_30s");
+    g.sample_size(10);
+    g.bench_function(DOPRI5.name(), |b| {
+        b.iter(|| {
+            let (_, r) = demo_case::run_arm(&case, ARMS[0].1, 30.0, 5).expect("run");
+            black_box(r.sim_s)
+        })
+    });
     g.finish();
 }
 
