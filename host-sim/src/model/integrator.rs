@@ -253,7 +253,7 @@ impl<const N: usize> Dopri5<N> {
                     pi_factor(safety, alpha, beta, ln_err, self.ln_err_old).clamp(fac_min, fac_max)
                 };
                 let fac = if last_rejected { fac.min(1.0) } else { fac };
-                self.ln_err_old = if err > ERR_FLOOR { ln_err } else { ln_floor };
+                self.ln_err_old = ln_err.max(ln_floor);
                 *y = y_new;
                 k1 = k7; // FSAL
                 t = t_new;
@@ -538,7 +538,7 @@ impl<const N: usize> Ark436<N> {
                     pi_factor(safety, alpha, beta, ln_err, self.ln_err_old).clamp(fac_min, fac_max)
                 };
                 let fac = if last_rejected { fac.min(1.0) } else { fac };
-                self.ln_err_old = if err > ERR_FLOOR { ln_err } else { ln_floor };
+                self.ln_err_old = ln_err.max(ln_floor);
                 *y = y_new;
                 t = if last { t_end } else { t + h };
                 self.stats.accepted += 1;
