@@ -478,7 +478,13 @@ fn rustdoc() -> Step {
 /// scripts and proc macros are the release images' (`target/release`), and it never waits for
 /// the host lane's lock on `target/debug` ([`test()`]).
 fn clippy_firmware() -> Step {
-    for features in ["", "qemu,deliberate-failure", "pil", TRUCK_MODEL] {
+    for features in [
+        "",
+        "qemu,deliberate-failure",
+        "pil",
+        TRUCK_MODEL,
+        "panic-location",
+    ] {
         let mut args = vec![
             "clippy",
             "--release",
