@@ -50,12 +50,6 @@ pub trait Real:
     fn tan(self) -> Self;
     /// Exponential (libm).
     fn exp(self) -> Self;
-    /// Hyperbolic sine (libm).
-    fn sinh(self) -> Self;
-    /// Hyperbolic cosine (libm).
-    fn cosh(self) -> Self;
-    /// Inverse hyperbolic sine (libm).
-    fn asinh(self) -> Self;
     /// Evaluates `f` in this precision and returns the result as f64. Design-time math (filter
     /// coefficients, start values) goes through it so that an f32 estimator, the target's,
     /// links no f64 transcendental function (11.8 KB less flash, `cargo xtask size`); the f64
@@ -126,18 +120,6 @@ impl Real for f32 {
     fn exp(self) -> Self {
         libm::expf(self)
     }
-    #[inline]
-    fn sinh(self) -> Self {
-        libm::sinhf(self)
-    }
-    #[inline]
-    fn cosh(self) -> Self {
-        libm::coshf(self)
-    }
-    #[inline]
-    fn asinh(self) -> Self {
-        libm::asinhf(self)
-    }
     const ROOT_TOL: Self = 64.0 * f32::EPSILON;
 }
 
@@ -195,18 +177,6 @@ impl Real for f64 {
     #[inline]
     fn exp(self) -> Self {
         libm::exp(self)
-    }
-    #[inline]
-    fn sinh(self) -> Self {
-        libm::sinh(self)
-    }
-    #[inline]
-    fn cosh(self) -> Self {
-        libm::cosh(self)
-    }
-    #[inline]
-    fn asinh(self) -> Self {
-        libm::asinh(self)
     }
     const ROOT_TOL: Self = 1e-13;
 }
