@@ -184,7 +184,7 @@ impl RateObserver {
         // cancellation (beta is ~0.1 from terms of ~2 in the direct form).
         let one_minus_r = -libm::expm1f(-zeta * wb * t);
         let r = 1.0 - one_minus_r;
-        let half_theta = 0.5 * wb * libm::sqrtf(1.0 - zeta * zeta) * t;
+        let half_theta = 0.5 * wb * crate::sqrt::sqrtf(1.0 - zeta * zeta) * t;
         let sin_half = crate::trig::sinf(half_theta);
         let alpha = one_minus_r * (1.0 + r);
         let beta = one_minus_r * one_minus_r + 4.0 * r * sin_half * sin_half;

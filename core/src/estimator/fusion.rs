@@ -234,7 +234,7 @@ fn corrected_onset_distance(z0: f32, slope: f32, onset_dist: f32, delta: f32) ->
     let disc = slope * slope - 4.0 * c * zc;
     // the root nearer to x = 0 in the form that does not cancel: 2 zc / (-slope + sqrt(disc))
     let x = if disc >= 0.0 {
-        2.0 * zc / (-slope + libm::sqrtf(disc))
+        2.0 * zc / (-slope + crate::sqrt::sqrtf(disc))
     } else {
         zc / -slope
     };
@@ -275,7 +275,7 @@ impl Fusion {
         } else {
             1.0
         };
-        (self.offset_sigma * libm::sqrtf(ratio)).max(1e-6)
+        (self.offset_sigma * crate::sqrt::sqrtf(ratio)).max(1e-6)
     }
 
     /// Compares the data with the model damping averaged over the slow estimate's own

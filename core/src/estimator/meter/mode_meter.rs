@@ -764,8 +764,21 @@ mod tests {
     #[test]
     fn ceil_count_is_libms_ceil_as_a_count() {
         let xs = [
-            -3.5, -0.0, 0.0, 1e-300, 0.5, 1.0, 1.0 + f64::EPSILON, 2.5, 99.999_999, 1e6,
-            4_294_967_295.0, 4_294_967_295.5, 1e12, f64::NAN, f64::INFINITY,
+            -3.5,
+            -0.0,
+            0.0,
+            1e-300,
+            0.5,
+            1.0,
+            1.0 + f64::EPSILON,
+            2.5,
+            99.999_999,
+            1e6,
+            4_294_967_295.0,
+            4_294_967_295.5,
+            1e12,
+            f64::NAN,
+            f64::INFINITY,
         ];
         for x in xs {
             assert_eq!(ceil_count(x), libm::ceil(x) as u32, "{x}");
