@@ -297,8 +297,9 @@ mod tests {
     #[test]
     fn f32_design_is_the_f64_design_to_a_few_ulps() {
         // The design runs in the filter's precision: in f32 every coefficient must be the f64
-        // design's to within a few ulps (measured 2.6; the cosine of the angle near pi/2 taken
-        // directly gives 12.9). The f64 design itself is checked against the closed form above.
+        // design's to within a few ulps (measured 5.5 with the f32 `crate::trig`, 2.6 with
+        // libm's f64-internal one; the cosine of the angle near pi/2 taken directly gives 12.9).
+        // The f64 design itself is checked against the closed form above.
         for (f_stop, atten, fs) in [
             (80.0, 60.0, 1000.0),
             (40.0, 60.0, 500.0),
@@ -312,7 +313,7 @@ mod tests {
                 for (c32, c64) in b32.iter().chain(&a32).zip(b64.iter().chain(&a64)) {
                     let ulp = f64::from(f32::EPSILON) * c64.abs().max(1e-30);
                     let off = (c32 - c64).abs() / ulp;
-                    assert!(off <= 4.0, "{f_stop} Hz: {c32} vs {c64} ({off:.1} ulp)");
+                    assert!(off <= 8.0, "{f_stop} Hz: {c32} vs {c64} ({off:.1} ulp)");
                 }
             }
         }
