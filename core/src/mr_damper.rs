@@ -70,7 +70,7 @@ impl SpencerParams {
 
     /// The steering damper of the reference plant: the automotive calibration with every force
     /// coefficient scaled by [`STEERING_DAMPER_FORCE_SCALE`].
-    pub fn steering() -> Self {
+    pub const fn steering() -> Self {
         let s = STEERING_DAMPER_FORCE_SCALE;
         let a = Self::automotive();
         SpencerParams {

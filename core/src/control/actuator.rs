@@ -40,16 +40,20 @@ pub struct CurrentLimits {
     pub slew_a_per_s: f32,
 }
 
-impl Default for CurrentLimits {
+impl CurrentLimits {
     /// 0-2 A (the damper's rated range); 2000 A/s lets the command go 0 -> 2 A in 1 ms
     /// (1 sample), i.e. it only catches steps bigger than the coil can follow anyway; tighten it
     /// for EMI or supply limits.
+    pub const DEFAULT: Self = CurrentLimits {
+        i_min_a: 0.0,
+        i_max_a: super::mr_model::MrModel::FITTED.i_max_a,
+        slew_a_per_s: 2000.0,
+    };
+}
+
+impl Default for CurrentLimits {
     fn default() -> Self {
-        CurrentLimits {
-            i_min_a: 0.0,
-            i_max_a: super::mr_model::MrModel::FITTED.i_max_a,
-            slew_a_per_s: 2000.0,
-        }
+        Self::DEFAULT
     }
 }
 
@@ -131,16 +135,20 @@ pub struct CoilParams {
     pub loop_bandwidth_radps: f32,
 }
 
-impl Default for CoilParams {
+impl CoilParams {
     /// 4 ohm, 21 mH (L/R = 1/190 s), 12 V; loop bandwidth 2 pi 50 Hz (a tenth of the 1 kHz
     /// sample rate: the discrete PI stays well damped).
+    pub const DEFAULT: Self = CoilParams {
+        r_coil_ohm: 4.0,
+        l_coil_h: 4.0 / 190.0,
+        v_supply_v: 12.0,
+        loop_bandwidth_radps: 2.0 * core::f32::consts::PI * 50.0,
+    };
+}
+
+impl Default for CoilParams {
     fn default() -> Self {
-        CoilParams {
-            r_coil_ohm: 4.0,
-            l_coil_h: 4.0 / 190.0,
-            v_supply_v: 12.0,
-            loop_bandwidth_radps: 2.0 * core::f32::consts::PI * 50.0,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -45,14 +45,19 @@ pub struct ConditioningParams {
     pub observer_damping: f32,
 }
 
+impl ConditioningParams {
+    /// The default (the `Default` implementation).
+    pub const DEFAULT: Self = ConditioningParams {
+        sample_rate_hz: 1000.0,
+        split_hz: 1.5,
+        observer_bandwidth_hz: 60.0,
+        observer_damping: 0.8,
+    };
+}
+
 impl Default for ConditioningParams {
     fn default() -> Self {
-        ConditioningParams {
-            sample_rate_hz: 1000.0,
-            split_hz: 1.5,
-            observer_bandwidth_hz: 60.0,
-            observer_damping: 0.8,
-        }
+        Self::DEFAULT
     }
 }
 

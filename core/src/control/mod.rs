@@ -129,27 +129,31 @@ pub struct ControlParams {
     pub psi_limit_rad: f32,
 }
 
-impl Default for ControlParams {
+impl ControlParams {
     /// Defaults for the reference plant's nominal parameter set and the fitted damper.
     /// fallback: the fail-safe current [`actuator::FAILSAFE_CURRENT_A`] (a passive-on current
     /// that keeps the analysed plants stable); min speed 2 m/s; psi limit 0.8 rad (beyond full
     /// lock).
+    pub const DEFAULT: Self = ControlParams {
+        conditioning: ConditioningParams::DEFAULT,
+        nominal: NominalPlant::DEFAULT,
+        mr: MrModel::FITTED,
+        smc: SmcParams::DEFAULT,
+        asmc: AsmcParams::DEFAULT,
+        schedule: ScheduleParams::DEFAULT,
+        skyhook_ns_per_m: 1000.0,
+        limits: CurrentLimits::DEFAULT,
+        // the fail-safe current (one place, next to the coil limits; chosen from the stability
+        // analysis)
+        fallback_current_a: actuator::FAILSAFE_CURRENT_A,
+        min_speed_mps: 2.0,
+        psi_limit_rad: 0.8,
+    };
+}
+
+impl Default for ControlParams {
     fn default() -> Self {
-        ControlParams {
-            conditioning: ConditioningParams::default(),
-            nominal: NominalPlant::default(),
-            mr: MrModel::FITTED,
-            smc: SmcParams::default(),
-            asmc: AsmcParams::default(),
-            schedule: ScheduleParams::default(),
-            skyhook_ns_per_m: 1000.0,
-            limits: CurrentLimits::default(),
-            // the fail-safe current (one place, next to the coil limits; chosen from the stability
-            // analysis)
-            fallback_current_a: actuator::FAILSAFE_CURRENT_A,
-            min_speed_mps: 2.0,
-            psi_limit_rad: 0.8,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -128,7 +128,7 @@ pub struct ScheduleParams {
     pub band_hz: f32,
 }
 
-impl Default for ScheduleParams {
+impl ScheduleParams {
     /// Tuned in the closed loop (`shimmy-sim compare`, README "Control that knows its
     /// margin"): arming over 4 -> 1 m/s of speed margin (14 -> 4 km/h: the warning monitor's
     /// `MarginLow` threshold is 1.4 m/s) and 10 -> 3 s to critical; the fast damping arms below
@@ -137,24 +137,28 @@ impl Default for ScheduleParams {
     /// 0.3 deg (below the 0.5 deg that counts as shimmy). Hold 0.4 s and release 0.15 s: the
     /// tail of a decay is damped to the 2 % band, the clipped half cycles (83 ms at 6 Hz) keep
     /// most of their current. Band 6 Hz: the reference plant's shimmy mode (5.8-7.2 Hz).
+    pub const DEFAULT: Self = ScheduleParams {
+        arm_margin_mps: 1.0,
+        idle_margin_mps: 4.0,
+        arm_ttc_s: 3.0,
+        idle_ttc_s: 10.0,
+        arm_zeta: 0.0,
+        idle_zeta: 0.02,
+        base_current_a: 1.0,
+        armed_phi_radps: 0.05,
+        armed_engage_rad: 0.1f32 * (core::f32::consts::PI / 180.0),
+        idle_engage_rad: 0.3f32 * (core::f32::consts::PI / 180.0),
+        noise_factor: 3.0,
+        noise_tau_s: 2.0,
+        hold_s: 0.4,
+        release_s: 0.1,
+        band_hz: 6.0,
+    };
+}
+
+impl Default for ScheduleParams {
     fn default() -> Self {
-        ScheduleParams {
-            arm_margin_mps: 1.0,
-            idle_margin_mps: 4.0,
-            arm_ttc_s: 3.0,
-            idle_ttc_s: 10.0,
-            arm_zeta: 0.0,
-            idle_zeta: 0.02,
-            base_current_a: 1.0,
-            armed_phi_radps: 0.05,
-            armed_engage_rad: 0.1f32 * (core::f32::consts::PI / 180.0),
-            idle_engage_rad: 0.3f32 * (core::f32::consts::PI / 180.0),
-            noise_factor: 3.0,
-            noise_tau_s: 2.0,
-            hold_s: 0.4,
-            release_s: 0.1,
-            band_hz: 6.0,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -109,7 +109,7 @@ pub struct NominalPlant {
 
 impl NominalPlant {
     /// Takes I_k, c_k and l_t from a plant parameter set.
-    pub fn from_params(p: &crate::params::PlantParams) -> Self {
+    pub const fn from_params(p: &crate::params::PlantParams) -> Self {
         NominalPlant {
             i_k_kgm2: p.i_k as f32,
             c_k_nms_per_rad: p.c_k as f32,
@@ -124,9 +124,14 @@ impl NominalPlant {
     }
 }
 
+impl NominalPlant {
+    /// The default (the `Default` implementation).
+    pub const DEFAULT: Self = NominalPlant::from_params(&crate::params::PlantParams::nominal());
+}
+
 impl Default for NominalPlant {
     fn default() -> Self {
-        NominalPlant::from_params(&crate::params::PlantParams::nominal())
+        Self::DEFAULT
     }
 }
 
@@ -141,17 +146,21 @@ pub struct SmcParams {
     pub k_radps2: f32,
 }
 
-impl Default for SmcParams {
+impl SmcParams {
     /// lambda = 6 1/s keeps the equivalent-control viscous part, (2/l_t^2)(lambda I_k - c_k)
     /// = 1.0e3 N s/m on the stroke, inside what the damper gives at 2 A, so the law is not
     /// saturated by its linear part alone; phi = 0.1 rad/s is a quarter of the rate of a
     /// 0.01 rad, 6 Hz shimmy; K = 8 rad/s^2 is a switching force of 2 I_k K / l_t = 370 N.
+    pub const DEFAULT: Self = SmcParams {
+        lambda_per_s: 6.0,
+        phi_radps: 0.1,
+        k_radps2: 8.0,
+    };
+}
+
+impl Default for SmcParams {
     fn default() -> Self {
-        SmcParams {
-            lambda_per_s: 6.0,
-            phi_radps: 0.1,
-            k_radps2: 8.0,
-        }
+        Self::DEFAULT
     }
 }
 
@@ -175,7 +184,7 @@ pub struct AsmcParams {
     pub anti_windup: bool,
 }
 
-impl Default for AsmcParams {
+impl AsmcParams {
     /// gamma = 300: |s| = 0.4 rad/s (a 0.01 rad, 6 Hz shimmy) raises K by 8 rad/s^2 in 0.07 s;
     /// sigma = 0.5 1/s: K returns to K_min within a few seconds of quiet; dead zone 0.04 rad/s
     /// (1.5x the rms noise of s with +-1 LSB encoder noise); K_max = 30 rad/s^2 (1.4 kN, beyond
@@ -185,16 +194,20 @@ impl Default for AsmcParams {
     /// left the last 10 % of a decay to the 0 A damper and ASMC settled 0.15-0.6 s later than
     /// fixed-gain SMC; with 300 / 0.04 it settles within 5 % of SMC at ~10 % of its coil energy,
     /// and still spends 0.2 J in a 10 s slalom with road noise (K_min > 0 would triple chattering).
+    pub const DEFAULT: Self = AsmcParams {
+        gamma: 300.0,
+        sigma_per_s: 0.5,
+        dead_zone_radps: 0.04,
+        k_min_radps2: 0.0,
+        k_max_radps2: 30.0,
+        k_init_radps2: 0.0,
+        anti_windup: true,
+    };
+}
+
+impl Default for AsmcParams {
     fn default() -> Self {
-        AsmcParams {
-            gamma: 300.0,
-            sigma_per_s: 0.5,
-            dead_zone_radps: 0.04,
-            k_min_radps2: 0.0,
-            k_max_radps2: 30.0,
-            k_init_radps2: 0.0,
-            anti_windup: true,
-        }
+        Self::DEFAULT
     }
 }
 

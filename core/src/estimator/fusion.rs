@@ -80,22 +80,27 @@ pub enum DataMarginUse {
     WhenModelInconsistent,
 }
 
+impl FusionParams {
+    /// The default (the `Default` implementation).
+    pub const DEFAULT: Self = Self {
+        mismatch_sigmas: 3.0,
+        less_stable_sigmas: 3.0,
+        agreement_sigmas: 3.0,
+        offset_tau_max_s: 0.0,
+        offset_speed_window_mps: 2.0,
+        mismatch_hold_s: 3.0,
+        mismatch_hold_speed_mps: 0.0,
+        mismatch_release_s: 3.0,
+        first_decision_timeout_s: 0.0,
+        min_slope_per_mps: 1.0e-5,
+        min_accel_mps2: 0.05,
+        data_margin: DataMarginUse::Always,
+    };
+}
+
 impl Default for FusionParams {
     fn default() -> Self {
-        Self {
-            mismatch_sigmas: 3.0,
-            less_stable_sigmas: 3.0,
-            agreement_sigmas: 3.0,
-            offset_tau_max_s: 0.0,
-            offset_speed_window_mps: 2.0,
-            mismatch_hold_s: 3.0,
-            mismatch_hold_speed_mps: 0.0,
-            mismatch_release_s: 3.0,
-            first_decision_timeout_s: 0.0,
-            min_slope_per_mps: 1.0e-5,
-            min_accel_mps2: 0.05,
-            data_margin: DataMarginUse::Always,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -51,7 +51,7 @@ impl PipelineParams {
     /// 3 km/h of lead, `shimmy-sim mismatch`). The offset is averaged over 1 m/s of speed
     /// change (at most 30 s): at constant speed the meter's 10 s memory then spans three
     /// independent windows, on the 1 km/h/s ramp 3.6 s of extra lag.
-    pub fn tuned_fusion() -> FusionParams {
+    pub const fn tuned_fusion() -> FusionParams {
         FusionParams {
             mismatch_sigmas: 2.5,
             less_stable_sigmas: 2.0,
@@ -61,7 +61,7 @@ impl PipelineParams {
             mismatch_hold_speed_mps: 0.25,
             first_decision_timeout_s: 15.0,
             data_margin: DataMarginUse::WhenModelInconsistent,
-            ..FusionParams::default()
+            ..FusionParams::DEFAULT
         }
     }
 
@@ -83,7 +83,7 @@ impl PipelineParams {
     /// - amplitude: `ShimmyPresent` above 0.5 deg peak in-phase yaw (road noise and imbalance
     ///   give < 0.2 deg envelope at 15-20 km/h; the limit cycle is ~7 deg), cleared below
     ///   0.25 deg; all levels are released after a 2 s dwell.
-    pub fn tuned_monitor() -> MonitorParams {
+    pub const fn tuned_monitor() -> MonitorParams {
         MonitorParams {
             zeta_low_on: 0.005,
             zeta_low_off: 0.015,
