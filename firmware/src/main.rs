@@ -543,34 +543,36 @@ mod app {
     /// A power-on also sets the brown-out flag, so power-on is tested first.
     fn reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) -> ResetCause {
         let f = rcc.csr().read();
-        let (cause, text) = if f.wdgrstf().bit_is_set() {
-            (
-                ResetCause::Watchdog,
-                "independent watchdog (the control loop stopped completing steps)",
-            )
+        // One log call per cause: defmt keeps a literal's text in the ELF, not in flash (a
+        // `{=str}` argument sends it from flash).
+        let cause = if f.wdgrstf().bit_is_set() {
+            defmt::warn!(
+                "reset cause: independent watchdog (the control loop stopped completing steps)"
+            );
+            ResetCause::Watchdog
         } else if f.wwdgrstf().bit_is_set() {
-            (ResetCause::Watchdog, "window watchdog")
+            defmt::warn!("reset cause: window watchdog");
+            ResetCause::Watchdog
         } else if f.sftrstf().bit_is_set() {
-            (
-                ResetCause::Software,
-                "software reset (panic or fault handler)",
-            )
+            defmt::warn!("reset cause: software reset (panic or fault handler)");
+            ResetCause::Software
         } else if f.porrstf().bit_is_set() {
-            (ResetCause::PowerOn, "power-on")
+            defmt::warn!("reset cause: power-on");
+            ResetCause::PowerOn
         } else if f.borrstf().bit_is_set() {
-            (
-                ResetCause::PowerOn,
-                "brown-out (supply below the BOR level)",
-            )
+            defmt::warn!("reset cause: brown-out (supply below the BOR level)");
+            ResetCause::PowerOn
         } else if f.lpwrrstf().bit_is_set() {
-            (ResetCause::Other, "low-power management")
+            defmt::warn!("reset cause: low-power management");
+            ResetCause::Other
         } else if f.padrstf().bit_is_set() {
-            (ResetCause::Pin, "reset pin (NRST, debug probe)")
+            defmt::warn!("reset cause: reset pin (NRST, debug probe)");
+            ResetCause::Pin
         } else {
-            (ResetCause::Other, "none flagged")
+            defmt::warn!("reset cause: none flagged");
+            ResetCause::Other
         };
         rcc.csr().modify(|_, w| w.rmvf().set_bit());
-        defmt::warn!("reset cause: {=str}", text);
         cause
     }
 
