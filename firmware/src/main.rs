@@ -576,14 +576,9 @@ mod app {
         cause
     }
 
+    /// The level's name, as the host link spells it.
     fn level_name(l: shimmy_core::estimator::monitor::Level) -> &'static str {
-        use shimmy_core::estimator::monitor::Level;
-        match l {
-            Level::Normal => "normal",
-            Level::MarginLow => "margin-low",
-            Level::ApproachingCritical => "approaching-critical",
-            Level::ShimmyPresent => "shimmy-present",
-        }
+        shimmy_link::wire::level_name(shimmy_link::wire::level_code(l))
     }
 
     /// End of a `qemu` run: the counters must be exactly what the simulation injected (driver
