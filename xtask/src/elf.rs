@@ -44,8 +44,8 @@ use std::path::Path;
 /// exp and ln and no f64 `ceil` (-1,536 B), an own Parlett-Reinsch balancing on `VSQRT` (libm's
 /// `sqrtf` out, -360 B), sine, cosine and tangent computed in f32 (-600 B), the defaults as
 /// constants with the compiled-in vehicle copied from flash (-360 B), one defmt literal per
-/// reset cause (-264 B), the f32 trigonometry's range checks on the argument's bits (-56 B): 97,956 B, and
-/// this budget issues 23/24's cap of 96 KiB (348 B, 0.4 % of headroom).
+/// reset cause (-264 B), the f32 trigonometry's range checks on the argument's bits (-56 B):
+/// 97,956 B, and this budget issues 23/24's cap of 96 KiB (348 B, 0.4 % of headroom).
 pub const FLASH_BUDGET: u64 = 96 * 1024;
 pub const RAM_BUDGET: u64 = 24 * 1024;
 
