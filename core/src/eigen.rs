@@ -166,7 +166,7 @@ impl Mode {
     pub fn from_eigenvalue(s: Complex<f64>) -> Self {
         // sqrt of the squares, not hypot: eigenvalues are far from overflow (the solvers reject
         // entries above 1e150) and hypot is ~4 k soft-float instructions on the M4
-        let omega_n = libm::sqrt(s.norm_sqr());
+        let omega_n = crate::sqrt::sqrt(s.norm_sqr());
         let zeta = if omega_n > 0.0 { -s.re / omega_n } else { 1.0 };
         Mode {
             re: s.re,

@@ -867,14 +867,14 @@ impl LinearModel<N_STATES> for TruckParams {
             .max(v[PHI].norm_sqr())
             .max(v[THETA_C].norm_sqr())
             .max(v[Y].norm_sqr() / (self.sigma * self.sigma));
-        let tyre = libm::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
+        let tyre = crate::sqrt::sqrt(v[A_L].norm_sqr().max(v[A_R].norm_sqr()));
         let tyre_ratio = if disp2 > 0.0 {
-            tyre / libm::sqrt(disp2)
+            tyre / crate::sqrt::sqrt(disp2)
         } else {
             f64::INFINITY
         };
         let steering_wheel_ratio = if wheel2 > 0.0 {
-            libm::sqrt(v[THETA_C].norm_sqr() / wheel2)
+            crate::sqrt::sqrt(v[THETA_C].norm_sqr() / wheel2)
         } else {
             f64::INFINITY
         };
