@@ -91,7 +91,7 @@ pub struct ControllerGains {
 }
 
 impl ControllerGains {
-    /// The default (the `Default` implementation).
+    /// The gains of [`ControlParams::DEFAULT`].
     pub const DEFAULT: Self = {
         let c = ControlParams::DEFAULT;
         ControllerGains {

@@ -125,7 +125,7 @@ impl NominalPlant {
 }
 
 impl NominalPlant {
-    /// The default (the `Default` implementation).
+    /// The nominal parameter set's I_k, c_k and l_t.
     pub const DEFAULT: Self = NominalPlant::from_params(&crate::params::PlantParams::nominal());
 }
 

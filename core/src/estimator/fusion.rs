@@ -81,7 +81,7 @@ pub enum DataMarginUse {
 }
 
 impl FusionParams {
-    /// The default (the `Default` implementation).
+    /// The generic fusion settings (the pipeline's tuned ones: `PipelineParams::tuned_fusion`).
     pub const DEFAULT: Self = Self {
         mismatch_sigmas: 3.0,
         less_stable_sigmas: 3.0,
