@@ -4,10 +4,9 @@
 //!
 //! libm's f32 functions compute in f64 (soft-float calls on the M4F: 1.6 KB of flash for these
 //! three in that form, 1.0 KB in this one, `cargo xtask size`) and reduce an argument beyond
-//! 2^28 pi/2 with `rem_pio2_large`
-//! (Payne-Hanek with a table of 2/pi, 2.5 KB more) that no caller needs: the estimator's
-//! arguments are wrapped phases (|x| <= pi), design angles below 2 pi and tan(pi f / fs) with
-//! f < fs / 2. Here the reduction is Cody-Waite with pi/2 in three parts, each product with
+//! 2^28 pi/2 with `rem_pio2_large` (Payne-Hanek with a table of 2/pi, 2.5 KB more) that no
+//! caller needs: the estimator's arguments are wrapped phases (|x| <= pi), design angles below
+//! 2 pi and tan(pi f / fs) with f < fs / 2. Here the reduction is Cody-Waite with pi/2 in three parts, each product with
 //! the quadrant number exact below 128 quadrants, and the kernels are msun's polynomials
 //! evaluated in f32. Host and target run the same f32 operations, so they compute the same
 //! bits (the conformance digests, `docs/architecture.md`).
