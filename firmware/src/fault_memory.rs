@@ -44,6 +44,9 @@ pub enum ResetCause {
     Pin = 3,
     /// Anything else (low-power management, no flag).
     Other = 4,
+    /// The firmware restarted itself at standstill to run a new vehicle configuration
+    /// ([`persist::restart`]).
+    Restart = 5,
 }
 
 impl ResetCause {
@@ -54,6 +57,7 @@ impl ResetCause {
             1 => ResetCause::Watchdog,
             2 => ResetCause::Software,
             3 => ResetCause::Pin,
+            5 => ResetCause::Restart,
             _ => ResetCause::Other,
         }
     }
@@ -63,15 +67,9 @@ impl ResetCause {
         matches!(self, ResetCause::Watchdog | ResetCause::Software)
     }
 
-    /// Short name for the log.
+    /// Short name for the log (the host link's, `shimmy_link::wire::cause_name`).
     pub const fn name(self) -> &'static str {
-        match self {
-            ResetCause::PowerOn => "power-on",
-            ResetCause::Watchdog => "watchdog",
-            ResetCause::Software => "software (panic or fault handler)",
-            ResetCause::Pin => "reset pin",
-            ResetCause::Other => "other",
-        }
+        shimmy_link::wire::cause_name(self as u8)
     }
 }
 
@@ -225,11 +223,53 @@ pub mod persist {
             core::ptr::write_volatile(core::ptr::addr_of_mut!(RECORD).cast::<ResetRecord>(), *r)
         }
     }
+
+    /// The restart request's mark (any other value: none). A power-on leaves random RAM, but
+    /// the power-on flag is tested before the request.
+    const RESTART_MARK: u32 = 0x5253_5452;
+
+    #[link_section = ".uninit.shimmy_restart"]
+    static mut RESTART: MaybeUninit<u32> = MaybeUninit::uninit();
+
+    /// Restarts the MCU to run a new vehicle configuration (the boot reads it from flash): a
+    /// software reset the next boot calls [`ResetCause::Restart`](super::ResetCause::Restart),
+    /// not a failure. Only at standstill with the damper idle (the caller holds the store's
+    /// token); the coil gets the fail-safe current out of reset as after any reset.
+    pub fn restart() -> ! {
+        // SAFETY: a plain word in `.uninit`, written here and read once at boot (`take_restart`).
+        unsafe {
+            core::ptr::write_volatile(core::ptr::addr_of_mut!(RESTART).cast::<u32>(), RESTART_MARK)
+        };
+        cortex_m::peripheral::SCB::sys_reset()
+    }
+
+    /// Whether the last reset was a [`restart`] (and forgets it, so a later panic's software
+    /// reset is not taken for one).
+    pub fn take_restart() -> bool {
+        // SAFETY: as in `restart`; read and cleared by `init` only.
+        unsafe {
+            let p = core::ptr::addr_of_mut!(RESTART).cast::<u32>();
+            let marked = core::ptr::read_volatile(p) == RESTART_MARK;
+            core::ptr::write_volatile(p, 0);
+            marked
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_cause_has_a_code_and_a_name() {
+        use ResetCause::*;
+        for c in [PowerOn, Watchdog, Software, Pin, Other, Restart] {
+            assert_eq!(ResetCause::from_code(c as u8), c);
+            assert_ne!(c.name(), "?");
+        }
+        // A restart for a new configuration is not a failure: it does not count toward a loop.
+        assert!(!Restart.abnormal());
+    }
 
     #[test]
     fn crc32_matches_the_standard_check_value() {

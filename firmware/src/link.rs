@@ -1,65 +1,64 @@
-//! The firmware's side of the host link (`shimmy-link`): the state the link serves, as a
-//! [`Backend`] of the protocol handler. Host-compilable and host-tested; `main.rs` runs the
-//! handler in the `link` task (USART1 interrupt, priority 1: below `meter` and `control`), and
-//! the meter task feeds [`LinkState::on_sample`] / [`LinkState::on_update`].
+//! The firmware's side of the host link (`shimmy-link`): the state the link serves and the
+//! flash store behind it, as a [`Backend`] of the protocol handler ([`BoardLink`]).
+//! Host-compilable and host-tested; `main.rs` runs the handler in the `link` task (USART1
+//! interrupt, priority 1: below `meter` and `control`), and the meter task feeds
+//! [`LinkState::on_update`].
 //!
-//! The configuration it serves is the vehicle this boot runs (the flash store's, else the
-//! compiled-in defaults). A vehicle a host writes is kept here until the background loop saves
-//! it with the store's standstill token ([`LinkState::take_unsaved`]); the boot after the save
-//! runs it. The event log it serves is a [`RamLog`] of [`LOG_CAPACITY`] entries of this boot,
-//! filled by its own [`Recorder`]; the flash log (`crate::store`) keeps the same episodes and
-//! faults across resets through the store's own recorder. TODO(issue 24): serve the flash log
-//! here, with one recorder for both, and hand a saved vehicle to the running tasks at
-//! standstill instead of at the next boot.
-//!
-//! A configuration write is validated whole by the core (`Vehicle::decode_record`) before it
-//! gets here; it takes effect only at standstill ([`STANDSTILL_MPS`]): while the vehicle moves it
-//! is stored as pending and applied at the next standstill the meter task sees.
+//! - Event log: the flash log (`crate::store`), so a host reads the episodes, faults and boots
+//!   of earlier runs too; the episode still open is served as its last entry. One recorder
+//!   makes every entry: `shimmy_link::log::Recorder` in the meter task, through a [`Batch`] and
+//!   the store's queue. Clearing it erases flash, so it is refused unless the vehicle stands
+//!   with the damper idle (the store's standstill token).
+//! - Configuration: the vehicle this boot runs (the flash store's, else the compiled-in
+//!   defaults). A vehicle a host writes has been validated whole by the core
+//!   (`Vehicle::decode_record`) before it gets here; it is served as pending and kept until the
+//!   background loop saves it with the standstill token ([`save_vehicle`]), which then
+//!   restarts the board into it (`fault_memory::persist::restart`): the one path by which a
+//!   vehicle reaches the control, meter and model tasks is the boot.
 
-use shimmy_core::estimator::monitor::Monitor;
-use shimmy_core::supervisor::faults::FaultSet;
+use embedded_storage_async::nor_flash::NorFlash;
+use shimmy_core::supervisor::faults::FaultKind;
 use shimmy_core::vehicle::record_schema_of;
 use shimmy_link::device::Backend;
-use shimmy_link::log::{RamLog, Recorder};
-use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, Telemetry};
+use shimmy_link::log::{EventSink, Pager};
+use shimmy_link::wire::{
+    level_code, ErrorReply, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry,
+};
 use shimmy_link::PROTOCOL_VERSION;
 
 use crate::control::Health;
 use crate::fault_memory::ResetRecord;
 use crate::monitoring::{ImageVehicle, MarginUpdate};
+use crate::store::{FlashError, StoreTask};
 
-/// Entries the RAM log keeps (the oldest go first).
-pub const LOG_CAPACITY: usize = 32;
 /// Below this trusted speed the vehicle is at standstill, m/s (an unknown speed is not): the
 /// flash store's threshold, so the link and the store agree on what a standstill is.
 pub const STANDSTILL_MPS: f32 = crate::store::STANDSTILL_SPEED_MPS;
 
-/// What the link serves: configuration, event log, fault record, newest margin report.
+/// What the link serves besides the flash store: configuration, fault record, newest margin
+/// report, the episode going on.
 pub struct LinkState {
     vehicle: ImageVehicle,
     pending: bool,
     /// A vehicle the host wrote that the flash store has not saved yet.
     unsaved: Option<ImageVehicle>,
-    standstill: bool,
-    log: RamLog<LOG_CAPACITY>,
-    recorder: Recorder,
     faults: FaultReport,
     telemetry: Option<Telemetry>,
-    open: Option<shimmy_link::wire::ShimmyEvent>,
+    /// The episode going on, as the log's last entry.
+    open: Option<LogEntry>,
+    /// Margin-path time of the newest update, s: the clock of the store's standstill watch.
+    t_s: f64,
 }
 
 impl LinkState {
-    /// `vehicle`: the one this boot runs (the flash store's, or the compiled-in defaults), an
-    /// empty log, no fault seen, speed unknown; `boot`: the reset record of this boot (resets,
-    /// cause, faults latched before it).
+    /// `vehicle`: the one this boot runs (the flash store's, or the compiled-in defaults), no
+    /// fault seen; `boot`: the reset record of this boot (resets, cause, faults latched before
+    /// it).
     pub fn new(boot: &ResetRecord, vehicle: ImageVehicle) -> Self {
         LinkState {
             vehicle,
             pending: false,
             unsaved: None,
-            standstill: false,
-            log: RamLog::new(),
-            recorder: Recorder::new(),
             faults: FaultReport {
                 resets: boot.resets,
                 last_cause: boot.last_cause,
@@ -71,12 +70,8 @@ impl LinkState {
             },
             telemetry: None,
             open: None,
+            t_s: 0.0,
         }
-    }
-
-    /// The event log.
-    pub fn log(&self) -> &RamLog<LOG_CAPACITY> {
-        &self.log
     }
 
     /// The vehicle a host wrote that is not in flash yet, for the background loop to save with
@@ -94,49 +89,29 @@ impl LinkState {
         self.unsaved.get_or_insert(v);
     }
 
-    /// One 1 kHz sample's damper command, A (the controller's action during an episode).
-    pub fn on_sample(&mut self, cmd_a: f32) {
-        self.recorder.on_command(cmd_a);
-    }
-
-    /// After a 100 Hz margin update: the monitor's episodes and the supervisor's faults into
-    /// the log, the fault record and the telemetry refreshed, and a pending configuration
-    /// applied if the vehicle stands still (`speed_mps`: the newest trusted speed; `t_ms`: the
-    /// control step of the update's sample, milliseconds since boot, wrapping after 49 days:
-    /// the same time as the report's f64 seconds without a soft-float multiply and conversion
-    /// per update).
-    ///
-    /// Latched faults: those restored at boot, plus the active ones of a latching kind (a
-    /// latched fault stays active until the next power-on; the control task's own reset record
-    /// is not shared, so that the 1 kHz step does no extra work for the link).
-    pub fn on_update<const N: usize>(
+    /// After a 100 Hz margin update: the episode going on (`open`, from the recorder), the
+    /// fault record and the telemetry refreshed (`latched`: the supervisor's latched faults;
+    /// `t_ms`: the control step of the update's sample, milliseconds since boot, wrapping
+    /// after 49 days: the same time as the report's f64 seconds without a soft-float multiply
+    /// and conversion per update).
+    pub fn on_update(
         &mut self,
         u: &MarginUpdate,
-        monitor: &Monitor<N>,
-        speed_mps: f32,
+        open: Option<ShimmyEvent>,
         health: &Health,
+        latched: u32,
         t_ms: u32,
     ) {
-        self.recorder.on_update(monitor, &mut self.log);
-        self.open = self.recorder.open_event(monitor);
-        let latching = FaultSet::from_bits(health.active_faults)
-            .iter()
-            .filter(|k| k.latched())
-            .fold(FaultSet::from_bits(self.faults.latched), |mut set, k| {
-                set.insert(k);
-                set
-            })
-            .bits();
-        self.recorder
-            .on_faults(t_ms, health.active_faults, latching, &mut self.log);
+        self.open = open.map(LogEntry::Shimmy);
         self.faults = FaultReport {
             uptime_ms: t_ms,
-            latched: latching,
+            latched: latched | self.faults.latched,
             active: health.active_faults,
             raised: health.faults_raised,
             ..self.faults
         };
         let r = &u.report;
+        self.t_s = r.t_s;
         self.telemetry = Some(Telemetry {
             t_s: r.t_s,
             speed_mps: r.speed_mps,
@@ -149,16 +124,57 @@ impl LinkState {
             level: level_code(u.level),
             valid: r.valid,
         });
-        self.standstill = speed_mps.is_finite() && speed_mps.abs() < STANDSTILL_MPS;
-        if self.standstill {
-            // TODO(issue 23): hand the vehicle to the control and meter tasks here (today
-            // they run the compiled-in parameters; the flash store loads it at boot).
-            self.pending = false;
+    }
+}
+
+/// Entries one margin update can record: every fault kind raised at once, and two episodes (the
+/// monitor can close one and the recorder find another closed since the last update).
+pub const BATCH_ENTRIES: usize = FaultKind::ALL.len() + 2;
+
+/// The entries one margin update records (the recorder's sink in the meter task; the store
+/// gets them through its queue).
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    entries: heapless::Vec<LogEntry, BATCH_ENTRIES>,
+    /// Entries that did not fit.
+    pub lost: u32,
+}
+
+impl Batch {
+    /// Empty.
+    pub const fn new() -> Self {
+        Batch {
+            entries: heapless::Vec::new(),
+            lost: 0,
         }
     }
 }
 
-impl Backend for LinkState {
+impl EventSink for Batch {
+    fn append(&mut self, e: LogEntry) {
+        if self.entries.push(e).is_err() {
+            self.lost = self.lost.saturating_add(1);
+        }
+    }
+}
+
+impl IntoIterator for Batch {
+    type Item = LogEntry;
+    type IntoIter = <heapless::Vec<LogEntry, BATCH_ENTRIES> as IntoIterator>::IntoIter;
+    fn into_iter(self) -> Self::IntoIter {
+        self.entries.into_iter()
+    }
+}
+
+/// The link's backend on the board: its state and the flash store.
+pub struct BoardLink<'a, F> {
+    /// Configuration, faults, telemetry, the open episode.
+    pub state: &'a mut LinkState,
+    /// The store: the event log.
+    pub store: &'a mut StoreTask<F>,
+}
+
+impl<F: NorFlash<Error = FlashError>> Backend for BoardLink<'_, F> {
     type Vehicle = ImageVehicle;
     fn identity(&self) -> Identity<'_> {
         Identity {
@@ -166,63 +182,161 @@ impl Backend for LinkState {
             core: shimmy_core::VERSION,
             protocol: PROTOCOL_VERSION,
             vehicle_schema: record_schema_of::<ImageVehicle>(),
-            log_capacity: LOG_CAPACITY as u16,
+            log_capacity: self.store.log_capacity(),
         }
     }
 
     fn vehicle(&self) -> (&ImageVehicle, bool) {
-        (&self.vehicle, self.pending)
+        (&self.state.vehicle, self.state.pending)
     }
 
+    /// Never in effect at once: saved at the next standstill, then run after a restart.
     fn store_vehicle(&mut self, v: ImageVehicle) -> bool {
-        self.vehicle = v;
-        self.unsaved = Some(v);
-        self.pending = !self.standstill;
-        self.standstill
+        self.state.vehicle = v;
+        self.state.unsaved = Some(v);
+        self.state.pending = true;
+        false
     }
 
-    fn log_len(&self) -> (u16, u32) {
-        self.log.len_with_open(self.open)
+    /// The flash log, then the episode still open (if any). Entries that do not read back
+    /// (written by another firmware, or damaged) are skipped and counted as dropped.
+    fn read_log(&mut self, pager: &mut Pager<'_>) -> Result<(u16, u32), ErrorReply<'static>> {
+        let mut unreadable = 0u32;
+        let store = self.store.store();
+        store
+            .read_log(&mut |e| match e {
+                Ok(e) => pager.offer(e),
+                Err(_) => unreadable += 1,
+            })
+            .map_err(|_| ErrorReply::Storage)?;
+        if let Some(e) = &self.state.open {
+            pager.offer(e);
+        }
+        Ok((
+            pager.seen(),
+            store.lost_entries().saturating_add(unreadable),
+        ))
     }
 
-    /// The kept entries, then the episode still open (if any) as the last one.
-    fn log_entry(&self, i: u16) -> Option<LogEntry> {
-        self.log.get_with_open(i, self.open)
-    }
-
-    fn clear_log(&mut self) -> u16 {
-        self.log.clear()
+    fn clear_log(&mut self) -> Result<u16, ErrorReply<'static>> {
+        let kept = self
+            .store
+            .store()
+            .read_log(&mut |_| ())
+            .map_err(|_| ErrorReply::Storage)?;
+        match self
+            .store
+            .at_standstill(self.state.t_s, |s, token| s.clear_log(token))
+        {
+            None => Err(ErrorReply::NotAtStandstill),
+            Some(Err(_)) => Err(ErrorReply::Storage),
+            Some(Ok(())) => Ok(u16::try_from(kept).unwrap_or(u16::MAX)),
+        }
     }
 
     fn faults(&self) -> FaultReport {
-        self.faults
+        self.state.faults
     }
 
     fn take_telemetry(&mut self) -> Option<Telemetry> {
-        self.telemetry.take()
+        self.state.telemetry.take()
+    }
+}
+
+/// What [`save_vehicle`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Saved {
+    /// Not at standstill: the vehicle waits.
+    Waiting,
+    /// Saved: restart to run it.
+    Saved,
+    /// The write failed; retried at the next pass.
+    Failed,
+}
+
+/// The background loop's part: a vehicle the host wrote ([`LinkState::take_unsaved`]) goes to
+/// flash with the store's standstill token (the erase a write may need stalls flash reads);
+/// unless [`Saved::Saved`], the caller hands it back ([`LinkState::keep_unsaved`]).
+pub fn save_vehicle<F: NorFlash<Error = FlashError>>(
+    task: &mut StoreTask<F>,
+    v: &ImageVehicle,
+    t_s: f64,
+) -> Saved {
+    match task.at_standstill(t_s, |store, token| store.save_config(v, token)) {
+        Some(Ok(())) => Saved::Saved,
+        Some(Err(_)) => Saved::Failed,
+        None => Saved::Waiting,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fault_memory::ResetCause;
     use crate::monitoring::{DataMargin, MeterSample};
     use crate::sim::{self, SimWorld};
+    use crate::store::{Layout, RamFlash, Store};
     use shimmy_core::vehicle::Vehicle;
-    use shimmy_link::wire::{fault_code, level_code};
+    use shimmy_link::log::Recorder;
+    use shimmy_link::wire::{fault_code, level_code, EVENTS_PER_PAGE};
+
+    const PAGE: usize = 16 * 1024;
+    type Flash = RamFlash<{ 4 * PAGE }, PAGE>;
+    const LAYOUT: Layout = Layout::split(PAGE as u32, 2, 2);
+
+    fn boot(flash: Flash) -> (StoreTask<Flash>, ImageVehicle) {
+        let b = Store::boot(flash, LAYOUT, ResetCause::PowerOn, 0).unwrap();
+        (StoreTask::new(b.store), b.report.config.vehicle)
+    }
+
+    /// The whole log as a host reads it, page by page.
+    fn read_all(link: &mut BoardLink<'_, Flash>) -> (Vec<LogEntry>, u32) {
+        let mut all = Vec::new();
+        loop {
+            let mut page = heapless::Vec::new();
+            let (kept, dropped) = link
+                .read_log(&mut Pager::new(all.len() as u16, &mut page))
+                .unwrap();
+            all.extend(page.iter().copied());
+            if all.len() >= usize::from(kept) || page.is_empty() {
+                assert!(page.len() <= EVENTS_PER_PAGE);
+                return (all, dropped);
+            }
+        }
+    }
+
+    /// The speed the meter trusts (`DataMargin::speed_mps`) stands below this.
+    fn stand(task: &mut StoreTask<Flash>, link: &mut LinkState, from_s: f64) {
+        for k in 0..300 {
+            let t = from_s + f64::from(k) * 0.01;
+            task.step(
+                crate::store::Motion {
+                    t_s: t,
+                    speed_mps: 0.0,
+                    cmd_peak_a: 0.0,
+                },
+                core::iter::empty(),
+            );
+            link.t_s = t;
+        }
+    }
 
     /// The firmware's own chain on the simulated sensors (the QEMU app's scenario: shimmy at
-    /// 8 Hz from boot, encoder faults at 1.3, 1.5 and 2.6 s): the link state logs each fault
-    /// the supervisor raised, once, and shows the shimmy episode going on.
+    /// 8 Hz from boot, encoder faults at 1.3, 1.5 and 2.6 s) into the flash store, as the meter
+    /// task and the background loop run it: the link serves each fault the supervisor raised,
+    /// once, the boot, and the shimmy episode going on; after a reset, the same entries again
+    /// (now from an earlier run) behind the new boot.
     #[test]
-    fn the_scenario_fills_the_log_with_its_faults_and_the_open_shimmy_episode() {
+    fn the_scenario_fills_the_flash_log_and_a_reset_keeps_it() {
         use crate::control::{supervised_step, Health};
         use shimmy_core::supervisor::frame::MarginStatus;
         let world: &'static SimWorld = Box::leak(Box::new(SimWorld::new()));
         let mut sensors = sim::sensors(world);
         let mut ctrl = crate::monitoring::safe_controller();
         let mut data = DataMargin::new().unwrap();
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), Vehicle::nominal());
+        let (mut task, vehicle) = boot(Flash::new());
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), vehicle);
+        let mut recorder = Recorder::new();
         let mut h = Health::default();
         let pwm = sim::SimPwm::new(world);
         let mut coil = crate::drivers::coil_pwm::CoilDriver::new(pwm, sim::COIL).unwrap();
@@ -232,19 +346,37 @@ mod tests {
             let out = supervised_step(&mut ctrl, &set, MarginStatus::NotUsed, &mut h);
             crate::control::drive_coil(&mut coil, &out).unwrap();
             let s = MeterSample::of(step, &out);
-            link.on_sample(s.cmd_a);
+            recorder.on_command(s.cmd_a);
             if let Some((u, _)) = data.push(&s, None) {
                 let monitor = data.pipeline().monitor();
-                link.on_update(&u, monitor, data.speed_mps(), &h, step);
+                let latched = ctrl.supervisor().latched().bits();
+                let mut batch = Batch::new();
+                recorder.on_update(monitor, &mut batch);
+                recorder.on_faults(step, h.active_faults, latched, &mut batch);
+                assert_eq!(batch.lost, 0);
+                state.on_update(&u, recorder.open_event(monitor), &h, latched, step);
+                let motion = crate::store::Motion {
+                    t_s: u.report.t_s,
+                    speed_mps: data.speed_mps(),
+                    cmd_peak_a: s.cmd_a,
+                };
+                task.step(motion, batch.into_iter());
             }
         }
-        let (kept, _) = link.log_len();
-        let entries: Vec<LogEntry> = (0..kept).filter_map(|i| link.log_entry(i)).collect();
+        let (entries, dropped) = read_all(&mut BoardLink {
+            state: &mut state,
+            store: &mut task,
+        });
+        assert_eq!(dropped, 0);
+        assert!(
+            matches!(entries.first(), Some(LogEntry::Boot(_))),
+            "{entries:?}"
+        );
         let faults: Vec<u8> = entries
             .iter()
             .filter_map(|e| match e {
                 LogEntry::Fault(f) => Some(f.kind),
-                LogEntry::Shimmy(_) => None,
+                _ => None,
             })
             .collect();
         assert_eq!(
@@ -252,7 +384,6 @@ mod tests {
             h.faults_raised,
             "each raised fault once"
         );
-        use shimmy_core::supervisor::faults::FaultKind;
         for k in [
             FaultKind::LeftFlag,
             FaultKind::RightFlag,
@@ -267,18 +398,29 @@ mod tests {
         assert!(e.level >= level_code(shimmy_core::estimator::monitor::Level::MarginLow));
         assert!((e.freq_hz - sim::SHIMMY_HZ).abs() < 0.5, "{}", e.freq_hz);
         assert!(e.peak_current_a.is_finite());
-        // Moving: a configuration waits for standstill.
-        let mut v = Vehicle::nominal();
-        v.set("plant", "k_d", 4000.0).unwrap();
-        assert!(!link.store_vehicle(v));
-        assert!(link.vehicle().1, "pending");
+
+        // A reset: the episode that was open is gone with the RAM, the rest is served again.
+        let flash = task.store().flash().clone();
+        let (mut task, vehicle) = boot(flash);
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), vehicle);
+        let (after, _) = read_all(&mut BoardLink {
+            state: &mut state,
+            store: &mut task,
+        });
+        let closed = entries.len() - 1;
+        assert_eq!(after[..closed], entries[..closed]);
+        assert!(matches!(after[closed..], [LogEntry::Boot(_)]), "{after:?}");
     }
 
+    /// A written vehicle is served as pending, waits while the vehicle moves, and is saved at
+    /// the first standstill, so that the next boot runs it; a newer write wins over one that
+    /// waits. A clear of the log is refused while moving, carried out at standstill.
     #[test]
-    fn a_written_vehicle_waits_for_the_store_and_a_newer_one_wins() {
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), Vehicle::nominal());
+    fn a_written_vehicle_is_saved_at_standstill_for_the_next_boot() {
+        let (mut task, booted) = boot(Flash::new());
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), booted);
         assert_eq!(
-            link.take_unsaved(),
+            state.take_unsaved(),
             None,
             "the booted vehicle is in flash already"
         );
@@ -286,16 +428,37 @@ mod tests {
         first.set("controller", "slew_a_per_s", 100.0).unwrap();
         let mut second = first;
         second.set("controller", "slew_a_per_s", 200.0).unwrap();
-        link.store_vehicle(first);
-        let taken = link.take_unsaved().unwrap();
-        assert_eq!(taken, first);
-        assert_eq!(link.take_unsaved(), None, "handed out once");
-        // No standstill yet: the background loop hands it back...
-        link.keep_unsaved(taken);
-        assert_eq!(link.take_unsaved(), Some(first));
+        let mut link = BoardLink {
+            state: &mut state,
+            store: &mut task,
+        };
+        assert!(!link.store_vehicle(first), "never in effect at once");
+        assert_eq!(link.vehicle(), (&first, true), "served as pending");
+        assert_eq!(link.clear_log(), Err(ErrorReply::NotAtStandstill));
+        // Moving: the background loop hands it back...
+        let taken = state.take_unsaved().unwrap();
+        assert_eq!(save_vehicle(&mut task, &taken, 1.0), Saved::Waiting);
+        state.keep_unsaved(taken);
         // ...unless the host wrote a newer one meanwhile.
-        link.store_vehicle(second);
-        link.keep_unsaved(first);
-        assert_eq!(link.take_unsaved(), Some(second));
+        BoardLink {
+            state: &mut state,
+            store: &mut task,
+        }
+        .store_vehicle(second);
+        state.keep_unsaved(first);
+        let taken = state.take_unsaved().unwrap();
+        assert_eq!(taken, second);
+        stand(&mut task, &mut state, 1.0);
+        assert_eq!(save_vehicle(&mut task, &taken, state.t_s), Saved::Saved);
+        let mut link = BoardLink {
+            state: &mut state,
+            store: &mut task,
+        };
+        let (before, _) = read_all(&mut link);
+        assert_eq!(link.clear_log(), Ok(before.len() as u16));
+        assert!(read_all(&mut link).0.is_empty());
+        // The restart: the boot loads it.
+        let (_, next) = boot(task.store().flash().clone());
+        assert_eq!(next, second);
     }
 }

@@ -3,9 +3,9 @@
 //! | task | runs | priority | work |
 //! |---|---|---|---|
 //! | `control` | TIM2 update interrupt, 1 kHz | 3 | sensors -> raw frame -> core `SafeController` (supervisor + margin-scheduled ASMC on the newest margin report + limiter) -> closed-loop coil current (PWM); pushes the step's validated sample into the SPSC queue; spawns `meter` on every 10th sample (`MeterCadence`); timing counters; feeds the watchdog |
-//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); publishes the report for the next control step; warnings on level changes, telemetry at 1 Hz |
-//! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::LinkState`): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
-//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: event log, latched faults, erases only at standstill); WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
+//! | `meter` | software task, 100 Hz | 2 | drains the queue into the core's `DataPipeline` (mode meter, fusion with the newest model margin, monitor); publishes the report for the next control step; warnings on level changes; the log's recorder (episodes and faults to the store's queue); with the feature `probe-telemetry` the margin report and counters over the probe at 1 Hz |
+//! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::BoardLink`: the link's state and the flash store): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
+//! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; the flash store (`shimmy_firmware::store`: the event log the meter's recorder fills, erases only at standstill), a host-written vehicle saved at standstill and run after a restart; WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
 //!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
@@ -31,16 +31,18 @@ mod app {
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
-    use shimmy_firmware::link::LinkState;
+    use shimmy_firmware::link::{save_vehicle, Batch, BoardLink, LinkState, Saved};
     use shimmy_firmware::monitoring::{
         safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
-    use shimmy_firmware::store::{ConfigSource, EpisodeRecorder, LogEntry, Motion, StoreTask};
+    use shimmy_firmware::store::{ConfigSource, LogEntry, Motion, StoreTask};
     use shimmy_link::device::{Device, REPLY_BYTES};
+    use shimmy_link::log::Recorder;
 
-    /// Telemetry every this many meter runs (1 Hz).
+    /// The probe's telemetry line every this many meter runs (1 Hz; feature `probe-telemetry`).
+    #[cfg(feature = "probe-telemetry")]
     const TELEMETRY_DIVIDER: u32 = 100;
     /// The link's telemetry stream every this many meter runs (10 Hz).
     const LINK_STREAM_DIVIDER: u32 = 10;
@@ -61,10 +63,13 @@ mod app {
         /// Time, trusted speed and peak coil command of the newest meter run (for the store's
         /// standstill watch).
         motion: Motion,
-        /// The supervisor's latched faults (written by `control`, logged by the store).
+        /// The supervisor's latched faults (written by `control`, recorded by `meter`).
         latched: FaultSet,
-        /// What the host link serves (written by `meter`, read and configured by `link`).
+        /// What the host link serves besides the store (written by `meter`, read and
+        /// configured by `link`).
         link: LinkState,
+        /// The flash store (the background loop's passes; the link reads and clears its log).
+        store_task: StoreTask<TargetFlash>,
     }
 
     #[local]
@@ -83,10 +88,10 @@ mod app {
         data: DataMargin,
         meter_runs: u32,
         model_task: ModelTask,
-        store_task: StoreTask<TargetFlash>,
         log_tx: Producer<'static, LogEntry>,
         log_rx: Consumer<'static, LogEntry>,
-        episodes: EpisodeRecorder,
+        /// The one recorder of the event log (episodes and faults).
+        recorder: Recorder,
         port: LinkPort,
         /// The ready frame has been sent.
         announced: bool,
@@ -114,8 +119,7 @@ mod app {
         let latched = FaultSet::from_bits(record.latched_faults);
         // The store opens before board::init starts the watchdog: a boot after a power cut in a
         // standstill write may finish the compaction the cut interrupted (an erase).
-        let Ok((store_task, boot)) =
-            store_target::boot(!stored.is_valid(), cause, record.resets, latched)
+        let Ok((store_task, boot)) = store_target::boot(!stored.is_valid(), cause, record.resets)
         else {
             // Only a second call or a layout that does not fit could fail (the layout is a
             // constant); the damper still gets the fail-safe current out of reset.
@@ -163,6 +167,7 @@ mod app {
                 motion: Motion::UNKNOWN,
                 latched,
                 link,
+                store_task,
             },
             Local {
                 board,
@@ -176,10 +181,10 @@ mod app {
                 data,
                 meter_runs: 0,
                 model_task: ModelTask::new(vehicle.model()),
-                store_task,
                 log_tx,
                 log_rx,
-                episodes: EpisodeRecorder::new(),
+                // The run that latched the restored faults logged them.
+                recorder: Recorder::after_boot(latched.bits()),
                 port,
                 announced: false,
             },
@@ -191,7 +196,7 @@ mod app {
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
     /// (`PassGate`); other wakes go back to sleep.
-    #[idle(local = [model_task, store_task, log_rx, gate: PassGate = PassGate::new()], shared = [model, now, health, motion, latched, link])]
+    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false], shared = [model, now, health, motion, link, store_task])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
@@ -208,13 +213,18 @@ mod app {
                 board::pil::background_pass(false);
                 continue;
             }
-            store_pass(
-                cx.local.store_task,
-                cx.local.log_rx,
-                motion,
-                cx.shared.latched.lock(|l| *l),
-            );
-            save_host_config(cx.local.store_task, &mut cx.shared.link, motion.t_s);
+            let log_rx = &mut *cx.local.log_rx;
+            let restart_due = &mut *cx.local.restart_due;
+            let link = &mut cx.shared.link;
+            cx.shared.store_task.lock(|task| {
+                store_pass(task, log_rx, motion);
+                *restart_due |= save_host_config(task, link, motion.t_s);
+                // Restart into a saved vehicle once nothing waits to be written.
+                if *restart_due && !task.store().needs_maintenance() && !log_rx.ready() {
+                    defmt::info!("restarting to run the saved vehicle");
+                    persist::restart();
+                }
+            });
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
             #[cfg(feature = "pil")]
@@ -326,7 +336,7 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs, episodes, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion, link])]
+    #[task(priority = 2, local = [rx, data, meter_runs, recorder, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion, link, latched])]
     async fn meter(mut cx: meter::Context) {
         #[cfg(feature = "pil")]
         let entry_instructions = board::pil::instructions();
@@ -338,9 +348,8 @@ mod app {
         #[cfg(feature = "pil")]
         let mut spawned_by = None;
         while let Some(s) = cx.local.rx.dequeue() {
-            cx.local.episodes.sample(s.cmd_a);
+            cx.local.recorder.on_command(s.cmd_a);
             *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
-            cx.shared.link.lock(|l| l.on_sample(s.cmd_a));
             #[cfg(feature = "pil")]
             {
                 spawned_by = Some(s.step);
@@ -351,24 +360,26 @@ mod app {
             #[cfg(feature = "pil")]
             board::pil::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
-            let data = &*cx.local.data;
-            cx.shared.link.lock(|l| {
-                l.on_update(
-                    &u,
-                    data.pipeline().monitor(),
-                    data.speed_mps(),
-                    &health,
-                    s.step,
-                )
-            });
-            // The store: a closed shimmy episode, and the motion for its standstill watch.
-            if let Some(e) = cx.local.episodes.update(cx.local.data.pipeline().monitor()) {
-                if cx.local.log_tx.enqueue(LogEntry::Shimmy(e)).is_err() {
-                    defmt::error!(
-                        "store queue full: shimmy episode at t = {=f64} s not logged",
-                        e.event.start_s
-                    );
+            let latched = cx.shared.latched.lock(|l| l.bits());
+            let monitor = cx.local.data.pipeline().monitor();
+            // The log: closed episodes and raised faults to the store, the open episode to the
+            // link; then the motion for the store's standstill watch.
+            let recorder = &mut *cx.local.recorder;
+            let mut batch = Batch::new();
+            recorder.on_update(monitor, &mut batch);
+            recorder.on_faults(s.step, health.active_faults, latched, &mut batch);
+            let open = recorder.open_event(monitor);
+            cx.shared
+                .link
+                .lock(|l| l.on_update(&u, open, &health, latched, s.step));
+            let lost = batch.lost;
+            for e in batch {
+                if cx.local.log_tx.enqueue(e).is_err() {
+                    defmt::error!("store queue full: a log entry at step {=u32} lost", s.step);
                 }
+            }
+            if lost > 0 {
+                defmt::error!("{=u32} log entries at step {=u32} lost", lost, s.step);
             }
             let motion = Motion {
                 t_s: u.report.t_s,
@@ -398,6 +409,9 @@ mod app {
                     u.report.speed_margin_mps.unwrap_or(f32::NAN)
                 );
             }
+            // The margin report and the counters over the probe at 1 Hz, for a debug build: a
+            // host watches the report over the link (`watch`, 10 Hz) instead.
+            #[cfg(feature = "probe-telemetry")]
             if runs.is_multiple_of(TELEMETRY_DIVIDER) {
                 let h = cx.shared.health.lock(|h| *h);
                 let r = &u.report;
@@ -475,9 +489,8 @@ mod app {
         task: &mut StoreTask<TargetFlash>,
         rx: &mut Consumer<'static, LogEntry>,
         motion: Motion,
-        latched: FaultSet,
     ) {
-        let pass = task.step(motion, latched, core::iter::from_fn(|| rx.dequeue()));
+        let pass = task.step(motion, core::iter::from_fn(|| rx.dequeue()));
         if pass.appended > 0 {
             defmt::info!(
                 "store: {=u32} log entries appended at t = {=f64} s ({=usize} waiting for a standstill)",
@@ -497,44 +510,52 @@ mod app {
     }
 
     /// A vehicle the host link accepted goes to flash here, with the store's standstill token
-    /// (the erase a map write may need stalls flash reads): saved at the first standstill, kept
-    /// in the link's state until then. The boot after the save runs it.
+    /// (the erase a write may need stalls flash reads): saved at the first standstill, kept in
+    /// the link's state until then. True when saved: the board restarts into it.
     fn save_host_config(
         task: &mut StoreTask<TargetFlash>,
         link: &mut impl rtic::Mutex<T = LinkState>,
         t_s: f64,
-    ) {
+    ) -> bool {
         let Some(v) = link.lock(|l| l.take_unsaved()) else {
-            return;
+            return false;
         };
-        match task.at_standstill(t_s, |store, token| store.save_config(&v, token)) {
-            Some(Ok(())) => defmt::info!("store: the host's vehicle saved at t = {=f64} s", t_s),
-            Some(Err(_)) => {
-                defmt::error!("store: saving the host's vehicle failed, retried at the next pass");
-                link.lock(|l| l.keep_unsaved(v));
+        match save_vehicle(task, &v, t_s) {
+            Saved::Saved => {
+                defmt::info!("store: the host's vehicle saved at t = {=f64} s", t_s);
+                return true;
             }
-            None => link.lock(|l| l.keep_unsaved(v)),
+            Saved::Failed => {
+                defmt::error!("store: saving the host's vehicle failed, retried at the next pass")
+            }
+            Saved::Waiting => {}
         }
+        link.lock(|l| l.keep_unsaved(v));
+        false
     }
 
     /// The host link, below `meter` and `control`: every received byte goes to the protocol
     /// handler, each complete request frame gets its reply (polled transmit, at most ~9 ms at
     /// 921,600 baud); while the stream is on, the newest margin report goes out when `meter`
     /// pends this task (10 Hz). `link` is locked only to run the handler, never while sending.
-    #[task(binds = USART1, priority = 1, local = [port, announced, device: Device = Device::new(), reply: [u8; REPLY_BYTES] = [0; REPLY_BYTES]], shared = [link])]
-    fn link(mut cx: link::Context) {
+    #[task(binds = USART1, priority = 1, local = [port, announced, device: Device = Device::new(), reply: [u8; REPLY_BYTES] = [0; REPLY_BYTES]], shared = [link, store_task])]
+    fn link(cx: link::Context) {
         let (port, device, reply) = (cx.local.port, cx.local.device, cx.local.reply);
+        let mut shared = (cx.shared.link, cx.shared.store_task);
+        let mut serve = |f: &mut dyn FnMut(&mut BoardLink<'_, TargetFlash>) -> Option<usize>| {
+            shared.lock(|state, store| f(&mut BoardLink { state, store }))
+        };
         if !*cx.local.announced {
             *cx.local.announced = true;
-            let n = cx.shared.link.lock(|l| Device::ready(l, reply));
+            let n = serve(&mut |b| Some(Device::ready(b, reply))).unwrap_or(0);
             port.write(reply.get(..n).unwrap_or_default());
         }
         while let Some(byte) = port.read() {
-            if let Some(n) = cx.shared.link.lock(|l| device.on_byte(byte, l, reply)) {
+            if let Some(n) = serve(&mut |b| device.on_byte(byte, b, reply)) {
                 port.write(reply.get(..n).unwrap_or_default());
             }
         }
-        if let Some(n) = cx.shared.link.lock(|l| device.poll_stream(l, reply)) {
+        if let Some(n) = serve(&mut |b| device.poll_stream(b, reply)) {
             port.write(reply.get(..n).unwrap_or_default());
         }
     }
@@ -543,6 +564,8 @@ mod app {
     /// A power-on also sets the brown-out flag, so power-on is tested first.
     fn reset_cause(rcc: &shimmy_firmware::hal::pac::RCC) -> ResetCause {
         let f = rcc.csr().read();
+        // Read every boot, so that a mark left by a restart is never taken for a later one.
+        let restarted = persist::take_restart();
         // One log call per cause: defmt keeps a literal's text in the ELF, not in flash (a
         // `{=str}` argument sends it from flash).
         let cause = if f.wdgrstf().bit_is_set() {
@@ -553,6 +576,9 @@ mod app {
         } else if f.wwdgrstf().bit_is_set() {
             defmt::warn!("reset cause: window watchdog");
             ResetCause::Watchdog
+        } else if f.sftrstf().bit_is_set() && restarted {
+            defmt::info!("reset cause: restart to run the new vehicle configuration");
+            ResetCause::Restart
         } else if f.sftrstf().bit_is_set() {
             defmt::warn!("reset cause: software reset (panic or fault handler)");
             ResetCause::Software

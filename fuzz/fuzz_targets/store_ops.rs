@@ -16,11 +16,10 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::vehicle::{Vehicle, FIELDS};
 use shimmy_firmware::fault_memory::ResetCause;
 use shimmy_firmware::store::{
-    Appended, ConfigSource, Layout, LogEntry, RamFlash, ShimmyEntry, StandstillWatch, Store,
+    Appended, ConfigSource, Layout, LogEntry, RamFlash, ShimmyEvent, StandstillWatch, Store,
 };
 
 const PAGE: usize = 2048;
@@ -38,19 +37,17 @@ fn vehicle(k: u8) -> Vehicle {
 }
 
 fn shimmy(seq: u32) -> LogEntry {
-    LogEntry::Shimmy(ShimmyEntry {
-        event: Event {
-            start_s: f64::from(seq),
-            speed_mps: 20.0,
-            freq_hz: 8.0,
-            peak_amplitude_rad: 0.02,
-            worst: Level::ShimmyPresent,
-            duration_s: 1.0,
-            shimmy_s: 0.5,
-            open: false,
-        },
-        cmd_peak_a: 2.0,
-        cmd_mean_a: 1.0,
+    LogEntry::Shimmy(ShimmyEvent {
+        start_s: f64::from(seq),
+        speed_mps: 20.0,
+        freq_hz: 8.0,
+        peak_amplitude_rad: 0.02,
+        duration_s: 1.0,
+        shimmy_s: 0.5,
+        level: 3,
+        open: false,
+        peak_current_a: 2.0,
+        mean_current_a: 1.0,
     })
 }
 
@@ -59,8 +56,8 @@ fn shimmy(seq: u32) -> LogEntry {
 fn shimmies(s: &mut Store<Flash>, ghost_max: u32) -> Vec<u32> {
     let mut seqs = Vec::new();
     s.read_log(
-        |e| match e.expect("an entry that does not read back whole") {
-            LogEntry::Shimmy(x) => seqs.push(x.event.start_s as u32),
+        &mut |e| match e.expect("an entry that does not read back whole") {
+            &LogEntry::Shimmy(x) => seqs.push(x.start_s as u32),
             LogEntry::Boot(_) | LogEntry::Fault(_) => {}
         },
     )

@@ -11,9 +11,10 @@
 use shimmy_core::vehicle::{decode_record, encode_record, RecordVehicle, RECORD_MAX_BYTES};
 
 use crate::frame::{self, Fed, FrameError, FrameReader, MAX_FRAME};
+use crate::log::Pager;
 use crate::wire::{
-    ConfigProblem, ErrorReply, EventPage, FaultReport, Header, Identity, LogEntry, Request,
-    Response, Telemetry, EVENTS_PER_PAGE, PROTOCOL_HEADER,
+    ConfigProblem, ErrorReply, EventPage, FaultReport, Header, Identity, Request, Response,
+    Telemetry, PROTOCOL_HEADER,
 };
 use crate::PROTOCOL_VERSION;
 
@@ -30,12 +31,11 @@ pub trait Backend {
     /// Stores a validated vehicle; returns whether it took effect at once (standstill) or waits
     /// for the next standstill.
     fn store_vehicle(&mut self, v: Self::Vehicle) -> bool;
-    /// Entries in the log and entries dropped because it was full.
-    fn log_len(&self) -> (u16, u32);
-    /// Log entry `i` (0 = oldest kept).
-    fn log_entry(&self, i: u16) -> Option<LogEntry>;
+    /// Reads the log front to back into `pager` (0 = oldest kept); returns the entries in it
+    /// and the entries dropped because it was full.
+    fn read_log(&mut self, pager: &mut Pager<'_>) -> Result<(u16, u32), ErrorReply<'static>>;
     /// Empties the log; returns the number of entries removed.
-    fn clear_log(&mut self) -> u16;
+    fn clear_log(&mut self) -> Result<u16, ErrorReply<'static>>;
     /// The fault record.
     fn faults(&self) -> FaultReport;
     /// The newest margin report not handed out before, if any.
@@ -168,26 +168,23 @@ impl Device {
                     Err(e) => Response::Error(ErrorReply::Config(ConfigProblem::of(e))),
                 },
                 Request::ReadEvents { first } => {
-                    let (kept, dropped) = backend.log_len();
-                    if first > kept {
-                        Response::Error(ErrorReply::NoSuchEntry { kept })
-                    } else {
-                        let mut entries = heapless::Vec::new();
-                        for i in (first..kept).take(EVENTS_PER_PAGE) {
-                            if let Some(e) = backend.log_entry(i) {
-                                let _ = entries.push(e);
-                            }
+                    let mut entries = heapless::Vec::new();
+                    match backend.read_log(&mut Pager::new(first, &mut entries)) {
+                        Err(e) => Response::Error(e),
+                        Ok((kept, _)) if first > kept => {
+                            Response::Error(ErrorReply::NoSuchEntry { kept })
                         }
-                        Response::Events(EventPage {
+                        Ok((kept, dropped)) => Response::Events(EventPage {
                             kept,
                             dropped,
                             first,
                             entries,
-                        })
+                        }),
                     }
                 }
-                Request::ClearEvents => Response::Cleared {
-                    removed: backend.clear_log(),
+                Request::ClearEvents => match backend.clear_log() {
+                    Ok(removed) => Response::Cleared { removed },
+                    Err(e) => Response::Error(e),
                 },
                 Request::ReadFaults => Response::Faults(backend.faults()),
                 Request::Telemetry { on } => {
@@ -213,7 +210,7 @@ mod tests {
     use super::*;
     use crate::frame::{decode, encode, message};
     use crate::log::{EventSink, RamLog};
-    use crate::wire::{FaultEvent, PROTOCOL_HEADER};
+    use crate::wire::{FaultEvent, LogEntry, PROTOCOL_HEADER};
     use shimmy_core::vehicle::Vehicle;
     use std::vec::Vec;
 
@@ -262,14 +259,14 @@ mod tests {
             self.pending = self.moving;
             !self.moving
         }
-        fn log_len(&self) -> (u16, u32) {
-            self.log.len()
+        fn read_log(&mut self, pager: &mut Pager<'_>) -> Result<(u16, u32), ErrorReply<'static>> {
+            Ok(self.log.page(None, pager))
         }
-        fn log_entry(&self, i: u16) -> Option<LogEntry> {
-            self.log.get(i)
-        }
-        fn clear_log(&mut self) -> u16 {
-            self.log.clear()
+        fn clear_log(&mut self) -> Result<u16, ErrorReply<'static>> {
+            if self.moving {
+                return Err(ErrorReply::NotAtStandstill);
+            }
+            Ok(self.log.clear())
         }
         fn faults(&self) -> FaultReport {
             FaultReport {
@@ -378,7 +375,12 @@ mod tests {
             &request_bytes(9, &Request::ReadEvents { first: 13 }),
         );
         assert_eq!(r, Response::Error(ErrorReply::NoSuchEntry { kept: 12 }));
+        // Moving: the clear (an erase) is refused and the log stays.
         let (_, r) = one_reply(&mut dev, &mut b, &request_bytes(10, &Request::ClearEvents));
+        assert_eq!(r, Response::Error(ErrorReply::NotAtStandstill));
+        assert_eq!(b.log.len(), (12, 0));
+        b.moving = false;
+        let (_, r) = one_reply(&mut dev, &mut b, &request_bytes(11, &Request::ClearEvents));
         assert_eq!(r, Response::Cleared { removed: 12 });
     }
 

@@ -7,13 +7,14 @@
 //! not an entry yet ([`Recorder::open_event`] shows it).
 //!
 //! [`RamLog`] is a bounded queue of entries in RAM (oldest dropped when full, drop count kept):
-//! the store of the simulator's device and of the firmware until the flash log takes its place
-//! behind the same [`EventSink`].
+//! the simulator's device keeps its log there; the firmware's recorder feeds the flash log
+//! (`shimmy_firmware::store`) behind the same [`EventSink`]. [`Pager`] cuts either into the
+//! pages a host reads.
 
 use shimmy_core::estimator::monitor::{Event, Monitor};
 use shimmy_core::supervisor::faults::FaultKind;
 
-use crate::wire::{fault_code, level_code, FaultEvent, LogEntry, ShimmyEvent};
+use crate::wire::{fault_code, level_code, FaultEvent, LogEntry, ShimmyEvent, EVENTS_PER_PAGE};
 
 /// Where recorded entries go (a RAM queue, the flash log).
 pub trait EventSink {
@@ -32,6 +33,8 @@ pub struct Recorder {
     episode: (f32, f32, u32),
     /// Fault bits active at the last look.
     active: u32,
+    /// Fault bits latched at the last look.
+    latched: u32,
 }
 
 fn merge(a: (f32, f32, u32), b: (f32, f32, u32)) -> (f32, f32, u32) {
@@ -46,6 +49,17 @@ impl Recorder {
             since_update: (0.0, 0.0, 0),
             episode: (0.0, 0.0, 0),
             active: 0,
+            latched: 0,
+        }
+    }
+
+    /// A recorder after a reset that restored the `latched` fault bits: the run that latched
+    /// them logged them, so they are not logged again.
+    pub const fn after_boot(latched: u32) -> Self {
+        Recorder {
+            active: latched,
+            latched,
+            ..Recorder::new()
         }
     }
 
@@ -90,10 +104,12 @@ impl Recorder {
         Some(shimmy_event(e, merge(self.episode, self.since_update)))
     }
 
-    /// The supervisor's fault bits at `t_ms`: every bit newly active becomes a [`FaultEvent`].
+    /// The supervisor's fault bits at `t_ms`: every bit newly active, or newly latched (an
+    /// intermittent fault escalated), becomes a [`FaultEvent`].
     pub fn on_faults(&mut self, t_ms: u32, active: u32, latched: u32, sink: &mut impl EventSink) {
-        let raised = active & !self.active;
+        let raised = (active & !self.active) | (latched & !self.latched);
         self.active = active;
+        self.latched = latched;
         if raised == 0 {
             // the usual update: no fault raised, no kind to look at
             return;
@@ -120,10 +136,44 @@ fn shimmy_event(e: &Event, (peak, sum, n): (f32, f32, u32)) -> ShimmyEvent {
         freq_hz: e.freq_hz,
         peak_amplitude_rad: e.peak_amplitude_rad,
         duration_s: e.duration_s,
+        shimmy_s: e.shimmy_s,
         level: level_code(e.worst),
         open: e.open,
         peak_current_a: if n > 0 { peak } else { f32::NAN },
         mean_current_a: if n > 0 { sum / n as f32 } else { f32::NAN },
+    }
+}
+
+/// Collects one page of a log read front to back: offered entry `first` and the ones after it,
+/// up to [`EVENTS_PER_PAGE`]; counts every entry offered.
+pub struct Pager<'a> {
+    first: u16,
+    seen: u16,
+    page: &'a mut heapless::Vec<LogEntry, EVENTS_PER_PAGE>,
+}
+
+impl<'a> Pager<'a> {
+    /// A page from entry `first` into `page` (emptied).
+    pub fn new(first: u16, page: &'a mut heapless::Vec<LogEntry, EVENTS_PER_PAGE>) -> Self {
+        page.clear();
+        Pager {
+            first,
+            seen: 0,
+            page,
+        }
+    }
+
+    /// The next entry of the log.
+    pub fn offer(&mut self, e: &LogEntry) {
+        if self.seen >= self.first {
+            let _ = self.page.push(*e);
+        }
+        self.seen = self.seen.saturating_add(1);
+    }
+
+    /// Entries offered so far.
+    pub fn seen(&self) -> u16 {
+        self.seen
     }
 }
 
@@ -161,24 +211,16 @@ impl<const N: usize> RamLog<N> {
         self.entries.iter().nth(usize::from(i)).copied()
     }
 
-    /// Entries and dropped count as a host reads them: the kept entries, then the episode
-    /// still `open` (if any) as one more.
-    pub fn len_with_open(&self, open: Option<ShimmyEvent>) -> (u16, u32) {
-        let (kept, dropped) = self.len();
-        (kept.saturating_add(u16::from(open.is_some())), dropped)
-    }
-
-    /// Entry `i` as a host reads it: the kept entries, oldest first, then the episode still
-    /// `open` (if any).
-    pub fn get_with_open(&self, i: u16, open: Option<ShimmyEvent>) -> Option<LogEntry> {
-        let (kept, _) = self.len();
-        if i < kept {
-            self.get(i)
-        } else if i == kept {
-            open.map(LogEntry::Shimmy)
-        } else {
-            None
+    /// The log as a host reads it, through [`Pager`]: the kept entries, then the episode still
+    /// `open` (if any) as one more; returns the entries and the dropped count.
+    pub fn page(&self, open: Option<ShimmyEvent>, pager: &mut Pager<'_>) -> (u16, u32) {
+        for e in &self.entries {
+            pager.offer(e);
         }
+        if let Some(e) = open {
+            pager.offer(&LogEntry::Shimmy(e));
+        }
+        (pager.seen(), self.dropped)
     }
 
     /// Empties the log; returns how many entries it held.
@@ -238,20 +280,21 @@ mod tests {
             freq_hz: 6.0,
             peak_amplitude_rad: 0.01,
             duration_s: 0.5,
+            shimmy_s: 0.0,
             level: 2,
             open: true,
             peak_current_a: 1.0,
             mean_current_a: 0.5,
         };
-        assert_eq!(log.len_with_open(None), (1, 0));
-        assert_eq!(log.get_with_open(1, None), None);
-        assert_eq!(log.len_with_open(Some(open)), (2, 0));
-        assert_eq!(log.get_with_open(0, Some(open)), Some(fault(1)));
-        assert_eq!(
-            log.get_with_open(1, Some(open)),
-            Some(LogEntry::Shimmy(open))
-        );
-        assert_eq!(log.get_with_open(2, Some(open)), None);
+        let mut page = heapless::Vec::new();
+        assert_eq!(log.page(None, &mut Pager::new(1, &mut page)), (1, 0));
+        assert!(page.is_empty());
+        assert_eq!(log.page(Some(open), &mut Pager::new(0, &mut page)), (2, 0));
+        assert_eq!(page[..], [fault(1), LogEntry::Shimmy(open)]);
+        assert_eq!(log.page(Some(open), &mut Pager::new(1, &mut page)), (2, 0));
+        assert_eq!(page[..], [LogEntry::Shimmy(open)]);
+        log.page(Some(open), &mut Pager::new(2, &mut page));
+        assert!(page.is_empty());
     }
 
     #[test]
@@ -265,6 +308,8 @@ mod tests {
         r.on_faults(30, left_flag | coil_short, coil_short, &mut log);
         r.on_faults(40, 0, coil_short, &mut log);
         r.on_faults(50, left_flag, 0, &mut log); // raised again
+        r.on_faults(60, left_flag, left_flag, &mut log); // escalated: latched while active
+        r.on_faults(70, left_flag, left_flag, &mut log);
         let kinds: std::vec::Vec<_> = (0..log.len().0)
             .filter_map(|i| match log.get(i) {
                 Some(LogEntry::Fault(f)) => Some((f.t_ms, f.kind, f.latched)),
@@ -277,8 +322,14 @@ mod tests {
                 (10, fault_code(FaultKind::LeftFlag), false),
                 (30, fault_code(FaultKind::CoilShort), true),
                 (50, fault_code(FaultKind::LeftFlag), false),
+                (60, fault_code(FaultKind::LeftFlag), true),
             ]
         );
+        // After a reset that restored a latched fault: not logged again.
+        let mut r = Recorder::after_boot(coil_short);
+        let mut log = RamLog::<8>::new();
+        r.on_faults(10, coil_short, coil_short, &mut log);
+        assert!(log.is_empty());
     }
 
     /// A monitor driven through one shimmy episode by amplitude alone: the recorder logs it

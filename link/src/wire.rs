@@ -132,8 +132,10 @@ pub struct EventPage {
 pub enum LogEntry {
     /// A shimmy (warning) episode of the core monitor.
     Shimmy(ShimmyEvent),
-    /// A supervisor fault became active.
+    /// A supervisor fault became active, or latched.
     Fault(FaultEvent),
+    /// The device started.
+    Boot(BootEvent),
 }
 
 /// A warning episode as the core monitor logs it (`shimmy_core::estimator::monitor::Event`),
@@ -150,6 +152,8 @@ pub struct ShimmyEvent {
     pub peak_amplitude_rad: f32,
     /// Duration, s (so far, if `open`).
     pub duration_s: f32,
+    /// Time at the shimmy-present level within it, s.
+    pub shimmy_s: f32,
     /// Highest warning level reached ([`level_code`]).
     pub level: u8,
     /// The episode is still going on.
@@ -160,7 +164,7 @@ pub struct ShimmyEvent {
     pub mean_current_a: f32,
 }
 
-/// A supervisor fault that became active.
+/// A supervisor fault that became active, or latched while active.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FaultEvent {
     /// Time since boot, ms.
@@ -169,6 +173,17 @@ pub struct FaultEvent {
     pub kind: u8,
     /// The supervisor latched it (kept across resets until the next power-on).
     pub latched: bool,
+}
+
+/// A start of the device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BootEvent {
+    /// Why it started ([`cause_name`]).
+    pub cause: u8,
+    /// Resets since power-on (the reset record's count).
+    pub resets_since_power_on: u32,
+    /// Starts of this board, counted in its flash (kept across power-offs).
+    pub boot_count: u32,
 }
 
 /// The fault record: the reset record (`firmware::fault_memory`) and the supervisor's faults.
@@ -236,6 +251,11 @@ pub enum ErrorReply<'a> {
         /// Entries in the log.
         kept: u16,
     },
+    /// Clearing the log erases flash, which only happens with the vehicle stopped and the
+    /// damper idle: nothing was removed.
+    NotAtStandstill,
+    /// The device could not read its log (a flash error); nothing was changed.
+    Storage,
 }
 
 /// What is wrong with a vehicle record (`shimmy_core::vehicle::RecordError`, without text
@@ -313,6 +333,20 @@ pub const fn level_name(code: u8) -> &'static str {
         1 => "margin-low",
         2 => "approaching-critical",
         3 => "shimmy-present",
+        _ => "?",
+    }
+}
+
+/// The name of a reset-cause code (`firmware::fault_memory::ResetCause` in declaration order;
+/// `?` for an unknown one).
+pub const fn cause_name(code: u8) -> &'static str {
+    match code {
+        0 => "power-on",
+        1 => "watchdog",
+        2 => "software (panic or fault handler)",
+        3 => "reset pin",
+        4 => "other",
+        5 => "restart (a new configuration)",
         _ => "?",
     }
 }

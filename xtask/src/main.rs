@@ -483,7 +483,8 @@ fn clippy_firmware() -> Step {
         "qemu,deliberate-failure",
         "pil",
         TRUCK_MODEL,
-        "panic-location",
+        // the debug build's features, together
+        "panic-location,probe-telemetry",
     ] {
         let mut args = vec![
             "clippy",

@@ -119,12 +119,7 @@ mod bench {
             run: meter_run_damped_no_model,
         },
         Entry {
-            name: "link: LinkState::on_update in the meter task (max)",
-            budget: Budget::None,
-            run: link_update,
-        },
-        Entry {
-            name: "meter task: link + store bookkeeping per run (max)",
+            name: "meter task: the log's recorder and the link's update per run (max)",
             budget: Budget::None,
             run: meter_bookkeeping,
         },
@@ -562,20 +557,17 @@ mod bench {
     }
 
     fn shimmy_entry(k: u32) -> shimmy_firmware::store::LogEntry {
-        use shimmy_core::estimator::monitor::{Event, Level};
-        shimmy_firmware::store::LogEntry::Shimmy(shimmy_firmware::store::ShimmyEntry {
-            event: Event {
-                start_s: f64::from(k),
-                speed_mps: 20.0,
-                freq_hz: 8.0,
-                peak_amplitude_rad: 0.02,
-                worst: Level::ShimmyPresent,
-                duration_s: 3.0,
-                shimmy_s: 2.0,
-                open: false,
-            },
-            cmd_peak_a: 2.0,
-            cmd_mean_a: 1.0,
+        shimmy_firmware::store::LogEntry::Shimmy(shimmy_firmware::store::ShimmyEvent {
+            start_s: f64::from(k),
+            speed_mps: 20.0,
+            freq_hz: 8.0,
+            peak_amplitude_rad: 0.02,
+            duration_s: 3.0,
+            shimmy_s: 2.0,
+            level: 3,
+            open: false,
+            peak_current_a: 2.0,
+            mean_current_a: 1.0,
         })
     }
 
@@ -607,56 +599,20 @@ mod bench {
         meter_counts().2
     }
 
-    /// The link's work in the meter task after each update (recorder, fault bits, telemetry),
-    /// worst over 0.5 s after 3 s of warm-up; the meter task runs it on top of the meter run.
-    fn link_update() -> u32 {
-        use shimmy_firmware::control::Health;
-        use shimmy_firmware::fault_memory::ResetRecord;
-        use shimmy_firmware::link::LinkState;
-        use shimmy_firmware::monitoring::{DataMargin, MeterSample};
-        let Ok(mut d) = DataMargin::new() else {
-            return u32::MAX;
-        };
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
-        let h = Health::default();
-        let mut seed = 7;
-        let mut worst = 0;
-        for k in 0..3500u32 {
-            let (l, r) = yaw(k, &mut seed);
-            let s = MeterSample {
-                step: k,
-                psi_l_rad: l,
-                psi_r_rad: r,
-                speed_mps: 15.0,
-                cmd_a: 0.5,
-            };
-            link.on_sample(s.cmd_a);
-            if let Some((u, _)) = d.push(&s, None) {
-                let n = measure_once(|| {
-                    link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), black_box(&h), k)
-                });
-                if k >= 3000 {
-                    worst = worst.max(n);
-                }
-            }
-        }
-        worst
-    }
-
     /// Per meter run, the meter task's work besides `DataMargin::push` (max over 0.5 s after
-    /// 3 s of warm-up): for each of the 10 samples the store's episode recorder and the link's
-    /// command bookkeeping, then the link's update and the store's episode check (`main.rs`).
+    /// 3 s of warm-up): for each of the 10 samples the recorder's command bookkeeping, then the
+    /// recorder's episode and fault check and the link's update (`main.rs`).
     fn meter_bookkeeping() -> u32 {
         use shimmy_firmware::control::Health;
         use shimmy_firmware::fault_memory::ResetRecord;
-        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::link::{Batch, LinkState};
         use shimmy_firmware::monitoring::{DataMargin, MeterSample};
-        use shimmy_firmware::store::EpisodeRecorder;
+        use shimmy_link::log::Recorder;
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
         let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
-        let mut episodes = EpisodeRecorder::new();
+        let mut recorder = Recorder::new();
         let h = Health::default();
         let mut seed = 7;
         let (mut run, mut worst) = (0u32, 0u32);
@@ -670,14 +626,17 @@ mod bench {
                 cmd_a: 0.5,
             };
             run += measure_once(|| {
-                episodes.sample(black_box(s.cmd_a));
-                link.on_sample(black_box(s.cmd_a));
+                recorder.on_command(black_box(s.cmd_a));
             });
             if let Some((u, _)) = d.push(&s, None) {
                 let monitor = d.pipeline().monitor();
                 run += measure_once(|| {
-                    link.on_update(&u, monitor, d.speed_mps(), black_box(&h), k);
-                    black_box(episodes.update(monitor));
+                    let mut batch = Batch::new();
+                    recorder.on_update(monitor, &mut batch);
+                    recorder.on_faults(k, black_box(h.active_faults), 0, &mut batch);
+                    let open = recorder.open_event(monitor);
+                    link.on_update(&u, open, black_box(&h), 0, k);
+                    black_box(batch);
                 });
                 if k >= 3000 {
                     worst = worst.max(run);
@@ -694,7 +653,7 @@ mod bench {
     fn link_telemetry() -> u32 {
         use shimmy_firmware::control::Health;
         use shimmy_firmware::fault_memory::ResetRecord;
-        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::link::{BoardLink, LinkState};
         use shimmy_firmware::monitoring::{DataMargin, MeterSample};
         use shimmy_link::device::{Device, REPLY_BYTES};
         use shimmy_link::frame::{encode, MAX_FRAME};
@@ -702,7 +661,8 @@ mod bench {
         let Ok(mut d) = DataMargin::new() else {
             return u32::MAX;
         };
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(0));
         let mut dev = Device::new();
         let mut reply = [0u8; REPLY_BYTES];
         let mut req = [0u8; MAX_FRAME + 1];
@@ -710,6 +670,10 @@ mod bench {
             return u32::MAX;
         };
         for &b in req.iter().take(n) {
+            let mut link = BoardLink {
+                state: &mut state,
+                store: &mut task,
+            };
             let _ = dev.on_byte(b, &mut link, &mut reply);
         }
         let h = Health::default();
@@ -725,9 +689,13 @@ mod bench {
                 cmd_a: 0.5,
             };
             if let Some((u, _)) = d.push(&s, None) {
-                link.on_update(&u, d.pipeline().monitor(), d.speed_mps(), &h, k);
+                state.on_update(&u, None, &h, 0, k);
                 let mut sent = false;
                 let n = measure_once(|| {
+                    let mut link = BoardLink {
+                        state: &mut state,
+                        store: &mut task,
+                    };
                     sent = black_box(dev.poll_stream(&mut link, &mut reply)).is_some();
                 });
                 if !sent {
@@ -744,14 +712,13 @@ mod bench {
 
     /// One pass of the background loop after a meter run with no model cycle due, as `main.rs`
     /// runs it (`background::PassGate`, 100 Hz): the store's pass while moving (no entry, no
-    /// new fault), the check for a host-written vehicle, a model call between two cycles.
+    /// fault entry), the check for a host-written vehicle, a model call between two cycles.
     fn idle_pass() -> u32 {
-        use shimmy_core::supervisor::faults::FaultSet;
         use shimmy_firmware::fault_memory::ResetRecord;
         use shimmy_firmware::link::LinkState;
         use shimmy_firmware::monitoring::ModelTask;
         use shimmy_firmware::store::{Motion, StoreTask};
-        let mut task = StoreTask::new(bench_store(0), FaultSet::EMPTY);
+        let mut task = StoreTask::new(bench_store(0));
         let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
         let mut model = ModelTask::new(image_vehicle().model());
         let v = 15.0;
@@ -774,7 +741,7 @@ mod bench {
             cmd_peak_a: 0.5,
         };
         let worst = measure(|| {
-            black_box(task.step(black_box(motion), FaultSet::EMPTY, core::iter::empty()));
+            black_box(task.step(black_box(motion), core::iter::empty()));
             black_box(link.take_unsaved());
             black_box(model.step(black_box(t), v));
         });
@@ -806,11 +773,12 @@ mod bench {
     /// (the last completes it: decode, record, reply frame), summed.
     fn link_request() -> u32 {
         use shimmy_firmware::fault_memory::ResetRecord;
-        use shimmy_firmware::link::LinkState;
+        use shimmy_firmware::link::{BoardLink, LinkState};
         use shimmy_link::device::{Device, REPLY_BYTES};
         use shimmy_link::frame::{encode, MAX_FRAME};
         use shimmy_link::wire::{Request, PROTOCOL_HEADER};
-        let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(0));
         let mut dev = Device::new();
         let mut req = [0u8; MAX_FRAME + 1];
         let Ok(n) = encode(PROTOCOL_HEADER, &Request::GetConfig, &mut req) else {
@@ -818,6 +786,10 @@ mod bench {
         };
         let mut reply = [0u8; REPLY_BYTES];
         let mut total = 0;
+        let mut link = BoardLink {
+            state: &mut state,
+            store: &mut task,
+        };
         for &b in req.iter().take(n) {
             total += measure_once(|| {
                 black_box(dev.on_byte(black_box(b), &mut link, &mut reply));

@@ -1,6 +1,6 @@
 //! The scripted drive of the store check, run by a host test and by the QEMU binary
 //! `store-check`: the firmware's own chain (the core `SafeController` at 1 kHz, the core
-//! `DataPipeline` through [`DataMargin`], [`EpisodeRecorder`], [`StoreTask`]) on a scripted
+//! `DataPipeline` through [`DataMargin`], the link's `Recorder`, [`StoreTask`]) on a scripted
 //! road, so the log gets what the running firmware would write.
 //!
 //! | time | road | what the store must get |
@@ -8,17 +8,18 @@
 //! | 0-4 s | 20 m/s, both wheels shimmy at [`SHIMMY_HZ`], [`SHIMMY_RAD`] | (the monitor raises `ShimmyPresent`) |
 //! | 4-9 s | 20 m/s, calm | the episode closes (~6.9 s, when the yaw envelope has fallen below the release threshold): one shimmy entry, written while moving |
 //! | 6-7 s | the coil current reads full scale (a short) | the supervisor latches `coil-short` (~6.06 s): one fault entry |
-//! | 9-14 s | braking to 0 (4 m/s^2) | - |
+//! | 9-14 s | braking to 0 (4 m/s^2) | the margin report becomes unavailable as the braking starts: one fault entry (not latched) |
 //! | 14-[`DRIVE_S`] s | standing, coil off | the standstill token: whatever waited for an erase is written |
 //!
 //! The yaw carries a small road vibration throughout (a still encoder reads as stuck).
 
 use super::flash::FlashError;
-use super::log::{EpisodeRecorder, LogEntry};
 use super::task::{Motion, StoreTask};
+use crate::link::Batch;
 use crate::monitoring::{safe_controller, DataMargin, MeterSample, DT_S};
 use embedded_storage_async::nor_flash::NorFlash;
 use shimmy_core::supervisor::frame::{RawFrame, NOMINAL_PERIOD_US};
+use shimmy_link::log::Recorder;
 
 /// Shimmy frequency of the episode, Hz.
 pub const SHIMMY_HZ: f32 = 8.0;
@@ -71,7 +72,7 @@ pub fn run<F: NorFlash<Error = FlashError>>(task: &mut StoreTask<F>) -> DriveSum
     let Ok(mut data) = DataMargin::new() else {
         return DriveSummary::default();
     };
-    let mut episodes = EpisodeRecorder::new();
+    let mut recorder = Recorder::new();
     let mut summary = DriveSummary::default();
     let mut cmd_peak_a = 0.0f32;
     let mut last_cmd_a = 0.0f32;
@@ -86,20 +87,21 @@ pub fn run<F: NorFlash<Error = FlashError>>(task: &mut StoreTask<F>) -> DriveSum
         let out = ctrl.step(&frame, data.margin_status());
         last_cmd_a = out.current_cmd_a;
         cmd_peak_a = cmd_peak_a.max(out.current_cmd_a);
-        episodes.sample(out.current_cmd_a);
+        recorder.on_command(out.current_cmd_a);
         let Some((u, _)) = data.push(&MeterSample::of(k, &out), None) else {
             continue;
         };
-        let closed = episodes
-            .update(data.pipeline().monitor())
-            .map(LogEntry::Shimmy);
+        let mut batch = Batch::new();
+        recorder.on_update(data.pipeline().monitor(), &mut batch);
+        let sup = ctrl.supervisor();
+        recorder.on_faults(k, sup.faults().bits(), sup.latched().bits(), &mut batch);
         let motion = Motion {
             t_s: u.report.t_s,
             speed_mps: data.speed_mps(),
             cmd_peak_a,
         };
         cmd_peak_a = 0.0;
-        let pass = task.step(motion, ctrl.supervisor().latched(), closed.into_iter());
+        let pass = task.step(motion, batch.into_iter());
         summary.appended += pass.appended;
         match pass.maintained {
             Some(Ok(m)) => summary.written_at_standstill += m.written,

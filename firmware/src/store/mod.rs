@@ -12,8 +12,9 @@
 //!   [`Store::load_config`] never fails: a missing, unreadable or invalid record gives the
 //!   compiled-in vehicle ([`BoardVehicle::compiled_in`](shimmy_core::vehicle::BoardVehicle::compiled_in): the car's `Vehicle::nominal`, the truck image's `truck-full`) and says why ([`ConfigSource`]), so the caller can report
 //!   it as a fault; nothing is half-applied.
-//! - Event log: [`LogEntry`]s (shimmy episodes, latched faults, boots) in a `sequential-storage`
-//!   queue, oldest first; when it is full the oldest go first.
+//! - Event log: the host link's [`LogEntry`]s (shimmy episodes, faults raised or latched,
+//!   boots) in a `sequential-storage` queue, oldest first; when it is full the oldest go first.
+//!   The link serves this log (`crate::link`), so events from before a reset can be read.
 //! - Erase only at standstill: all flash access goes through [`Gated`], whose
 //!   erase is refused unless a [`Standstill`] token opened it for one of [`Store::maintain`],
 //!   [`Store::save_config`] or [`Store::clear_log`]. An append that would need an erase (the
@@ -43,13 +44,13 @@ mod task;
 pub use flash::board;
 pub use flash::{FlashError, RamFlash};
 pub use log::{
-    BootEntry, EpisodeRecorder, FaultEntry, LogEntry, ShimmyEntry, Unreadable, ENTRY_MAX_BYTES,
+    decode, encode, BootEvent, FaultEvent, LogEntry, ShimmyEvent, Unreadable, ENTRY_MAX_BYTES,
 };
 pub use standstill::{
     Standstill, StandstillWatch, IDLE_CURRENT_A, STANDSTILL_HOLD_S, STANDSTILL_SPEED_MPS,
 };
 pub use storage::{
     block_on, Appended, Boot, BootReport, ConfigLoad, ConfigSource, Gated, Layout, Maintenance,
-    Store, StoreError, PENDING, STATE_HEADER_BYTES, STATE_MAX_BYTES,
+    Store, StoreError, ITEM_HEADER_BYTES, PENDING, STATE_HEADER_BYTES, STATE_MAX_BYTES,
 };
 pub use task::{Motion, Pass, StoreTask, RETRY_S};

@@ -2,8 +2,7 @@
 //! module documentation of `store` says what and why).
 
 use super::flash::FlashError;
-use super::log::FaultEntry;
-use super::log::{BootEntry, LogEntry, Unreadable, ENTRY_MAX_BYTES};
+use super::log::{self, BootEvent, LogEntry, Unreadable, ENTRY_MAX_BYTES};
 use super::standstill::Standstill;
 use crate::fault_memory::ResetCause;
 use crate::monitoring::ImageVehicle;
@@ -20,6 +19,9 @@ use shimmy_core::vehicle::{
 
 /// Log entries kept in RAM while an append waits for a standstill erase.
 pub const PENDING: usize = 16;
+/// Bytes `sequential-storage` writes in front of each item (its length, the length's CRC, the
+/// data's CRC), for [`Store::log_capacity`].
+pub const ITEM_HEADER_BYTES: usize = 8;
 /// Bytes of a configuration state before its vehicle record: the boot count (u32,
 /// little-endian) and the clearing mark (1 while a log clear is under way, so a clear cut by a
 /// power loss is finished at the next boot: a half-erased log page is not left for the queue).
@@ -228,7 +230,7 @@ pub struct BootReport {
     /// The configuration to run with.
     pub config: ConfigLoad,
     /// This boot, as logged.
-    pub entry: BootEntry,
+    pub entry: BootEvent,
     /// Entries in the log before this boot's (0 if it could not be read).
     pub log_entries: usize,
 }
@@ -287,6 +289,15 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         self.flash.into_inner()
     }
 
+    /// Entries the log holds at least: every page but the one a full queue erases for new
+    /// entries, filled with the longest entry and `sequential-storage`'s item header (a
+    /// length, its CRC and the data's CRC: [`ITEM_HEADER_BYTES`]).
+    pub fn log_capacity(&self) -> u16 {
+        let pages = (self.layout.log.end - self.layout.log.start) as usize / F::ERASE_SIZE;
+        let per_page = F::ERASE_SIZE / (ENTRY_MAX_BYTES + ITEM_HEADER_BYTES);
+        u16::try_from(pages.saturating_sub(1) * per_page).unwrap_or(u16::MAX)
+    }
+
     /// Entries lost because more than [`PENDING`] waited for a standstill.
     pub fn lost_entries(&self) -> u32 {
         self.lost
@@ -324,7 +335,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
             }
         }
         // Reading the whole log finishes an interrupted page turn of the queue.
-        let log_entries = store.read_log(|_| ()).unwrap_or(0);
+        let log_entries = store.read_log(&mut |_| ()).unwrap_or(0);
         let entry = store.record_boot(cause, resets_since_power_on);
         store.flash.close();
         Ok(Boot {
@@ -460,7 +471,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
 
     /// Counts this boot (the persistent count) and logs it with the reset cause and the fault
     /// memory's reset count; what cannot be written now is written at the next standstill.
-    fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEntry {
+    fn record_boot(&mut self, cause: ResetCause, resets_since_power_on: u32) -> BootEvent {
         let mut state = [0u8; STATE_MAX_BYTES];
         let stored = match self.read_state(&mut state) {
             Ok(n) if n > 0 => state_boots(&state),
@@ -470,8 +481,8 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         if self.store_boots(boot_count).is_err() {
             self.boots_unsaved = Some(boot_count);
         }
-        let entry = BootEntry {
-            cause,
+        let entry = BootEvent {
+            cause: cause as u8,
             resets_since_power_on,
             boot_count,
         };
@@ -491,7 +502,7 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
 
     fn push(&mut self, entry: &LogEntry, drop_oldest: bool) -> Result<(), StoreError> {
         let mut bytes = [0u8; ENTRY_MAX_BYTES];
-        let n = entry.encode(&mut bytes);
+        let n = log::encode(entry, &mut bytes);
         let data = bytes.get(..n).ok_or(StoreError::Library)?;
         let mut queue = self.queue()?;
         block_on(queue.push(data, drop_oldest)).map_err(StoreError::from)
@@ -539,10 +550,13 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
     }
 
     /// Calls `each` with every entry of the log, oldest first (entries still pending in RAM
-    /// last); returns how many. Reads only.
+    /// last); returns how many. Reads only. (`dyn`: one copy of the queue walk in the image
+    /// for its callers, the boot, the link's pages and its clear; entries by reference: each
+    /// is copied once, by the caller that keeps it.)
+    #[inline(never)]
     pub fn read_log(
         &mut self,
-        mut each: impl FnMut(Result<LogEntry, Unreadable>),
+        each: &mut dyn FnMut(Result<&LogEntry, Unreadable>),
     ) -> Result<usize, StoreError> {
         let mut count = 0;
         let config =
@@ -551,25 +565,13 @@ impl<F: NorFlash<Error = FlashError>> Store<F> {
         let mut iter = block_on(queue.iter())?;
         let mut buf = [0u8; ENTRY_MAX_BYTES + 8];
         while let Some(item) = block_on(iter.next(&mut buf))? {
-            each(LogEntry::decode(&item));
+            each(log::decode(&item).as_ref().map_err(|u| *u));
             count += 1;
         }
         for e in &self.pending {
-            each(Ok(*e));
+            each(Ok(e));
             count += 1;
         }
-        Ok(count)
-    }
-
-    /// Calls `each` with every latched fault in the log, oldest first; returns how many.
-    pub fn read_faults(&mut self, mut each: impl FnMut(&FaultEntry)) -> Result<usize, StoreError> {
-        let mut count = 0;
-        self.read_log(|e| {
-            if let Ok(LogEntry::Fault(f)) = e {
-                each(&f);
-                count += 1;
-            }
-        })?;
         Ok(count)
     }
 

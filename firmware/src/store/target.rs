@@ -6,7 +6,6 @@ use super::storage::{BootReport, Layout, Store, StoreError};
 use super::task::StoreTask;
 use crate::fault_memory::ResetCause;
 use core::sync::atomic::{AtomicBool, Ordering};
-use shimmy_core::supervisor::faults::FaultSet;
 
 /// The flash the store runs on in this build.
 #[cfg(not(feature = "qemu"))]
@@ -46,16 +45,15 @@ fn take(ram_lost: bool) -> Option<TargetFlash> {
 }
 
 /// Opens the store at boot (before `board::init` starts the watchdog: see `Store::boot`)
-/// and wraps it for the background loop. `latched` are the faults the fault memory restored.
+/// and wraps it for the background loop.
 pub fn boot(
     ram_lost: bool,
     cause: ResetCause,
     resets_since_power_on: u32,
-    latched: FaultSet,
 ) -> Result<(StoreTask<TargetFlash>, BootReport), StoreError> {
     let flash = take(ram_lost).ok_or(StoreError::Layout)?;
     let b = Store::boot(flash, LAYOUT, cause, resets_since_power_on)?;
-    Ok((StoreTask::new(b.store, latched), b.report))
+    Ok((StoreTask::new(b.store), b.report))
 }
 
 /// The RAM flash of the QEMU build.

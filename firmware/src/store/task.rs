@@ -1,13 +1,11 @@
-//! The store as the firmware's background loop runs it: log entries from the meter task, newly
-//! latched faults from the control task, and the standstill work (the only holder of a
-//! [`Standstill`] token at run time).
+//! The store as the firmware's background loop runs it: log entries from the meter task's
+//! recorder, and the standstill work (the only holder of a [`Standstill`] token at run time).
 
 use super::flash::FlashError;
-use super::log::{FaultEntry, LogEntry};
+use super::log::LogEntry;
 use super::standstill::{Standstill, StandstillWatch};
 use super::storage::{Maintenance, Store, StoreError};
 use embedded_storage_async::nor_flash::NorFlash;
-use shimmy_core::supervisor::faults::FaultSet;
 
 /// A failed standstill maintenance is retried after this long, s.
 pub const RETRY_S: f64 = 10.0;
@@ -46,18 +44,15 @@ pub struct Pass {
 pub struct StoreTask<F> {
     store: Store<F>,
     watch: StandstillWatch,
-    latched_logged: FaultSet,
     retry_at_s: f64,
 }
 
 impl<F: NorFlash<Error = FlashError>> StoreTask<F> {
-    /// The task over the booted `store`; `latched_at_boot` (restored by the fault memory) was
-    /// logged by the run that latched it.
-    pub fn new(store: Store<F>, latched_at_boot: FaultSet) -> Self {
+    /// The task over the booted `store`.
+    pub fn new(store: Store<F>) -> Self {
         StoreTask {
             store,
             watch: StandstillWatch::new(),
-            latched_logged: latched_at_boot,
             retry_at_s: f64::NEG_INFINITY,
         }
     }
@@ -68,29 +63,18 @@ impl<F: NorFlash<Error = FlashError>> StoreTask<F> {
         &mut self.store
     }
 
-    /// One pass: appends `entries`, logs every fault in `latched` not logged yet, and at
-    /// standstill writes what waits for an erase.
-    pub fn step(
-        &mut self,
-        motion: Motion,
-        latched: FaultSet,
-        entries: impl Iterator<Item = LogEntry>,
-    ) -> Pass {
+    /// Entries the log holds at least ([`Store::log_capacity`]).
+    pub fn log_capacity(&self) -> u16 {
+        self.store.log_capacity()
+    }
+
+    /// One pass: appends `entries` and at standstill writes what waits for an erase.
+    pub fn step(&mut self, motion: Motion, entries: impl Iterator<Item = LogEntry>) -> Pass {
         let mut pass = Pass::default();
         for e in entries {
             self.store.append(&e);
             pass.appended += 1;
         }
-        let new = FaultSet::from_bits(latched.bits() & !self.latched_logged.bits());
-        for fault in new.iter() {
-            self.store.append(&LogEntry::Fault(FaultEntry {
-                t_s: motion.t_s,
-                fault,
-                latched,
-            }));
-            pass.appended += 1;
-        }
-        self.latched_logged = latched;
         self.watch
             .observe(motion.t_s, motion.speed_mps, motion.cmd_peak_a);
         if self.store.needs_maintenance() && motion.t_s >= self.retry_at_s {

@@ -3,10 +3,11 @@
 
 use super::*;
 use crate::store::drive;
-use crate::store::{RamFlash, ShimmyEntry, StandstillWatch, StoreTask};
-use shimmy_core::estimator::monitor::{Event, Level};
-use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
+use crate::store::{FaultEvent, RamFlash, ShimmyEvent, StandstillWatch, StoreTask};
+use shimmy_core::estimator::monitor::Level;
+use shimmy_core::supervisor::faults::FaultKind;
 use shimmy_core::vehicle::{Vehicle, FIELDS};
+use shimmy_link::wire::{fault_code, level_code};
 
 /// Small pages so a handful of writes fill one and force the page turns of both queues (each with an erase) under the cut.
 const PAGE: usize = 2048;
@@ -41,25 +42,23 @@ fn vehicle(k: u32) -> Vehicle {
 }
 
 fn shimmy(k: u32) -> LogEntry {
-    LogEntry::Shimmy(ShimmyEntry {
-        event: Event {
-            start_s: 10.0 * f64::from(k),
-            speed_mps: 20.0 + k as f32,
-            freq_hz: 8.0,
-            peak_amplitude_rad: 0.01 * k as f32,
-            worst: Level::ShimmyPresent,
-            duration_s: 2.5,
-            shimmy_s: 1.5,
-            open: false,
-        },
-        cmd_peak_a: 2.0,
-        cmd_mean_a: 1.25,
+    LogEntry::Shimmy(ShimmyEvent {
+        start_s: 10.0 * f64::from(k),
+        speed_mps: 20.0 + k as f32,
+        freq_hz: 8.0,
+        peak_amplitude_rad: 0.01 * k as f32,
+        duration_s: 2.5,
+        shimmy_s: 1.5,
+        level: level_code(Level::ShimmyPresent),
+        open: false,
+        peak_current_a: 2.0,
+        mean_current_a: 1.25,
     })
 }
 
 fn log_of(s: &mut Store<Flash>) -> Vec<LogEntry> {
     let mut v = Vec::new();
-    s.read_log(|e| v.push(e.expect("every stored entry reads back whole")))
+    s.read_log(&mut |e| v.push(*e.expect("every stored entry reads back whole")))
         .unwrap();
     v
 }
@@ -265,18 +264,25 @@ fn without_the_token_nothing_is_erased() {
     }
     // Both pages of the log are full: the next entry needs the oldest page erased.
     assert!(k > 20, "{k} entries fit the log");
+    assert!(
+        u32::from(s.log_capacity()) <= k / 2,
+        "the capacity claimed ({}) is what a full queue keeps after turning a page ({})",
+        s.log_capacity(),
+        k / 2
+    );
     let erased_before = s.flash().bytes().to_vec();
-    let mut latched = FaultSet::EMPTY;
-    latched.insert(FaultKind::CoilShort);
-    let fault = LogEntry::Fault(FaultEntry {
-        t_s: 5.0,
-        fault: FaultKind::CoilShort,
-        latched,
+    let fault = LogEntry::Fault(FaultEvent {
+        t_ms: 5000,
+        kind: fault_code(FaultKind::CoilShort),
+        latched: true,
     });
     assert_eq!(s.append(&fault), Appended::Pending);
     assert_eq!(s.pending_entries(), 2);
-    let mut faults = Vec::new();
-    assert_eq!(s.read_faults(|f| faults.push(*f)).unwrap(), 1);
+    assert_eq!(
+        log_of(&mut s).last(),
+        Some(&fault),
+        "a pending entry is read last"
+    );
     assert_eq!(s.flash().bytes(), &erased_before[..], "no byte changed");
     // A config write needs the token by its signature; the flush too.
     let mut w = standing();
@@ -309,8 +315,8 @@ fn boots_are_counted_across_power_offs_and_logged_with_their_cause() {
     assert_eq!(log.len(), 3);
     assert_eq!(
         log[2],
-        LogEntry::Boot(BootEntry {
-            cause: ResetCause::Watchdog,
+        LogEntry::Boot(BootEvent {
+            cause: ResetCause::Watchdog as u8,
             resets_since_power_on: 2,
             boot_count: 3
         })
@@ -364,7 +370,7 @@ fn a_layout_that_does_not_fit_is_refused() {
 /// moving are logged with what the monitor and the supervisor saw; with a full log they wait in
 /// RAM and the standstill at the end writes them.
 #[test]
-fn a_drive_logs_the_shimmy_episode_and_the_latched_fault() {
+fn a_drive_logs_the_shimmy_episode_and_the_faults() {
     for prefill in [0u32, 88] {
         let mut flash = Flash::new();
         if prefill > 0 {
@@ -376,26 +382,31 @@ fn a_drive_logs_the_shimmy_episode_and_the_latched_fault() {
         }
         let b = Store::boot(flash, LAYOUT, ResetCause::PowerOn, 0).unwrap();
         let boot_entry = b.report.entry;
-        let mut task = StoreTask::new(b.store, FaultSet::EMPTY);
+        let mut task = StoreTask::new(b.store);
         let d = drive::run(&mut task);
-        assert_eq!(d.appended, 2, "{d:?}");
+        assert_eq!(d.appended, 3, "{d:?} {:?}", log_of(task.store()));
         assert_eq!(d.maintenance_errors, 0);
         assert_eq!(d.final_cmd_a, 0.0, "standing with the coil off");
         let log = log_of(task.store());
-        // The newest prefilled entries, this boot, then the drive's two: the short is latched
+        // The newest prefilled entries, this boot, then the drive's three: the short is latched
         // before the episode closes (the yaw envelope falls below its release threshold ~3 s
-        // after the shimmy ends).
-        let kept = log.len() - 3;
+        // after the shimmy ends); braking, the margin report becomes unavailable (the mode
+        // meter does not trust a decelerating drive), a fault the supervisor raises.
+        let kept = log.len() - 4;
         assert!(log[..kept].iter().eq((prefill - kept as u32..prefill)
             .map(shimmy)
             .collect::<Vec<_>>()
             .iter()));
-        let [LogEntry::Boot(boot), LogEntry::Fault(f), LogEntry::Shimmy(s)] = log[kept..] else {
+        let [LogEntry::Boot(boot), LogEntry::Fault(f), LogEntry::Shimmy(s), LogEntry::Fault(g)] =
+            log[kept..]
+        else {
             panic!("{log:?}");
         };
+        assert_eq!(g.kind, fault_code(FaultKind::MarginUnavailable), "{g:?}");
+        assert!(!g.latched && (9000..10_500).contains(&g.t_ms), "{g:?}");
         assert_eq!(boot, boot_entry);
-        let e = &s.event;
-        assert_eq!(e.worst, Level::ShimmyPresent);
+        let e = &s;
+        assert_eq!(e.level, level_code(Level::ShimmyPresent));
         assert!((e.freq_hz - drive::SHIMMY_HZ).abs() < 0.5, "{e:?}");
         assert!((e.speed_mps - drive::CRUISE_MPS).abs() < 0.5, "{e:?}");
         assert!(
@@ -407,16 +418,17 @@ fn a_drive_logs_the_shimmy_episode_and_the_latched_fault() {
             "{e:?}"
         );
         assert!(
-            s.cmd_peak_a > 0.0 && s.cmd_mean_a > 0.0,
+            s.peak_current_a > 0.0 && s.mean_current_a > 0.0,
             "the controller acted: {s:?}"
         );
-        assert_eq!(f.fault, FaultKind::CoilShort);
-        assert!((6.0..7.5).contains(&f.t_s), "{f:?}");
-        // With the log full (the short boot entry still fits its last page), both of the
-        // drive's entries waited for the standstill, which dropped the oldest page (half the
-        // log) for them.
+        assert_eq!(f.kind, fault_code(FaultKind::CoilShort));
+        assert!(f.latched, "{f:?}");
+        assert!((6000..7500).contains(&f.t_ms), "{f:?}");
+        // With the log full (the short boot entry still fits its last page), the drive's
+        // entries waited for the standstill, which dropped the oldest page (half the log) for
+        // them.
         let (written, kept_expected) = if prefill > 0 {
-            (2, prefill as usize / 2)
+            (3, prefill as usize / 2)
         } else {
             (0, 0)
         };
@@ -468,7 +480,7 @@ fn a_cut_clear_is_finished_at_boot() {
         }
         let got: Vec<LogEntry> = log_of(&mut s)
             .into_iter()
-            .filter(|e| matches!(e, LogEntry::Shimmy(s) if s.event.start_s >= 1000.0))
+            .filter(|e| matches!(e, LogEntry::Shimmy(s) if s.start_s >= 1000.0))
             .collect();
         let kept = got.len();
         assert!(got[..] == (140 - kept as u32..140).map(shimmy).collect::<Vec<_>>()[..]);

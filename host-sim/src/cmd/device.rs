@@ -15,7 +15,7 @@ use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
 use shimmy_core::vehicle::{
     encode_record, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
-use shimmy_link::wire::{fault_name, level_name, FaultReport, LogEntry};
+use shimmy_link::wire::{cause_name, fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -289,13 +289,7 @@ fn names(bits: u32) -> String {
 }
 
 fn faults_text(f: &FaultReport) -> String {
-    let cause = match f.last_cause {
-        0 => "power-on",
-        1 => "watchdog",
-        2 => "software (panic or fault handler)",
-        3 => "reset pin",
-        _ => "other",
-    };
+    let cause = cause_name(f.last_cause);
     format!(
         "resets since power-on   {}\nlast reset cause        {cause}\nabnormal resets in row  {}\nuptime                  {:.3} s\nlatched faults          {}\nactive faults           {}\nfaults raised           {}\n",
         f.resets,
@@ -308,7 +302,7 @@ fn faults_text(f: &FaultReport) -> String {
 }
 
 /// The CSV header of the event log.
-pub const EVENTS_CSV_HEADER: &str = "index,kind,start_s,speed_kmh,freq_hz,peak_amplitude_mrad,duration_s,level,open,peak_current_a,mean_current_a,fault,latched";
+pub const EVENTS_CSV_HEADER: &str = "index,kind,start_s,speed_kmh,freq_hz,peak_amplitude_mrad,duration_s,shimmy_s,level,open,peak_current_a,mean_current_a,fault,latched,cause,resets_since_power_on,boot_count";
 
 /// The log as CSV, one row per entry (shimmy columns empty for a fault and vice versa).
 pub fn events_csv(log: &EventLog) -> String {
@@ -318,12 +312,13 @@ pub fn events_csv(log: &EventLog) -> String {
         let _ = match e {
             LogEntry::Shimmy(x) => writeln!(
                 s,
-                "{i},shimmy,{:.3},{:.1},{:.2},{:.2},{:.2},{},{},{:.3},{:.3},,",
+                "{i},shimmy,{:.3},{:.1},{:.2},{:.2},{:.2},{:.2},{},{},{:.3},{:.3},,,,,",
                 x.start_s,
                 f64::from(x.speed_mps) * 3.6,
                 x.freq_hz,
                 x.peak_amplitude_rad * 1e3,
                 x.duration_s,
+                x.shimmy_s,
                 level_name(x.level),
                 x.open,
                 x.peak_current_a,
@@ -331,10 +326,18 @@ pub fn events_csv(log: &EventLog) -> String {
             ),
             LogEntry::Fault(f) => writeln!(
                 s,
-                "{i},fault,{:.3},,,,,,,,,{},{}",
+                "{i},fault,{:.3},,,,,,,,,,{},{},,,",
                 f64::from(f.t_ms) * 1e-3,
                 fault_name(f.kind),
                 f.latched
+            ),
+            // A boot has no time of its own (each run's clock starts at 0).
+            LogEntry::Boot(b) => writeln!(
+                s,
+                "{i},boot,,,,,,,,,,,,,{},{},{}",
+                cause_name(b.cause),
+                b.resets_since_power_on,
+                b.boot_count
             ),
         };
     }
@@ -373,6 +376,15 @@ fn events_table(log: &EventLog) -> String {
                 "",
                 fault_name(f.kind),
                 if f.latched { " (latched)" } else { "" }
+            ),
+            LogEntry::Boot(b) => writeln!(
+                s,
+                "{i:>3}  boot   {:>9} {:>59}  boot {} of this board, cause {}, {} resets since power-on",
+                "",
+                "",
+                b.boot_count,
+                cause_name(b.cause),
+                b.resets_since_power_on
             ),
         };
     }

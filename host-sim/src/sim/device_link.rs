@@ -180,6 +180,12 @@ pub fn device_error(e: &ErrorReply<'_>) -> anyhow::Error {
         ErrorReply::NoSuchEntry { kept } => {
             anyhow!("no such log entry: the device's log holds {kept}")
         }
+        ErrorReply::NotAtStandstill => anyhow!(
+            "the device clears its log (a flash erase) only with the vehicle stopped and the damper idle for 2 s; nothing was removed"
+        ),
+        ErrorReply::Storage => {
+            anyhow!("the device could not read its flash log; nothing was changed")
+        }
         ErrorReply::Config(p) => anyhow!(
             "the device refused the configuration, nothing was stored: {}",
             config_problem(p)

@@ -28,8 +28,10 @@ use shimmy_core::truck::TruckParams;
 use shimmy_core::truck_vehicle::TruckVehicle;
 use shimmy_core::vehicle::{record_schema_of, RecordVehicle, Vehicle};
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
-use shimmy_link::log::{RamLog, Recorder};
-use shimmy_link::wire::{level_code, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry};
+use shimmy_link::log::{EventSink, Pager, RamLog, Recorder};
+use shimmy_link::wire::{
+    level_code, BootEvent, ErrorReply, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry,
+};
 use shimmy_link::PROTOCOL_VERSION;
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -75,14 +77,15 @@ impl<V: RecordVehicle> Backend for SimBackend<V> {
         self.pending = !self.standstill;
         self.standstill
     }
-    fn log_len(&self) -> (u16, u32) {
-        self.log.len_with_open(self.open)
+    fn read_log(&mut self, pager: &mut Pager<'_>) -> Result<(u16, u32), ErrorReply<'static>> {
+        Ok(self.log.page(self.open, pager))
     }
-    fn log_entry(&self, i: u16) -> Option<LogEntry> {
-        self.log.get_with_open(i, self.open)
-    }
-    fn clear_log(&mut self) -> u16 {
-        self.log.clear()
+    /// As on the board: only standing (the board's clear erases flash).
+    fn clear_log(&mut self) -> Result<u16, ErrorReply<'static>> {
+        if !self.standstill {
+            return Err(ErrorReply::NotAtStandstill);
+        }
+        Ok(self.log.clear())
     }
     fn faults(&self) -> FaultReport {
         self.faults
@@ -248,6 +251,13 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
     }];
     let pipe = ShimmyPipeline::<16, M::Linear, N>::for_model(vehicle.model.linear(), params)
         .context("pipeline configuration")?;
+    // The log starts as a board's does: with its first boot after a power-on.
+    let mut log = RamLog::new();
+    log.append(LogEntry::Boot(BootEvent {
+        cause: 0,
+        resets_since_power_on: 0,
+        boot_count: 1,
+    }));
     let mut obs = DriveObserver {
         pipe: Box::new(pipe),
         recorder: Recorder::new(),
@@ -255,7 +265,7 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
             vehicle: stored,
             pending: false,
             standstill: false,
-            log: RamLog::new(),
+            log,
             open: None,
             faults: FaultReport {
                 resets: 0,

@@ -12,6 +12,7 @@ use shimmy_core::vehicle::{
 };
 use shimmy_link::frame::{self, MAX_FRAME};
 use shimmy_link::wire::{Header, LogEntry, PROTOCOL_HEADER};
+use shimmy_link::PROTOCOL_VERSION;
 use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
 use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
@@ -98,17 +99,21 @@ fn the_simulated_drive_logs_its_shimmy_episode_and_its_fault_and_config_round_tr
         .iter()
         .filter_map(|e| match e {
             LogEntry::Shimmy(s) => Some(*s),
-            LogEntry::Fault(_) => None,
+            LogEntry::Fault(_) | LogEntry::Boot(_) => None,
         })
         .collect();
     assert!(!shimmy.is_empty(), "a warning episode in {log:?}");
+    assert!(
+        matches!(log.entries.first(), Some(LogEntry::Boot(_))),
+        "the log starts with the boot, as a board's: {log:?}"
+    );
     assert!(shimmy.iter().all(|s| s.peak_current_a.is_finite()));
     let fault_ms: Vec<u32> = log
         .entries
         .iter()
         .filter_map(|e| match e {
             LogEntry::Fault(f) => Some(f.t_ms),
-            LogEntry::Shimmy(_) => None,
+            LogEntry::Shimmy(_) | LogEntry::Boot(_) => None,
         })
         .collect();
     let start_ms = (PARITY_FAULT_S.0 * 1e3) as u32;
@@ -195,7 +200,7 @@ fn an_unknown_request_is_reported_and_changes_nothing() {
     let n = frame::encode(h, &(0u8,), &mut out).unwrap();
     let e = c.send_raw(&out[..n - 1]).unwrap_err().to_string();
     assert!(
-        e.contains("version mismatch") && e.contains("speaks version 1"),
+        e.contains("version mismatch") && e.contains(&format!("speaks version {PROTOCOL_VERSION}")),
         "{e}"
     );
     assert_eq!(state(&mut c), before);
