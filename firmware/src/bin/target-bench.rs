@@ -144,6 +144,11 @@ mod bench {
             run: link_request,
         },
         Entry {
+            name: "link: the last events page of a 40-entry flash log",
+            budget: Budget::None,
+            run: link_events_page,
+        },
+        Entry {
             name: "eigen update: linearise + eigenvalues (f32, balanced)",
             budget: Budget::None,
             run: eigen_update_f32,
@@ -767,6 +772,45 @@ mod bench {
         }
         IDLE_WAKE_MAX.store(worst, Ordering::Relaxed);
         worst
+    }
+
+    /// A host reading the log: the request for the last page (entries 32-39) of a flash log of
+    /// 40 shimmy entries (and the boot), fed byte by byte and summed. The handler walks the
+    /// flash queue from its oldest entry for every page, so the cost grows with the log.
+    fn link_events_page() -> u32 {
+        use shimmy_firmware::fault_memory::ResetRecord;
+        use shimmy_firmware::link::{BoardLink, LinkState};
+        use shimmy_link::device::{Device, REPLY_BYTES};
+        use shimmy_link::frame::{encode, MAX_FRAME};
+        use shimmy_link::wire::{Request, PROTOCOL_HEADER};
+        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
+        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(40));
+        let mut dev = Device::new();
+        let mut req = [0u8; MAX_FRAME + 1];
+        let Ok(n) = encode(
+            PROTOCOL_HEADER,
+            &Request::ReadEvents { first: 32 },
+            &mut req,
+        ) else {
+            return u32::MAX;
+        };
+        let mut reply = [0u8; REPLY_BYTES];
+        let mut link = BoardLink {
+            state: &mut state,
+            store: &mut task,
+        };
+        let mut total = 0;
+        let mut replied = 0;
+        for &b in req.iter().take(n) {
+            total += measure_once(|| {
+                replied = black_box(dev.on_byte(black_box(b), &mut link, &mut reply)).unwrap_or(0);
+            });
+        }
+        // A full page of 8 shimmy entries is more than 300 bytes; an error reply is short.
+        if replied < 300 {
+            return u32::MAX; // not the path we meant to measure
+        }
+        total
     }
 
     /// One request through the link's handler: the bytes of a config-get frame fed one by one
