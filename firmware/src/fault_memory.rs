@@ -45,7 +45,7 @@ pub enum ResetCause {
     /// Anything else (low-power management, no flag).
     Other = 4,
     /// The firmware restarted itself at standstill to run a new vehicle configuration
-    /// ([`persist::restart`]).
+    /// (`persist::restart`, target only).
     Restart = 5,
 }
 
