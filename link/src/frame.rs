@@ -321,4 +321,35 @@ mod tests {
         };
         assert!(encode(header(5), &reply, &mut out).is_ok());
     }
+
+    /// A full page of the longest entries, with the largest counts (postcard's varints at their
+    /// longest), fits a frame: the device never has to cut a page short.
+    #[test]
+    fn a_full_page_of_the_longest_entries_fits_a_frame() {
+        use crate::wire::{EventPage, LogEntry, Response, ShimmyEvent, EVENTS_PER_PAGE};
+        let e = LogEntry::Shimmy(ShimmyEvent {
+            start_s: 1e9,
+            speed_mps: 70.0,
+            freq_hz: 40.0,
+            peak_amplitude_rad: 0.5,
+            duration_s: 1e6,
+            shimmy_s: 1e6,
+            level: 3,
+            open: true,
+            peak_current_a: 2.0,
+            mean_current_a: 2.0,
+        });
+        let mut entries = heapless::Vec::new();
+        while entries.push(e).is_ok() {}
+        assert_eq!(entries.len(), EVENTS_PER_PAGE);
+        let reply = Response::Events(EventPage {
+            kept: u16::MAX,
+            dropped: u32::MAX,
+            first: u16::MAX,
+            entries,
+        });
+        let mut out = [0u8; MAX_FRAME + 1];
+        let n = encode(header(u16::MAX), &reply, &mut out).unwrap();
+        assert!(n <= MAX_FRAME + 1, "{n}");
+    }
 }

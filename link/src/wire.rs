@@ -53,7 +53,10 @@ pub enum Request<'a> {
     },
 }
 
-/// Entries per [`Response::Events`] page.
+/// Entries per [`Response::Events`] page. A frame would hold 16 of the longest (`frame::tests`
+/// checks a full page fits), which would halve the pages of a board's log, each a walk of its
+/// flash log from the oldest entry; 8 keep the link task's reply 132 B smaller in flash, where
+/// the board had 168 B left (`cargo xtask size`).
 pub const EVENTS_PER_PAGE: usize = 8;
 
 /// Device to host.
