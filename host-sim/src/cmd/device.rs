@@ -173,7 +173,8 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
                 if now {
                     "in effect (vehicle at standstill)"
                 } else {
-                    "takes effect at the next standstill"
+                    "takes effect at the next standstill (2 s stopped with the damper idle: a \
+                     board saves it to flash then and restarts into it)"
                 }
             );
         }
