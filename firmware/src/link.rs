@@ -269,6 +269,20 @@ pub fn save_vehicle<F: NorFlash<Error = FlashError>>(
     }
 }
 
+/// After [`Saved::Saved`]: whether the board may restart into the saved vehicle now. Only
+/// with nothing waiting to be written (`entries_waiting`: entries still in the meter's queue;
+/// the store's pending entries and boot count) and while the vehicle still stands with the
+/// damper idle: it may have driven off while a maintenance waited for its retry.
+pub fn may_restart<F: NorFlash<Error = FlashError>>(
+    task: &mut StoreTask<F>,
+    t_s: f64,
+    entries_waiting: bool,
+) -> bool {
+    !entries_waiting
+        && !task.store().needs_maintenance()
+        && task.at_standstill(t_s, |_, _| ()).is_some()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,7 +471,22 @@ mod tests {
         let (before, _) = read_all(&mut link);
         assert_eq!(link.clear_log(), Ok(before.len() as u16));
         assert!(read_all(&mut link).0.is_empty());
-        // The restart: the boot loads it.
+        // The restart: at standstill with nothing waiting, never while moving; the boot
+        // loads the vehicle.
+        assert!(!may_restart(&mut task, state.t_s, true), "an entry waits");
+        assert!(may_restart(&mut task, state.t_s, false));
+        task.step(
+            crate::store::Motion {
+                t_s: state.t_s + 0.01,
+                speed_mps: 3.0,
+                cmd_peak_a: 0.2,
+            },
+            core::iter::empty(),
+        );
+        assert!(
+            !may_restart(&mut task, state.t_s + 0.01, false),
+            "driven off"
+        );
         let (_, next) = boot(task.store().flash().clone());
         assert_eq!(next, second);
     }

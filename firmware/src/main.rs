@@ -31,7 +31,7 @@ mod app {
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
-    use shimmy_firmware::link::{save_vehicle, Batch, BoardLink, LinkState, Saved};
+    use shimmy_firmware::link::{may_restart, save_vehicle, Batch, BoardLink, LinkState, Saved};
     use shimmy_firmware::monitoring::{
         safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
     };
@@ -219,8 +219,7 @@ mod app {
             cx.shared.store_task.lock(|task| {
                 store_pass(task, log_rx, motion);
                 *restart_due |= save_host_config(task, link, motion.t_s);
-                // Restart into a saved vehicle once nothing waits to be written.
-                if *restart_due && !task.store().needs_maintenance() && !log_rx.ready() {
+                if *restart_due && may_restart(task, motion.t_s, log_rx.ready()) {
                     defmt::info!("restarting to run the saved vehicle");
                     persist::restart();
                 }
