@@ -12,9 +12,10 @@
 //! - Configuration: the vehicle this boot runs (the flash store's, else the compiled-in
 //!   defaults). A vehicle a host writes has been validated whole by the core
 //!   (`Vehicle::decode_record`) before it gets here; it is served as pending and kept until the
-//!   background loop saves it with the standstill token ([`save_vehicle`]), which then
-//!   restarts the board into it (`fault_memory::persist::restart`): the one path by which a
-//!   vehicle reaches the control, meter and model tasks is the boot.
+//!   background loop saves it with the standstill token ([`save_vehicle`]) and then, while
+//!   the vehicle still stands ([`may_restart`]), restarts the board into it
+//!   (`fault_memory::persist::restart`): the one path by which a vehicle reaches the control,
+//!   meter and model tasks is the boot.
 
 use embedded_storage_async::nor_flash::NorFlash;
 use shimmy_core::supervisor::faults::FaultKind;
