@@ -113,7 +113,8 @@ pub struct Identity<'a> {
     pub protocol: u16,
     /// The vehicle record schema the device reads (`shimmy_core::vehicle::record_schema`).
     pub vehicle_schema: u32,
-    /// Capacity of the event log, entries.
+    /// Entries the event log holds (on a board at least this many: its flash log filled with
+    /// the longest entry; when full, the oldest go first).
     pub log_capacity: u16,
 }
 
