@@ -32,10 +32,6 @@ use crate::fault_memory::ResetRecord;
 use crate::monitoring::{ImageVehicle, MarginUpdate};
 use crate::store::{FlashError, StoreTask};
 
-/// Below this trusted speed the vehicle is at standstill, m/s (an unknown speed is not): the
-/// flash store's threshold, so the link and the store agree on what a standstill is.
-pub const STANDSTILL_MPS: f32 = crate::store::STANDSTILL_SPEED_MPS;
-
 /// What the link serves besides the flash store: configuration, fault record, newest margin
 /// report, the episode going on.
 pub struct LinkState {
@@ -219,19 +215,16 @@ impl<F: NorFlash<Error = FlashError>> Backend for BoardLink<'_, F> {
         ))
     }
 
+    /// Counts the entries only once the token is granted: a refused clear walks no flash.
     fn clear_log(&mut self) -> Result<u16, ErrorReply<'static>> {
-        let kept = self
-            .store
-            .store()
-            .read_log(&mut |_| ())
-            .map_err(|_| ErrorReply::Storage)?;
-        match self
-            .store
-            .at_standstill(self.state.t_s, |s, token| s.clear_log(token))
-        {
+        let cleared = self.store.at_standstill(self.state.t_s, |s, token| {
+            let kept = s.read_log(&mut |_| ())?;
+            s.clear_log(token).map(|()| kept)
+        });
+        match cleared {
             None => Err(ErrorReply::NotAtStandstill),
             Some(Err(_)) => Err(ErrorReply::Storage),
-            Some(Ok(())) => Ok(u16::try_from(kept).unwrap_or(u16::MAX)),
+            Some(Ok(kept)) => Ok(u16::try_from(kept).unwrap_or(u16::MAX)),
         }
     }
 

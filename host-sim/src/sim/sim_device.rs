@@ -169,8 +169,9 @@ impl<V: RecordVehicle, L: LinearModel<S>, const S: usize> LoopObserver for Drive
     }
 }
 
-/// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's value).
-pub use shimmy_firmware::link::STANDSTILL_MPS;
+/// Below this trusted speed the simulated vehicle stands still, m/s (the firmware's store's
+/// value, so the simulated device and a board agree on what a standstill is).
+pub use shimmy_firmware::store::STANDSTILL_SPEED_MPS as STANDSTILL_MPS;
 
 impl From<FamilyVehicle<TruckParams>> for TruckVehicle {
     /// The truck as the record stores it (the same two parts).
