@@ -774,24 +774,25 @@ mod bench {
         worst
     }
 
-    /// A host reading the log: the request for the last page (entries 32-39) of a flash log of
-    /// 40 shimmy entries (and the boot), fed byte by byte and summed. The handler walks the
-    /// flash queue from its oldest entry for every page, so the cost grows with the log.
-    fn link_events_page() -> u32 {
+    /// Instructions the link's handler takes for `req` fed byte by byte (the last byte
+    /// completes the frame: decode, answer, reply frame), summed, on a store with `log_entries`
+    /// shimmy entries; `u32::MAX` when the reply is shorter than `min_reply` bytes (an error
+    /// reply: not the path meant).
+    fn request_instructions(
+        req: &shimmy_link::wire::Request<'_>,
+        log_entries: u32,
+        min_reply: usize,
+    ) -> u32 {
         use shimmy_firmware::fault_memory::ResetRecord;
         use shimmy_firmware::link::{BoardLink, LinkState};
         use shimmy_link::device::{Device, REPLY_BYTES};
         use shimmy_link::frame::{encode, MAX_FRAME};
-        use shimmy_link::wire::{Request, PROTOCOL_HEADER};
+        use shimmy_link::wire::PROTOCOL_HEADER;
         let mut state = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
-        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(40));
+        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(log_entries));
         let mut dev = Device::new();
-        let mut req = [0u8; MAX_FRAME + 1];
-        let Ok(n) = encode(
-            PROTOCOL_HEADER,
-            &Request::ReadEvents { first: 32 },
-            &mut req,
-        ) else {
+        let mut frame = [0u8; MAX_FRAME + 1];
+        let Ok(n) = encode(PROTOCOL_HEADER, req, &mut frame) else {
             return u32::MAX;
         };
         let mut reply = [0u8; REPLY_BYTES];
@@ -801,45 +802,33 @@ mod bench {
         };
         let mut total = 0;
         let mut replied = 0;
-        for &b in req.iter().take(n) {
+        for &b in frame.iter().take(n) {
             total += measure_once(|| {
                 replied = black_box(dev.on_byte(black_box(b), &mut link, &mut reply)).unwrap_or(0);
             });
         }
-        // A full page of 8 shimmy entries is more than 300 bytes; an error reply is short.
-        if replied < 300 {
-            return u32::MAX; // not the path we meant to measure
+        if replied < min_reply {
+            return u32::MAX;
         }
         total
     }
 
-    /// One request through the link's handler: the bytes of a config-get frame fed one by one
-    /// (the last completes it: decode, record, reply frame), summed.
+    /// A host reading the log: the request for the last page (entries 32-40) of a flash log of
+    /// 40 shimmy entries and the boot. The handler walks the flash queue from its oldest entry
+    /// for every page, so the cost grows with the log. A full page of 8 shimmy entries is more
+    /// than 300 bytes; an error reply is short.
+    fn link_events_page() -> u32 {
+        request_instructions(
+            &shimmy_link::wire::Request::ReadEvents { first: 32 },
+            40,
+            300,
+        )
+    }
+
+    /// One config-get request through the link's handler (the reply holds the vehicle record,
+    /// more than 500 bytes).
     fn link_request() -> u32 {
-        use shimmy_firmware::fault_memory::ResetRecord;
-        use shimmy_firmware::link::{BoardLink, LinkState};
-        use shimmy_link::device::{Device, REPLY_BYTES};
-        use shimmy_link::frame::{encode, MAX_FRAME};
-        use shimmy_link::wire::{Request, PROTOCOL_HEADER};
-        let mut state = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
-        let mut task = shimmy_firmware::store::StoreTask::new(bench_store(0));
-        let mut dev = Device::new();
-        let mut req = [0u8; MAX_FRAME + 1];
-        let Ok(n) = encode(PROTOCOL_HEADER, &Request::GetConfig, &mut req) else {
-            return u32::MAX;
-        };
-        let mut reply = [0u8; REPLY_BYTES];
-        let mut total = 0;
-        let mut link = BoardLink {
-            state: &mut state,
-            store: &mut task,
-        };
-        for &b in req.iter().take(n) {
-            total += measure_once(|| {
-                black_box(dev.on_byte(black_box(b), &mut link, &mut reply));
-            });
-        }
-        total
+        request_instructions(&shimmy_link::wire::Request::GetConfig, 0, 500)
     }
 
     fn eigen_update_f32() -> u32 {
