@@ -144,7 +144,7 @@ impl DualAxleSim {
 fn tyre_force_n(t: &DualAxleParams, op: &DualAxleOperatingPoint, axle: usize, a: f64) -> f64 {
     let d = t.mu * op.f_z[axle];
     let b = op.c_a[axle] / (t.c_s * d);
-    d * (t.c_s * (b * a).atan()).sin()
+    super::tyre::magic_formula_n(d, t.c_s, b, a)
 }
 
 /// The tyres' saturation (as its departure from `C_a a`) and the kingpin friction

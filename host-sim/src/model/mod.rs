@@ -17,3 +17,4 @@ pub mod sensors;
 pub mod study;
 pub mod trailer_plant;
 pub mod truck_plant;
+pub mod tyre;

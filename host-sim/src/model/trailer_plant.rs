@@ -116,7 +116,7 @@ impl TrailerSim {
 fn tyre_force_n(t: &TrailerParams, alpha: f64) -> f64 {
     let d = t.mu * t.axle_load_n();
     let b = t.cornering_stiffness() / (t.c_s * d);
-    d * (t.c_s * (b * alpha).atan()).sin()
+    super::tyre::magic_formula_n(d, t.c_s, b, alpha)
 }
 
 /// Adds a lateral force `f_n` at the axle (to the left) to `dx`: the generalised force

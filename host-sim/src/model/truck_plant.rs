@@ -91,7 +91,7 @@ impl TruckSim {
 fn tyre_force_n(t: &TruckParams, op: &TruckOperatingPoint, a: f64) -> f64 {
     let d = t.mu * op.f_z;
     let b = op.c_a / (t.c_s * d);
-    d * (t.c_s * (b * a).atan()).sin()
+    super::tyre::magic_formula_n(d, t.c_s, b, a)
 }
 
 /// The struts' roll moment on the axle at roll `phi`, N m (restoring), from the gas law.

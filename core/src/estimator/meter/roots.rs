@@ -43,16 +43,18 @@ impl<T: Real> Cx<T> {
             self.re * o.im + self.im * o.re,
         )
     }
+    // One division and two products instead of two divisions: a division is 14 cycles on
+    // the M4's FPU against 1 for a product, and the Aberth sweep is mostly reciprocals.
     fn div(self, o: Self) -> Self {
-        let d = o.norm_sqr();
+        let inv = T::ONE / o.norm_sqr();
         Self::new(
-            (self.re * o.re + self.im * o.im) / d,
-            (self.im * o.re - self.re * o.im) / d,
+            (self.re * o.re + self.im * o.im) * inv,
+            (self.im * o.re - self.re * o.im) * inv,
         )
     }
     fn recip(self) -> Self {
-        let d = self.norm_sqr();
-        Self::new(self.re / d, -self.im / d)
+        let inv = T::ONE / self.norm_sqr();
+        Self::new(self.re * inv, -self.im * inv)
     }
     /// |z|^2 (no square root: the iteration compares squared magnitudes).
     pub fn norm_sqr(self) -> T {
@@ -166,12 +168,20 @@ fn iterate<T: Real>(
     // rounding noise (near-multiple roots in f32), not progress still to be made.
     let floor_sqr = T::from_f64(1e4) * tol_sqr;
     let mut last_sqr: Option<T> = None;
+    // A root whose correction fell below the tolerance is kept where it is: the Newton ratio
+    // that decides its correction is already tiny, and its value still enters the others'
+    // sums. While tracking, most roots converge a sweep before the slowest one.
+    let mut converged = [false; MAX_ORDER];
     for it in 1..=max_iter {
         let mut max_sqr = T::ZERO;
         for i in 0..p {
+            if converged[i] {
+                continue;
+            }
             let zi = roots[i];
             let (pv, dp) = eval(c, zi);
             if pv.re == T::ZERO && pv.im == T::ZERO {
+                converged[i] = true;
                 continue; // exact root
             }
             let ratio = pv.div(dp);
@@ -188,6 +198,7 @@ fn iterate<T: Real>(
             roots[i] = zi.sub(w);
             let mag = zi.norm_sqr();
             let rel_sqr = w.norm_sqr() / if mag > T::ONE { mag } else { T::ONE };
+            converged[i] = rel_sqr < tol_sqr;
             if rel_sqr > max_sqr {
                 max_sqr = rel_sqr;
             }
