@@ -4,50 +4,21 @@ use object::{Object, ObjectSection, SectionFlags};
 use std::fmt;
 use std::path::Path;
 
-/// Budgets of the release application image (issue 6): what the firmware may use of the
-/// STM32F405RG, leaving room for a bootloader. Flash: the measured image plus ~2 % headroom;
-/// raise it deliberately, with the measured size, when a feature needs more.
-///
-/// History (`cargo xtask size`): 97.9 KB before the design-time math moved to the estimator's
-/// precision, 87.2 KB before the eigenvalue-only QR, 83.1 KB after it (issue 17); then, each on
-/// its own branch: the margin-scheduled ASMC +2.3 KB (issue 19), the host link +23.6 KB
-/// (of which ~13.8 KB is the core's vehicle record: field table, ranges, rules, decode/encode,
-/// which the flash store needs too; issue 24), the flash store +24.4 KB on top of the link
-/// (sequential-storage 12.0 KB, the store, log, boot load of the vehicle; issue 23). Merged:
-/// 137,388 B. Then (issues 17/23/24, the flash work): the field descriptions only on the host
-/// -4.1 KB, one out-of-line framer extend in the link -0.5 KB, the configuration as states in a
-/// second store queue instead of a map -6.1 KB, sequential-storage, postcard and COBS at
-/// opt-level z -1.2 KB, the RLS update's checks folded in -0.1 KB: 125,092 B, and this budget
-/// 124 KiB (1,884 B, 1.5 % of headroom). Then no `memmove` linked (-1,192 B), f32 sin/cos/tan
-/// without libm's huge-argument reduction (`core::trig`, -3,520 B), one accessor per vehicle
-/// field instead of a getter and a setter (-1,832 B): 121,324 B with the session's merged
-/// branches (the model family's generic pipeline, issue 14's safe-side fusion threshold). One
-/// complex LU for both sizes saved 2,072 B more but cost the warm model cycle 8.4 k
-/// instructions, which put the firmware at 50.4 per mille, over the 50 guard: reverted. This
-/// budget 119 KiB (532 B, 0.4 % of headroom). Still over issues 23/24's cap
-/// of 96 KiB for store, log and link, and issue 17's 64 KiB without them (README, "Memory":
-/// what the parts measure in the breakdown by source). Then the eigenvectors' LU swapping its
-/// pivot rows entry by entry: `memmove` out again (-1,288 B; [`UNWANTED`] keeps such cuts
-/// from coming back unnoticed); the meter's filter design and root start in f32 (-960 B),
-/// defmt at "z" (-696 B), the field table's section and unit as indices (-952 B), the mode
-/// shape classified in f32 (-1,056 B), the eigenpair Newton's start unrotated (-868 B) and its
-/// residual in f32 (-1,384 B): 114,276 B, and this budget 114 KiB; the meter's filter design
-/// back in f64 (+704 B, README "Memory"): 114,980 B (1,756 B, 1.5 % of headroom). Then the
-/// eigenpair and the tracker's speed search in the tracker's precision (-3,376 B), the filter
-/// design back in f32 in the bilinear transform's unit (-712 B), the controller's filters and
-/// observer designed in f32 (-904 B), the meter's mode selection in its roots' precision
-/// (-544 B): 109,460 B, and this budget 109 KiB (2,156 B, 1.9 % of headroom). Then the board's
-/// panic handler without the panic's location and message (the cargo feature `panic-location`
-/// puts them back for a debug build): every panic site's location record and file path and
-/// core::fmt out (-8,328 B): 101,132 B, and this budget 100 KiB (1,268 B, 1.3 % of headroom),
-/// 2,828 B over issues 23/24's 96 KiB. Then the anti-alias design's sinh, cosh and asinh from
-/// exp and ln and no f64 `ceil` (-1,536 B), an own Parlett-Reinsch balancing on `VSQRT` (libm's
-/// `sqrtf` out, -360 B), sine, cosine and tangent computed in f32 (-600 B), the defaults as
-/// constants with the compiled-in vehicle copied from flash (-360 B), one defmt literal per
-/// reset cause (-264 B), the f32 trigonometry's range checks on the argument's bits (-56 B),
-/// the f64 square root digit by digit (-432 B): 97,524 B, and this budget issues 23/24's cap of
-/// 96 KiB (780 B, 0.8 % of headroom).
-pub const FLASH_BUDGET: u64 = 96 * 1024;
+/// The application's share of the code region (flash sectors 0-7, 512 KiB; `memory.x`) once a
+/// field-update bootloader is in: the bootloader in sectors 0-3 (64 KiB), the running image's
+/// slot in sectors 4-5 (64 + 128 KiB) and the download slot in sectors 6-7 (256 KiB, of which
+/// the image may use as much as the smaller slot). An image must fit the smaller slot: 192 KiB.
+pub const APP_SLOT_BYTES: u64 = 192 * 1024;
+
+/// Headroom every image keeps in its slot, per cent: room for field fixes and features without
+/// a round of byte-shaving first.
+pub const FLASH_HEADROOM_PERCENT: u64 = 15;
+
+/// The flash budget of every image: the slot less its headroom (167,116 B).
+pub const FLASH_BUDGET: u64 = APP_SLOT_BYTES * (100 - FLASH_HEADROOM_PERCENT) / 100;
+
+/// Static RAM (data + bss) of every image: 24 KiB of the 128 KiB SRAM, so the stack and its
+/// guard keep the rest (the worst stack use is measured by `cargo xtask bench`).
 pub const RAM_BUDGET: u64 = 24 * 1024;
 
 /// The flash and static-RAM budget of one firmware image.
@@ -68,22 +39,11 @@ pub const CAR_BUDGET: Budget = Budget {
     ram: RAM_BUDGET,
 };
 
-/// The truck image's budget (cargo feature `model-truck`): the same chip and headroom rule as
-/// the car's, set from its measurement (`cargo xtask size`): flash 126,900 B, static RAM
-/// 14,568 B, its 12-state model's monomorphised code 5,576 B more than the car image: 125 KiB.
-/// Raised to 129 KiB when the image began to store, load and serve the truck's own vehicle
-/// record instead of the car's: 126,996 -> 131,724 B (sized symbols +4,725 B: the truck
-/// record's decoder, field access, checks, encoder, schema and compiled-in vehicle ~4.0 KB,
-/// the struts' operating point out of line now that the checks call it as well); 130,916 B
-/// after two clean-ups, 1,180 B of headroom; 129,612 B with the LU's row swap entry by entry
-/// (no `memmove`), 125,692 B with the car's later cuts, and the budget 124 KiB (1,284 B of
-/// headroom); 120,116 B with the car's f32 design and tracker cuts, and the budget 120 KiB
-/// (2,764 B, 2.3 % of headroom); 111,868 B with the board's bare panic message, and the budget
-/// 111 KiB (1,796 B, 1.6 % of headroom); 109,044 B with the car's cuts to 96 KiB, and the
-/// budget 108 KiB (1,548 B, 1.4 % of headroom); static RAM the car's 24 KiB.
+/// The truck image's budget (cargo feature `model-truck`): the same slot and headroom as the
+/// car's.
 pub const TRUCK_BUDGET: Budget = Budget {
     image: "the truck image",
-    flash: 108 * 1024,
+    flash: FLASH_BUDGET,
     ram: RAM_BUDGET,
 };
 

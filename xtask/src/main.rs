@@ -34,6 +34,8 @@
 //!                                time domain, closed loop, eigenvalue sweep), skipped with a
 //!                                message when python3 with numpy and scipy is missing;
 //!                                `--target-only` stops after the on-target part
+//! cargo xtask docs               measure the images' size and the on-target benchmark and write
+//!                                docs/measurements.md (`cargo xtask test` fails when it is stale)
 //! ```
 //!
 //! Missing system tools are installed when this runs as root with apt (qemu-system-arm, g++) or
@@ -44,6 +46,7 @@ mod elf;
 mod fmu;
 mod fuzz;
 mod link_e2e;
+mod measurements;
 mod python;
 mod qemu;
 
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Some("test") => test(),
         Some("qemu") => run_in_qemu(args.get(1).map(String::as_str).unwrap_or(FIRMWARE)),
         Some("size") => size(),
+        Some("docs") => docs(),
         Some("bench") => bench().and_then(|s| {
             println!("on-target benchmark: {s}");
             println!("{TRUCK_MODEL} image (the model task on the truck's 12-state model):");
@@ -85,10 +89,15 @@ fn main() -> ExitCode {
         Some("python") => python::module_tests().map(|s| println!("{s}")),
         Some("fmu") => fmu::tests().map(|s| println!("{s}")),
         Some("fuzz") => fuzz::command(&args[1..]),
-        _ => {
-            eprintln!(
-                "usage: cargo xtask <test | qemu [BIN] | size | bench [--target-only] | conformance | link | pil | python [--wheel] | fmu | fuzz [--seconds N]>"
-            );
+        Some("help" | "--help" | "-h") => {
+            print!("{USAGE}");
+            return ExitCode::SUCCESS;
+        }
+        other => {
+            if let Some(o) = other {
+                eprintln!("xtask: unknown command `{o}`");
+            }
+            eprint!("{USAGE}");
             return ExitCode::from(2);
         }
     };
@@ -100,6 +109,22 @@ fn main() -> ExitCode {
         }
     }
 }
+
+/// `cargo xtask help`: every command in one line each.
+const USAGE: &str = "usage: cargo xtask <command>
+  test                 every check CI runs (host and firmware lanes, QEMU, PIL)
+  qemu [BIN]           build BIN (default shimmy-firmware) for QEMU, run it, print its log
+  size                 flash/RAM of the release images against their budgets
+  bench [--target-only] on-target instruction counts under QEMU -icount (then the host bench)
+  docs                 measure size and bench, write docs/measurements.md
+  conformance          host vs target replay of the committed trace, bit-identical
+  link                 the host link end to end (QEMU app over TCP, shimmy-sim device)
+  pil                  processor in the loop: PIL = SIL bit for bit
+  python [--wheel]     the Python module's tests
+  fmu                  build, validate and co-simulate the FMU
+  fuzz [--seconds N] [--target NAME]  the fuzz targets
+  help                 this text
+";
 
 type Step = Result<String, String>;
 type StepFn = fn() -> Step;
@@ -299,16 +324,14 @@ fn test() -> Result<(), String> {
                 fuzz::CI_SECONDS
             ))
         }),
-        ("firmware size", || {
-            let elf = build_firmware(FIRMWARE, &[])?;
-            let report = elf::MemoryReport::read(&elf)?;
-            println!("{report}");
-            println!("{}", elf::top_symbols(&elf, 15)?);
-            report.check_fits()?;
-            report.check_budget(&elf::CAR_BUDGET)?;
-            let truck = truck_image_size()?;
-            Ok(format!("{}; {truck}", report.one_line()))
-        }),
+        (
+            "firmware size (and its section of docs/measurements.md)",
+            || {
+                let section = measure_size(false)?;
+                measurements::check("size", &section)?;
+                Ok("both images within budget; docs/measurements.md current".into())
+            },
+        ),
         ("panic-free control path (link check)", || {
             // Links only if no panic is reachable (firmware/src/bin/panic-free-check.rs).
             build_firmware("panic-free-check", &[]).map(|_| "no reachable panic".into())
@@ -321,7 +344,14 @@ fn test() -> Result<(), String> {
         ("stack overflow caught by the guard (QEMU)", stack_guard),
         ("fault memory across resets (QEMU)", reset_memory),
         ("flash store across resets (QEMU)", store_check),
-        ("on-target benchmark budgets (QEMU -icount)", bench),
+        ("on-target benchmark budgets (QEMU -icount)", || {
+            let run = run_bench_measured(&["qemu"])?;
+            measurements::check("bench", &run.section())?;
+            Ok(format!(
+                "{} entries within budget; docs/measurements.md current",
+                run.rows.len()
+            ))
+        }),
         (
             "an over-budget benchmark entry fails the run",
             || match run_bench(&["qemu", "deliberate-failure"]) {
@@ -690,15 +720,51 @@ fn run_truck_bench() -> Step {
 }
 
 fn run_bench(features: &[&str]) -> Step {
+    run_bench_measured(features).map(|b| format!("{} entries within budget", b.rows.len()))
+}
+
+/// What one on-target benchmark run measured.
+struct BenchRun {
+    /// name, instructions, budget, result
+    rows: Vec<Vec<String>>,
+    /// The run's stack high-water mark and CPU load lines.
+    notes: Vec<String>,
+}
+
+impl BenchRun {
+    /// The `bench` section of `docs/measurements.md`.
+    fn section(&self) -> String {
+        let rows: Vec<Vec<String>> = self.rows.iter().filter(|r| r.len() == 4).cloned().collect();
+        let mut out = measurements::table(
+            &["entry", "instructions", "budget", "result"],
+            &[false, true, true, false],
+            &rows,
+        );
+        for note in &self.notes {
+            out.push_str(&format!("\n{note}\n"));
+        }
+        out
+    }
+}
+
+fn run_bench_measured(features: &[&str]) -> Result<BenchRun, String> {
     ensure_thumb_target()?;
     qemu::ensure_installed()?;
     let elf = build_firmware("target-bench", features)?;
     let run = qemu::run_with(&elf, qemu::BENCH_ICOUNT)?;
     let mut rows = Vec::new();
+    let mut notes = Vec::new();
     for line in &run.log {
         match line.split_once("bench | ") {
             Some((_, rest)) => rows.push(rest.split(" | ").map(str::to_string).collect::<Vec<_>>()),
-            None => println!("  | {line}"),
+            None => {
+                println!("  | {line}");
+                for key in ["stack high-water mark", "cpu load:"] {
+                    if let Some(i) = line.find(key) {
+                        notes.push(line[i..].to_string());
+                    }
+                }
+            }
         }
     }
     println!(
@@ -723,38 +789,87 @@ fn run_bench(features: &[&str]) -> Step {
     if rows.is_empty() {
         return Err("the benchmark printed no rows".into());
     }
-    Ok(format!("{} entries within budget", rows.len()))
+    Ok(BenchRun { rows, notes })
 }
 
-fn size() -> Result<(), String> {
+/// The `size` section of `docs/measurements.md`: both images against their budgets and slot.
+fn size_section(images: &[(&elf::Budget, &elf::MemoryReport)]) -> String {
+    let rows: Vec<Vec<String>> = images
+        .iter()
+        .map(|(budget, report)| {
+            let flash = report.flash_bytes();
+            let headroom = 100.0 * (1.0 - flash as f64 / elf::APP_SLOT_BYTES as f64);
+            vec![
+                budget.image.to_string(),
+                flash.to_string(),
+                budget.flash.to_string(),
+                format!("{headroom:.1} %"),
+                report.ram_bytes().to_string(),
+                budget.ram.to_string(),
+            ]
+        })
+        .collect();
+    format!(
+        "{}\nThe application slot is {} B; the budget keeps {} % of it free (`xtask/src/elf.rs`).",
+        measurements::table(
+            &[
+                "image",
+                "flash B",
+                "flash budget B",
+                "slot free",
+                "static RAM B",
+                "RAM budget B"
+            ],
+            &[false, true, true, true, true, true],
+            &rows,
+        ),
+        elf::APP_SLOT_BYTES,
+        elf::FLASH_HEADROOM_PERCENT
+    )
+}
+
+/// Builds both board images, prints their tables, checks fit and budget, and returns the
+/// `size` section of `docs/measurements.md`.
+fn measure_size(detail: bool) -> Result<String, String> {
     ensure_thumb_target()?;
-    let elf = build_firmware(FIRMWARE, &[])?;
-    let report = elf::MemoryReport::read(&elf)?;
-    println!("{report}");
-    println!("{}", elf::top_symbols(&elf, 25)?);
-    println!("{}", elf::attribution(&elf, 12)?);
-    println!("{}", elf::source_table(&elf, 30)?);
-    println!("{}", elf::soft_f64_table(&elf, 12)?);
-    report.check_fits()?;
-    report.check_budget(&elf::CAR_BUDGET)?;
-    elf::check_unwanted(&elf)?;
-    println!("xtask: {}", truck_image_size()?);
+    let car_elf = build_firmware(FIRMWARE, &[])?;
+    let car = elf::MemoryReport::read(&car_elf)?;
+    println!("{car}");
+    if detail {
+        println!("{}", elf::top_symbols(&car_elf, 25)?);
+        println!("{}", elf::attribution(&car_elf, 12)?);
+        println!("{}", elf::source_table(&car_elf, 30)?);
+        println!("{}", elf::soft_f64_table(&car_elf, 12)?);
+    } else {
+        println!("{}", elf::top_symbols(&car_elf, 15)?);
+    }
+    car.check_fits()?;
+    car.check_budget(&elf::CAR_BUDGET)?;
+    elf::check_unwanted(&car_elf)?;
+    let truck_elf = build_firmware(FIRMWARE, &[TRUCK_MODEL])?;
+    let truck = elf::MemoryReport::read(&truck_elf)?;
+    println!("{TRUCK_MODEL} image:\n{truck}");
+    truck.check_fits()?;
+    truck.check_budget(&elf::TRUCK_BUDGET)?;
+    elf::check_unwanted(&truck_elf)?;
+    Ok(size_section(&[
+        (&elf::CAR_BUDGET, &car),
+        (&elf::TRUCK_BUDGET, &truck),
+    ]))
+}
+
+/// `cargo xtask docs`: measures and writes `docs/measurements.md`.
+fn docs() -> Result<(), String> {
+    let size = measure_size(false)?;
+    let bench = run_bench_measured(&["qemu"])?.section();
+    measurements::write(&[("size", size), ("bench", bench)])?;
+    println!("xtask: wrote {}", measurements::PATH);
     Ok(())
 }
 
-/// The truck-model image (feature `model-truck`): must fit the chip and its own budget
-/// ([`elf::TRUCK_BUDGET`]; the 12-state model's code makes it larger than the car image).
-fn truck_image_size() -> Result<String, String> {
-    let elf = build_firmware(FIRMWARE, &[TRUCK_MODEL])?;
-    let report = elf::MemoryReport::read(&elf)?;
-    println!("{TRUCK_MODEL} image:\n{report}");
-    report.check_fits()?;
-    report.check_budget(&elf::TRUCK_BUDGET)?;
-    elf::check_unwanted(&elf)?;
-    Ok(format!(
-        "{TRUCK_MODEL} image: {}, within its budget",
-        report.one_line()
-    ))
+fn size() -> Result<(), String> {
+    let section = measure_size(true)?;
+    measurements::check("size", &section)
 }
 
 fn run_in_qemu(bin: &str) -> Result<(), String> {
