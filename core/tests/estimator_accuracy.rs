@@ -137,7 +137,7 @@ fn one_mode_ambient_bias_and_spread_within_bound() {
 ///
 /// One deviation from (0.25 b, 1.5 b), measured and kept visible rather than hidden: at
 /// zeta = 0.1, 18 Hz the spread is 2.45 b in the default 30 runs with the meter's AR(10) slow
-/// instance (README: the 200-run figure), tolerance 2.6 b. History: 1.67 b with AR(6)
+/// instance (docs/margin-estimator.md: the 200-run figure), tolerance 2.6 b. History: 1.67 b with AR(6)
 /// (tolerance 1.75 b), 2.09 b (30 runs) with AR(8) (tolerance 2.3 b). AR(10) is the default
 /// because on the simulated vehicle the in-phase yaw carries the tramp mode, the
 /// steering-wheel mode and two tyre-lag poles next to the shimmy mode: AR(8) reads the

@@ -686,7 +686,7 @@ mod app {
 fn main() {
     eprintln!(
         "shimmy-firmware runs on a Cortex-M4F: build it with --target thumbv7em-none-eabihf, \
-         run it under QEMU with `cargo xtask qemu`, or flash a board (see README)."
+         run it under QEMU with `cargo xtask qemu`, or flash a board (see docs/firmware.md)."
     );
     std::process::exit(2);
 }

@@ -44,7 +44,7 @@ pub fn finish(_outcome: Outcome) -> ! {
 fn panic(info: &core::panic::PanicInfo) -> ! {
     // Under QEMU (tests) the whole message is formatted. The board build logs a bare "panic" by
     // default: its location and message would keep every panic site's file path and location
-    // record and core::fmt in flash (~8.3 KB, README "Memory") for a path that the link checks
+    // record and core::fmt in flash (~8.3 KB, docs/performance.md, "Memory") for a path that the link checks
     // (`bin/panic-free-check.rs`, `bin/panic-free-glue.rs`) show is unreachable from the control
     // step. A debug build for the board gets file, line and literal message with the cargo
     // feature `panic-location`.

@@ -53,7 +53,7 @@ pub fn guard(mpu: &mut cortex_m::peripheral::MPU, scb: &mut cortex_m::peripheral
     let size_field = GUARD_SIZE.trailing_zeros() - 1;
     // SAFETY: region 0 is this guard only; the default map (PRIVDEFENA) keeps every other
     // access as before; the region lies between the statics and the deepest stack use measured
-    // (README, stack high-water marks), so nothing live is in it.
+    // (docs/performance.md, stack high-water marks), so nothing live is in it.
     unsafe {
         mpu.rnr.write(0);
         mpu.rbar.write(start as u32);

@@ -1,5 +1,5 @@
 //! Processor-in-the-loop (PIL) frames: the firmware image under QEMU closes the loop with the
-//! host's plant in lockstep (`shimmy-sim pil`, README "Processor in the loop").
+//! host's plant in lockstep (`shimmy-sim pil`, docs/testing.md, "Processor in the loop").
 //!
 //! Each 1 kHz control step the host sends one [`HostFrame::Sensors`] (the raw sensor frame of the
 //! simulator's sensor models, faults applied) and the firmware answers, on one pipe and in this

@@ -129,7 +129,7 @@ pub struct ScheduleParams {
 }
 
 impl ScheduleParams {
-    /// Tuned in the closed loop (`shimmy-sim compare`, README "Control that knows its
+    /// Tuned in the closed loop (`shimmy-sim compare`, docs/margin-estimator.md, "Control that knows its
     /// margin"): arming over 4 -> 1 m/s of speed margin (14 -> 4 km/h: the warning monitor's
     /// `MarginLow` threshold is 1.4 m/s) and 10 -> 3 s to critical; the fast damping arms below
     /// 0.02 and fully at 0 (growth). Armed: the coil engages at 0.06 deg shimmy-band amplitude

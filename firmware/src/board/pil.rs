@@ -191,7 +191,7 @@ fn executed() -> u64 {
 ///
 /// Why: with `-icount sleep=off` each WFI costs no virtual time but a hand-over inside QEMU
 /// (the halted vCPU is woken by QEMU's main loop when the timer expires), which was most of
-/// the wall time of a step (README, "Processor in the loop"). TIM2's own update interrupt is
+/// the wall time of a step (docs/testing.md, "Processor in the loop"). TIM2's own update interrupt is
 /// off in this build ([`init`]): QEMU 7.2's STM32 timer neither keeps the period nor restarts
 /// at a counter write, so it cannot mark the period's end. Every control step still consumes
 /// one host frame and answers with one report, so lockstep and the results are unchanged.

@@ -1,6 +1,6 @@
 //! STM32F405RG board layer: clocks (HSE with a bounded start-up, else HSI: [`crate::clock`];
 //! the watchdog runs before), pins and peripherals (stm32f4xx-hal), wrapped in the drivers of
-//! [`crate::drivers`]. Wiring: README, "Firmware" / "Wiring".
+//! [`crate::drivers`]. Wiring: docs/firmware.md, "Wiring".
 //!
 //! | function                     | peripheral       | pins                                  |
 //! |------------------------------|------------------|---------------------------------------|

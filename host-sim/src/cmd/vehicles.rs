@@ -1,5 +1,5 @@
 //! `shimmy-sim vehicles`: one table of every vehicle model of the family at its named parameter
-//! sets (the README's vehicle-model table): degrees of freedom, the Hopf window(s) of straight
+//! sets (docs/simulator.md, "Every vehicle model"): degrees of freedom, the Hopf window(s) of straight
 //! running without damper, the shimmy frequency at the onset, the limit cycle the nonlinear plant
 //! settles on inside the first window, and the margin estimator's warning lead on a speed ramp
 //! through the onset.

@@ -14,7 +14,7 @@
 //!    and writes each channel's digest (FNV-1a over the f32/f64 bit patterns) to
 //!    `target/conformance/host.txt`. `cargo xtask test` runs the same replay on the target
 //!    under QEMU (`firmware/src/bin/conformance.rs`) and requires identical digests: the
-//!    tolerance is zero ulp (see README, "Conformance").
+//!    tolerance is zero ulp (see docs/testing.md, "Conformance").
 
 use shimmy_core::params::PlantParams;
 use shimmy_firmware::monitoring::MODEL_REFRESH_S;

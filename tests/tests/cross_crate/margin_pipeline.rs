@@ -134,7 +134,7 @@ mod wrong_model {
     /// the data correction warns earlier on every seed (figures: `shimmy-sim mismatch --only
     /// "C_a +20" --seed N`). The mismatch is held over 0.25 m/s of speed change as well as 3 s:
     /// with the time hold alone (the negative arm, seed 1) the 1 km/h/s ramp loses the lead to
-    /// the hold. The 3 km/h is not met on every seed (README, "With a wrong model").
+    /// the hold. The 3 km/h is not met on every seed (docs/margin-estimator.md, "The warning with a wrong model").
     #[test]
     fn less_stable_plant_warns_earlier_with_the_correction() {
         let c = case("C_a +20 %");
