@@ -22,7 +22,9 @@
 
 use nalgebra::SVector;
 
-use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
+use crate::model::{
+    ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo, UpdatableModel, UpdateParam,
+};
 use crate::plant::{wheel_phase_rad, wheel_yaw_shape};
 use crate::truck::G_MPS2;
 
@@ -718,6 +720,20 @@ impl LinearModel<N_STATES> for DualAxleParams {
             wheel_phase_rad: wheel_phase_rad(v[l], v[r]),
             tyre_ratio,
         }
+    }
+}
+
+/// No parameter is updated online yet: this model's identifiability study has not been run, so
+/// its margin stays the vehicle file's (corrected by the fusion's measured damping offset).
+impl UpdatableModel<N_STATES> for DualAxleParams {
+    const UPDATE_PARAMS: &'static [UpdateParam] = &[];
+
+    fn scaled_update_param(&self, _index: usize, _factor: f64) -> Self {
+        *self
+    }
+
+    fn update_param(&self, _index: usize) -> f64 {
+        f64::NAN
     }
 }
 

@@ -136,3 +136,35 @@ pub struct ModeShapeInfo {
     /// model's reference length).
     pub tyre_ratio: f64,
 }
+
+/// A physical parameter of a model that the online model update
+/// ([`crate::estimator::model_update`]) may move: the update estimates the factor by which the
+/// vehicle differs from its file in each of a model's few effective parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpdateParam {
+    /// The field's short name (as in the vehicle file), e.g. `c_a`.
+    pub field: &'static str,
+    /// What it is, in plain words for a diagnosis ("tyre cornering stiffness").
+    pub what: &'static str,
+    /// Prior one-sigma uncertainty of ln(factor): how far a vehicle in service plausibly is
+    /// from its file before any data.
+    pub prior_sigma_ln: f64,
+    /// The plausible band of the factor; outside it the diagnosis names the parameter.
+    pub band: (f64, f64),
+}
+
+/// A linear model whose effective parameters can be updated from data.
+pub trait UpdatableModel<const N: usize>: LinearModel<N> + Copy {
+    /// The parameters the update estimates (at most
+    /// [`crate::estimator::model_update::MAX_UPDATE_PARAMS`]): those the model's
+    /// identifiability study (`shimmy-sim identifiability`) separates from shimmy frequency and
+    /// damping over speed.
+    const UPDATE_PARAMS: &'static [UpdateParam];
+
+    /// `self` with update parameter `index` multiplied by `factor` (and whatever the model
+    /// derives from it).
+    fn scaled_update_param(&self, index: usize, factor: f64) -> Self;
+
+    /// The value of update parameter `index` (NaN for an index past the list).
+    fn update_param(&self, index: usize) -> f64;
+}

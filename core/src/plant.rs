@@ -22,8 +22,10 @@
 use nalgebra::{Complex, SMatrix, SVector};
 
 use crate::float::SolveFloat;
-use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
-use crate::params::PlantParams;
+use crate::model::{
+    ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo, UpdatableModel, UpdateParam,
+};
+use crate::params::{Param, PlantParams};
 
 /// Number of states of the linear model.
 pub const N_STATES: usize = 10;
@@ -235,6 +237,62 @@ impl LinearModel<N_STATES> for PlantParams {
 
     fn classify_in<T: SolveFloat>(&self, v: &[Complex<T>; N_STATES]) -> ModeShapeInfo {
         classify_in(v, [self.i_k, self.i_phi, self.j_sw, self.i_s])
+    }
+}
+
+/// The car's updatable parameters: the tyre (cornering stiffness, relaxation length, pneumatic
+/// trail), the restoring stiffness of the steering linkage and the caster trail, the ones the
+/// shimmy mode's frequency and damping move with (`shimmy-sim identifiability`). Priors of
+/// +-15 % (one sigma) are the spread of tyres and linkages in service; the band is where the
+/// diagnosis speaks up (a tyre 25 % softer is under-inflated or worn).
+/// The fields behind [`PlantParams::UPDATE_PARAMS`], in its order.
+const CAR_UPDATE_FIELDS: [Param; 5] = [Param::CA, Param::Sigma, Param::KD, Param::TP, Param::E];
+
+impl UpdatableModel<N_STATES> for PlantParams {
+    const UPDATE_PARAMS: &'static [UpdateParam] = &[
+        UpdateParam {
+            field: "c_a",
+            what: "tyre cornering stiffness",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+        UpdateParam {
+            field: "sigma",
+            what: "tyre relaxation length",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+        UpdateParam {
+            field: "k_d",
+            what: "steering linkage stiffness",
+            prior_sigma_ln: 0.15,
+            band: (0.7, 1.3),
+        },
+        UpdateParam {
+            field: "t_p",
+            what: "tyre pneumatic trail",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+        UpdateParam {
+            field: "e",
+            what: "caster trail",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+    ];
+
+    fn scaled_update_param(&self, index: usize, factor: f64) -> Self {
+        match CAR_UPDATE_FIELDS.get(index) {
+            Some(p) => self.scaled(*p, factor),
+            None => *self,
+        }
+    }
+
+    fn update_param(&self, index: usize) -> f64 {
+        CAR_UPDATE_FIELDS
+            .get(index)
+            .map_or(f64::NAN, |p| self.get(*p))
     }
 }
 

@@ -26,7 +26,9 @@
 
 use nalgebra::SVector;
 
-use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
+use crate::model::{
+    ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo, UpdatableModel, UpdateParam,
+};
 
 /// Standard gravity, m/s^2.
 pub const G_MPS2: f64 = 9.80665;
@@ -469,6 +471,20 @@ impl LinearModel<N_STATES> for TrailerParams {
             wheel_phase_rad: phase,
             tyre_ratio,
         }
+    }
+}
+
+/// No parameter is updated online yet: this model's identifiability study has not been run, so
+/// its margin stays the vehicle file's (corrected by the fusion's measured damping offset).
+impl UpdatableModel<N_STATES> for TrailerParams {
+    const UPDATE_PARAMS: &'static [UpdateParam] = &[];
+
+    fn scaled_update_param(&self, _index: usize, _factor: f64) -> Self {
+        *self
+    }
+
+    fn update_param(&self, _index: usize) -> f64 {
+        f64::NAN
     }
 }
 

@@ -24,7 +24,9 @@ use nalgebra::SVector;
 
 use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
-use crate::model::{ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo};
+use crate::model::{
+    ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo, UpdatableModel, UpdateParam,
+};
 use crate::plant::{wheel_phase_rad, wheel_yaw_shape};
 
 /// Standard gravity, m/s^2.
@@ -899,6 +901,63 @@ impl LinearModel<N_STATES> for TruckParams {
             wheel_phase_rad: wheel_phase_rad(v[PSI_L], v[PSI_R]),
             tyre_ratio,
         }
+    }
+}
+
+/// The truck's updatable parameters: the tyre (cornering coefficient, relaxation length,
+/// pneumatic trail) and the hydrostatic steering linkage (stiffness and damping), the ones its
+/// shimmy mode moves with (`shimmy-sim identifiability --vehicle truck-full`). Priors of
+/// +-15 % (one sigma); the band is where the diagnosis speaks up.
+impl UpdatableModel<N_STATES> for TruckParams {
+    const UPDATE_PARAMS: &'static [UpdateParam] = &[
+        UpdateParam {
+            field: "c_a_per_fz",
+            what: "tyre cornering coefficient",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+        UpdateParam {
+            field: "sigma",
+            what: "tyre relaxation length",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+        UpdateParam {
+            field: "c_h",
+            what: "steering linkage damping",
+            prior_sigma_ln: 0.15,
+            band: (0.6, 1.5),
+        },
+        UpdateParam {
+            field: "k_h",
+            what: "steering linkage stiffness",
+            prior_sigma_ln: 0.15,
+            band: (0.7, 1.3),
+        },
+        UpdateParam {
+            field: "t_p",
+            what: "tyre pneumatic trail",
+            prior_sigma_ln: 0.15,
+            band: (0.75, 1.3),
+        },
+    ];
+
+    fn scaled_update_param(&self, index: usize, factor: f64) -> Self {
+        let mut out = *self;
+        if let Some(v) = Self::UPDATE_PARAMS
+            .get(index)
+            .and_then(|u| out.field_mut(u.field))
+        {
+            *v *= factor;
+        }
+        out
+    }
+
+    fn update_param(&self, index: usize) -> f64 {
+        Self::UPDATE_PARAMS
+            .get(index)
+            .and_then(|u| self.get(u.field))
+            .unwrap_or(f64::NAN)
     }
 }
 

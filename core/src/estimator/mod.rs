@@ -8,12 +8,17 @@
 //! 2. [`model_margin`]: the model-based margin at the current speed (damping, its slope over
 //!    speed, the onset speed), updated incrementally so one call costs at most one eigen-solve
 //!    ([`model_margin::ModelMargin`]);
-//! 3. [`fusion`]: the model for the shape, the data for the level: the model's speed margin,
+//! 3. [`model_update`]: optional online model updating. The slow meter's frequency and damping
+//!    at each speed update a few physical parameters of the model (an extended Kalman filter on
+//!    their log-factors, evidence kept over the whole drive), so the model margin follows the
+//!    vehicle's slope and curvature, not only its offset
+//!    ([`model_update::ModelUpdater`]);
+//! 4. [`fusion`]: the model for the shape, the data for the level: the model's speed margin,
 //!    corrected by the measured damping offset when data and model disagree, time to critical
 //!    and a data/model consistency flag ([`fusion::MarginReport`]);
-//! 4. [`monitor`]: warning levels with hysteresis and an event log, from the report and the
+//! 5. [`monitor`]: warning levels with hysteresis and an event log, from the report and the
 //!    meter's yaw amplitude ([`monitor::Level`]);
-//! 5. [`pipeline`]: the one object the firmware and the simulator call every control tick
+//! 6. [`pipeline`]: the one object the firmware and the simulator call every control tick
 //!    (meter -> fusion with the latest model margin -> monitor).
 //!
 //! Each module imports only the ones before it. Constant work per call; no allocation; nothing
@@ -22,5 +27,6 @@
 pub mod fusion;
 pub mod meter;
 pub mod model_margin;
+pub mod model_update;
 pub mod monitor;
 pub mod pipeline;

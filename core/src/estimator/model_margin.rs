@@ -517,6 +517,20 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
         self.known_valid = false;
     }
 
+    /// Replaces the plant (an updated model of the same vehicle): the known crossings are kept
+    /// as Newton starts and refined in the next cycle (a scan only if Newton loses one).
+    pub fn set_plant(&mut self, p: M) {
+        self.p = p;
+        for k in self.known.iter_mut() {
+            k.converged = false;
+        }
+    }
+
+    /// The plant the tracker linearises.
+    pub fn plant(&self) -> &M {
+        &self.p
+    }
+
     fn error(&mut self) {
         self.work.errors = self.work.errors.saturating_add(1);
     }

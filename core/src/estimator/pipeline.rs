@@ -16,8 +16,9 @@ use super::meter::mode_meter::{
     ConfigError, EstimatorConfig, MarginEstimator, MeterOutput, Sample,
 };
 use super::model_margin::{ModelMargin, ModelMarginConfig, ModelMarginTracker, ModelPoint};
+use super::model_update::{ModelUpdateConfig, ModelUpdater, UpdateOutcome};
 use super::monitor::{Level, Monitor, MonitorInput, MonitorParams};
-use crate::model::LinearModel;
+use crate::model::UpdatableModel;
 use crate::params::PlantParams;
 
 /// Every tunable of the pipeline in one place.
@@ -31,6 +32,9 @@ pub struct PipelineParams {
     pub monitor: MonitorParams,
     /// Incremental model margin.
     pub model: ModelMarginConfig,
+    /// Online model update from the meter's frequency and damping (off by default: on the
+    /// host with `--model-update`; not yet on the board).
+    pub update: ModelUpdateConfig,
 }
 
 impl PipelineParams {
@@ -110,6 +114,7 @@ impl Default for PipelineParams {
             fusion: Self::tuned_fusion(),
             monitor: Self::tuned_monitor(),
             model: ModelMarginConfig::default(),
+            update: ModelUpdateConfig::OFF,
         }
     }
 }
@@ -290,12 +295,13 @@ impl<const N: usize> DataPipeline<N> {
 #[derive(Clone, Debug)]
 pub struct ShimmyPipeline<
     const N: usize,
-    M: LinearModel<S> = PlantParams,
+    M: UpdatableModel<S> = PlantParams,
     const S: usize = { crate::plant::N_STATES },
 > {
     params: PipelineParams,
     data: DataPipeline<N>,
     model: ModelMarginTracker<f64, M, S>,
+    updater: ModelUpdater<M, S>,
     model_margin: Option<ModelMargin>,
     c_damper_nspm: f32,
 }
@@ -307,12 +313,19 @@ impl<const N: usize> ShimmyPipeline<N> {
     }
 }
 
-impl<const N: usize, M: LinearModel<S>, const S: usize> ShimmyPipeline<N, M, S> {
-    /// A pipeline whose model side tracks the vehicle model `plant`.
+impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, S> {
+    /// A pipeline whose model side tracks the vehicle model `plant` (updated from the data
+    /// when `params.update.enabled`).
     pub fn for_model(plant: M, params: PipelineParams) -> Result<Self, ConfigError> {
+        let est = &params.estimator;
+        let update = params.update.matched_to(
+            est.lambda_slow,
+            est.input_rate_hz / f32::from(est.decimation.max(1)),
+        );
         Ok(Self {
             data: DataPipeline::new(&params)?,
             model: ModelMarginTracker::new(plant, params.model),
+            updater: ModelUpdater::new(plant, update),
             model_margin: None,
             c_damper_nspm: 0.0,
             params,
@@ -347,13 +360,25 @@ impl<const N: usize, M: LinearModel<S>, const S: usize> ShimmyPipeline<N, M, S> 
         if let Some(pt) = self.model.step(t_s, speed_mps, self.c_damper_nspm) {
             self.model_margin = Some(pt.margin());
         }
-        self.data.push(
+        let out = self.data.push(
             sample,
             speed_mps,
             accel_mps2,
             t_s,
             self.model_margin.as_ref(),
-        )
+        )?;
+        let outcome = self
+            .updater
+            .update(t_s, speed_mps, self.c_damper_nspm, &out.meter.slow);
+        if outcome == UpdateOutcome::Updated {
+            self.model.set_plant(self.updater.model());
+        }
+        Some(out)
+    }
+
+    /// The online model update (its parameters, their uncertainty and the diagnosis).
+    pub fn updater(&self) -> &ModelUpdater<M, S> {
+        &self.updater
     }
 
     /// Current level.

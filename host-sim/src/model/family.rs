@@ -20,7 +20,7 @@ use anyhow::Result;
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::control::ControlParams;
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::vehicle::Vehicle;
@@ -31,7 +31,7 @@ use super::plant::{Damper, Inputs, Method};
 /// A vehicle model as the simulator runs it; `N` is the state count of its linear model.
 pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'static {
     /// The core's linear model (eigenvalues, Hopf crossings, the model-margin tracker).
-    type Linear: LinearModel<N> + Copy + Send + Sync + std::fmt::Debug + 'static;
+    type Linear: UpdatableModel<N> + Copy + Send + Sync + std::fmt::Debug + 'static;
     /// The nonlinear plant in time.
     type Plant: SimPlant + Clone + Send;
 

@@ -24,7 +24,7 @@ use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::estimator::pipeline::{
     AccelEstimator, DataPipeline, PipelineOutput, ShimmyPipeline,
 };
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::params::PlantParams;
 use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
@@ -275,12 +275,12 @@ pub fn level_name(l: Level) -> &'static str {
 
 /// The pipeline of an analysis: with the model tracker on the vehicle's model `M`, or data
 /// only.
-enum Pipe<M: LinearModel<S>, const S: usize> {
+enum Pipe<M: UpdatableModel<S>, const S: usize> {
     Full(Box<ShimmyPipeline<EVENT_LOG, M, S>>),
     DataOnly(Box<DataPipeline<EVENT_LOG>>),
 }
 
-impl<M: LinearModel<S>, const S: usize> Pipe<M, S> {
+impl<M: UpdatableModel<S>, const S: usize> Pipe<M, S> {
     fn push(&mut self, s: &Sample, v: f32, a: f32, t: f64) -> Option<PipelineOutput> {
         match self {
             Pipe::Full(p) => p.push(s, v, a, t),

@@ -9,11 +9,12 @@
 
 use anyhow::{Context, Result};
 use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
+use shimmy_core::estimator::model_update::ParamEstimate;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::{
     DataPipeline, PipelineOutput, PipelineParams, ShimmyPipeline,
 };
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, ModeSelect};
 
@@ -168,6 +169,8 @@ pub struct MarginRun {
     pub max_solves_per_call: u8,
     /// Model cycles completed.
     pub model_cycles: u32,
+    /// The online model update's parameters at the end (empty when it is off).
+    pub updated: Vec<ParamEstimate>,
     /// Wall-clock time of the run, s.
     pub wall_s: f64,
 }
@@ -183,12 +186,12 @@ impl MarginRun {
 pub use crate::model::family::onset_kmh;
 
 /// The pipeline of a run: the full one (model tracker stepped every call) or the data-only arm.
-enum Pipe<M: LinearModel<N>, const N: usize> {
+enum Pipe<M: UpdatableModel<N>, const N: usize> {
     Full(Box<ShimmyPipeline<16, M, N>>),
     DataOnly(Box<DataPipeline<16>>),
 }
 
-impl<M: LinearModel<N>, const N: usize> Pipe<M, N> {
+impl<M: UpdatableModel<N>, const N: usize> Pipe<M, N> {
     fn new(model: Option<M>, pp: PipelineParams) -> Result<Self> {
         Ok(match model {
             Some(m) => Pipe::Full(Box::new(
@@ -216,6 +219,13 @@ impl<M: LinearModel<N>, const N: usize> Pipe<M, N> {
         match self {
             Pipe::Full(p) => p.model().cycles(),
             Pipe::DataOnly(_) => 0,
+        }
+    }
+
+    fn estimates(&self) -> Vec<ParamEstimate> {
+        match self {
+            Pipe::Full(p) if p.params().update.enabled => p.updater().estimates().to_vec(),
+            _ => Vec::new(),
         }
     }
 }
@@ -337,6 +347,7 @@ pub fn run_with_progress<M: SimModel<N>, const N: usize>(
         onset_time_s: onset_time,
         max_solves_per_call: max_solves,
         model_cycles: pipe.cycles(),
+        updated: pipe.estimates(),
         wall_s: wall.elapsed().as_secs_f64(),
     })
 }

@@ -20,7 +20,7 @@ use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
 use shimmy_core::estimator::meter::mode_meter::WheelOrder;
 use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::params::kmh_to_mps;
 use shimmy_core::supervisor::faults::FaultSet;
 use shimmy_core::supervisor::safe_controller::SafeController;
@@ -97,7 +97,7 @@ impl<V: RecordVehicle> Backend for SimBackend<V> {
 
 /// The loop observer of the drive: pipeline (on the model `L` with `S` states), recorder, fault
 /// bits, telemetry.
-struct DriveObserver<V: RecordVehicle, L: LinearModel<S>, const S: usize> {
+struct DriveObserver<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> {
     pipe: Box<ShimmyPipeline<16, L, S>>,
     recorder: Recorder,
     backend: SimBackend<V>,
@@ -106,7 +106,9 @@ struct DriveObserver<V: RecordVehicle, L: LinearModel<S>, const S: usize> {
     updates: u32,
 }
 
-impl<V: RecordVehicle, L: LinearModel<S>, const S: usize> LoopObserver for DriveObserver<V, L, S> {
+impl<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> LoopObserver
+    for DriveObserver<V, L, S>
+{
     fn on_sample(&mut self, r: &SampleRecord<'_>) {
         let Some(o) = r.safe else {
             return;

@@ -1,0 +1,373 @@
+//! Online model updating: the few effective physical parameters of the vehicle model
+//! ([`UpdatableModel::UPDATE_PARAMS`], e.g. the car's tyre cornering stiffness and relaxation
+//! length) estimated from the mode meter's shimmy frequency AND damping over the whole drive,
+//! so the model's onset speed, slope and curvature follow the vehicle rather than its file.
+//!
+//! The state is theta = ln(factor) per parameter with its covariance P, a Gaussian prior
+//! (theta = 0, sigma [`UpdateParam::prior_sigma_ln`]) updated by an extended Kalman filter
+//! without process noise: evidence from the lead-in and every speed of the ramp accumulates,
+//! nothing restarts at a new speed. One measurement update every `period_s`:
+//!
+//! - y = (f, zeta) of the slow meter instance, valid estimates only;
+//! - h(theta, V) = the damped frequency and damping of the shimmy eigenvalue of A(V) of the
+//!   updated model, at V = the speed the meter's estimate belongs to: the meter's exponential
+//!   memory (time constant tau = 1 / ((1 - lambda) f_dec)) weights the past speeds exactly as a
+//!   first-order low-pass of the speed with the same tau does, so that filtered speed is used;
+//! - the Jacobian dh/dtheta by first-order eigenvalue perturbation (one eigen-solve, one complex
+//!   LU for the left and right eigenvectors, and dA/dtheta_k by a forward difference of the
+//!   model's A, which is cheap: no solve);
+//! - the noise: the meter's sigma of zeta, and for the frequency sigma_f = f_n sigma_zeta (the
+//!   root's uncertainty is about circular in the s-plane: Re and Im scatter alike, so the
+//!   frequency is known zeta / sigma_zeta times better relative to its value than the damping),
+//!   each with a floor (the meter's bias on the plant) and inflated by 2 tau / period_s
+//!   because consecutive estimates share the meter's memory (one independent look per
+//!   effective window T_eff = 2 tau);
+//! - an innovation gate: a measurement more than `gate_sigmas` from the prediction is dropped
+//!   (counted), so a meter glitch cannot drag the model;
+//! - theta is kept inside ln of [`ModelUpdateConfig::max_factor`] either way.
+//!
+//! Cost per update: one eigen-solve of the model's A, one complex LU, K + 1 model
+//! linearisations and K x K arithmetic (K <= [`MAX_UPDATE_PARAMS`]); at 1 Hz it is a small
+//! share next to the 10 Hz model-margin tracker.
+
+use nalgebra::{Complex, SMatrix, SVector};
+
+use super::meter::mode_meter::ModeEstimate;
+use crate::eigen::{self, Eigenpair, Mode};
+use crate::model::{UpdatableModel, UpdateParam};
+use crate::stability::{self, ModeSelect};
+
+/// Most parameters a model may expose to the update.
+pub const MAX_UPDATE_PARAMS: usize = 5;
+
+type Vk = SVector<f64, MAX_UPDATE_PARAMS>;
+type Pk = SMatrix<f64, MAX_UPDATE_PARAMS, MAX_UPDATE_PARAMS>;
+
+/// Tuning of the online model update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelUpdateConfig {
+    /// Run the update (false: the model stays the vehicle file's).
+    pub enabled: bool,
+    /// Time between measurement updates, s.
+    pub period_s: f32,
+    /// The slow meter's memory time constant tau, s (its estimates are correlated over it):
+    /// set from the meter's configuration by [`ModelUpdateConfig::matched_to`].
+    pub memory_s: f32,
+    /// Floor of the damping ratio's sigma (the meter's bias on the plant, ~1e-3 at the
+    /// well-damped points of `shimmy-sim meter-accuracy`, doubled).
+    pub zeta_sigma_floor: f64,
+    /// Floor of the frequency's relative sigma.
+    pub freq_sigma_floor_rel: f64,
+    /// Innovations beyond this many sigmas are dropped.
+    pub gate_sigmas: f64,
+    /// Each factor stays within [1 / max_factor, max_factor].
+    pub max_factor: f64,
+    /// Below this speed no update (the shimmy mode is overdamped and the meter sees road
+    /// noise), m/s.
+    pub min_speed_mps: f32,
+}
+
+impl ModelUpdateConfig {
+    /// The defaults with the update switched off.
+    pub const OFF: Self = Self {
+        enabled: false,
+        period_s: 1.0,
+        memory_s: 5.0,
+        zeta_sigma_floor: 0.002,
+        freq_sigma_floor_rel: 0.002,
+        gate_sigmas: 5.0,
+        max_factor: 2.0,
+        min_speed_mps: 2.0,
+    };
+
+    /// The defaults with the update on.
+    pub const ON: Self = Self {
+        enabled: true,
+        ..Self::OFF
+    };
+
+    /// `self` with the memory of a meter whose slow instance forgets with `lambda_slow` per
+    /// decimated step at `decimated_rate_hz`.
+    pub fn matched_to(self, lambda_slow: f32, decimated_rate_hz: f32) -> Self {
+        let tau = 1.0 / ((1.0 - lambda_slow) * decimated_rate_hz);
+        Self {
+            memory_s: if tau.is_finite() && tau > 0.0 {
+                tau
+            } else {
+                self.memory_s
+            },
+            ..self
+        }
+    }
+}
+
+impl Default for ModelUpdateConfig {
+    fn default() -> Self {
+        Self::OFF
+    }
+}
+
+/// One updated parameter: the factor on the vehicle file's value and its uncertainty.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct ParamEstimate {
+    /// The field's short name.
+    pub field: &'static str,
+    /// What it is.
+    pub what: &'static str,
+    /// The estimated factor on the file's value (exp theta).
+    pub factor: f64,
+    /// One-sigma uncertainty of ln(factor).
+    pub sigma_ln: f64,
+    /// Prior sigma of ln(factor): how much the data narrowed it is `sigma_ln / prior_sigma_ln`.
+    pub prior_sigma_ln: f64,
+    /// The factor is outside its plausible band by more than two of its sigmas.
+    pub out_of_band: bool,
+}
+
+impl ParamEstimate {
+    /// The change from the file in per cent (`factor - 1`).
+    pub fn change_pct(&self) -> f64 {
+        (self.factor - 1.0) * 100.0
+    }
+}
+
+/// What one measurement update did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateOutcome {
+    /// Not due, disabled, no valid estimate or too slow.
+    Idle,
+    /// The model's shimmy mode could not be computed.
+    ModelFailed,
+    /// The measurement was outside the innovation gate and dropped.
+    Gated,
+    /// The parameters moved.
+    Updated,
+}
+
+/// The online model update on the vehicle model `M` with `N` states.
+#[derive(Clone, Debug)]
+pub struct ModelUpdater<M: UpdatableModel<N>, const N: usize> {
+    base: M,
+    cfg: ModelUpdateConfig,
+    theta: Vk,
+    p: Pk,
+    k: usize,
+    speed_filt_mps: Option<f32>,
+    last_t_s: Option<f64>,
+    next_due_s: Option<f64>,
+    updates: u32,
+    gated: u32,
+    failures: u32,
+    last_shimmy: Option<Complex<f64>>,
+}
+
+impl<M: UpdatableModel<N>, const N: usize> ModelUpdater<M, N> {
+    /// The update of the model `base` (the vehicle file) with its prior.
+    pub fn new(base: M, cfg: ModelUpdateConfig) -> Self {
+        let k = M::UPDATE_PARAMS.len().min(MAX_UPDATE_PARAMS);
+        let mut p = Pk::zeros();
+        for (i, u) in M::UPDATE_PARAMS.iter().take(k).enumerate() {
+            p[(i, i)] = u.prior_sigma_ln * u.prior_sigma_ln;
+        }
+        Self {
+            base,
+            cfg,
+            theta: Vk::zeros(),
+            p,
+            k,
+            speed_filt_mps: None,
+            last_t_s: None,
+            next_due_s: None,
+            updates: 0,
+            gated: 0,
+            failures: 0,
+            last_shimmy: None,
+        }
+    }
+
+    /// Configuration.
+    pub fn config(&self) -> &ModelUpdateConfig {
+        &self.cfg
+    }
+
+    /// The vehicle file's model.
+    pub fn base(&self) -> &M {
+        &self.base
+    }
+
+    /// The model with the current factors.
+    pub fn model(&self) -> M {
+        self.model_at(&self.theta)
+    }
+
+    fn model_at(&self, theta: &Vk) -> M {
+        (0..self.k).fold(self.base, |m, i| {
+            m.scaled_update_param(i, libm::exp(theta[i]))
+        })
+    }
+
+    /// Measurement updates applied, dropped by the gate, and failed model solves.
+    pub fn counts(&self) -> (u32, u32, u32) {
+        (self.updates, self.gated, self.failures)
+    }
+
+    /// The current estimate of parameter `i`.
+    pub fn estimate(&self, i: usize) -> Option<ParamEstimate> {
+        let u: &UpdateParam = M::UPDATE_PARAMS.get(i).filter(|_| i < self.k)?;
+        let sigma = libm::sqrt(self.p[(i, i)].max(0.0));
+        let (lo, hi) = (libm::log(u.band.0), libm::log(u.band.1));
+        let th = self.theta[i];
+        Some(ParamEstimate {
+            field: u.field,
+            what: u.what,
+            factor: libm::exp(th),
+            sigma_ln: sigma,
+            prior_sigma_ln: u.prior_sigma_ln,
+            out_of_band: th - 2.0 * sigma > hi || th + 2.0 * sigma < lo,
+        })
+    }
+
+    /// Every parameter's estimate, in the model's order.
+    pub fn estimates(&self) -> heapless::Vec<ParamEstimate, MAX_UPDATE_PARAMS> {
+        (0..self.k).filter_map(|i| self.estimate(i)).collect()
+    }
+
+    /// The parameter furthest outside its plausible band (beyond two sigmas), if any.
+    pub fn diagnosis(&self) -> Option<ParamEstimate> {
+        self.estimates()
+            .into_iter()
+            .filter(|e| e.out_of_band)
+            .max_by(|a, b| {
+                libm::fabs(libm::log(a.factor) / a.sigma_ln.max(1e-12))
+                    .total_cmp(&libm::fabs(libm::log(b.factor) / b.sigma_ln.max(1e-12)))
+            })
+    }
+
+    /// The model's shimmy eigenvalue at `v` with damper `c` for `theta`, and its derivatives
+    /// with respect to each theta_k.
+    fn shimmy_and_gradient(
+        &self,
+        theta: &Vk,
+        v: f64,
+        c: f64,
+    ) -> Option<(Complex<f64>, [Complex<f64>; MAX_UPDATE_PARAMS])> {
+        let m = self.model_at(theta);
+        let a = m.linearise(v, c);
+        let vals = eigen::eigenvalues_of::<f64, N>(&a).ok()?;
+        let mode: Mode =
+            stability::select_mode_of::<f64, M, N>(&m, &a, &vals, ModeSelect::Shimmy).ok()?;
+        let lambda = mode.eigenvalue();
+        let lambda = if lambda.im < 0.0 {
+            lambda.conj()
+        } else {
+            lambda
+        };
+        let (right, left) = eigen::eigenvectors_in::<f64, N>(&a, lambda).ok()?;
+        let pair = Eigenpair::<f64, N> {
+            lambda,
+            right,
+            left,
+            iterations: 0,
+        };
+        // forward differences of A only (no solve): A is smooth in each factor
+        const STEP: f64 = 1e-4;
+        let mut grad = [Complex::new(0.0, 0.0); MAX_UPDATE_PARAMS];
+        for (i, g) in grad.iter_mut().enumerate().take(self.k) {
+            let mut t = *theta;
+            t[i] += STEP;
+            let da = (self.model_at(&t).linearise(v, c) - a) / STEP;
+            *g = pair.derivative(&da)?;
+        }
+        Some((lambda, grad))
+    }
+
+    /// One call per meter report (100 Hz): `t_s` time, `speed_mps` the current speed,
+    /// `c_damper_nspm` the damper coefficient the model uses, `slow` the slow meter estimate.
+    /// Keeps the speed the meter's estimate belongs to and, every `period_s`, updates the
+    /// parameters.
+    pub fn update(
+        &mut self,
+        t_s: f64,
+        speed_mps: f32,
+        c_damper_nspm: f32,
+        slow: &ModeEstimate,
+    ) -> UpdateOutcome {
+        if !self.cfg.enabled || !speed_mps.is_finite() || !t_s.is_finite() {
+            return UpdateOutcome::Idle;
+        }
+        let dt = self.last_t_s.map_or(0.0, |t0| (t_s - t0).max(0.0) as f32);
+        self.last_t_s = Some(t_s);
+        let a = dt / (self.cfg.memory_s + dt);
+        let v_meter = match self.speed_filt_mps {
+            Some(v) => v + a * (speed_mps - v),
+            None => speed_mps,
+        };
+        self.speed_filt_mps = Some(v_meter);
+        let due = self.next_due_s.is_none_or(|t1| t_s >= t1);
+        if !due
+            || !slow.valid
+            || v_meter < self.cfg.min_speed_mps
+            || !(slow.freq_hz.is_finite() && slow.zeta.is_finite())
+        {
+            return UpdateOutcome::Idle;
+        }
+        self.next_due_s = Some(t_s + f64::from(self.cfg.period_s));
+        let c = f64::from(c_damper_nspm.max(0.0));
+        let Some((lambda, grad)) = self.shimmy_and_gradient(&self.theta, f64::from(v_meter), c)
+        else {
+            self.failures = self.failures.saturating_add(1);
+            return UpdateOutcome::ModelFailed;
+        };
+        self.last_shimmy = Some(lambda);
+        // h = (f_d, zeta) and its Jacobian
+        let two_pi = 2.0 * core::f64::consts::PI;
+        let wn = libm::hypot(lambda.re, lambda.im);
+        if wn <= 0.0 {
+            self.failures = self.failures.saturating_add(1);
+            return UpdateOutcome::ModelFailed;
+        }
+        let h = [lambda.im / two_pi, -lambda.re / wn];
+        let mut hj = SMatrix::<f64, 2, MAX_UPDATE_PARAMS>::zeros();
+        for (i, g) in grad.iter().enumerate().take(self.k) {
+            let dwn = (lambda.re * g.re + lambda.im * g.im) / wn;
+            hj[(0, i)] = g.im / two_pi;
+            hj[(1, i)] = -(g.re * wn - lambda.re * dwn) / (wn * wn);
+        }
+        let y = [f64::from(slow.freq_hz), f64::from(slow.zeta)];
+        let sz = f64::from(slow.sigma_zeta).max(self.cfg.zeta_sigma_floor);
+        let fn_hz = f64::from(slow.wn_hz).max(f64::from(slow.freq_hz));
+        let sf = (fn_hz * sz).max(self.cfg.freq_sigma_floor_rel * fn_hz);
+        // one independent estimate per effective window 2 tau (the meter's T_eff)
+        let inflate = f64::from((2.0 * self.cfg.memory_s / self.cfg.period_s).max(1.0));
+        let r = SMatrix::<f64, 2, 2>::new(sf * sf * inflate, 0.0, 0.0, sz * sz * inflate);
+        let s = hj * self.p * hj.transpose() + r;
+        let Some(s_inv) = s.try_inverse() else {
+            self.failures = self.failures.saturating_add(1);
+            return UpdateOutcome::ModelFailed;
+        };
+        let innov = nalgebra::Vector2::new(y[0] - h[0], y[1] - h[1]);
+        let d2 = (innov.transpose() * s_inv * innov)[(0, 0)];
+        if !d2.is_finite() || d2 > self.cfg.gate_sigmas * self.cfg.gate_sigmas {
+            self.gated = self.gated.saturating_add(1);
+            return UpdateOutcome::Gated;
+        }
+        let gain = self.p * hj.transpose() * s_inv;
+        let ikh = Pk::identity() - gain * hj;
+        // Joseph form: P stays symmetric and positive
+        let p_new = ikh * self.p * ikh.transpose() + gain * r * gain.transpose();
+        let lim = libm::log(self.cfg.max_factor.max(1.0));
+        let mut theta = self.theta + gain * innov;
+        for i in 0..self.k {
+            theta[i] = theta[i].clamp(-lim, lim);
+        }
+        if !(theta.iter().all(|x| x.is_finite()) && p_new.iter().all(|x| x.is_finite())) {
+            self.failures = self.failures.saturating_add(1);
+            return UpdateOutcome::ModelFailed;
+        }
+        self.theta = theta;
+        self.p = (p_new + p_new.transpose()) * 0.5;
+        self.updates = self.updates.saturating_add(1);
+        UpdateOutcome::Updated
+    }
+}
