@@ -18,7 +18,7 @@ use super::meter::mode_meter::{
 use super::model_margin::{ModelMargin, ModelMarginConfig, ModelMarginTracker, ModelPoint};
 use super::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 use crate::model::LinearModel;
-use crate::params::PlantParams;
+use crate::vehicles::car::PlantParams;
 
 /// Every tunable of the pipeline in one place.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -291,7 +291,7 @@ impl<const N: usize> DataPipeline<N> {
 pub struct ShimmyPipeline<
     const N: usize,
     M: LinearModel<S> = PlantParams,
-    const S: usize = { crate::plant::N_STATES },
+    const S: usize = { crate::vehicles::car::N_STATES },
 > {
     params: PipelineParams,
     data: DataPipeline<N>,

@@ -30,8 +30,8 @@ use rayon::prelude::*;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::PlantParams;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 
 use crate::model::family::FamilyVehicle;
 use crate::model::study::StudyModel;
