@@ -1,5 +1,5 @@
 #[cfg(test)]
-mod tests {
+mod model {
     use crate::eigen;
     #[allow(unused_imports)]
     use crate::model::{LinearModel, ModeShape};

@@ -1,5 +1,5 @@
 #[cfg(test)]
-mod tests {
+mod model {
     #[allow(unused_imports)]
     use crate::model::{LinearModel, ModeShape};
     use crate::stability::{self, CrossingKind};
