@@ -2,9 +2,9 @@
 //! summary, dzeta/dV, and one warm-started `critical_speed_near` update.
 use criterion::{criterion_group, criterion_main, Criterion};
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker};
-use shimmy_core::params::ParamSet;
 use shimmy_core::stability::{self, ModeSelect};
-use shimmy_core::{eigen, plant};
+use shimmy_core::vehicles::car::ParamSet;
+use shimmy_core::{eigen, vehicles::car as plant};
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {

@@ -14,7 +14,7 @@ mod hessenberg_qr;
 pub use crate::float::{narrowed, widened, widened_complex, SolveFloat, VectorIn};
 use crate::model::LinearModel;
 pub use crate::model::{ComplexVector, Matrix, ModeShape, ModeShapeInfo};
-use crate::plant::N_STATES;
+use crate::vehicles::car::N_STATES;
 
 /// State matrix of the car's linear plant.
 pub type StateMatrix = Matrix<N_STATES>;
@@ -831,9 +831,9 @@ fn real_times<T: SolveFloat, const N: usize>(
     })
 }
 
-/// The car's mode classification ([`crate::plant::classify`]), kept here for its callers.
+/// The car's mode classification ([`crate::vehicles::car::classify`]), kept here for its callers.
 pub fn classify(v: &CVector, i_k: f64, i_phi: f64, j_sw: f64, i_s: f64) -> ModeShapeInfo {
-    crate::plant::classify(v, i_k, i_phi, j_sw, i_s)
+    crate::vehicles::car::classify(v, i_k, i_phi, j_sw, i_s)
 }
 
 /// Eigenvector of `lambda` of `a` and its classification by the model `m`.
@@ -858,8 +858,8 @@ pub fn mode_shape_of<T: SolveFloat, M: LinearModel<N>, const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::ParamSet;
-    use crate::plant::linearise;
+    use crate::vehicles::car::linearise;
+    use crate::vehicles::car::ParamSet;
 
     #[test]
     fn the_f32_mode_shape_is_the_f64_one() {
@@ -996,7 +996,7 @@ mod tests {
     fn newton_continues_an_eigenpair_to_its_precision() {
         fn check<T: SolveFloat>() {
             let p = ParamSet::Nominal.params();
-            let da = crate::plant::dlinearise_dv(&p);
+            let da = crate::vehicles::car::dlinearise_dv(&p);
             let a0 = linearise(&p, 8.0, 0.0);
             let l0 = least_damped_mode(&eigenvalues(&a0).unwrap())
                 .unwrap()

@@ -4,17 +4,13 @@
 //! - [`sqrt`]: the correctly rounded f32 square root on the FPU (libm's off the target);
 //! - [`trig`]: f32 sine, cosine and tangent with libm's bits up to 2^28 pi/2 (no huge-argument
 //!   reduction linked);
-//! - [`params`]: parameter sets of the 4-DOF solid-axle steering plant (`docs/plant-model.md`);
+//! - [`units`]: unit conversions and physical constants;
 //! - [`model`]: the vehicle-model family: the trait a linear steering model with N states
 //!   implements (A(V), dA/dV, damper input, measured output, mode shapes);
-//! - [`plant`]: the car's plant linearised at a forward speed (state matrix A(V), dA/dV);
+//! - [`vehicles`]: the models of the family, one folder each (car, mining truck, trailer,
+//!   dual-axle truck), laid out alike;
 //! - [`eigen`]: bounded eigenvalue solver and shimmy-mode classification of A(V);
 //! - [`stability`]: stability over speed: Hopf crossings and critical speeds (any model);
-//! - [`truck`]: the mining dump truck (5 DOF, hydro-pneumatic struts) as a model of the family;
-//!   [`truck_vehicle`]: the truck as a stored vehicle record (its fields and the shared ones);
-//! - [`trailer`]: trailer sway (2 DOF on a laterally compliant hitch) as a model of the family;
-//! - [`dual_axle`]: the dual-front-axle heavy truck (8 DOF, two steered axles linked by a
-//!   mid-shift transmission) as a model of the family;
 //! - [`mr_damper`]: the Spencer model of the MR steering damper (the simulator's damper);
 //! - [`control`]: signal conditioning, the invertible damper model, the actuator path and the
 //!   controllers (`docs/control-and-supervisor.md`);
@@ -42,7 +38,6 @@ mod fmt;
     )
 )]
 pub mod control;
-pub mod dual_axle;
 pub mod eigen;
 // The estimator's fixed-size numeric kernels index arrays in loops bounded by their capacity;
 // that those bounds checks can never fire is shown by the panic-free link check
@@ -55,13 +50,10 @@ pub mod estimator;
 pub mod float;
 pub mod model;
 pub mod mr_damper;
-pub mod params;
-pub mod plant;
 pub mod sqrt;
 pub mod stability;
-pub mod trailer;
 pub mod trig;
-pub mod truck;
+pub mod units;
 // Control path: panic-free by lint (tests may unwrap/index).
 #[cfg_attr(
     not(test),
@@ -77,12 +69,12 @@ pub mod supervisor;
     not(test),
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
-pub mod truck_vehicle;
+pub mod vehicle;
 #[cfg_attr(
     not(test),
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
-pub mod vehicle;
+pub mod vehicles;
 
 /// Crate version, reported by the firmware at boot and by the simulator in its reports.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -9,10 +9,10 @@
 //! sensitivities, the incremental margin) is written once, generic over the member, with the
 //! state count a const generic so that every buffer stays on the stack.
 //!
-//! Members: the 4-DOF car-class solid axle ([`crate::params::PlantParams`], 10 states), the
-//! 5-DOF mining dump truck ([`crate::truck::TruckParams`], 12 states), the 8-DOF
-//! dual-front-axle truck ([`crate::dual_axle::DualAxleParams`], 20 states) and the 2-DOF
-//! trailer on a compliant hitch ([`crate::trailer::TrailerParams`], 5 states).
+//! Members: the 4-DOF car-class solid axle ([`crate::vehicles::car::PlantParams`], 10 states), the
+//! 5-DOF mining dump truck ([`crate::vehicles::truck::TruckParams`], 12 states), the 8-DOF
+//! dual-front-axle truck ([`crate::vehicles::dual_axle::DualAxleParams`], 20 states) and the 2-DOF
+//! trailer on a compliant hitch ([`crate::vehicles::trailer::TrailerParams`], 5 states).
 
 use crate::float::{widened, SolveFloat};
 use nalgebra::{Complex, SMatrix, SVector};
@@ -167,4 +167,35 @@ pub trait UpdatableModel<const N: usize>: LinearModel<N> + Copy {
 
     /// The value of update parameter `index` (NaN for an index past the list).
     fn update_param(&self, index: usize) -> f64;
+}
+
+/// The larger of `a` and `b` (as `f64::max` for numbers; the squared magnitudes here are).
+pub(crate) fn larger<T: PartialOrd>(a: T, b: T) -> T {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// Phase of the right wheel's yaw `psi_r` relative to the left one's `psi_l`, rad. In f32
+/// (scaled into its range): ample for a phase, and the firmware links no f64 atan.
+pub fn wheel_phase_rad<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> f64 {
+    let rel = psi_r * psi_l.conj();
+    let m = larger(rel.re.abs(), rel.im.abs());
+    if m > T::zero() {
+        let f = |x: T| (x / m).to_f64() as f32;
+        f64::from(libm::atan2f(f(rel.im), f(rel.re)))
+    } else {
+        0.0
+    }
+}
+
+/// In-phase (the shimmy mode) or anti-phase wheel yaw, from the two wheels' components.
+pub fn wheel_yaw_shape<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> ModeShape {
+    if (psi_l + psi_r).norm_sqr() >= (psi_l - psi_r).norm_sqr() {
+        ModeShape::InPhaseWheelYaw
+    } else {
+        ModeShape::AntiPhaseWheelYaw
+    }
 }

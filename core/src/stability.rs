@@ -5,7 +5,7 @@
 //! crossing is bracketed on a speed grid and refined with Brent's method to a speed tolerance
 //! (default 1e-5 m/s). Nothing here allocates; all work is bounded by explicit evaluation
 //! budgets. The Hopf window is computed, never typed in. Every function works for any model of
-//! the family ([`LinearModel`]); the car's [`crate::params::PlantParams`] is one.
+//! the family ([`LinearModel`]); the car's [`crate::vehicles::car::PlantParams`] is one.
 
 use heapless::Vec;
 use nalgebra::Complex;
@@ -549,7 +549,8 @@ pub fn critical_speed_near<M: LinearModel<N>, const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
+    use crate::units::{kmh_to_mps, mps_to_kmh};
+    use crate::vehicles::car::{Param, ParamSet, PlantParams};
 
     fn ab(c: Complex<f64>) -> f64 {
         c.re.hypot(c.im)

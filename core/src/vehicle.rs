@@ -26,8 +26,8 @@ use crate::estimator::monitor::MonitorParams;
 use crate::estimator::pipeline::PipelineParams;
 use crate::model::LinearModel;
 use crate::mr_damper::SpencerParams;
-use crate::params::{Param, ParamSet, PlantParams};
 use crate::supervisor::params::SupervisorParams;
+use crate::vehicles::car::{Param, ParamSet, PlantParams};
 
 /// The MR damper of the vehicle.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -416,11 +416,11 @@ pub struct Field {
     pub doc: &'static str,
     /// Where the value lives in a vehicle: one accessor per field, not a getter and a setter
     /// (those were ~3.2 KB of the firmware image for 87 fields; `cargo xtask size`).
-    slot: fn(&mut Vehicle) -> Slot<'_>,
+    pub(crate) slot: fn(&mut Vehicle) -> Slot<'_>,
 }
 
 /// Where a field's value is kept, and its type.
-enum Slot<'a> {
+pub(crate) enum Slot<'a> {
     F64(&'a mut f64),
     F32(&'a mut f32),
     /// Whole numbers (the range check runs before a write).
@@ -430,7 +430,7 @@ enum Slot<'a> {
 }
 
 impl Slot<'_> {
-    fn read(&self) -> f64 {
+    pub(crate) fn read(&self) -> f64 {
         match self {
             Slot::F64(x) => **x,
             Slot::F32(x) => f64::from(**x),
@@ -439,7 +439,7 @@ impl Slot<'_> {
         }
     }
 
-    fn write(self, x: f64) {
+    pub(crate) fn write(self, x: f64) {
         match self {
             Slot::F64(p) => *p = x,
             Slot::F32(p) => *p = x as f32,
@@ -1375,7 +1375,7 @@ pub const RECORD_MAX_BYTES: usize = RECORD_HEADER_BYTES + 8 * RECORD_MAX_FIELDS;
 
 /// A vehicle of one model as a stored record holds it: its values in a fixed order, each with a
 /// section, name and unit, under the model's schema id. The car ([`Vehicle`]) and the mining
-/// truck ([`crate::truck_vehicle::TruckVehicle`]: its model's parameters and the shared
+/// truck ([`crate::vehicles::truck::board::TruckVehicle`]: its model's parameters and the shared
 /// sections) are records of their own model; one encoder and decoder ([`encode_record`],
 /// [`decode_record`]) serves every model, so a record of one model is refused by another
 /// model's decoder (another schema id) instead of misread.
@@ -1394,48 +1394,6 @@ pub trait RecordVehicle: Copy {
     fn write_value(&mut self, i: usize, x: f64) -> Result<(), VehicleError>;
     /// Every value in range and every rule between them; the first offender.
     fn check_all(&self) -> Result<(), VehicleError>;
-}
-
-impl RecordVehicle for Vehicle {
-    const MODEL: &'static str =
-        <PlantParams as crate::model::LinearModel<{ crate::plant::N_STATES }>>::NAME;
-
-    fn values() -> usize {
-        FIELDS.len()
-    }
-
-    fn describe(i: usize) -> Option<(&'static str, &'static str, &'static str)> {
-        FIELDS.get(i).map(|f| (f.section(), f.name, f.unit()))
-    }
-
-    fn record_base() -> Self {
-        Vehicle::nominal()
-    }
-
-    fn read_value(&mut self, i: usize) -> f64 {
-        FIELDS.get(i).map_or(f64::NAN, |f| (f.slot)(self).read())
-    }
-
-    fn write_value(&mut self, i: usize, x: f64) -> Result<(), VehicleError> {
-        // The decoder writes only `i < values()`; nothing lies beyond.
-        if let Some(field) = FIELDS.get(i) {
-            field.check(x)?;
-            (field.slot)(self).write(x);
-        }
-        Ok(())
-    }
-
-    fn check_all(&self) -> Result<(), VehicleError> {
-        self.validate()
-    }
-}
-
-/// The schema id of [`FIELDS`] (the car's record): FNV-1a over every field's section, name and
-/// unit, in table order. A record written under another table (a field added, removed, renamed,
-/// moved or given another unit, or another model's) carries another id and is refused instead
-/// of misread.
-pub fn record_schema() -> u32 {
-    record_schema_of::<Vehicle>()
 }
 
 /// The schema id of the model `V`'s record (FNV-1a over each value's section, name and unit).
@@ -1496,7 +1454,7 @@ pub enum RecordError {
     /// Written under another field table (another model's, or another version's).
     #[error("vehicle record schema {found:#010x} is not this firmware's {expected:#010x}")]
     Schema {
-        /// The record's schema id ([`crate::truck_vehicle::record_model`] names its model, if known).
+        /// The record's schema id ([`crate::vehicles::truck::board::record_model`] names its model, if known).
         found: u32,
         /// The decoder's model's ([`record_schema_of`]).
         expected: u32,
@@ -1567,7 +1525,7 @@ pub fn decode_record<V: RecordVehicle>(bytes: &[u8]) -> Result<V, RecordError> {
 /// A stored vehicle of one model as a board image is configured from it: the model's linear
 /// parameters (the model-margin tracker's model) and the sections every model shares (damper,
 /// sensors, gains, thresholds). The car ([`Vehicle`], its plant is the model) and the mining
-/// truck ([`crate::truck_vehicle::TruckVehicle`]) are members; an image is built for one.
+/// truck ([`crate::vehicles::truck::board::TruckVehicle`]) are members; an image is built for one.
 pub trait BoardVehicle<const N: usize>: RecordVehicle + PartialEq {
     /// The vehicle model's linear model.
     type Model: LinearModel<N> + Copy;
@@ -1590,38 +1548,6 @@ pub trait BoardVehicle<const N: usize>: RecordVehicle + PartialEq {
     /// The margin pipeline's parameters for the model ([`Vehicle::pipeline_params_for`]).
     fn margin_pipeline(&self) -> PipelineParams {
         self.parts().pipeline_params_for(&self.model())
-    }
-}
-
-impl BoardVehicle<{ crate::plant::N_STATES }> for Vehicle {
-    type Model = PlantParams;
-
-    fn compiled_in() -> Self {
-        Vehicle::nominal()
-    }
-
-    fn model(&self) -> PlantParams {
-        self.plant
-    }
-
-    fn parts(&self) -> &Vehicle {
-        self
-    }
-
-    fn nominal_plant(&self) -> NominalPlant {
-        NominalPlant::from_params(&self.plant)
-    }
-}
-
-impl Vehicle {
-    /// Writes the vehicle as a car record ([`encode_record`]).
-    pub fn encode_record(&self, out: &mut [u8]) -> Result<usize, RecordError> {
-        encode_record(self, out)
-    }
-
-    /// Reads a car record ([`decode_record`]): the schema must be [`record_schema`].
-    pub fn decode_record(bytes: &[u8]) -> Result<Vehicle, RecordError> {
-        decode_record(bytes)
     }
 }
 
@@ -1837,8 +1763,14 @@ mod tests {
             .iter()
             .map(|f| (f.section(), f.name, f.unit()))
             .collect();
-        assert_eq!(schema_of(table.iter().copied()), record_schema());
+        assert_eq!(
+            schema_of(table.iter().copied()),
+            record_schema_of::<Vehicle>()
+        );
         table.swap(0, 1);
-        assert_ne!(schema_of(table.iter().copied()), record_schema());
+        assert_ne!(
+            schema_of(table.iter().copied()),
+            record_schema_of::<Vehicle>()
+        );
     }
 }

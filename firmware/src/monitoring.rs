@@ -64,7 +64,7 @@ impl BoardCalibration for Vehicle {
     }
 }
 
-impl BoardCalibration for shimmy_core::truck_vehicle::TruckVehicle {
+impl BoardCalibration for shimmy_core::vehicles::truck::board::TruckVehicle {
     /// The truck's loaded rolling radius (its 40.00R57 tyres, 1.72 m): with the car's 0.35 m
     /// the wheel order would sweep through the truck's ~3 Hz shimmy at 20-30 km/h.
     /// TODO(vehicle): the truck board's own tone-wheel calibration, as for the car.
@@ -297,13 +297,13 @@ pub type ModelFloat = f32;
 pub type ImageVehicle = Vehicle;
 /// The vehicle the image is built for (`model-truck`: the mining truck).
 #[cfg(feature = "model-truck")]
-pub type ImageVehicle = shimmy_core::truck_vehicle::TruckVehicle;
+pub type ImageVehicle = shimmy_core::vehicles::truck::board::TruckVehicle;
 /// States of the image's vehicle model.
 #[cfg(not(feature = "model-truck"))]
-pub const IMAGE_MODEL_STATES: usize = shimmy_core::plant::N_STATES;
+pub const IMAGE_MODEL_STATES: usize = shimmy_core::vehicles::car::N_STATES;
 /// States of the image's vehicle model.
 #[cfg(feature = "model-truck")]
-pub const IMAGE_MODEL_STATES: usize = shimmy_core::truck::N_STATES;
+pub const IMAGE_MODEL_STATES: usize = shimmy_core::vehicles::truck::N_STATES;
 /// The linear model of the image's model task.
 pub type ImageModel = <ImageVehicle as BoardVehicle<IMAGE_MODEL_STATES>>::Model;
 
@@ -459,7 +459,8 @@ mod tests {
 
     #[test]
     fn model_margin_inside_and_below_the_window() {
-        use shimmy_core::params::{kmh_to_mps, PlantParams};
+        use shimmy_core::units::kmh_to_mps;
+        use shimmy_core::vehicles::car::PlantParams;
         let mut m = ModelTask::new(PlantParams::nominal());
         let mut run = |t: f64, v: f64| {
             for _ in 0..200 {

@@ -158,7 +158,7 @@ fn reading(
 /// firmware's configuration, `params` as the model plant.
 pub fn replay(
     trace: &[u8],
-    params: &shimmy_core::params::PlantParams,
+    params: &shimmy_core::vehicles::car::PlantParams,
 ) -> Result<Digest, ReplayError> {
     if !trace.len().is_multiple_of(SAMPLE_BYTES) {
         return Err(ReplayError::Length);

@@ -9,7 +9,8 @@
 //! `closed_loop_demo_damper_off_30s`: its other arm (the damper passive at 0 A) at the default
 //! integrator. Simulated s per wall s = 30 s / (time per iteration).
 use criterion::{criterion_group, criterion_main, Criterion};
-use shimmy_core::params::{kmh_to_mps, PlantParams};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::PlantParams;
 use shimmy_sim::model::disturbance::initial_yaw;
 use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator};
 use shimmy_sim::sim::demo_case::{self, ARMS};

@@ -247,7 +247,7 @@ mod tests {
                 firmware: "test",
                 core: shimmy_core::VERSION,
                 protocol: PROTOCOL_VERSION,
-                vehicle_schema: shimmy_core::vehicle::record_schema(),
+                vehicle_schema: shimmy_core::vehicles::car::board::record_schema(),
                 log_capacity: 20,
             }
         }

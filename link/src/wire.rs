@@ -111,7 +111,7 @@ pub struct Identity<'a> {
     pub core: &'a str,
     /// [`PROTOCOL_VERSION`] of the device.
     pub protocol: u16,
-    /// The vehicle record schema the device reads (`shimmy_core::vehicle::record_schema`).
+    /// The vehicle record schema the device reads (`shimmy_core::vehicles::car::board::record_schema`).
     pub vehicle_schema: u32,
     /// Entries the event log holds (on a board at least this many: its flash log filled with
     /// the longest entry; when full, the oldest go first).

@@ -23,9 +23,10 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, ModeSelect, DEFAULT_TOL_MPS};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
+use shimmy_core::vehicles::car::Param;
 use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
@@ -104,7 +105,7 @@ impl Vehicle {
             .collect()
     }
 
-    /// The plant parameters by their names in `shimmy_core::params` (and in
+    /// The plant parameters by their names in `shimmy_core::vehicles::car` (and in
     /// `host-sim/reference/plant_scipy.py`), SI units.
     fn plant(&self) -> BTreeMap<&'static str, f64> {
         Param::ALL

@@ -14,7 +14,7 @@
 //! not know well or cannot measure is lumped into tau_u: tyre aligning and lateral-force moments
 //! -(e + t_p)(F_L + F_R)/2 (speed, load and road dependent), the drag-link torque
 //! K_d (theta_sw/i_s - psi_L)/2 (the most uncertain parameter), and the gyroscopic torque
-//! -H phi'. So the controller uses only I_k, c_k and l_t from [`crate::params::PlantParams`]
+//! -H phi'. So the controller uses only I_k, c_k and l_t from [`crate::vehicles::car::PlantParams`]
 //! (their nominal values, [`NominalPlant`]): the geometry l_t is known exactly, I_k within a few
 //! per cent, c_k is small; tau_u is the matched disturbance that the switching gain must cover.
 //! The damper stroke rate is v_d = l_t psi'.
@@ -109,7 +109,7 @@ pub struct NominalPlant {
 
 impl NominalPlant {
     /// Takes I_k, c_k and l_t from a plant parameter set.
-    pub const fn from_params(p: &crate::params::PlantParams) -> Self {
+    pub const fn from_params(p: &crate::vehicles::car::PlantParams) -> Self {
         NominalPlant {
             i_k_kgm2: p.i_k as f32,
             c_k_nms_per_rad: p.c_k as f32,
@@ -126,7 +126,8 @@ impl NominalPlant {
 
 impl NominalPlant {
     /// The nominal parameter set's I_k, c_k and l_t.
-    pub const DEFAULT: Self = NominalPlant::from_params(&crate::params::PlantParams::nominal());
+    pub const DEFAULT: Self =
+        NominalPlant::from_params(&crate::vehicles::car::PlantParams::nominal());
 }
 
 impl Default for NominalPlant {

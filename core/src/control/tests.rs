@@ -386,7 +386,7 @@ fn slow_steering_does_not_make_the_damper_work() {
 /// (coil lag included) on the stroke x_d = l_t psi. Returns (max |psi| over the last 0.5 s,
 /// mean current).
 fn closed_loop(kind: ControllerKind, secs: f64) -> (f64, f64) {
-    let pp = crate::params::PlantParams::nominal();
+    let pp = crate::vehicles::car::PlantParams::nominal();
     let (ik, lt) = (pp.i_k, pp.l_t);
     let w = 2.0 * PI * 6.0;
     let k = ik * w * w;

@@ -236,8 +236,8 @@ fn two_by_two<T: RealField + Copy + Sqrt>(a: T, b: T, c: T, d: T) -> (Complex<T>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::PlantParams;
-    use crate::plant::{linearise, N_STATES};
+    use crate::vehicles::car::PlantParams;
+    use crate::vehicles::car::{linearise, N_STATES};
 
     type StateMatrix = nalgebra::SMatrix<f64, N_STATES, N_STATES>;
 

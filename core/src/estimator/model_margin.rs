@@ -43,9 +43,9 @@ use nalgebra::Complex;
 use crate::eigen::{self, Eigenpair, EigenvaluesOf, Matrix, Mode, SolveFloat};
 use crate::float::{narrowed_complex, widened_complex};
 use crate::model::LinearModel;
-use crate::params::PlantParams;
-use crate::plant::N_STATES;
 use crate::stability::{self, CrossingKind, ModeSelect, V_SEARCH_MAX_MPS, V_SEARCH_MIN_MPS};
+use crate::vehicles::car::PlantParams;
+use crate::vehicles::car::N_STATES;
 
 /// Most Hopf crossings the tracker keeps (the nominal window has two; a scan that finds more
 /// is incomplete and repeated).
@@ -1063,7 +1063,7 @@ impl<T: SolveFloat, M: LinearModel<N>, const N: usize> ModelMarginTracker<T, M, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::ParamSet;
+    use crate::vehicles::car::ParamSet;
 
     #[test]
     fn resumable_brent_matches_the_one_shot_brent() {

@@ -19,7 +19,7 @@ use super::model_margin::{ModelMargin, ModelMarginConfig, ModelMarginTracker, Mo
 use super::model_update::{ModelUpdateConfig, ModelUpdater, UpdateOutcome};
 use super::monitor::{Level, Monitor, MonitorInput, MonitorParams};
 use crate::model::UpdatableModel;
-use crate::params::PlantParams;
+use crate::vehicles::car::PlantParams;
 
 /// Every tunable of the pipeline in one place.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -296,7 +296,7 @@ impl<const N: usize> DataPipeline<N> {
 pub struct ShimmyPipeline<
     const N: usize,
     M: UpdatableModel<S> = PlantParams,
-    const S: usize = { crate::plant::N_STATES },
+    const S: usize = { crate::vehicles::car::N_STATES },
 > {
     params: PipelineParams,
     data: DataPipeline<N>,

@@ -7,7 +7,7 @@
 
 #[cfg(target_os = "none")]
 mod run {
-    use shimmy_core::params::PlantParams;
+    use shimmy_core::vehicles::car::PlantParams;
     use shimmy_firmware::replay::{replay, CHANNELS};
     use shimmy_firmware::runtime::{finish, Outcome};
 

@@ -833,11 +833,11 @@ mod bench {
 
     fn eigen_update_f32() -> u32 {
         use shimmy_core::eigen::eigenvalues_of;
-        use shimmy_core::params::PlantParams;
+        use shimmy_core::vehicles::car::PlantParams;
         let p = PlantParams::nominal();
         let mut v = 12.0;
         measure(|| {
-            let a = shimmy_core::plant::linearise(&p, black_box(v), 0.0);
+            let a = shimmy_core::vehicles::car::linearise(&p, black_box(v), 0.0);
             let _ = black_box(eigenvalues_of::<f32, _>(&a));
             v += 0.1;
         })
@@ -851,9 +851,9 @@ mod bench {
         shimmy_core::eigen::CVector,
     ) {
         use shimmy_core::eigen;
-        use shimmy_core::params::PlantParams;
+        use shimmy_core::vehicles::car::PlantParams;
         let p = PlantParams::nominal();
-        let a = shimmy_core::plant::linearise(&p, 8.0, 0.0);
+        let a = shimmy_core::vehicles::car::linearise(&p, 8.0, 0.0);
         let l = eigen::eigenvalues_of::<f32, _>(&a)
             .and_then(|v| eigen::least_damped_mode(&v))
             .map_or(nalgebra::Complex::new(-1.0, 40.0), |m| m.eigenvalue());
@@ -882,9 +882,13 @@ mod bench {
     }
 
     fn linearise_only() -> u32 {
-        let p = shimmy_core::params::PlantParams::nominal();
+        let p = shimmy_core::vehicles::car::PlantParams::nominal();
         measure(|| {
-            let _ = black_box(shimmy_core::plant::linearise(&p, black_box(8.0), 0.0));
+            let _ = black_box(shimmy_core::vehicles::car::linearise(
+                &p,
+                black_box(8.0),
+                0.0,
+            ));
         })
     }
 
@@ -913,7 +917,7 @@ mod bench {
     /// bounds the cycle from above), through the nominal Hopf onset at 29.35 km/h. Each call is
     /// measured; a cycle's count is the sum of its calls. Computed once.
     fn tracker_counts() -> (u32, u32, u32) {
-        use shimmy_core::params::kmh_to_mps;
+        use shimmy_core::units::kmh_to_mps;
         use shimmy_firmware::monitoring::{ModelTask, MODEL_REFRESH_S};
         static DONE: AtomicU32 = AtomicU32::new(0);
         static CALL: AtomicU32 = AtomicU32::new(0);

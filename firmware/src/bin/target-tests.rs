@@ -8,7 +8,7 @@
 
 #[cfg(target_os = "none")]
 mod harness {
-    use shimmy_core::params::{Param, ParamSet, PlantParams};
+    use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
     use shimmy_firmware::runtime::{finish, Outcome};
 
     struct Test {

@@ -11,7 +11,8 @@ use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
-use shimmy_core::params::{kmh_to_mps, PlantParams};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::PlantParams;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -19,7 +20,7 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug)]
 pub struct BifurcationOptions<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// Parameter set.
     pub params: M,
@@ -402,8 +403,8 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
             anyhow::ensure!(
                 a.damper_current_a.is_none(),
                 "--damper-current-a: the {} model has no MR damper configured; leave it out",
-                <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
-                    { shimmy_core::dual_axle::N_STATES },
+                <shimmy_core::vehicles::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                    { shimmy_core::vehicles::dual_axle::N_STATES },
                 >>::NAME
             );
             dual_axle(&t.model, a)
@@ -442,7 +443,10 @@ fn command_on<M: SimModel<N>, const N: usize>(
 /// `bifurcation` on the dual-axle truck (`docs/dual-axle-truck.md`): friction off and on from
 /// the small start, friction on from the large start; the friction's onsets refined; the
 /// paper's directions; table, `bifurcation.csv`, `directions.csv`, `bifurcation.png`.
-pub fn dual_axle(t: &shimmy_core::dual_axle::DualAxleParams, a: &BifurcationArgs) -> Result<()> {
+pub fn dual_axle(
+    t: &shimmy_core::vehicles::dual_axle::DualAxleParams,
+    a: &BifurcationArgs,
+) -> Result<()> {
     use crate::sim::dual_axle_study::{self as study, CycleRuns};
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let runs = CycleRuns {

@@ -19,8 +19,9 @@ use rayon::prelude::*;
 use shimmy_core::control::schedule::SpeedSchedule;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{mps_to_kmh, PlantParams};
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::mps_to_kmh;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -541,8 +542,12 @@ pub fn run_all<M: SimModel<N>, const N: usize>(
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
     match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
-        ModelVehicle::Truck(v) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, v),
+        ModelVehicle::Car(v) => {
+            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+        }
+        ModelVehicle::Truck(v) => {
+            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, v)
+        }
         other => bail!(
             "`compare` runs the {} and {} models, not the {} (vehicle `{}`)",
             PlantParams::NAME,

@@ -17,9 +17,10 @@ use crate::sim::vehicle_file::{self, FileModel, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{mps_to_kmh, PlantParams};
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::mps_to_kmh;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -53,7 +54,7 @@ pub const RAMP_S_DEFAULT: f64 = 30.0;
 #[derive(Clone, Debug)]
 pub struct DemoOptions<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// Output directory.
     pub out: PathBuf,
@@ -271,8 +272,12 @@ pub fn command(a: &DemoArgs) -> Result<()> {
         None => ModelVehicle::Car(Vehicle::nominal()),
     };
     match vehicle {
-        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
-        ModelVehicle::Truck(v) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, v),
+        ModelVehicle::Car(v) => {
+            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+        }
+        ModelVehicle::Truck(v) => {
+            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, v)
+        }
         other => bail!(
             "the demo runs the {} and {} models, not the {}",
             PlantParams::NAME,

@@ -11,10 +11,10 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
-use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
 use shimmy_core::vehicle::{
     encode_record, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
+use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
 use shimmy_link::wire::{cause_name, fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -22,12 +22,13 @@ use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::control::ControllerKind;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::supervisor::checks::SupervisorEvent;
 use shimmy_core::supervisor::policy::Mode;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -311,7 +312,10 @@ pub fn standard_cases() -> Vec<Case> {
 /// the kick and noise torques are the car's, scaled by `SimModel::yaw_torque_scale` in the
 /// loop).
 #[derive(Clone, Copy, Debug)]
-pub struct Setup<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }> {
+pub struct Setup<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
+> {
     /// The true vehicle (plant, damper, sensors).
     pub plant: M::Vehicle,
     /// The vehicle the firmware believes (controller model and gains); `None`: `plant`.
@@ -838,15 +842,19 @@ pub fn verdict(bad: &[String]) -> Result<()> {
 /// written either way, then the command fails if any check failed.
 pub fn command(a: &FaultsArgs) -> Result<()> {
     match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a, v),
-        ModelVehicle::Truck(t) => command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a, t),
+        ModelVehicle::Car(v) => {
+            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+        }
+        ModelVehicle::Truck(t) => {
+            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, t)
+        }
         ModelVehicle::Trailer(t) => command_on::<
-            shimmy_core::trailer::TrailerParams,
-            { shimmy_core::trailer::N_STATES },
+            shimmy_core::vehicles::trailer::TrailerParams,
+            { shimmy_core::vehicles::trailer::N_STATES },
         >(a, crate::model::trailer_plant::trailer_vehicle(t)?),
         ModelVehicle::DualAxle(t) => command_on::<
-            shimmy_core::dual_axle::DualAxleParams,
-            { shimmy_core::dual_axle::N_STATES },
+            shimmy_core::vehicles::dual_axle::DualAxleParams,
+            { shimmy_core::vehicles::dual_axle::N_STATES },
         >(a, t),
     }
 }

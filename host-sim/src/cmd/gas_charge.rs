@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::kmh_to_mps;
 use shimmy_core::stability;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::truck::TruckParams;
 
 use crate::out::plot_util::{self, diverging};
 use crate::sim::arg_range::{self, Range};

@@ -29,8 +29,8 @@ use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, Sample, WheelOrder,
 };
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::kmh_to_mps;
 use shimmy_core::stability::{self, ModeSelect};
+use shimmy_core::units::kmh_to_mps;
 
 use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
@@ -373,8 +373,8 @@ pub fn command(a: &MeterAccuracyArgs) -> Result<()> {
         ModelVehicle::Truck(v) => command_on(a, &v),
         other => bail!(
             "`meter-accuracy` runs the {} and {} models, not the {} (vehicle `{}`)",
-            shimmy_core::params::PlantParams::NAME,
-            shimmy_core::truck::TruckParams::NAME,
+            shimmy_core::vehicles::car::PlantParams::NAME,
+            shimmy_core::vehicles::truck::TruckParams::NAME,
             other.model_name(),
             a.vehicle
         ),

@@ -31,8 +31,8 @@ use shimmy_core::estimator::model_update::ModelUpdateConfig;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::{LinearModel, UpdatableModel};
-use shimmy_core::params::PlantParams;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 
 use crate::model::family::FamilyVehicle;
 use crate::model::study::StudyModel;

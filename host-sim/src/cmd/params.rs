@@ -2,8 +2,8 @@
 
 use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::Result;
-use shimmy_core::truck::TRUCK_FIELDS;
 use shimmy_core::vehicle::{Vehicle, FIELDS, SECTIONS};
+use shimmy_core::vehicles::truck::TRUCK_FIELDS;
 
 /// Prints every field of the vehicle `spec`, section by section, with its unit and allowed range
 /// (after validating it); a truck's `[truck]` section first, then the shared sections.
@@ -28,7 +28,7 @@ pub fn command(spec: &str) -> Result<()> {
         }
         ModelVehicle::DualAxle(t) => {
             println!("[dual_axle]");
-            for f in &shimmy_core::dual_axle::DUAL_AXLE_FIELDS {
+            for f in &shimmy_core::vehicles::dual_axle::DUAL_AXLE_FIELDS {
                 println!(
                     "  {:<22} = {:>14.6} {:<16} ({} ..= {})",
                     f.name,
@@ -42,7 +42,7 @@ pub fn command(spec: &str) -> Result<()> {
         }
         ModelVehicle::Trailer(t) => {
             println!("[trailer]");
-            for f in &shimmy_core::trailer::TRAILER_FIELDS {
+            for f in &shimmy_core::vehicles::trailer::TRAILER_FIELDS {
                 println!(
                     "  {:<22} = {:>14.6} {:<16} ({} ..= {})",
                     f.name,

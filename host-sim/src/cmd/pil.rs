@@ -64,7 +64,7 @@ pub fn command(a: &PilArgs) -> Result<()> {
         AnyScenario::Trailer(_) => bail!(
             "scenario file {}: its vehicle is a {}; the firmware is built for the {} models",
             a.scenario.display(),
-            shimmy_core::trailer::TrailerParams::NAME,
+            shimmy_core::vehicles::trailer::TrailerParams::NAME,
             image_models()
         ),
     }

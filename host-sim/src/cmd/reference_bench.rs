@@ -21,7 +21,8 @@ use crate::sim::arg_range::{self, Range};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::{Param, PlantParams};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -156,7 +157,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let start = Instant::now();
     let mut max_re_rust = Vec::with_capacity(sweep.len());
     for &v in &sweep {
-        let m = shimmy_core::plant::linearise(&params, v, 0.0);
+        let m = shimmy_core::vehicles::car::linearise(&params, v, 0.0);
         let ev = shimmy_core::eigen::eigenvalues(&m).context("eigen")?;
         max_re_rust.push(ev.iter().map(|l| l.re).fold(f64::NEG_INFINITY, f64::max));
     }

@@ -12,8 +12,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::PlantParams;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::path::{Path, PathBuf};
 
 /// Options of `shimmy-sim report`.
@@ -207,10 +207,10 @@ fn model_name(a: &ReportArgs) -> Result<&'static str> {
 pub fn command(a: &ReportArgs) -> Result<()> {
     match model_name(a)? {
         m if m == TruckParams::NAME => {
-            command_on::<TruckParams, { shimmy_core::truck::N_STATES }>(a)
+            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a)
         }
         m if m == PlantParams::NAME => {
-            command_on::<PlantParams, { shimmy_core::plant::N_STATES }>(a)
+            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a)
         }
         m => bail!(
             "`report` runs scenario files on the {} and {} models, not the {m}",
@@ -354,7 +354,7 @@ mod tests {
             vehicle: None,
             model_vehicle: None,
         };
-        let plan = plan::<PlantParams, { shimmy_core::plant::N_STATES }>(&a).unwrap();
+        let plan = plan::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(&a).unwrap();
         assert!(plan.len() >= 7, "{} files", plan.len());
     }
 }

@@ -6,13 +6,14 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use shimmy_core::dual_axle::{DualAxleParams, DUAL_AXLE_FIELDS};
 use shimmy_core::eigen::ModeShape;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param};
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
-use shimmy_core::trailer::{TrailerParams, TRAILER_FIELDS};
-use shimmy_core::truck::{TruckParams, TRUCK_FIELDS};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::car::Param;
+use shimmy_core::vehicles::dual_axle::{DualAxleParams, DUAL_AXLE_FIELDS};
+use shimmy_core::vehicles::trailer::{TrailerParams, TRAILER_FIELDS};
+use shimmy_core::vehicles::truck::{TruckParams, TRUCK_FIELDS};
 
 use crate::out::table::opt;
 use crate::sim::vehicle_file::{self, ModelVehicle};

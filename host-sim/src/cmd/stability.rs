@@ -9,8 +9,8 @@ use anyhow::{Context, Result};
 use plotters::prelude::*;
 use shimmy_core::eigen::ModeShape;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_TOL_MPS};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 
 use crate::model::damper_equiv::damper_equivalent;
 use crate::sim::arg_range::{self, Range};
@@ -90,7 +90,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
                 args.damper_current_a.is_none(),
                 "--damper-current-a: the {} model has no MR damper configured; leave it out \
                  (`sway-damping` gives the sway damper it needs)",
-                shimmy_core::trailer::TrailerParams::NAME
+                shimmy_core::vehicles::trailer::TrailerParams::NAME
             );
             println!("stability of straight running: vehicle `{}`", args.vehicle);
             println!("damper: none (F_d = 0)");

@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
-use shimmy_core::trailer::TrailerParams;
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::trailer::TrailerParams;
 
 use crate::out::plot_util;
 use crate::sim::arg_range::{self, Range};

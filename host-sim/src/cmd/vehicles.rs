@@ -14,8 +14,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::model::{LinearModel, ModeShape};
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 

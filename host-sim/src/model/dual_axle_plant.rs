@@ -15,12 +15,12 @@
 //! the fastest mode of A(V) and the friction's slope (`h max(|lambda|, M_f / (eps I_k)) <= 1`,
 //! inside RK4's stability region, radius ~2.8).
 
-use shimmy_core::dual_axle::{
+use shimmy_core::eigen::eigenvalues;
+use shimmy_core::model::{LinearModel, Matrix};
+use shimmy_core::vehicles::dual_axle::{
     DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, PSI_2L,
     PSI_2R, WHEELS,
 };
-use shimmy_core::eigen::eigenvalues;
-use shimmy_core::model::{LinearModel, Matrix};
 
 use super::integrator::rk4_step;
 
@@ -271,9 +271,9 @@ pub fn envelope_growth_1ps(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::dual_axle::DualAxleSet;
-    use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
     use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
+    use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
 
     /// The tyre has the linear model's slope at 0 and saturates; the smoothed friction is odd,
     /// reaches the full torque above a few eps and is off when friction is off.
@@ -379,7 +379,7 @@ pub const SIM_STATE_NAMES: [&str; N_SIM] = {
     let mut n = [""; N_SIM];
     let mut i = 0;
     while i < N_STATES {
-        n[i] = shimmy_core::dual_axle::STATE_NAMES[i];
+        n[i] = shimmy_core::vehicles::dual_axle::STATE_NAMES[i];
         i += 1;
     }
     n[U] = "u_V";
@@ -535,7 +535,7 @@ impl super::family::SimPlant for DualAxlePlant {
     }
 
     fn steering_angle_rad(&self) -> f64 {
-        self.x[shimmy_core::dual_axle::THETA_G]
+        self.x[shimmy_core::vehicles::dual_axle::THETA_G]
     }
 
     fn coil_input_a(&self) -> f64 {
@@ -612,11 +612,11 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     }
 
     fn yaw_torque_scale(&self) -> f64 {
-        self.i_k / shimmy_core::params::ParamSet::Nominal.params().i_k
+        self.i_k / shimmy_core::vehicles::car::ParamSet::Nominal.params().i_k
     }
 
     fn params() -> Vec<super::family::ParamInfo> {
-        shimmy_core::dual_axle::DUAL_AXLE_FIELDS
+        shimmy_core::vehicles::dual_axle::DUAL_AXLE_FIELDS
             .iter()
             .map(|f| super::family::ParamInfo {
                 name: f.name,
@@ -633,7 +633,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
         let mut t = *self;
         match t.set(name, value) {
             Ok(()) => Ok(t),
-            Err(shimmy_core::dual_axle::DualAxleFieldError::Unknown) => anyhow::bail!(
+            Err(shimmy_core::vehicles::dual_axle::DualAxleFieldError::Unknown) => anyhow::bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 <DualAxleParams as LinearModel<N_STATES>>::NAME,
                 super::family::param_names::<Self, N_STATES>()
@@ -672,7 +672,7 @@ fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Res
     })?;
     let (mode, slope, _) = dzeta_dv(
         m,
-        shimmy_core::params::kmh_to_mps(onset),
+        shimmy_core::units::kmh_to_mps(onset),
         0.0,
         ModeSelect::Shimmy,
     )
@@ -681,8 +681,8 @@ fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Res
 }
 
 fn compute_dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
-    use shimmy_core::dual_axle::DualAxleSet;
-    use shimmy_core::params::ParamSet;
+    use shimmy_core::vehicles::car::ParamSet;
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
     let t = DualAxleSet::Rated.params();
     let mut v = super::members::car_parts_with_damper_scaled(
         super::members::damper_scale_like_the_cars(&t)?,
@@ -714,9 +714,10 @@ mod parts_tests {
     use super::*;
     use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
     use crate::model::members::{damper_scale_like_the_cars, least_stabilising_c};
-    use shimmy_core::dual_axle::DualAxleSet;
-    use shimmy_core::params::{kmh_to_mps, ParamSet};
     use shimmy_core::stability::{hopf_crossings, CrossingKind};
+    use shimmy_core::units::kmh_to_mps;
+    use shimmy_core::vehicles::car::ParamSet;
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
 
     /// The truck's shared sections: checked on the eigenvalues (independent of the sizing
     /// rule), the damper leaves a Hopf window at 0 A and none at the rated current, as on the

@@ -21,9 +21,9 @@ use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::control::ControlParams;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::{LinearModel, UpdatableModel};
-use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
 
 use super::integrator::IntegrateError;
 use super::plant::{Damper, Inputs, Method};
@@ -111,8 +111,10 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
 pub fn image_models() -> String {
     format!(
         "{} and {}",
-        <PlantParams as LinearModel<{ shimmy_core::plant::N_STATES }>>::NAME,
-        <shimmy_core::truck::TruckParams as LinearModel<{ shimmy_core::truck::N_STATES }>>::NAME
+        <PlantParams as LinearModel<{ shimmy_core::vehicles::car::N_STATES }>>::NAME,
+        <shimmy_core::vehicles::truck::TruckParams as LinearModel<
+            { shimmy_core::vehicles::truck::N_STATES },
+        >>::NAME
     )
 }
 
@@ -226,13 +228,13 @@ pub fn onset_kmh<M: LinearModel<N>, const N: usize>(p: &M) -> Option<f64> {
     shimmy_core::stability::hopf_crossings(
         p,
         0.0,
-        shimmy_core::params::kmh_to_mps(1.0),
-        shimmy_core::params::kmh_to_mps(150.0),
-        shimmy_core::params::kmh_to_mps(0.5),
+        shimmy_core::units::kmh_to_mps(1.0),
+        shimmy_core::units::kmh_to_mps(150.0),
+        shimmy_core::units::kmh_to_mps(0.5),
         shimmy_core::stability::DEFAULT_TOL_MPS,
     )
     .ok()?
     .iter()
     .find(|c| c.kind == shimmy_core::stability::CrossingKind::Onset)
-    .map(|c| shimmy_core::params::mps_to_kmh(c.speed_mps))
+    .map(|c| shimmy_core::units::mps_to_kmh(c.speed_mps))
 }

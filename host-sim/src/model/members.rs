@@ -6,11 +6,12 @@
 use anyhow::{bail, Result};
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{hopf_crossings, CrossingKind};
-use shimmy_core::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
-use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
+use shimmy_core::vehicles::truck::board::TruckVehicle;
+use shimmy_core::vehicles::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_firmware::monitoring::BoardCalibration;
 
 use super::damper_equiv::damper_equivalent;
@@ -77,7 +78,7 @@ pub fn reference_tyre_yaw_stiffness() -> f64 {
     (p.e + p.t_p) * p.c_a
 }
 
-impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+impl SimModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     type Linear = PlantParams;
     type Plant = Simulator;
     type State = super::plant::State;
@@ -144,13 +145,13 @@ impl SimModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
             None => bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 PlantParams::NAME,
-                param_names::<Self, { shimmy_core::plant::N_STATES }>()
+                param_names::<Self, { shimmy_core::vehicles::car::N_STATES }>()
             ),
         }
     }
 }
 
-impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+impl SimModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     type Linear = TruckParams;
     type Plant = TruckPlant;
     type State = [f64; super::truck_plant::N_SIM];
@@ -221,10 +222,10 @@ impl SimModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
         let mut t = *self;
         match t.set(name, value) {
             Ok(()) => Ok(t),
-            Err(shimmy_core::truck::TruckFieldError::Unknown) => bail!(
+            Err(shimmy_core::vehicles::truck::TruckFieldError::Unknown) => bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 TruckParams::NAME,
-                param_names::<Self, { shimmy_core::truck::N_STATES }>()
+                param_names::<Self, { shimmy_core::vehicles::truck::N_STATES }>()
             ),
             Err(e) => bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
         }
@@ -322,7 +323,7 @@ pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> 
 /// ([`TruckParams::warning_thresholds`]).
 ///
 /// The core keeps the factor as
-/// [`TRUCK_DAMPER_SCALE`](shimmy_core::truck_vehicle::TRUCK_DAMPER_SCALE) (the truck image's
+/// [`TRUCK_DAMPER_SCALE`](shimmy_core::vehicles::truck::board::TRUCK_DAMPER_SCALE) (the truck image's
 /// compiled-in vehicle is built from it); the test
 /// `the_cores_truck_damper_scale_is_the_computed_one` holds the two equal.
 pub fn truck_parts() -> Vehicle {
@@ -338,7 +339,7 @@ pub fn car_parts_with_damper_scaled(s: f64) -> Vehicle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::truck::TruckSet;
+    use shimmy_core::vehicles::truck::TruckSet;
 
     /// The truck's default damper is sized as the car's: at the rated current its c_eq is the
     /// same multiple of the least stabilising coefficient; and, checked on the eigenvalues
@@ -393,7 +394,7 @@ mod tests {
     /// computed here, to the last bits.
     #[test]
     fn the_cores_truck_damper_scale_is_the_computed_one() {
-        use shimmy_core::truck_vehicle::TRUCK_DAMPER_SCALE;
+        use shimmy_core::vehicles::truck::board::TRUCK_DAMPER_SCALE;
         let computed = truck_damper_scale().unwrap();
         assert!(
             (TRUCK_DAMPER_SCALE / computed - 1.0).abs() < 1e-12,

@@ -16,7 +16,7 @@ use crate::model::integrator::{
 };
 use nalgebra::{DMatrix, SMatrix};
 use shimmy_core::mr_damper::{self, SpencerParams, SpencerState};
-use shimmy_core::params::PlantParams;
+use shimmy_core::vehicles::car::PlantParams;
 
 /// Number of plant (mechanical + tyre) states.
 pub const N_PLANT: usize = 10;
@@ -26,13 +26,13 @@ pub const N_STATE: usize = 13;
 pub type State = [f64; N_STATE];
 
 /// Indices into [`State`]: the 10 plant states in the core's order (one definition, in
-/// `shimmy_core::plant`), then the damper's internal states.
+/// `shimmy_core::vehicles::car`), then the damper's internal states.
 pub mod idx {
-    pub use shimmy_core::plant::{
+    pub use shimmy_core::vehicles::car::{
         A_L, A_R, DPHI, DPSI_L, DPSI_R, DTHETA_SW, PHI, PSI_L, PSI_R, THETA_SW,
     };
     /// Damper filtered coil input u, V (1 V per A).
-    pub const U: usize = shimmy_core::plant::N_STATES;
+    pub const U: usize = shimmy_core::vehicles::car::N_STATES;
     /// Damper internal displacement y, m.
     pub const Y: usize = U + 1;
     /// Damper Bouc-Wen variable z, m.

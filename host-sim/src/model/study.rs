@@ -4,8 +4,8 @@
 //! and only these model facts differ.
 
 use anyhow::Result;
-use shimmy_core::params::{Param, ParamSet, PlantParams};
-use shimmy_core::truck::TruckParams;
+use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
+use shimmy_core::vehicles::truck::TruckParams;
 
 use super::family::SimModel;
 
@@ -31,7 +31,7 @@ pub trait StudyModel<const N: usize>: SimModel<N> {
     fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]);
 }
 
-impl StudyModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+impl StudyModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     const DRIVER_TORQUE: bool = true;
 
     fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
@@ -85,7 +85,7 @@ fn scaled<M: SimModel<N>, const N: usize>(p: &M, name: &str, f: f64) -> Result<M
     p.with_param(name, x * f)
 }
 
-impl StudyModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+impl StudyModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     const DRIVER_TORQUE: bool = false;
 
     /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
@@ -135,7 +135,7 @@ impl StudyModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::truck::TruckSet;
+    use shimmy_core::vehicles::truck::TruckSet;
 
     /// The truck's variants differ from the base in exactly the named field.
     #[test]

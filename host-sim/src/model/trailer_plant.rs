@@ -17,10 +17,10 @@ use nalgebra::SVector;
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
-use shimmy_core::trailer::{
+use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::trailer::{
     TrailerFieldError, TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, TRAILER_FIELDS, Y,
 };
-use shimmy_core::vehicle::Vehicle;
 
 use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
@@ -493,7 +493,7 @@ pub fn trailer_vehicle(t: TrailerParams) -> Result<FamilyVehicle<TrailerParams>>
 mod tests {
     use super::*;
     use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
-    use shimmy_core::trailer::TrailerSet;
+    use shimmy_core::vehicles::trailer::TrailerSet;
 
     /// The family's plant linearises to the core's linear model: its finite-difference
     /// Jacobian at rest with a viscous sway damper is A(V, c) (the damper's states do not
@@ -574,7 +574,8 @@ mod tests {
         let (w0, w2) = (work(0.0), work(parts.damper.spencer.u_max));
         let s = trailer_damper_scale().unwrap();
         let deg = super::super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
-        let car = shimmy_core::vehicle::Vehicle::from_set(shimmy_core::params::ParamSet::Nominal);
+        let car =
+            shimmy_core::vehicle::Vehicle::from_set(shimmy_core::vehicles::car::ParamSet::Nominal);
         // the car's damper on the trailer (the sizing's first pass), then times the scale: the
         // Spencer force is linear in the force coefficients
         let ceq = |i| {

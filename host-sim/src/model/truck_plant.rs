@@ -1,5 +1,5 @@
 //! The mining truck's nonlinear plant (`docs/mining-truck.md`): the linear model of
-//! `shimmy_core::truck` plus its two nonlinear elements, each added as its departure from its
+//! `shimmy_core::vehicles::truck` plus its two nonlinear elements, each added as its departure from its
 //! linearisation so that the small-motion limit is the linear model exactly:
 //!
 //! - the tyres: Magic-Formula force `F = D sin(C_s atan(B a))` of the lagged slip (`D = mu F_z`,
@@ -15,7 +15,7 @@
 use nalgebra::SVector;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
-use shimmy_core::truck::{
+use shimmy_core::vehicles::truck::{
     TruckOperatingPoint, TruckParams, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI, PSI_L,
     PSI_R, THETA_C, Y,
 };
@@ -45,7 +45,7 @@ impl TruckSim {
         t: &TruckParams,
         v_mps: f64,
         x0: [f64; N_STATES],
-    ) -> Result<Self, shimmy_core::truck::HpsError> {
+    ) -> Result<Self, shimmy_core::vehicles::truck::HpsError> {
         Ok(Self {
             t: *t,
             op: t.operating_point()?,
@@ -341,7 +341,7 @@ pub fn envelope_growth_1ps(
     settle_s: f64,
     duration_s: f64,
     window_s: f64,
-) -> Result<f64, shimmy_core::truck::HpsError> {
+) -> Result<f64, shimmy_core::vehicles::truck::HpsError> {
     let mut sim = TruckSim::new(t, v_mps, x0)?;
     let (mut first, mut last) = (0.0_f64, 0.0_f64);
     let (w0, w1) = (settle_s + window_s, duration_s - window_s);
@@ -368,7 +368,7 @@ pub fn yaw_start(psi_rad: f64) -> [f64; N_STATES] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::truck::TruckSet;
+    use shimmy_core::vehicles::truck::TruckSet;
 
     /// Both nonlinear elements have the linear model's slope at 0 and depart from it at large
     /// motion in the physical direction (the tyre saturates, the gas stiffens).

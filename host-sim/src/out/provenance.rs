@@ -8,9 +8,9 @@ use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use sha2::{Digest, Sha256};
-use shimmy_core::params::ParamSet;
-use shimmy_core::truck::TruckSet;
 use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
+use shimmy_core::vehicles::car::ParamSet;
+use shimmy_core::vehicles::truck::TruckSet;
 use std::path::Path;
 
 /// The build's `git describe --always --dirty --tags` (or why there is none).
@@ -124,11 +124,11 @@ impl Provenance {
             ModelVehicle::Truck(t) => (format!("{t:?}"), TruckSet::from_name(spec).is_some()),
             ModelVehicle::DualAxle(t) => (
                 format!("{t:?}"),
-                shimmy_core::dual_axle::DualAxleSet::from_name(spec).is_some(),
+                shimmy_core::vehicles::dual_axle::DualAxleSet::from_name(spec).is_some(),
             ),
             ModelVehicle::Trailer(t) => (
                 format!("{t:?}"),
-                shimmy_core::trailer::TrailerSet::from_name(spec).is_some(),
+                shimmy_core::vehicles::trailer::TrailerSet::from_name(spec).is_some(),
             ),
         };
         if !named {

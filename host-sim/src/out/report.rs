@@ -20,7 +20,7 @@ use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use crate::sim::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
-use shimmy_core::params::PlantParams;
+use shimmy_core::vehicles::car::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug)]
 pub struct ReportRun<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// Legend and table label (usually the controller).
     pub label: String,
@@ -60,8 +60,10 @@ impl<M: SimModel<N>, const N: usize> ReportRun<M, N> {
 
 /// One scenario with its runs.
 #[derive(Clone, Debug)]
-pub struct Section<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }>
-{
+pub struct Section<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
+> {
     /// Scenario name (heading; file names use a sanitised form).
     pub name: String,
     /// Markdown text under the heading.
@@ -74,7 +76,10 @@ pub struct Section<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core:
 
 /// A whole report.
 #[derive(Clone, Debug)]
-pub struct Report<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }> {
+pub struct Report<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
+> {
     /// Page title.
     pub title: String,
     /// Markdown under the title.

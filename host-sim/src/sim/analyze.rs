@@ -25,9 +25,9 @@ use shimmy_core::estimator::pipeline::{
     AccelEstimator, DataPipeline, PipelineOutput, ShimmyPipeline,
 };
 use shimmy_core::model::{LinearModel, UpdatableModel};
-use shimmy_core::params::PlantParams;
-use shimmy_core::truck::TruckParams;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 
 /// The meter's input period, s (1 kHz, the control rate).
 pub const GRID_DT_S: f64 = 1e-3;

@@ -38,7 +38,6 @@ use shimmy_core::estimator::meter::mode_meter::{
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::LinearModel;
 use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
 use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
 use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
@@ -46,6 +45,7 @@ use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
 use shimmy_firmware::pil::HostApp;
 
 /// The closed loop's plant integrator: adaptive Dopri5 at rtol 1e-7. The fixed-step IMEX
@@ -87,7 +87,7 @@ impl Arm {
 #[derive(Clone, Debug)]
 pub struct LoopConfig<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// The true plant (the controller knows only `control.nominal`).
     pub plant: M,

@@ -10,15 +10,18 @@ use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
 
 /// The demo's case on the vehicle model `M` (the car by default): the vehicles, the ramp
 /// scenario and the facts the report states.
 #[derive(Clone, Debug)]
-pub struct DemoCase<M: SimModel<N> = PlantParams, const N: usize = { shimmy_core::plant::N_STATES }>
-{
+pub struct DemoCase<
+    M: SimModel<N> = PlantParams,
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
+> {
     /// The simulated vehicle.
     pub plant: M::Vehicle,
     /// The vehicle the firmware believes (its controller's and estimator's models, gains).
@@ -56,7 +59,7 @@ pub const ROAD_SEED: u64 = 7;
 /// The demo's case on the simulated vehicle `plant` with a firmware that believes `model`;
 /// the Hopf window and the pothole's speed are the simulated plant's.
 pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
-    demo_case_on::<PlantParams, { shimmy_core::plant::N_STATES }>(plant, model, ramp_s)
+    demo_case_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(plant, model, ramp_s)
 }
 
 /// [`demo_case_for`] on a vehicle of any model of the family (the road's torques are the

@@ -9,11 +9,11 @@
 //! with a delimiter, which ends whatever partial frame a cut link left in the device's reader.
 
 use anyhow::{anyhow, bail, Context, Result};
-use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
 use shimmy_core::vehicle::{
     check_record_value, decode_record, encode_record, RecordError, RecordVehicle, Vehicle,
     RECORD_MAX_BYTES,
 };
+use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
 use shimmy_link::frame::{self, Fed, FrameReader, DELIMITER, MAX_FRAME};
 use shimmy_link::wire::{
     ConfigProblem, ErrorReply, FaultReport, Header, LogEntry, Request, Response, Telemetry,

@@ -12,9 +12,9 @@
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use shimmy_core::dual_axle::DualAxleParams;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::dual_axle::DualAxleParams;
 
 use crate::model::dual_axle_plant::{run_cycle, CycleSummary};
 
@@ -301,7 +301,7 @@ pub fn threshold_start_deg(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::dual_axle::DualAxleSet;
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
 
     fn onset_mps(t: &DualAxleParams) -> f64 {
         kmh_to_mps(linear_onset_kmh(t, 1.0, 150.0).unwrap().unwrap())
@@ -363,12 +363,12 @@ mod margin_tests {
     use crate::model::family::{SimModel, SimPlant};
     use crate::model::plant::{Damper, Method};
     use crate::sim::margin_run::{self, MarginScenario};
-    use shimmy_core::dual_axle::DualAxleSet;
-    use shimmy_core::dual_axle::{DualAxleParams, N_STATES};
     use shimmy_core::estimator::meter::mode_meter::{MarginEstimator, Sample, WheelOrder};
     use shimmy_core::estimator::monitor::Level;
-    use shimmy_core::params::kmh_to_mps;
     use shimmy_core::stability::{mode_at, ModeSelect};
+    use shimmy_core::units::kmh_to_mps;
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
+    use shimmy_core::vehicles::dual_axle::{DualAxleParams, N_STATES};
 
     fn parts_of(t: DualAxleParams) -> crate::model::family::FamilyVehicle<DualAxleParams> {
         crate::model::family::FamilyVehicle {

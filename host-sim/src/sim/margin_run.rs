@@ -15,8 +15,9 @@ use shimmy_core::estimator::pipeline::{
     DataPipeline, PipelineOutput, PipelineParams, ShimmyPipeline,
 };
 use shimmy_core::model::UpdatableModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{self, ModeSelect};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::car::PlantParams;
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::{SimModel, SimPlant};
@@ -29,7 +30,7 @@ pub const DT_S: f64 = 1e-3;
 #[derive(Clone, Debug)]
 pub struct MarginScenario<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// Parameters of the simulated plant.
     pub params: M,

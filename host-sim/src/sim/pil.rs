@@ -17,13 +17,13 @@ use crate::model::family::FamilyVehicle;
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
 use crate::sim::vehicle_file::FileModel;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::PlantParams;
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
-use shimmy_core::truck::TruckParams;
-use shimmy_core::truck_vehicle::{record_model, TruckVehicle};
 use shimmy_core::vehicle::{BoardVehicle, Vehicle};
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
+use shimmy_core::vehicles::truck::TruckParams;
 use shimmy_firmware::monitoring::{BoardCalibration, CONTROLLER};
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
@@ -60,7 +60,7 @@ pub trait PilModel<const N: usize>: FileModel<N> {
     fn board_vehicle(v: &FamilyVehicle<Self>) -> Self::Board;
 }
 
-impl PilModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+impl PilModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     type Board = Vehicle;
     const ELF: &'static str = "target/xtask/shimmy-firmware.pil.elf";
     fn board_vehicle(v: &FamilyVehicle<Self>) -> Vehicle {
@@ -71,7 +71,7 @@ impl PilModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
     }
 }
 
-impl PilModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+impl PilModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     type Board = TruckVehicle;
     const ELF: &'static str = "target/xtask/shimmy-firmware.pil+model-truck.elf";
     fn board_vehicle(v: &FamilyVehicle<Self>) -> TruckVehicle {

@@ -14,7 +14,7 @@ use crate::sim::vehicle_file::FileModel;
 use anyhow::{bail, Context, Result};
 use shimmy_core::control::ControlParams;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::PlantParams;
+use shimmy_core::vehicles::car::PlantParams;
 use std::path::{Path, PathBuf};
 
 /// The controller names, one per controller, as they appear in tables, legends and file names
@@ -43,7 +43,7 @@ pub const ON_CURRENT_FIELD: &str = "field `controller.on_current_a`";
 #[derive(Clone, Debug)]
 pub struct ScenarioSpec<
     M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::plant::N_STATES },
+    const N: usize = { shimmy_core::vehicles::car::N_STATES },
 > {
     /// Short name (tables, headings; file names use its sanitised form).
     pub name: String,

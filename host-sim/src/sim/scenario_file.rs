@@ -80,10 +80,11 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, PlantParams};
-use shimmy_core::trailer::TrailerParams;
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::trailer::TrailerParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -272,9 +273,9 @@ pub enum AnyScenario {
     /// On the car.
     Car(ScenarioSpec),
     /// On the mining truck.
-    Truck(ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>),
+    Truck(ScenarioSpec<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>),
     /// On the trailer.
-    Trailer(ScenarioSpec<TrailerParams, { shimmy_core::trailer::N_STATES }>),
+    Trailer(ScenarioSpec<TrailerParams, { shimmy_core::vehicles::trailer::N_STATES }>),
 }
 
 impl AnyScenario {
@@ -354,8 +355,8 @@ fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVe
         }
         ModelVehicle::DualAxle(_) => bail!(
             "field `{key}.vehicle`: a {} vehicle; scenario files take the car, the mining truck or the trailer",
-            <shimmy_core::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
-                { shimmy_core::dual_axle::N_STATES },
+            <shimmy_core::vehicles::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
+                { shimmy_core::vehicles::dual_axle::N_STATES },
             >>::NAME
         ),
     }
@@ -824,7 +825,7 @@ fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
     )
 }
 
-impl ScenarioModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+impl ScenarioModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     const SCENARIO_DIR: &'static str = "";
     fn scenario(s: AnyScenario) -> Result<ScenarioSpec> {
         match s {
@@ -844,11 +845,11 @@ impl ScenarioModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
     }
 }
 
-impl ScenarioModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+impl ScenarioModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     const SCENARIO_DIR: &'static str = "truck";
     fn scenario(
         s: AnyScenario,
-    ) -> Result<ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>> {
+    ) -> Result<ScenarioSpec<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>> {
         match s {
             AnyScenario::Truck(s) => Ok(s),
             other => Err(other_model(

@@ -21,12 +21,12 @@ use shimmy_core::control::ControllerKind;
 use shimmy_core::estimator::meter::mode_meter::WheelOrder;
 use shimmy_core::estimator::pipeline::{PipelineParams, ShimmyPipeline};
 use shimmy_core::model::UpdatableModel;
-use shimmy_core::params::kmh_to_mps;
 use shimmy_core::supervisor::faults::FaultSet;
 use shimmy_core::supervisor::safe_controller::SafeController;
-use shimmy_core::truck::TruckParams;
-use shimmy_core::truck_vehicle::TruckVehicle;
+use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::{record_schema_of, RecordVehicle, Vehicle};
+use shimmy_core::vehicles::truck::board::TruckVehicle;
+use shimmy_core::vehicles::truck::TruckParams;
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
 use shimmy_link::log::{EventSink, Pager, RamLog, Recorder};
 use shimmy_link::wire::{

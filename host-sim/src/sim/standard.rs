@@ -10,9 +10,10 @@ use crate::sim::scenario::ScenarioSpec;
 use crate::sim::scenario_file::ScenarioModel;
 use anyhow::Result;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, PlantParams};
 use shimmy_core::stability::{mode_at, ModeSelect};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::PlantParams;
 
 /// The speed (m/s) where the no-damper shimmy mode grows fastest (largest real part of the
 /// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
@@ -60,7 +61,7 @@ pub fn road(seed: u64, radius_m: f64) -> (RoadNoise, Imbalance) {
 /// The standard scenario set on `vehicle` (its plant, damper, sensors; the firmware believes
 /// it). `quick` shortens the runs (for tests).
 pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
-    standard_scenarios_on::<PlantParams, { shimmy_core::plant::N_STATES }>(vehicle, quick)
+    standard_scenarios_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(vehicle, quick)
         .expect("the car's variants are infallible")
 }
 

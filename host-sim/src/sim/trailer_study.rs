@@ -9,7 +9,7 @@
 use anyhow::{Context, Result};
 use shimmy_core::eigen::EigenError;
 use shimmy_core::stability;
-use shimmy_core::trailer::TrailerParams;
+use shimmy_core::vehicles::trailer::TrailerParams;
 
 /// Largest damping ratio of the sway damper searched ([`TrailerParams::damper_zeta`]).
 pub const ZETA_DAMPER_MAX: f64 = 2.0;
@@ -72,7 +72,7 @@ pub struct DhPoint {
 /// speed and hitch stiffness alone (every other dimensionless ratio kept, the hitch's lateral
 /// damping ratio `c_y / (2 sqrt(k_y m))` too), and that speed.
 pub fn similar_point(t: &TrailerParams, strouhal: f64, energy: f64) -> (TrailerParams, f64) {
-    let v = (t.c_a_per_fz * shimmy_core::trailer::G_MPS2 * t.a / energy).sqrt();
+    let v = (t.c_a_per_fz * shimmy_core::units::G_MPS2 * t.a / energy).sqrt();
     let zeta_y = t.c_y / (2.0 * (t.k_y * t.m).sqrt());
     let mut p = *t;
     let omega = strouhal * v / t.l;
@@ -106,7 +106,7 @@ pub fn dh_map(t: &TrailerParams, energy_terms: &[f64], strouhals: &[f64]) -> Res
 mod tests {
     use super::*;
     use shimmy_core::stability::CrossingKind;
-    use shimmy_core::trailer::TrailerSet;
+    use shimmy_core::vehicles::trailer::TrailerSet;
 
     /// The critical damper at a speed is the damper whose Hopf onset is that speed, and 1 %
     /// less leaves the trailer unstable there; below the undamped onset none is needed.

@@ -7,9 +7,9 @@
 //! speed, bracketed on a grid of gas volumes and refined with Brent's method.
 
 use anyhow::{bail, Context, Result};
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
-use shimmy_core::truck::TruckParams;
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::truck::TruckParams;
 
 /// Highest speed the window search looks at, km/h (above the class's top speed of ~60 km/h).
 pub const WINDOW_V_MAX_KMH: f64 = 90.0;
@@ -198,7 +198,7 @@ pub fn gas_charge(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use shimmy_core::truck::TruckSet;
+    use shimmy_core::vehicles::truck::TruckSet;
 
     /// The charge bounds are where the growth changes sign: just inside a stable range the
     /// truck is stable at the speed, just outside it is not (eigenvalues, independent of the

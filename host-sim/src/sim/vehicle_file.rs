@@ -18,10 +18,10 @@
 //! A file names its vehicle model with `model` (default `car-4dof`, so every earlier file stays
 //! valid). A `model = "mining-truck-5dof"` file (`docs/mining-truck.md`) has `base` =
 //! `truck-empty` or `truck-full` (default `truck-full`) and one section, `[truck]`, with the
-//! fields of `shimmy_core::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
+//! fields of `shimmy_core::vehicles::truck::TRUCK_FIELDS`; the named sets `truck-empty` and `truck-full`
 //! work wherever a vehicle is asked for by [`load_model`]. A `model = "trailer-2dof"` file
 //! (`docs/trailer.md`) has `base = "trailer"` (the default) and one section, `[trailer]`, with the
-//! fields of `shimmy_core::trailer::TRAILER_FIELDS`; the named set `trailer` works there too.
+//! fields of `shimmy_core::vehicles::trailer::TRAILER_FIELDS`; the named set `trailer` works there too.
 //!
 //! The parameter files of earlier versions (`base` + `[overrides]`) are vehicle files; the
 //! sections they leave out take their defaults. Every value goes through the core's one
@@ -32,12 +32,16 @@ use crate::model::dual_axle_plant::dual_axle_parts;
 use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::members::truck_parts;
 use anyhow::{bail, Context, Result};
-use shimmy_core::dual_axle::{DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{ParamSet, PlantParams};
-use shimmy_core::trailer::{TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS};
-use shimmy_core::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
+use shimmy_core::vehicles::car::{ParamSet, PlantParams};
+use shimmy_core::vehicles::dual_axle::{
+    DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS,
+};
+use shimmy_core::vehicles::trailer::{
+    TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS,
+};
+use shimmy_core::vehicles::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
 use std::path::{Path, PathBuf};
 
 /// A vehicle of any model of the family, as a vehicle file or a set name gives it (read once
@@ -77,13 +81,13 @@ pub trait FileModel<const N: usize>: SimModel<N> {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<Self::Vehicle>;
 }
 
-impl FileModel<{ shimmy_core::plant::N_STATES }> for PlantParams {
+impl FileModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<Vehicle> {
         load_relative(spec, dir)
     }
 }
 
-impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
+impl FileModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TruckParams>> {
         match load_model_relative(spec, dir)? {
             ModelVehicle::Truck(t) => Ok(t),
@@ -97,7 +101,7 @@ impl FileModel<{ shimmy_core::truck::N_STATES }> for TruckParams {
     }
 }
 
-impl FileModel<{ shimmy_core::dual_axle::N_STATES }> for DualAxleParams {
+impl FileModel<{ shimmy_core::vehicles::dual_axle::N_STATES }> for DualAxleParams {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<DualAxleParams>> {
         match load_model_relative(spec, dir)? {
             ModelVehicle::DualAxle(t) => Ok(t),
@@ -111,7 +115,7 @@ impl FileModel<{ shimmy_core::dual_axle::N_STATES }> for DualAxleParams {
     }
 }
 
-impl FileModel<{ shimmy_core::trailer::N_STATES }> for TrailerParams {
+impl FileModel<{ shimmy_core::vehicles::trailer::N_STATES }> for TrailerParams {
     fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TrailerParams>> {
         match load_model_relative(spec, dir)? {
             ModelVehicle::Trailer(t) => crate::model::trailer_plant::trailer_vehicle(t),

@@ -447,10 +447,10 @@ trace_every = 1
 /// it gives a worse one: the vehicle of `analyze` is not decoration.
 #[test]
 fn a_truck_log_is_read_with_the_trucks_meter() {
-    use shimmy_core::params::kmh_to_mps;
     use shimmy_core::stability::{mode_at, ModeSelect};
-    use shimmy_core::truck::TruckSet;
+    use shimmy_core::units::kmh_to_mps;
     use shimmy_core::vehicle::Vehicle;
+    use shimmy_core::vehicles::truck::TruckSet;
     use shimmy_sim::model::family::SimModel;
     use shimmy_sim::sim::scenario_file::AnyScenario;
     use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};

@@ -5,11 +5,11 @@
 //! configuration and log as they were.
 
 use anyhow::Result;
-use shimmy_core::truck_vehicle::TruckVehicle;
 use shimmy_core::vehicle::{
     encode_record, find_field, record_index, record_schema_of, Vehicle, FIELDS,
     RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
+use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_link::frame::{self, MAX_FRAME};
 use shimmy_link::wire::{Header, LogEntry, PROTOCOL_HEADER};
 use shimmy_link::PROTOCOL_VERSION;

@@ -10,8 +10,8 @@
 //!
 //! The full table (20 seeds, 5 speeds per arm) is `shimmy-sim meter-accuracy`.
 use shimmy_core::estimator::meter::mode_meter::EstimatorConfig;
-use shimmy_core::params::ParamSet;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::ParamSet;
 use shimmy_sim::cmd::meter_accuracy::{
     cell_stats, run_case, Case, CaseRun, CellStats, COVERAGE_PCT, MAX_ABS_BIAS_B, MAX_SPREAD_B,
 };

@@ -5,7 +5,8 @@
 //! Runs are short (seconds of simulated time); the full-speed-grid study is the
 //! `shimmy-sim bifurcation` command.
 
-use shimmy_core::params::{kmh_to_mps, Param, PlantParams};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::{Param, PlantParams};
 use shimmy_sim::model::disturbance::initial_yaw;
 use shimmy_sim::model::plant::{
     fd_eigenvalues, idx, jacobian_fd, least_damped_mode, Damper, Inputs, Method, Plant, Simulator,

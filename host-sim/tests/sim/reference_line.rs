@@ -9,8 +9,8 @@
 //! cycle), below ~0.03 deg the damper no longer slides and the describing function is 8 % off.
 
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::kmh_to_mps;
 use shimmy_core::stability::{mode_at, ModeSelect};
+use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_sim::model::disturbance::{initial_yaw, Scenario};
 use shimmy_sim::model::sensors::SensorConfig;

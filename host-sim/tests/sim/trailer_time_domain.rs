@@ -4,9 +4,9 @@
 //! meter slowed ten times to the 0.64 Hz sway, the model tracker on the trailer's linear model)
 //! warns before the onset on a speed ramp where the plant differs from the model, and not at
 //! 70 % of the onset at constant speed.
-use shimmy_core::params::kmh_to_mps;
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
-use shimmy_core::trailer::{TrailerParams, TrailerSet, PSI};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet, PSI};
 use shimmy_sim::model::family::{FamilyVehicle, SimModel, SimPlant};
 use shimmy_sim::model::plant::{Damper, Inputs, Method};
 use shimmy_sim::model::trailer_plant::trailer_vehicle;
@@ -172,7 +172,8 @@ fn the_trailers_gust_scenario_runs_and_the_damper_holds_the_sway() {
     else {
         panic!("a trailer scenario")
     };
-    let run = |spec: &ScenarioSpec<TrailerParams, { shimmy_core::trailer::N_STATES }>, name| {
+    let run = |spec: &ScenarioSpec<TrailerParams, { shimmy_core::vehicles::trailer::N_STATES }>,
+               name| {
         let arm = Arm::from_name(name, 0.0).unwrap();
         let control = spec.model_family().control_params();
         let (cfg, r) = scenario::run_arm(spec, arm, &control).unwrap();

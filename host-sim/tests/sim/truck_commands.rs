@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::truck::{TruckParams, TruckSet};
+use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::model::family::SimModel;
 use shimmy_sim::model::members::truck_parts;
 use shimmy_sim::model::study::StudyModel;
@@ -228,7 +228,7 @@ fn the_trucks_thresholds_lead_and_stay_quiet_on_a_mismatched_plant() {
     .pipeline_params();
     let on = onset_kmh(&plant.linear()).unwrap();
     assert!(on < onset_kmh(&model.linear()).unwrap() - 1.0, "{on}");
-    let mut ramp = MarginScenario::<TruckParams, { shimmy_core::truck::N_STATES }>::ramp(
+    let mut ramp = MarginScenario::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>::ramp(
         plant,
         0.6 * on,
         on + 3.0,
@@ -259,11 +259,12 @@ fn the_trucks_fusion_keeps_plant_equal_model_quiet_where_the_cars_warns() {
     };
     let pp = truck.pipeline_params();
     assert_eq!(pp.fusion.less_stable_sigmas, 3.0);
-    let mut drive = MarginScenario::<TruckParams, { shimmy_core::truck::N_STATES }>::constant(
-        model,
-        0.7 * on,
-        600.0,
-    );
+    let mut drive =
+        MarginScenario::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>::constant(
+            model,
+            0.7 * on,
+            600.0,
+        );
     drive.model = Some(model);
     let quiet = run(&drive, pp, 0).unwrap();
     assert_eq!(quiet.warnings, 0, "max level {:?}", quiet.max_level);

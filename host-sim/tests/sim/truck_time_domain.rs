@@ -3,9 +3,9 @@
 //! must grow just above the linear model's Hopf speed and decay just below it, at the rate the
 //! eigenvalues give; and the least gas charge of `gas-charge` must separate growth (less gas)
 //! from decay (more gas) at its load and speed.
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
-use shimmy_core::truck::{TruckParams, TruckSet};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::model::truck_plant::{envelope_growth_1ps, yaw_start};
 use shimmy_sim::sim::truck_study;
 
@@ -78,7 +78,8 @@ fn truck_closed_loop_asmc_suppresses_the_shimmy_that_the_damper_at_0_a_leaves() 
         panic!("a car scenario")
     };
     spec.duration_s = 7.0;
-    let run = |spec: &ScenarioSpec<TruckParams, { shimmy_core::truck::N_STATES }>, name| {
+    let run = |spec: &ScenarioSpec<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>,
+               name| {
         let arm = Arm::from_name(name, 0.0).unwrap();
         let control = spec.model_family().control_params();
         let (cfg, r) = scenario::run_arm(spec, arm, &control).unwrap();

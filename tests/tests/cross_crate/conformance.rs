@@ -16,7 +16,7 @@
 //!    under QEMU (`firmware/src/bin/conformance.rs`) and requires identical digests: the
 //!    tolerance is zero ulp (see docs/testing.md, "Conformance").
 
-use shimmy_core::params::PlantParams;
+use shimmy_core::vehicles::car::PlantParams;
 use shimmy_firmware::monitoring::MODEL_REFRESH_S;
 use shimmy_firmware::replay::{self, CHANNELS, SAMPLE_BYTES, ZERO_COUNTS};
 use shimmy_sim::model::disturbance::{initial_yaw, RoadNoise, Scenario, SpeedProfile};

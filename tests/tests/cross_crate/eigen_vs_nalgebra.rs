@@ -5,8 +5,9 @@
 //! other cross-crate checks of the model margin too.
 use nalgebra::Complex;
 use shimmy_core::eigen;
-use shimmy_core::params::{kmh_to_mps, ParamSet, PlantParams};
-use shimmy_core::plant::{linearise, N_STATES};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::{linearise, N_STATES};
+use shimmy_core::vehicles::car::{ParamSet, PlantParams};
 
 /// The eigenvalues of A(V, c) from nalgebra's Schur decomposition of the matrix as it is.
 pub fn reference_eigenvalues(p: &PlantParams, v_mps: f64, c: f64) -> Vec<Complex<f64>> {

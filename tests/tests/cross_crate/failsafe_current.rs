@@ -27,9 +27,10 @@
 
 use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
 use shimmy_core::mr_damper::SpencerParams;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
 use shimmy_core::stability::{critical_mode_at, hopf_crossings, V_SEARCH_MIN_MPS};
 use shimmy_core::supervisor::params::ZERO_CURRENT_SAFE_BELOW_MPS;
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
 use shimmy_sim::model::damper_equiv::mr_equivalent_viscous;
 use shimmy_sim::sim::open_loop::{run_speed, DamperSetting};
 

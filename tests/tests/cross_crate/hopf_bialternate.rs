@@ -5,9 +5,10 @@
 //! is small and the crossing mode is oscillatory). The determinant is taken with nalgebra's LU
 //! (partial pivoting) from the matrix entries alone and its sign change is bisected independently.
 use nalgebra::DMatrix;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, Param, ParamSet, PlantParams};
-use shimmy_core::plant::{linearise, N_STATES};
 use shimmy_core::stability::{hopf_crossings, DEFAULT_TOL_MPS};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::car::{linearise, N_STATES};
+use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
 
 /// det of the bialternate product 2A (.) I of the 10x10 A(V) (order 45), Fuller/Govaerts rule.
 fn bialternate_det(p: &PlantParams, v_mps: f64, c: f64) -> f64 {

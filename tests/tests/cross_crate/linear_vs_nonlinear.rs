@@ -1,7 +1,8 @@
 //! The core's analytic linearisation A(V) (what the firmware's margin estimator uses) against
 //! the simulator's nonlinear right-hand side differentiated numerically (central differences),
 //! for every named set over the speed range. Two independent derivations of the same model.
-use shimmy_core::params::{kmh_to_mps, ParamSet};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::car::ParamSet;
 
 #[test]
 fn analytic_a_of_v_equals_the_jacobian_of_the_nonlinear_plant() {
@@ -9,7 +10,7 @@ fn analytic_a_of_v_equals_the_jacobian_of_the_nonlinear_plant() {
         let p = set.params();
         for v_kmh in [0.5, 10.0, 29.35, 55.0, 84.15, 130.0] {
             let v = kmh_to_mps(v_kmh);
-            let a = shimmy_core::plant::linearise(&p, v, 0.0);
+            let a = shimmy_core::vehicles::car::linearise(&p, v, 0.0);
             let j = shimmy_sim::model::plant::jacobian_fd(&p, v);
             for r in 0..10 {
                 for c in 0..10 {

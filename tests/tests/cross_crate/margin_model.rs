@@ -5,8 +5,9 @@
 use super::eigen_vs_nalgebra::reference_eigenvalues;
 use shimmy_core::eigen::SolveFloat;
 use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh, ParamSet, PlantParams};
 use shimmy_core::stability::CrossingKind;
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
+use shimmy_core::vehicles::car::{ParamSet, PlantParams};
 
 /// max Re over the oscillatory eigenvalues (|Im| > 1e-6 |lambda|) of the reference solve.
 fn g_reference(p: &PlantParams, v_mps: f64, c: f64) -> f64 {

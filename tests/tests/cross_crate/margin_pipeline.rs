@@ -12,7 +12,7 @@
 //! available as `shimmy-sim margin --constant-kmh 15 --duration-s 600`).
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::params::ParamSet;
+use shimmy_core::vehicles::car::ParamSet;
 use shimmy_sim::sim::margin_run::{run, MarginScenario};
 
 /// Constant-speed drive per speed: 10 minutes [s].

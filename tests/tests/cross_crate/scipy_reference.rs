@@ -5,12 +5,15 @@
 //! trailer's against its trailer, written from `docs/trailer.md`.
 //! Needs python3 with numpy and scipy (`cargo xtask test` installs them).
 use nalgebra::Complex;
-use shimmy_core::dual_axle::{self, DualAxleSet, DUAL_AXLE_FIELDS};
 use shimmy_core::eigen::eigenvalues;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::kmh_to_mps;
-use shimmy_core::trailer::{self, TrailerParams, TrailerSet};
-use shimmy_core::truck::{self, TruckParams, TruckSet};
+use shimmy_core::units::kmh_to_mps;
+use shimmy_core::vehicles::dual_axle;
+use shimmy_core::vehicles::dual_axle::{DualAxleSet, DUAL_AXLE_FIELDS};
+use shimmy_core::vehicles::trailer;
+use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet};
+use shimmy_core::vehicles::truck;
+use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};
 
 #[test]

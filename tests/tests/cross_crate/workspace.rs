@@ -1,5 +1,5 @@
 //! The simulator and the core agree on the parameter sets they both name.
-use shimmy_core::params::{ParamSet, PlantParams};
+use shimmy_core::vehicles::car::{ParamSet, PlantParams};
 
 #[test]
 fn every_named_set_is_valid_and_distinct() {

@@ -6,8 +6,8 @@ use crate::sim::arg_range::{self, Range};
 use crate::sim::scenario::controller_name;
 use anyhow::{bail, Result};
 use clap::Args;
-use shimmy_core::params::Param;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::car::Param;
 use std::path::PathBuf;
 
 /// Options of `shimmy-sim sweep`.

@@ -14,8 +14,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -333,7 +333,7 @@ mod tests {
         assert_eq!(last.max_re, again[0].rows[2].max_re, "deterministic");
         // The boundary of the nominal row is the nominal Hopf window found independently by a
         // fine hopf_crossings call.
-        let p = shimmy_core::params::PlantParams::nominal();
+        let p = shimmy_core::vehicles::car::PlantParams::nominal();
         let fine =
             stability::hopf_crossings(&p, 0.0, kmh_to_mps(5.0), kmh_to_mps(120.0), 0.05, 1e-6)
                 .unwrap();

@@ -21,8 +21,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
 use shimmy_core::control::ControllerKind;
-use shimmy_core::params::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::stability::{self, CrossingKind};
+use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

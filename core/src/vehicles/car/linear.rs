@@ -19,13 +19,17 @@
 //!
 //! Everything here is `no_std`, allocation-free and cheap (a few hundred flops).
 
+#[allow(unused_imports)]
+use super::*;
+
 use nalgebra::{Complex, SMatrix, SVector};
 
 use crate::float::SolveFloat;
 use crate::model::{
-    ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo, UpdatableModel, UpdateParam,
+    larger, wheel_phase_rad, wheel_yaw_shape, ComplexVector, LinearModel, Matrix, ModeShape,
+    ModeShapeInfo, UpdatableModel, UpdateParam,
 };
-use crate::params::{Param, PlantParams};
+use crate::vehicles::car::{Param, PlantParams};
 
 /// Number of states of the linear model.
 pub const N_STATES: usize = 10;
@@ -357,107 +361,5 @@ pub fn classify_in<T: SolveFloat>(v: &[Complex<T>; N_STATES], m: [f64; 4]) -> Mo
         steering_wheel_ratio: steering_wheel_ratio.to_f64(),
         wheel_phase_rad,
         tyre_ratio: tyre_ratio.to_f64(),
-    }
-}
-
-/// The larger of `a` and `b` (as `f64::max` for numbers; the squared magnitudes here are).
-fn larger<T: PartialOrd>(a: T, b: T) -> T {
-    if b > a {
-        b
-    } else {
-        a
-    }
-}
-
-/// Phase of the right wheel's yaw `psi_r` relative to the left one's `psi_l`, rad. In f32
-/// (scaled into its range): ample for a phase, and the firmware links no f64 atan.
-pub fn wheel_phase_rad<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> f64 {
-    let rel = psi_r * psi_l.conj();
-    let m = larger(rel.re.abs(), rel.im.abs());
-    if m > T::zero() {
-        let f = |x: T| (x / m).to_f64() as f32;
-        f64::from(libm::atan2f(f(rel.im), f(rel.re)))
-    } else {
-        0.0
-    }
-}
-
-/// In-phase (the shimmy mode) or anti-phase wheel yaw, from the two wheels' components.
-pub fn wheel_yaw_shape<T: SolveFloat>(psi_l: Complex<T>, psi_r: Complex<T>) -> ModeShape {
-    if (psi_l + psi_r).norm_sqr() >= (psi_l - psi_r).norm_sqr() {
-        ModeShape::InPhaseWheelYaw
-    } else {
-        ModeShape::AntiPhaseWheelYaw
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::params::ParamSet;
-
-    #[test]
-    fn kinematic_rows_are_identity_blocks_and_v0_has_no_tyre_stiffness() {
-        let p = ParamSet::Nominal.params();
-        let a = linearise(&p, 0.0, 0.0);
-        for i in 0..N_DOF {
-            for j in 0..N_STATES {
-                let want = if j == N_DOF + i { 1.0 } else { 0.0 };
-                assert_eq!(a[(i, j)], want, "row {i} col {j}");
-            }
-        }
-        // At V = 0 the tyre rows have no V/sigma terms and there is no gyroscopic coupling.
-        assert_eq!(a[(A_L, PSI_L)], 0.0);
-        assert_eq!(a[(A_L, A_L)], 0.0);
-        assert_eq!(a[(DPSI_L, DPHI)], 0.0);
-        assert_eq!(a[(DPHI, DPSI_L)], 0.0);
-        assert_eq!(a[(A_L, DPSI_L)], p.e / p.sigma);
-    }
-
-    #[test]
-    fn a_is_affine_in_speed_with_the_stated_derivative() {
-        let p = ParamSet::Hard.params();
-        let a0 = linearise(&p, 10.0, 500.0);
-        let a1 = linearise(&p, 13.0, 500.0);
-        let d = dlinearise_dv(&p);
-        let err = (a1 - a0 - d * 3.0).amax();
-        assert!(err < 1e-9, "{err}");
-    }
-
-    #[test]
-    fn second_order_structure_matches_the_reference_equations() {
-        let p = ParamSet::Nominal.params();
-        let v = 20.0;
-        let so = second_order(&p, v, 0.0);
-        // K symmetric, gyroscopic part skew.
-        assert_eq!(so.k, so.k.transpose());
-        let h = p.i_p * v / p.r;
-        assert_eq!(so.c[(0, 2)], h);
-        assert_eq!(so.c[(2, 0)], -h);
-        // The in-phase rigid steering motion (psi_L = psi_R = theta_sw / i_s) has no mechanical
-        // stiffness: only the tyres hold it.
-        let q = nalgebra::Vector4::new(1.0, 1.0, 0.0, p.i_s);
-        assert!((so.k * q).amax() < 1e-9);
-    }
-
-    #[test]
-    fn viscous_damper_adds_c_lt2_over_4_to_the_four_wheel_entries() {
-        let p = ParamSet::Nominal.params();
-        let c = 1234.0;
-        let d = second_order(&p, 15.0, c).c - second_order(&p, 15.0, 0.0).c;
-        let want = c * p.l_t * p.l_t / 4.0;
-        for (i, j) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-            assert!((d[(i, j)] - want).abs() < 1e-12 * want);
-        }
-        assert!((d.abs().sum() - 4.0 * want).abs() < 1e-12 * want);
-        // Same as feeding F_d = c v_d through the damper input column.
-        let a_c = linearise(&p, 15.0, c);
-        let a_0 = linearise(&p, 15.0, 0.0);
-        let b = damper_force_input(&p);
-        let mut x = SVector::<f64, N_STATES>::zeros();
-        x[DPSI_L] = 0.3;
-        x[DPSI_R] = -0.1;
-        let via_input = a_0 * x + b * (c * damper_stroke_rate_mps(&p, &x));
-        assert!((a_c * x - via_input).amax() < 1e-9);
     }
 }

@@ -5,10 +5,14 @@
 //! [`crate::vehicle::decode_record`]). The record holds the truck's 32 fields, then every
 //! shared field in the car record's order (the car's `plant` section left out).
 
+use crate::estimator::monitor::MonitorParams;
+use crate::estimator::pipeline::PipelineParams;
 use crate::model::LinearModel;
-use crate::params::Param;
-use crate::truck::{HpsError, TruckFieldError, TruckParams, TruckSet, N_STATES, TRUCK_FIELDS};
 use crate::vehicle::{BoardVehicle, Problem, RecordVehicle, Vehicle, VehicleError, FIELDS};
+use crate::vehicles::car::Param;
+use crate::vehicles::truck::{
+    HpsError, TruckFieldError, TruckParams, TruckSet, N_STATES, TRUCK_FIELDS,
+};
 
 /// The section of the truck's fields in a vehicle file and its record.
 pub const TRUCK_SECTION: &str = "truck";
@@ -210,13 +214,45 @@ pub fn record_model(schema: u32) -> Option<&'static str> {
     .map(|(_, m)| m)
 }
 
+impl TruckParams {
+    /// The controller's nominal plant: the wheel assembly's yaw inertia I_k and kingpin
+    /// damping c_k, and the steering arm l_t (the ASMC's model).
+    pub fn nominal_plant(&self) -> crate::control::smc::NominalPlant {
+        crate::control::smc::NominalPlant {
+            i_k_kgm2: self.i_k as f32,
+            c_k_nms_per_rad: self.c_k as f32,
+            l_t_m: self.l_t as f32,
+        }
+    }
+
+    /// The truck vehicle's warning thresholds by default (its `[thresholds]` section): the
+    /// car's ([`PipelineParams::tuned_monitor`]) with the data path's MarginLow damping
+    /// thresholds lowered for the truck's lightly damped mode (zeta 0.0098 at 70 % of the
+    /// loaded truck's onset, where the car's `zeta_low_on` 0.005 flickers: 24-42 false
+    /// warnings per hour on the data-only arm, 0 with these) and the speed-margin thresholds
+    /// lowered (the truck's 70 % point is only 7 km/h from its onset), chosen by `shimmy-sim
+    /// mismatch --vehicle truck-full` (`docs/mining-truck.md`, "Warning thresholds").
+    pub fn warning_thresholds() -> MonitorParams {
+        MonitorParams {
+            zeta_low_on: -0.005,
+            zeta_low_off: 0.005,
+            dv_low_on_mps: 1.2,
+            dv_low_off_mps: 1.4,
+            dv_crit_on_mps: 0.6,
+            dv_crit_off_mps: 0.9,
+            ..PipelineParams::tuned_monitor()
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::vehicle::{
-        decode_record, encode_record, record_index, record_schema, record_schema_of, RecordError,
+        decode_record, encode_record, record_index, record_schema_of, RecordError,
         RECORD_HEADER_BYTES, RECORD_MAX_BYTES, RECORD_MAX_FIELDS,
     };
+    use crate::vehicles::car::board::record_schema;
 
     fn truck() -> TruckVehicle {
         let mut t = TruckVehicle::of_set(TruckSet::Empty);

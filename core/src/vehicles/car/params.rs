@@ -3,6 +3,9 @@
 //! SI units throughout (rad, m, s, N, N m). Named sets are built by functions here and nowhere
 //! else; studies derive variants with [`PlantParams::with`] / [`PlantParams::scaled`].
 
+#[allow(unused_imports)]
+use super::*;
+
 /// Physical parameters of the steering plant. Field names follow the symbols of the reference
 /// document; the unit of each field is in its doc comment.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,46 +52,6 @@ pub struct PlantParams {
     pub mu: f64,
     /// Magic-Formula shape factor C_s.
     pub c_s: f64,
-}
-
-/// The named parameter sets shipped with the project.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ParamSet {
-    /// The reference vehicle.
-    Nominal,
-    /// Less steering-wheel damping (c_sw = 2.0): a narrower Hopf window.
-    Gentle,
-    /// Half the drag-link stiffness: a wide window at a lower frequency.
-    Hard,
-}
-
-impl ParamSet {
-    /// Every named set, in display order.
-    pub const ALL: [ParamSet; 3] = [ParamSet::Nominal, ParamSet::Gentle, ParamSet::Hard];
-
-    /// The set's name as used on command lines and in scenario files.
-    pub const fn name(self) -> &'static str {
-        match self {
-            ParamSet::Nominal => "nominal",
-            ParamSet::Gentle => "gentle",
-            ParamSet::Hard => "hard",
-        }
-    }
-
-    /// Looks a set up by name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|s| s.name() == name)
-    }
-
-    /// The parameter values of this set.
-    pub fn params(self) -> PlantParams {
-        let nominal = PlantParams::nominal();
-        match self {
-            ParamSet::Nominal => nominal,
-            ParamSet::Gentle => nominal.with(Param::CSw, 2.0),
-            ParamSet::Hard => nominal.scaled(Param::KD, 0.5),
-        }
-    }
 }
 
 /// One named parameter, for overrides and sensitivity studies.
@@ -241,35 +204,6 @@ impl Param {
 }
 
 impl PlantParams {
-    /// The nominal parameter set of the reference document.
-    pub const fn nominal() -> Self {
-        let l_t = 0.197;
-        PlantParams {
-            i_k: 4.54,
-            i_p: 7.18,
-            r: 0.372,
-            h_r: 0.372,
-            i_phi: 108.437,
-            k_phi: 479_348.0,
-            c_phi: 4000.0,
-            c_a: 90_000.0,
-            sigma: 0.60,
-            e: 0.04,
-            t_p: 0.04,
-            l_t,
-            // Track-rod axial stiffness 5e6 N/m referred to the kingpin through the arm.
-            k_tr: 5.0e6 * l_t * l_t,
-            k_d: 1.0e4,
-            i_s: 16.0,
-            j_sw: 0.04,
-            c_sw: 3.0,
-            c_k: 8.0,
-            f_z: 6200.0,
-            mu: 0.8,
-            c_s: 1.3507,
-        }
-    }
-
     /// The value of one parameter.
     pub fn get(&self, p: Param) -> f64 {
         *self.field(p)
@@ -368,61 +302,5 @@ impl PlantParams {
             Param::Mu => &mut self.mu,
             Param::CS => &mut self.c_s,
         }
-    }
-}
-
-/// km/h -> m/s.
-pub fn kmh_to_mps(v_kmh: f64) -> f64 {
-    v_kmh / 3.6
-}
-
-/// m/s -> km/h.
-pub fn mps_to_kmh(v_mps: f64) -> f64 {
-    v_mps * 3.6
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn named_sets_differ_only_where_documented() {
-        let n = ParamSet::Nominal.params();
-        let g = ParamSet::Gentle.params();
-        let h = ParamSet::Hard.params();
-        for p in Param::ALL {
-            if p != Param::CSw {
-                assert_eq!(n.get(p), g.get(p), "{}", p.name());
-            }
-            if p != Param::KD {
-                assert_eq!(n.get(p), h.get(p), "{}", p.name());
-            }
-        }
-        assert_eq!(g.c_sw, 2.0);
-        assert_eq!(h.k_d, 0.5e4);
-        assert!((n.k_tr - 194_045.0).abs() < 1.0);
-    }
-
-    #[test]
-    fn names_round_trip_and_validation_names_the_offender() {
-        for p in Param::ALL {
-            assert_eq!(Param::from_name(p.name()), Some(p));
-        }
-        for s in ParamSet::ALL {
-            assert_eq!(ParamSet::from_name(s.name()), Some(s));
-            assert!(s.params().validate().is_ok());
-        }
-        let bad = PlantParams::nominal().with(Param::Sigma, -0.1);
-        assert_eq!(bad.validate(), Err((Param::Sigma, -0.1)));
-        let nan = PlantParams::nominal().with(Param::KD, f64::NAN);
-        assert!(matches!(nan.validate(), Err((Param::KD, _))));
-    }
-
-    #[test]
-    fn tyre_slope_at_origin_is_cornering_stiffness() {
-        let p = PlantParams::nominal();
-        // d/da [D sin(C atan(B a))] at a = 0 is D C B.
-        let slope = p.tyre_peak_force() * p.c_s * p.tyre_stiffness_factor();
-        assert!((slope - p.c_a).abs() < 1e-9 * p.c_a);
     }
 }
