@@ -257,7 +257,7 @@ impl TruckParams {
     }
 
     /// The operating point, or (struts topped or bottomed out) a zero roll spring from them:
-    /// [`LinearModel`] is infallible, so callers validate with [`Self::operating_point`] first
+    /// [`LinearModel`](crate::model::LinearModel) is infallible, so callers validate with [`Self::operating_point`] first
     /// (the simulator's nonlinear plant uses the same point).
     pub fn point_or_tyres_only(&self) -> TruckOperatingPoint {
         self.operating_point().unwrap_or_else(|_| {
