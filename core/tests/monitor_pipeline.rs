@@ -50,6 +50,7 @@ fn subcritical_burst_raises_shimmy_present_and_is_logged() {
                 t_s: t,
                 amplitude_rad: o.amplitude_rad,
                 report: &r,
+                speed_margin_sigma_mps: 0.0,
             });
             if (30.0..t0).contains(&t) {
                 level_before = level_before.max(lvl);

@@ -354,6 +354,7 @@ mod tests {
                 t_s: t,
                 amplitude_rad: amp,
                 report: &report,
+                speed_margin_sigma_mps: 0.0,
             });
             r.on_update(&m, &mut log);
             if k == 150 {

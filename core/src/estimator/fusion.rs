@@ -78,6 +78,10 @@ pub enum DataMarginUse {
     /// (zeta_model + delta) / |dzeta/dV|. The ambient-data spread of a data margin (~0.5 m/s
     /// at 20 km/h on the nominal plant) would cause false warnings if it were always used.
     WhenModelInconsistent,
+    /// Never: the model margin alone, with the consistency flag still reported. For a model
+    /// whose parameters the data already update (the online model update): correcting its
+    /// margin by the damping offset as well would count the same evidence twice.
+    Never,
 }
 
 impl FusionParams {
@@ -434,7 +438,7 @@ impl Fusion {
         // a wrong model must not silence the warning either (plant = model, seed 3: no
         // warning at all at 2 and 4 km/h/s without this).
         let timeout = self.params.first_decision_timeout_s;
-        let undecided = self.params.data_margin == DataMarginUse::WhenModelInconsistent
+        let undecided = self.params.data_margin != DataMarginUse::Always
             && !self.checked
             && timeout > 0.0
             && self
@@ -447,6 +451,7 @@ impl Fusion {
                 DataMarginUse::WhenModelInconsistent => {
                     !self.consistent || model_onset.is_none() || undecided
                 }
+                DataMarginUse::Never => false,
             };
         let mut correction = if use_data { self.offset } else { 0.0 };
         let candidate = match model_onset {
@@ -491,7 +496,9 @@ impl Fusion {
         // model) would raise a warning that the comparison then withdraws.
         let gate = match self.params.data_margin {
             DataMarginUse::Always => true,
-            DataMarginUse::WhenModelInconsistent => self.checked || undecided,
+            DataMarginUse::WhenModelInconsistent | DataMarginUse::Never => {
+                self.checked || undecided
+            }
         };
         r.valid = data_valid && gate && r.speed_margin_mps.is_some();
         r

@@ -66,6 +66,10 @@ pub struct MonitorParams {
     /// level is raised only when the estimate is below the threshold by that many of its own
     /// sigmas (0: the estimate itself).
     pub data_sigmas: f32,
+    /// `MarginLow` on the speed margin compares the margin + `margin_sigmas` x its model-side
+    /// sigma: the advisory level waits until the margin is low with that confidence, the
+    /// critical level does not wait (it compares the margin itself).
+    pub margin_sigmas: f32,
 }
 
 impl Default for MonitorParams {
@@ -85,6 +89,7 @@ impl Default for MonitorParams {
             amp_off_rad: 0.005,
             release_s: 1.0,
             data_sigmas: 0.0,
+            margin_sigmas: 1.0,
         }
     }
 }
@@ -119,6 +124,9 @@ pub struct MonitorInput<'a> {
     pub amplitude_rad: f32,
     /// Fused margin report.
     pub report: &'a MarginReport,
+    /// One-sigma uncertainty of the report's speed margin from the model side (the online
+    /// model update's posterior; 0 when the model is taken as known), m/s.
+    pub speed_margin_sigma_mps: f32,
 }
 
 /// The shimmy monitor with an event log of capacity `N`.
@@ -192,8 +200,14 @@ impl<const N: usize> Monitor<N> {
         {
             return Level::ApproachingCritical;
         }
+        let sigma_dv = inp.speed_margin_sigma_mps;
+        let dv_low = if sigma_dv.is_finite() && sigma_dv > 0.0 {
+            dv.map(|d| d + p.margin_sigmas * sigma_dv)
+        } else {
+            dv
+        };
         if lt(slow, pick(p.zeta_low_on, p.zeta_low_off))
-            || lt(dv, pick(p.dv_low_on_mps, p.dv_low_off_mps))
+            || lt(dv_low, pick(p.dv_low_on_mps, p.dv_low_off_mps))
         {
             return Level::MarginLow;
         }
@@ -308,6 +322,7 @@ mod tests {
                 t_s: t,
                 amplitude_rad: amp,
                 report: r,
+                speed_margin_sigma_mps: 0.0,
             })
         };
         assert_eq!(
@@ -367,10 +382,31 @@ mod tests {
             m2.update(&MonitorInput {
                 t_s: 0.0,
                 amplitude_rad: 0.0,
-                report: &inv
+                report: &inv,
+                speed_margin_sigma_mps: 0.0,
             }),
             Level::Normal
         );
+    }
+
+    /// The advisory level on the speed margin waits for confidence: a margin of 4.5 m/s
+    /// (below the 5 m/s threshold) with a model-side sigma of 1 m/s raises nothing, the same
+    /// margin known exactly raises `MarginLow`; the critical level (below 2 m/s) does not wait.
+    #[test]
+    fn margin_low_waits_for_a_confident_margin() {
+        let level = |dv: f32, sigma: f32| {
+            let mut m = Monitor::<4>::new(MonitorParams::default());
+            m.update(&MonitorInput {
+                t_s: 0.0,
+                amplitude_rad: 0.0,
+                report: &report(0.08, 0.08, Some(dv)),
+                speed_margin_sigma_mps: sigma,
+            })
+        };
+        assert_eq!(level(4.5, 0.0), Level::MarginLow);
+        assert_eq!(level(4.5, 1.0), Level::Normal);
+        assert_eq!(level(3.5, 1.0), Level::MarginLow);
+        assert_eq!(level(1.5, 5.0), Level::ApproachingCritical);
     }
 
     #[test]
@@ -385,6 +421,7 @@ mod tests {
                     t_s: t,
                     amplitude_rad: 0.0,
                     report: &report(0.08, 0.08, Some(20.0)),
+                    speed_margin_sigma_mps: 0.0,
                 });
             }
             for k in 0..300 {
@@ -394,6 +431,7 @@ mod tests {
                     t_s: t,
                     amplitude_rad: amp,
                     report: &report(0.08, 0.08, Some(20.0)),
+                    speed_margin_sigma_mps: 0.0,
                 });
             }
         }
@@ -403,6 +441,7 @@ mod tests {
                 t_s: t,
                 amplitude_rad: 0.0,
                 report: &report(0.08, 0.08, Some(20.0)),
+                speed_margin_sigma_mps: 0.0,
             });
         }
         let ev: Vec<Event> = m.events().copied().collect();
@@ -438,6 +477,7 @@ mod tests {
                 t_s: k as f64 * 0.01,
                 amplitude_rad: f32::NAN,
                 report: &r,
+                speed_margin_sigma_mps: 0.0,
             });
             assert_eq!(lvl, Level::Normal);
         }
@@ -445,6 +485,7 @@ mod tests {
             t_s: f64::NAN,
             amplitude_rad: 1.0,
             report: &r,
+            speed_margin_sigma_mps: 0.0,
         });
         assert_eq!(m.level(), Level::Normal);
         assert_eq!(m.events().count(), 0);

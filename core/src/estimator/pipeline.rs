@@ -78,7 +78,9 @@ impl PipelineParams {
     /// - speed margin: `MarginLow` below 1.4 m/s (5.0 km/h), cleared above 1.6 m/s; at 70 % of
     ///   the nominal onset the margin is 8.8 km/h, so a data-corrected margin may scatter by
     ///   3.8 km/h (about 1.6 of its sigmas at 20 km/h) before a false warning;
-    ///   `ApproachingCritical` below 1.0 m/s (3.6 km/h);
+    ///   `ApproachingCritical` below 1.0 m/s (3.6 km/h); with the online model update the
+    ///   `MarginLow` comparison adds one sigma of the updated onset (`margin_sigmas`), so a
+    ///   drive whose margin is uncertain by about the band's width does not sit in it;
     /// - time to critical: `ApproachingCritical` below 6 s (6 km/h ahead at 1 km/h/s: the
     ///   nominal ramp's first warning);
     /// - data damping, a backstop for a plant far from its model: the estimate plus one of its
@@ -103,6 +105,7 @@ impl PipelineParams {
             amp_off_rad: 0.25f32.to_radians(),
             release_s: 2.0,
             data_sigmas: 1.0,
+            margin_sigmas: 1.0,
         }
     }
 }
@@ -208,6 +211,7 @@ pub struct DataPipeline<const N: usize> {
     meter: MarginEstimator<f32>,
     fusion: Fusion,
     monitor: Monitor<N>,
+    margin_sigma_mps: f32,
 }
 
 impl<const N: usize> DataPipeline<N> {
@@ -217,7 +221,19 @@ impl<const N: usize> DataPipeline<N> {
             meter: MarginEstimator::new(params.estimator)?,
             fusion: Fusion::new(params.fusion).matched_to(params.estimator.lambda_slow),
             monitor: Monitor::new(params.monitor),
+            margin_sigma_mps: 0.0,
         })
+    }
+
+    /// The model side's one-sigma uncertainty of the onset speed, m/s (the online model
+    /// update's posterior; 0, the default, takes the model as known). The monitor's
+    /// `MarginLow` on the speed margin waits for confidence by `margin_sigmas` of it.
+    pub fn set_margin_sigma(&mut self, sigma_mps: f32) {
+        self.margin_sigma_mps = if sigma_mps.is_finite() && sigma_mps > 0.0 {
+            sigma_mps
+        } else {
+            0.0
+        };
     }
 
     /// One 1 kHz sample: `sample` (wheel yaw angles, wheel order), vehicle speed and
@@ -259,6 +275,7 @@ impl<const N: usize> DataPipeline<N> {
             t_s,
             amplitude_rad: out.amplitude_rad,
             report: &report,
+            speed_margin_sigma_mps: self.margin_sigma_mps,
         });
         Some(PipelineOutput {
             report,
@@ -322,8 +339,13 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
             est.lambda_slow,
             est.input_rate_hz / f32::from(est.decimation.max(1)),
         );
+        // The updated model is the data's correction: the fusion does not correct it again.
+        let mut data_params = params;
+        if update.enabled {
+            data_params.fusion.data_margin = DataMarginUse::Never;
+        }
         Ok(Self {
-            data: DataPipeline::new(&params)?,
+            data: DataPipeline::new(&data_params)?,
             model: ModelMarginTracker::new(plant, params.model),
             updater: ModelUpdater::new(plant, update),
             model_margin: None,
@@ -372,6 +394,14 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
             .update(t_s, speed_mps, self.c_damper_nspm, &out.meter.slow);
         if outcome == UpdateOutcome::Updated {
             self.model.set_plant(self.updater.model());
+            let sigma = self
+                .model_margin
+                .and_then(|m| m.v_crit_onset_mps)
+                .and_then(|v| {
+                    self.updater
+                        .onset_sigma_mps(v, f64::from(self.c_damper_nspm))
+                });
+            self.data.set_margin_sigma(sigma.map_or(0.0, |s| s as f32));
         }
         Some(out)
     }
