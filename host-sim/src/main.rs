@@ -68,6 +68,9 @@ enum Command {
     /// Plant != model: warning lead over the true onset and false warnings at 70 % of it, with
     /// the model nominal and the plant off by +-20 % in one parameter (or `hard`, `gentle`).
     Mismatch(cmd::mismatch::MismatchArgs),
+    /// Which of a model's parameters the online model update can separate from the meter's
+    /// shimmy frequency and damping, at which speeds and noise levels (Fisher information).
+    Identifiability(cmd::identifiability::IdentifiabilityArgs),
     /// Fault campaign: every sensor/coil fault (and combinations) injected into the supervised
     /// ASMC loop inside and outside the Hopf window: detection time, safe state, suppression.
     Faults(cmd::faults::FaultsArgs),
@@ -102,6 +105,7 @@ fn main() -> Result<()> {
         Some(Command::Margin(a)) => cmd::margin::command(&a),
         Some(Command::MeterAccuracy(a)) => cmd::meter_accuracy::command(&a),
         Some(Command::Mismatch(a)) => cmd::mismatch::command(&a),
+        Some(Command::Identifiability(a)) => cmd::identifiability::command(&a),
         Some(Command::Device(a)) => cmd::device::command(&a),
         Some(Command::Faults(a)) => cmd::faults::command(&a),
         Some(Command::Report(a)) => cmd::report::command(&a),

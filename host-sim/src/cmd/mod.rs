@@ -10,6 +10,7 @@ pub mod demo;
 pub mod device;
 pub mod faults;
 pub mod gas_charge;
+pub mod identifiability;
 pub mod margin;
 pub mod meter_accuracy;
 pub mod mismatch;

@@ -226,7 +226,7 @@ mod wrong_model {
     /// negative arm) corrects the model's level but keeps its slope and curvature: on seed 1
     /// it warns less than 3 km/h ahead and on seed 3 after the onset. The online model update
     /// (frequency and damping over the lead-in and the ramp) warns at least 3 km/h ahead on
-    /// each seed; on a 120 s drive at 70 % of the onset the steering damping it reports is
+    /// each seed; on a 120 s drive at 70 % of the onset the steering linkage stiffness it reports is
     /// within two of its sigmas of the plant's (0.8), its sigma a third of the prior's.
     #[test]
     fn combined_error_needs_the_model_update() {

@@ -246,7 +246,9 @@ impl LinearModel<N_STATES> for PlantParams {
 
 /// The car's updatable parameters: the tyre (cornering stiffness, relaxation length, pneumatic
 /// trail), the restoring stiffness of the steering linkage and the caster trail, the ones the
-/// shimmy mode's frequency and damping move with (`shimmy-sim identifiability`). Priors of
+/// shimmy mode's frequency and damping move with. `shimmy-sim identifiability` shows what the
+/// data separate: k_d well at every speed, c_a and sigma nearer the onset, t_p and e hardly
+/// (they stay near their prior and carry its uncertainty into the onset's sigma). Priors of
 /// +-15 % (one sigma) are the spread of tyres and linkages in service; the band is where the
 /// diagnosis speaks up (a tyre 25 % softer is under-inflated or worn).
 /// The fields behind [`PlantParams::UPDATE_PARAMS`], in its order.
