@@ -487,3 +487,56 @@ fn a_truck_on_a_car_only_command_is_rejected_naming_the_models() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `identifiability` rejects bad values and a model without updatable parameters before it
+/// writes anything; on the car it writes its tables, and the data separate the steering
+/// linkage stiffness (k_d) at once while the onset's sigma shrinks as the evidence nears the
+/// onset (the study's finding, not its construction: a wrong Jacobian or noise model moves
+/// both).
+#[test]
+fn identifiability_rejects_bad_input_and_separates_the_linkage_stiffness() {
+    rejected(
+        &["identifiability", "--sigma-zeta", "0"],
+        &["--sigma-zeta", "0.001 <= value <= 0.1"],
+    );
+    rejected(
+        &["identifiability", "--speeds", "1"],
+        &["--speeds", "2..=50"],
+    );
+    rejected(
+        &["identifiability", "--vehicle", "trailer"],
+        &["trailer-2dof", "car, truck"],
+    );
+    let dir = temp_dir();
+    let o = run_in(
+        &dir,
+        &["identifiability", "--sigma-zeta", "0.01", "--out", "o"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(dir.join("o/identifiability.csv")).expect("csv");
+    assert!(dir.join("o/identifiability.md").is_file());
+    let rows: Vec<(f64, String, f64, f64)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[1].parse().expect("speed"),
+                f[2].to_string(),
+                f[3].parse().expect("sigma"),
+                f[4].parse().expect("onset sigma"),
+            )
+        })
+        .collect();
+    let kd: Vec<f64> = rows.iter().filter(|r| r.1 == "k_d").map(|r| r.2).collect();
+    let onset: Vec<f64> = rows.iter().filter(|r| r.1 == "k_d").map(|r| r.3).collect();
+    assert!(
+        kd.len() == 6 && kd.iter().all(|&s| s < 0.5 * 0.15),
+        "{kd:?}"
+    );
+    assert!(
+        onset.windows(2).all(|w| w[1] < w[0]) && onset[5] < 0.7 * onset[0],
+        "{onset:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
