@@ -189,6 +189,11 @@ mod bench {
             run: newton_f32,
         },
         Entry {
+            name: "model update: one measurement update (f64, the car's 5 parameters)",
+            budget: Budget::None,
+            run: model_update_step,
+        },
+        Entry {
             name: "model cycle wall time at measured load [ms]",
             budget: Budget::Hard(MODEL_REFRESH_BUDGET_MS),
             run: model_refresh_ms,
@@ -859,6 +864,30 @@ mod bench {
             .map_or(nalgebra::Complex::new(-1.0, 40.0), |m| m.eigenvalue());
         let v = eigen::eigenvector_of::<f32, _>(&a, l).unwrap_or_else(|_| eigen::CVector::zeros());
         (a, l, v)
+    }
+
+    /// One measurement update of the online model update (`estimator::model_update`): the
+    /// shimmy eigenpair of the updated model, five linearisations for the Jacobian and the
+    /// 5 x 5 filter step, all in f64 (soft-float here), at 1 Hz when it runs.
+    fn model_update_step() -> u32 {
+        use shimmy_core::estimator::meter::mode_meter::ModeEstimate;
+        use shimmy_core::estimator::model_update::{ModelUpdateConfig, ModelUpdater};
+        use shimmy_core::vehicles::car::PlantParams;
+        let mut up = ModelUpdater::new(PlantParams::nominal(), ModelUpdateConfig::ON);
+        // near the nominal car's shimmy mode at 18 km/h, so the update is applied, not gated
+        let est = ModeEstimate {
+            zeta: 0.055,
+            sigma_zeta: 0.01,
+            freq_hz: 5.75,
+            wn_hz: 5.76,
+            valid: true,
+            ..ModeEstimate::default()
+        };
+        let mut t = 0.0;
+        measure(|| {
+            t += 1.0;
+            let _ = black_box(up.update(t, black_box(5.0), 0.0, &est));
+        })
     }
 
     fn eigenvector_f32() -> u32 {
