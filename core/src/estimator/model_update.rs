@@ -80,8 +80,9 @@ pub struct ModelUpdateConfig {
     pub reopen_after_gated: u32,
     /// Each factor stays within [1 / max_factor, max_factor].
     pub max_factor: f64,
-    /// Below this speed no update (the shimmy mode is overdamped and the meter sees road
-    /// noise), m/s.
+    /// Below this speed no update, m/s: about walking pace, where the road hardly excites the
+    /// steering (the meter's own validity flag decides above it; a stiff-tyred or soft-linked
+    /// vehicle's onset can be below 10 km/h, and its lead-in is its best evidence).
     pub min_speed_mps: f32,
 }
 
@@ -97,7 +98,7 @@ impl ModelUpdateConfig {
         gate_sigmas: 5.0,
         reopen_after_gated: 5,
         max_factor: 2.0,
-        min_speed_mps: 2.0,
+        min_speed_mps: 0.8,
     };
 
     /// The defaults with the update on.
