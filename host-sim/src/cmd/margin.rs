@@ -70,6 +70,10 @@ pub struct MarginArgs {
     /// Output directory.
     #[arg(long, default_value = "out/margin")]
     pub out: PathBuf,
+    /// Update the model's parameters online from the data (`docs/margin-estimator.md`, "Model
+    /// updating") and print them with their uncertainty and a diagnosis at the end.
+    #[arg(long)]
+    pub model_update: bool,
 }
 
 fn level_num(l: Level) -> u8 {
@@ -91,7 +95,7 @@ pub fn summary_json<M: SimModel<N>, const N: usize>(
 ) -> serde_json::Value {
     let lead = run.lead();
     let constant = matches!(sc.speed, SpeedProfile::Constant(_));
-    serde_json::json!({
+    let mut summary = serde_json::json!({
         "plant_onset_kmh": run.onset_kmh,
         "model_onset_kmh": sc.model.as_ref().and_then(|m| onset_kmh(&m.linear())),
         "first_warning_kmh": run.first_warning.map(|(_, v, _)| v),
@@ -102,7 +106,27 @@ pub fn summary_json<M: SimModel<N>, const N: usize>(
         "max_level": format!("{:?}", run.max_level),
         "duration_s": constant.then_some(sc.duration_s),
         "warnings": constant.then_some(run.warnings),
-    })
+    });
+    if !run.updated.is_empty() {
+        summary["updated"] = run
+            .updated
+            .iter()
+            .map(|u| {
+                serde_json::json!({
+                    "field": u.field,
+                    "what": u.what,
+                    "factor": u.factor,
+                    "sigma_ln": u.sigma_ln,
+                    "prior_sigma_ln": u.prior_sigma_ln,
+                    "band": [u.band.0, u.band.1],
+                    "out_of_band": u.out_of_band,
+                })
+            })
+            .collect();
+        summary["diagnosis"] =
+            serde_json::json!(run.diagnosis.as_ref().map(|d| d.statement().to_string()));
+    }
+    summary
 }
 
 /// Writes the rows as CSV.
@@ -327,6 +351,10 @@ fn run_on<M: SimModel<N>, const N: usize>(
     sc.imbalance_nm = a.imbalance_nm;
     sc.seed = a.seed;
     sc.model = Some(model);
+    let mut pipeline = pipeline;
+    if a.model_update {
+        pipeline.update = shimmy_core::estimator::model_update::ModelUpdateConfig::ON;
+    }
     let provenance = provenance.seed("road noise", sc.seed);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
     let bar = progress::bar(0, "1 ms steps");
@@ -379,6 +407,27 @@ fn run_on<M: SimModel<N>, const N: usize>(
         ),
         (Some((t, v, l)), None) => println!("first warning {l:?} at t = {t:.2} s, {v:.2} km/h"),
         (None, _) => println!("no warning (max level {:?})", run.max_level),
+    }
+    if !run.updated.is_empty() {
+        println!("model update (factor on the vehicle file, 2 sigma, plausible band):");
+        for u in &run.updated {
+            let (lo, hi) = u.two_sigma();
+            println!(
+                "  {:<28} {:<10} x{:.3}  (x{:.3}-x{:.3}; x{:.2}-x{:.2}){}",
+                u.what,
+                u.field,
+                u.factor,
+                lo,
+                hi,
+                u.band.0,
+                u.band.1,
+                if u.out_of_band { "  OUT OF BAND" } else { "" }
+            );
+        }
+        match &run.diagnosis {
+            Some(d) => println!("diagnosis: {}", d.statement()),
+            None => println!("diagnosis: every updated parameter within its plausible band"),
+        }
     }
     let csv = a.out.join("margin.csv");
     write_csv(&csv, &run.rows)?;

@@ -172,6 +172,8 @@ pub struct MarginRun {
     pub model_cycles: u32,
     /// The online model update's parameters at the end (empty when it is off).
     pub updated: Vec<ParamEstimate>,
+    /// The update's diagnosis at the end: the parameter furthest outside its plausible band.
+    pub diagnosis: Option<ParamEstimate>,
     /// Wall-clock time of the run, s.
     pub wall_s: f64,
 }
@@ -220,6 +222,13 @@ impl<M: UpdatableModel<N>, const N: usize> Pipe<M, N> {
         match self {
             Pipe::Full(p) => p.model().cycles(),
             Pipe::DataOnly(_) => 0,
+        }
+    }
+
+    fn diagnosis(&self) -> Option<ParamEstimate> {
+        match self {
+            Pipe::Full(p) if p.params().update.enabled => p.updater().diagnosis(),
+            _ => None,
         }
     }
 
@@ -349,6 +358,7 @@ pub fn run_with_progress<M: SimModel<N>, const N: usize>(
         max_solves_per_call: max_solves,
         model_cycles: pipe.cycles(),
         updated: pipe.estimates(),
+        diagnosis: pipe.diagnosis(),
         wall_s: wall.elapsed().as_secs_f64(),
     })
 }

@@ -540,3 +540,58 @@ fn identifiability_rejects_bad_input_and_separates_the_linkage_stiffness() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `margin --model-update` on the `hard` plant (K_d x0.5) with the nominal model: the warning
+/// comes before the onset and the diagnosis names the steering linkage stiffness, about half
+/// the file's, in the terminal and in `summary.json`; without the flag neither key is written
+/// (the negative arm: the nominal model alone warns after this plant's onset).
+#[test]
+fn margin_with_model_update_diagnoses_the_soft_linkage() {
+    let dir = temp_dir();
+    let args = |update: bool| {
+        let mut v = vec![
+            "margin",
+            "--vehicle",
+            "hard",
+            "--model-vehicle",
+            "nominal",
+            "--ramp-from-kmh",
+            "4.6",
+            "--ramp-to-kmh",
+            "10",
+            "--out",
+        ];
+        v.push(if update { "u" } else { "o" });
+        if update {
+            v.push("--model-update");
+        }
+        v
+    };
+    let o = run_in(&dir, &args(true));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("diagnosis: steering linkage stiffness (k_d) 5"),
+        "{out}"
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("u/summary.json")).expect("summary"),
+    )
+    .expect("json");
+    assert!(json["lead_kmh"].as_f64().is_some_and(|l| l > 0.0), "{json}");
+    let kd = json["updated"]
+        .as_array()
+        .and_then(|a| a.iter().find(|u| u["field"] == "k_d"))
+        .and_then(|u| u["factor"].as_f64())
+        .expect("k_d");
+    assert!((kd - 0.5).abs() < 0.05, "{kd}");
+    let o = run_in(&dir, &args(false));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("o/summary.json")).expect("summary"),
+    )
+    .expect("json");
+    assert!(json.get("updated").is_none() && json.get("diagnosis").is_none());
+    assert!(json["lead_kmh"].as_f64().is_none_or(|l| l < 0.0), "{json}");
+    std::fs::remove_dir_all(&dir).ok();
+}
