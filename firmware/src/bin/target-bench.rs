@@ -33,34 +33,21 @@ mod bench {
     /// `monitoring::MODEL_REFRESH_S` (10 Hz; derivation there).
     const MODEL_REFRESH_BUDGET_MS: u32 =
         (shimmy_firmware::monitoring::MODEL_REFRESH_S * 1000.0) as u32;
-    /// Budget of the worst warm model cycle [instructions] (issue 17: the continuation tracker
-    /// does one eigen-solve and a few Newton LUs per cycle).
+    /// Budget of the worst warm model cycle [instructions]: the continuation tracker does one
+    /// eigen-solve and a few Newton LUs per cycle.
     const MODEL_CYCLE_BUDGET: u32 = 500_000;
     /// Cycles per instruction assumed for the CPU load row (see `cpu_load_permille`): 1, the
     /// M4's single-cycle ALU/FPU issue with the flash accelerator hiding wait states on
     /// straight-line code; [`INSN_PER_S`] keeps 1.5 for the wall-time budgets.
     const LOAD_CPI: u64 = 1;
-    /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: a
-    /// regression guard just above the measured 50.3. The eigenvalue-only Hessenberg QR and
-    /// integer entry checks (worst warm model cycle 264 k -> 177 k instructions) and the margin
-    /// path's f64 time only on the reporting sample (plain meter push 562 -> 263) took the
-    /// firmware to 49.1, inside issue 17's 5 %; the AR(10) slow meter merged since (+2,121 per
-    /// meter run) took it to 50.3; the RLS covariance updated in place (no clear and copy of
-    /// the 14 x 14 matrix per update: meter run 37,910 -> 35,079) to 48.7. Counting what the
-    /// sum had left out (the meter task's link and store bookkeeping, the background loop's
-    /// passes and wakes, the telemetry stream) took it to 55.3; a background pass only per
-    /// meter run (`background::PassGate`), no vehicle-sized copy in `take_unsaved`, no fault
-    /// loop without a raised fault and the link's milliseconds from the step count (no f64)
-    /// brought it to 49.9, and the RLS update's checks on the values it computes (meter run
-    /// 35,079 -> 33,001) to 48.7. The firmware's margin-scheduled ASMC (control step 2,904 ->
-    /// 3,243) took it to 50.7, the FPU's square root (`shimmy_core::sqrt`: control step 3,079,
-    /// meter run 32,345, worst model cycle 171,408) back to 49.0: inside issue 17's 5 %, which
-    /// this guard holds.
+    /// Budget of the whole firmware's CPU load at its rates [per mille of the 168 MHz M4]: 5 %,
+    /// the share of the M4 the shimmy functions may take (the rest is the vehicle
+    /// application's); the measured load is in `docs/measurements.md`.
     #[cfg(not(feature = "model-truck"))]
     const CPU_LOAD_BUDGET_PERMILLE: u32 = 50;
     /// The truck image's budget of the same load (cargo feature `model-truck`, the model task
-    /// on the truck's 12-state model): a regression guard just above its measured 53.8 (9.04 M
-    /// instructions/s, `cargo xtask bench`; the model cycles cost 0.65 M/s more than the car's).
+    /// on the truck's 12-state model): 5.5 %, the car's 5 % and room for the truck's larger
+    /// model cycles.
     #[cfg(feature = "model-truck")]
     const CPU_LOAD_BUDGET_PERMILLE: u32 = 55;
 
