@@ -153,6 +153,12 @@ pub struct UpdateParam {
     pub band: (f64, f64),
 }
 
+impl UpdateParam {
+    /// The usual prior: one sigma of 15 % on the factor, the spread of tyres and steering
+    /// linkages of one type in service (inflation, wear, play).
+    pub const SERVICE_PRIOR_SIGMA_LN: f64 = 0.15;
+}
+
 /// A linear model whose effective parameters can be updated from data.
 pub trait UpdatableModel<const N: usize>: LinearModel<N> + Copy {
     /// The parameters the update estimates (at most

@@ -108,21 +108,7 @@ pub fn summary_json<M: SimModel<N>, const N: usize>(
         "warnings": constant.then_some(run.warnings),
     });
     if !run.updated.is_empty() {
-        summary["updated"] = run
-            .updated
-            .iter()
-            .map(|u| {
-                serde_json::json!({
-                    "field": u.field,
-                    "what": u.what,
-                    "factor": u.factor,
-                    "sigma_ln": u.sigma_ln,
-                    "prior_sigma_ln": u.prior_sigma_ln,
-                    "band": [u.band.0, u.band.1],
-                    "out_of_band": u.out_of_band,
-                })
-            })
-            .collect();
+        summary["updated"] = serde_json::to_value(&run.updated).unwrap_or_default();
         summary["diagnosis"] =
             serde_json::json!(run.diagnosis.as_ref().map(|d| d.statement().to_string()));
     }

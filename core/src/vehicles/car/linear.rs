@@ -244,46 +244,46 @@ impl LinearModel<N_STATES> for PlantParams {
     }
 }
 
+/// The fields behind [`PlantParams::UPDATE_PARAMS`], in its order (its names are taken from
+/// here).
+const CAR_UPDATE_FIELDS: [Param; 5] = [Param::CA, Param::Sigma, Param::KD, Param::TP, Param::E];
+
 /// The car's updatable parameters: the tyre (cornering stiffness, relaxation length, pneumatic
 /// trail), the restoring stiffness of the steering linkage and the caster trail, the ones the
 /// shimmy mode's frequency and damping move with. `shimmy-sim identifiability` shows what the
 /// data separate: k_d well at every speed, c_a and sigma nearer the onset, t_p and e hardly
-/// (they stay near their prior and carry its uncertainty into the onset's sigma). Priors of
-/// +-15 % (one sigma) are the spread of tyres and linkages in service; the band is where the
-/// diagnosis speaks up (a tyre 25 % softer is under-inflated or worn).
-/// The fields behind [`PlantParams::UPDATE_PARAMS`], in its order.
-const CAR_UPDATE_FIELDS: [Param; 5] = [Param::CA, Param::Sigma, Param::KD, Param::TP, Param::E];
-
+/// (they stay near their prior and carry its uncertainty into the onset's sigma). The band is
+/// where the diagnosis speaks up (a tyre 25 % softer is under-inflated or worn).
 impl UpdatableModel<N_STATES> for PlantParams {
     const UPDATE_PARAMS: &'static [UpdateParam] = &[
         UpdateParam {
-            field: "c_a",
+            field: CAR_UPDATE_FIELDS[0].name(),
             what: "tyre cornering stiffness",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
         UpdateParam {
-            field: "sigma",
+            field: CAR_UPDATE_FIELDS[1].name(),
             what: "tyre relaxation length",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
         UpdateParam {
-            field: "k_d",
+            field: CAR_UPDATE_FIELDS[2].name(),
             what: "steering linkage stiffness",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.7, 1.3),
         },
         UpdateParam {
-            field: "t_p",
+            field: CAR_UPDATE_FIELDS[3].name(),
             what: "tyre pneumatic trail",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
         UpdateParam {
-            field: "e",
+            field: CAR_UPDATE_FIELDS[4].name(),
             what: "caster trail",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
     ];

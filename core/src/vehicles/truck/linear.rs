@@ -208,38 +208,38 @@ impl LinearModel<N_STATES> for TruckParams {
 
 /// The truck's updatable parameters: the tyre (cornering coefficient, relaxation length,
 /// pneumatic trail) and the hydrostatic steering linkage (stiffness and damping), the ones its
-/// shimmy mode moves with (`shimmy-sim identifiability --vehicle truck-full`). Priors of
-/// +-15 % (one sigma); the band is where the diagnosis speaks up.
+/// shimmy mode moves with (`shimmy-sim identifiability --vehicle truck-full`). The band is
+/// where the diagnosis speaks up.
 impl UpdatableModel<N_STATES> for TruckParams {
     const UPDATE_PARAMS: &'static [UpdateParam] = &[
         UpdateParam {
             field: "c_a_per_fz",
             what: "tyre cornering coefficient",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
         UpdateParam {
             field: "sigma",
             what: "tyre relaxation length",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
         UpdateParam {
             field: "c_h",
             what: "steering linkage damping",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.6, 1.5),
         },
         UpdateParam {
             field: "k_h",
             what: "steering linkage stiffness",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.7, 1.3),
         },
         UpdateParam {
             field: "t_p",
             what: "tyre pneumatic trail",
-            prior_sigma_ln: 0.15,
+            prior_sigma_ln: UpdateParam::SERVICE_PRIOR_SIGMA_LN,
             band: (0.75, 1.3),
         },
     ];
