@@ -102,13 +102,19 @@ pub fn study<M: UpdatableModel<N>, const N: usize>(
     let grid: Vec<f64> = (0..n)
         .map(|i| onset * (from_fraction + (0.95 - from_fraction) * i as f64 / (n - 1) as f64))
         .collect();
+    // the predictions depend on the speed only: one eigen-solve per speed for every noise level
+    let predictions = grid
+        .iter()
+        .map(|&v_kmh| {
+            up.predict(kmh_to_mps(v_kmh), 0.0)
+                .map(|p| (v_kmh, p))
+                .with_context(|| format!("no shimmy mode at {v_kmh:.1} km/h"))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let mut rows = Vec::new();
     for &sz in sigmas_zeta {
         let mut info = ParamMatrix::zeros();
-        for &v_kmh in &grid {
-            let p = up
-                .predict(kmh_to_mps(v_kmh), 0.0)
-                .with_context(|| format!("no shimmy mode at {v_kmh:.1} km/h"))?;
+        for &(v_kmh, p) in &predictions {
             let r = up.measurement_noise(sz, p.wn_hz);
             let r_inv = r.try_inverse().context("singular measurement noise")?;
             let j: SMatrix<f64, 2, MAX_UPDATE_PARAMS> = p.jacobian;
