@@ -144,16 +144,19 @@ pub fn reference_at<M: SimModel<N>, const N: usize>(
     times
         .par_iter()
         .filter_map(|&t| {
+            // The trace is in time order: binary searches, not scans.
             let speed = trace
-                .iter()
-                .find(|row| row.t_s >= t)
+                .get(trace.partition_point(|row| row.t_s < t))
                 .map_or(last.speed_mps, |row| row.speed_mps)
                 .max(0.1);
-            let (sum_i, count) = trace
-                .iter()
-                .filter(|row| (row.t_s - t).abs() <= 0.5 * CURRENT_WINDOW_S)
-                .fold((0.0, 0usize), |(s, n), row| (s + row.coil_a, n + 1));
-            let current = if count > 0 { sum_i / count as f64 } else { 0.0 };
+            let half = 0.5 * CURRENT_WINDOW_S;
+            let window = &trace[trace.partition_point(|row| row.t_s < t - half)
+                ..trace.partition_point(|row| row.t_s <= t + half)];
+            let current = if window.is_empty() {
+                0.0
+            } else {
+                window.iter().map(|row| row.coil_a).sum::<f64>() / window.len() as f64
+            };
             let amp = envelope_at(&peaks, t);
             let (mode, c) =
                 shimmy_mode_with_damper(&cfg.plant, damper.as_ref(), speed, current, amp).ok()?;
