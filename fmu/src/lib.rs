@@ -65,8 +65,9 @@ pub struct ShimmyController {
     /// The speed source marks its value valid (signal qualifier)
     #[variable(causality = Input, variability = Discrete, start = true)]
     pub speed_valid: bool,
-    /// Measured coil current, A (NaN: not measured)
-    #[variable(causality = Input, variability = Discrete, start = 0.0)]
+    /// Measured coil current, A (NaN: not measured, the start value: an input left unconnected
+    /// must not read as 0 A, which the supervisor takes for an open coil)
+    #[variable(causality = Input, variability = Discrete, start = f64::NAN)]
     pub coil_current_a: f64,
     /// Longitudinal acceleration, m/s2 (for the margin's time to critical)
     #[variable(causality = Input, variability = Discrete, start = 0.0)]

@@ -78,9 +78,14 @@ class Controller:
         self.slave.exitInitializationMode()
 
     def step(self, t, psi_l, psi_r, speed_mps, coil_a):
+        """`coil_a=None` leaves the coil-current input at its value (its start value: not
+        measured)."""
         vr = self.vr
-        self.slave.setFloat64([vr["psi_l_rad"], vr["psi_r_rad"], vr["speed_mps"],
-                               vr["coil_current_a"]], [psi_l, psi_r, speed_mps, coil_a])
+        names, values = ["psi_l_rad", "psi_r_rad", "speed_mps"], [psi_l, psi_r, speed_mps]
+        if coil_a is not None:
+            names.append("coil_current_a")
+            values.append(coil_a)
+        self.slave.setFloat64([vr[n] for n in names], values)
         self.slave.doStep(t, DT_S)
         out = dict(zip(self.OUTPUTS, self.slave.getFloat64([vr[n] for n in self.OUTPUTS])))
         out.update(zip(self.INT_OUTPUTS, self.slave.getInt32([vr[n] for n in self.INT_OUTPUTS])))

@@ -95,3 +95,30 @@ def test_a_step_off_the_control_period_is_refused():
             ctl.slave.doStep(0.0, 0.5e-3)
     finally:
         ctl.close()
+
+
+def supervisor_modes(coil_a):
+    """Supervisor modes over 1 s of a 0.5 deg, 7 Hz wheel-yaw oscillation at 55 km/h (the
+    controller commands current), the coil-current input set to `coil_a` at each step (None:
+    never set)."""
+    ctl = cosim.Controller(fmu_path())
+    modes, cmds = [], []
+    try:
+        for k in range(1000):
+            t = k * cosim.DT_S
+            psi = np.radians(0.5) * np.sin(2 * np.pi * 7.0 * t)
+            out = ctl.step(t, psi, psi, 55.0 / 3.6, coil_a)
+            modes.append(out["supervisor_mode"])
+            cmds.append(out["current_cmd_a"])
+    finally:
+        ctl.close()
+    return np.array(modes), np.array(cmds)
+
+
+def test_an_unconnected_coil_current_input_is_not_an_open_coil():
+    modes, cmds = supervisor_modes(None)
+    assert np.max(cmds) > 0.5
+    assert np.all(modes < 2), "fail-safe with the coil-current input left at its start value"
+    # What the start value prevents: a measured 0 A while current is commanded is an open coil.
+    modes_zero, _ = supervisor_modes(0.0)
+    assert np.max(modes_zero) == 2

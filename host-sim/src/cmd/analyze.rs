@@ -43,7 +43,7 @@ pub struct AnalyzeArgs {
     /// No time column: the rows are equally spaced at this rate, Hz (1 to 100000).
     #[arg(long)]
     pub rate_hz: Option<f64>,
-    /// One yaw signal for both wheels (a wheel yaw or, with --yaw-gain, a steering angle).
+    /// One yaw signal for both wheels (a wheel yaw or a steering angle; needs --yaw-gain).
     #[arg(long)]
     pub yaw_column: Option<String>,
     /// Left wheel yaw column (with --yaw-right).

@@ -7,7 +7,7 @@
 //! Mapping file (every key optional; the defaults read a `shimmy-sim run` trace):
 //!
 //! ```toml
-//! delimiter = ","            # "," | ";" | "\t"
+//! delimiter = ","            # "," | ";" | "\t"; without it, the header line decides
 //! [time]                     # either a time column ...
 //! column = "t_s"
 //! unit = "s"                 # s | ms | us
@@ -163,8 +163,9 @@ pub enum YawColumns {
 /// Which column holds which signal, in which unit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LogMapping {
-    /// Field separator.
-    pub delimiter: char,
+    /// Field separator; `None`: the one of `,` `;` tab that splits the header into the most
+    /// fields (a log exported with a locale's `;` reads without options).
+    pub delimiter: Option<char>,
     /// Time column or fixed rate.
     pub time: TimeSource,
     /// Yaw column(s).
@@ -184,7 +185,7 @@ impl Default for LogMapping {
     /// The columns of a `shimmy-sim run` trace: the samples the in-loop meter received.
     fn default() -> Self {
         Self {
-            delimiter: ',',
+            delimiter: None,
             time: TimeSource::Column {
                 name: "t_s".into(),
                 unit: TimeUnit::S,
@@ -326,12 +327,12 @@ impl MappingChanges {
     pub fn mapping(&self) -> Result<LogMapping> {
         let mut m = LogMapping::default();
         if let Some(d) = &self.delimiter {
-            m.delimiter = match d.as_str() {
+            m.delimiter = Some(match d.as_str() {
                 "," => ',',
                 ";" => ';',
                 "\t" | "\\t" | "tab" => '\t',
                 _ => bail!("delimiter `{d}`: allowed: \",\", \";\", \"\\t\""),
-            };
+            });
         }
         if self.rate_hz.is_some() && (self.time_column.is_some() || self.time_unit.is_some()) {
             bail!("time: give either a time column (time.column, time.unit) or time.rate_hz, not both");
@@ -375,6 +376,13 @@ impl MappingChanges {
                 bail!("yaw.gain = {g}: allowed |gain| in {lo} ..= {hi}");
             }
             m.yaw_gain = g;
+        }
+        // A steering-wheel angle read as a wheel yaw is ~15x too large: a false shimmy.
+        if let (YawColumns::Single(c), None) = (&m.yaw, self.yaw_gain) {
+            bail!(
+                "yaw.column `{c}` is one signal for both wheels: give yaw.gain (--yaw-gain): 1 \
+                 for a wheel yaw, 1 / steering ratio for a steering-wheel angle (0.0625 at 16:1)"
+            );
         }
         if let Some(c) = &self.speed_column {
             m.speed = c.clone();
@@ -425,6 +433,14 @@ fn unquote(s: &str) -> &str {
         .unwrap_or(s)
 }
 
+/// The separator of `,` `;` tab that splits `header` into the most fields (`,` on a tie).
+fn detect_delimiter(header: &str) -> char {
+    [',', ';', '\t']
+        .into_iter()
+        .max_by_key(|&d| (header.split(d).count(), d == ','))
+        .unwrap_or(',')
+}
+
 /// Parses a log's text with `map`. Lines starting with `#` and blank lines are skipped; the
 /// first other line is the header. Errors name the line (1-based, as an editor counts) and
 /// the column.
@@ -437,8 +453,9 @@ pub fn parse(text: &str, map: &LogMapping) -> Result<Log> {
     let Some((_, head)) = lines.next() else {
         bail!("the log is empty (no header line)");
     };
+    let delimiter = map.delimiter.unwrap_or_else(|| detect_delimiter(head));
     let header: Vec<String> = head
-        .split(map.delimiter)
+        .split(delimiter)
         .map(|h| unquote(h).to_string())
         .collect();
     // (time column and its unit) or the fixed rate.
@@ -459,7 +476,7 @@ pub fn parse(text: &str, map: &LogMapping) -> Result<Log> {
     let speed = column_index(&header, &map.speed, "speed")?;
     let mut samples: Vec<LogSample> = Vec::new();
     for (line, l) in lines {
-        let cells: Vec<&str> = l.split(map.delimiter).map(unquote).collect();
+        let cells: Vec<&str> = l.split(delimiter).map(unquote).collect();
         if cells.len() != header.len() {
             bail!(
                 "line {line}: {} fields, the header has {}",
@@ -565,6 +582,39 @@ mod tests {
 
     fn err(text: &str, map: &LogMapping) -> String {
         format!("{:#}", parse(text, map).unwrap_err())
+    }
+
+    #[test]
+    fn one_yaw_signal_needs_its_gain() {
+        let single = |gain| MappingChanges {
+            yaw_column: Some("steer_deg".into()),
+            yaw_gain: gain,
+            ..MappingChanges::default()
+        };
+        let e = format!("{:#}", single(None).mapping().unwrap_err());
+        assert!(e.contains("steer_deg") && e.contains("yaw.gain"), "{e}");
+        assert_eq!(single(Some(0.0625)).mapping().unwrap().yaw_gain, 0.0625);
+    }
+
+    #[test]
+    fn the_header_decides_the_delimiter_when_none_is_given() {
+        let comma =
+            "t_s,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps\n0,0.01,0.02,10\n0.01,0.03,0.04,11\n";
+        let want = parse(comma, &LogMapping::default()).unwrap();
+        for d in [";", "\t"] {
+            let text = comma.replace(',', d);
+            let got = parse(&text, &LogMapping::default()).unwrap();
+            assert_eq!(got.samples, want.samples, "delimiter {d:?}");
+        }
+        // A delimiter given is used as given: a `;` log read with `,` has no time column.
+        let forced = MappingChanges {
+            delimiter: Some(",".into()),
+            ..MappingChanges::default()
+        }
+        .mapping()
+        .unwrap();
+        let e = err(&comma.replace(',', ";"), &forced);
+        assert!(e.contains("time column `t_s`"), "{e}");
     }
 
     #[test]
