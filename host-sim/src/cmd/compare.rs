@@ -262,20 +262,17 @@ pub fn table<M: SimModel<N>, const N: usize>(
     specs: &[ScenarioSpec<M, N>],
 ) -> String {
     let mut s = String::new();
+    // Units in the header cells: a Markdown table has one header row.
     s.push_str(&format!(
-        "| {:<22} | {:<11} | {:>7} | {:>7} | {:>6} | {:>7} | {:>6} | {:>6} | {:>7} | {:>7} | {:>7} | {:>7} | {:>7} |\n",
-        "scenario", "controller", "pk yaw", "rms yaw", "t_2%", "pk sw", "I rms", "I pk", "E coil", "TV(I)", "F rms", "shimmy", "A end"
-    ));
-    s.push_str(&format!(
-        "| {:<22} | {:<11} | {:>7} | {:>7} | {:>6} | {:>7} | {:>6} | {:>6} | {:>7} | {:>7} | {:>7} | {:>7} | {:>7} |\n",
-        "", "", "deg", "deg", "s", "deg", "A", "A", "J", "A", "N", "s", "deg"
+        "| {:<22} | {:<11} | {:>9} | {:>9} | {:>7} | {:>8} | {:>7} | {:>6} | {:>8} | {:>7} | {:>7} | {:>9} | {:>9} |\n",
+        "scenario", "controller", "pk yaw °", "rms yaw °", "t_2% s", "pk sw °", "I rms A", "I pk A", "E coil J", "TV(I) A", "F rms N", "shimmy s", "A end °"
     ));
     s.push_str(&format!("|{}|\n", ["---"; 13].join("|")));
     for spec in specs {
         for r in rows.iter().filter(|r| r.scenario == spec.name) {
             let m = &r.m;
             s.push_str(&format!(
-                "| {:<22} | {:<11} | {:>7.3} | {:>7.3} | {:>6} | {:>7.2} | {:>6.3} | {:>6.3} | {:>7.2} | {:>7.1} | {:>7.1} | {:>7.1} | {:>7.3} |\n",
+                "| {:<22} | {:<11} | {:>9.3} | {:>9.3} | {:>7} | {:>8.2} | {:>7.3} | {:>6.3} | {:>8.2} | {:>7.1} | {:>7.1} | {:>9.1} | {:>9.3} |\n",
                 r.scenario,
                 r.arm.name(),
                 m.peak_yaw_rad.to_degrees(),
@@ -686,10 +683,9 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
         rayon::current_num_threads()
     );
     write_csv(&a.out.join("compare.csv"), &rows)?;
-    std::fs::write(
-        a.out.join("compare.md"),
-        format!("{tab}\n```\n{ver}```\n\n{mtab}\n```\n{mver}```\n"),
-    )?;
+    let md = format!("{tab}\n```\n{ver}```\n\n{mtab}\n```\n{mver}```\n");
+    crate::out::html::check_tables(&md).context("compare.md")?;
+    std::fs::write(a.out.join("compare.md"), md)?;
     for spec in &specs {
         let runs: Vec<(&str, &LoopResult)> = rows
             .iter()

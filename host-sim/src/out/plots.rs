@@ -3,7 +3,7 @@
 
 use crate::model::family::SimModel;
 use crate::out::plot_util::{self, COLORS};
-use crate::sim::closed_loop::{LoopConfig, LoopResult, TraceRow};
+use crate::sim::closed_loop::{LoopConfig, LoopResult, MeterRow, TraceRow};
 use crate::sim::reference::{reference_line, REFERENCE_LABEL};
 use anyhow::Result;
 use plotters::prelude::*;
@@ -75,10 +75,10 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
     Ok(())
 }
 
-/// Mode-meter damping estimate (slow, dots, +- one sigma) of each run over time next to its
-/// reference line (same colour): the damping ratio of the plant's shimmy mode as the run goes,
-/// linearised with the damper's equivalent viscous coefficient at the run's current and
-/// amplitude ([`crate::sim::reference`]). The caption says so.
+/// Mode-meter damping estimate (slow: dots in a shaded +- one sigma band) of each run over time
+/// next to its reference line (same colour, drawn on top): the damping ratio of the plant's
+/// shimmy mode as the run goes, linearised with the damper's equivalent viscous coefficient at
+/// the run's current and amplitude ([`crate::sim::reference`]). The axis spans the data (and 0).
 pub fn plot_margin<M: SimModel<N>, const N: usize>(
     path: &Path,
     title: &str,
@@ -90,11 +90,27 @@ pub fn plot_margin<M: SimModel<N>, const N: usize>(
         .iter()
         .filter_map(|(_, _, r)| r.meter.last().map(|m| m.t_s))
         .fold(0.1f64, f64::max);
-    let (lo, hi) = (-0.15, 0.3);
+    let lines: Vec<Vec<(f64, f64)>> = runs
+        .iter()
+        .map(|(_, cfg, r)| {
+            reference_line(cfg, r, REFERENCE_EVERY_S)
+                .iter()
+                .map(|p| (p.t_s, p.mode.zeta))
+                .collect()
+        })
+        .collect();
+    let meters: Vec<Vec<&MeterRow>> = runs
+        .iter()
+        .map(|(_, _, r)| r.meter.iter().filter(|m| m.valid).collect())
+        .collect();
+    let (lo, hi) = zeta_axis(
+        lines.iter().flatten().map(|p| p.1),
+        meters.iter().flatten().map(|m| m.zeta_slow),
+    );
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("{title}: shimmy-mode damping ratio. Dots +- sigma: mode meter. Lines: {REFERENCE_LABEL}"),
-            ("sans-serif", 14),
+            format!("{title}: damping ratio of the shimmy mode"),
+            ("sans-serif", 16),
         )
         .margin(8)
         .x_label_area_size(35)
@@ -102,39 +118,68 @@ pub fn plot_margin<M: SimModel<N>, const N: usize>(
         .build_cartesian_2d(0.0..t_end, lo..hi)?;
     plot_util::mesh(&mut chart, "time [s]", "zeta [-]")?;
     chart.draw_series(LineSeries::new([(0.0, 0.0), (t_end, 0.0)], BLACK))?;
-    for (i, (name, cfg, r)) in runs.iter().enumerate() {
+    for (i, (name, valid)) in runs.iter().map(|r| r.0).zip(&meters).enumerate() {
         let c = COLORS[(i + 1) % COLORS.len()];
-        let line: Vec<(f64, f64)> = reference_line(cfg, r, REFERENCE_EVERY_S)
-            .iter()
-            .map(|p| (p.t_s, p.mode.zeta.clamp(lo, hi)))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(line, c.stroke_width(2)))?
-            .label(format!("reference (plant as it runs), {name}"))
-            .legend(plot_util::line_marker(c, 2));
-    }
-    for (i, (name, _, r)) in runs.iter().enumerate() {
-        let c = COLORS[(i + 1) % COLORS.len()];
-        let valid: Vec<_> = r.meter.iter().filter(|m| m.valid).collect();
-        chart.draw_series(valid.iter().map(|m| {
-            PathElement::new(
-                [
-                    (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi)),
-                    (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)),
-                ],
-                c.mix(0.25),
-            )
-        }))?;
+        for span in contiguous(valid) {
+            let band: Vec<(f64, f64)> = span
+                .iter()
+                .map(|m| (m.t_s, (m.zeta_slow + m.sigma_zeta_slow).clamp(lo, hi)))
+                .chain(
+                    span.iter()
+                        .rev()
+                        .map(|m| (m.t_s, (m.zeta_slow - m.sigma_zeta_slow).clamp(lo, hi))),
+                )
+                .collect();
+            chart.draw_series(std::iter::once(Polygon::new(band, c.mix(0.15).filled())))?;
+        }
         chart
             .draw_series(
                 valid
                     .iter()
                     .map(|m| Circle::new((m.t_s, m.zeta_slow.clamp(lo, hi)), 1, c.filled())),
             )?
-            .label(format!("mode meter (slow), {name}"))
+            .label(format!("mode meter (slow) +- sigma, {name}"))
             .legend(plot_util::dot_marker(c));
+    }
+    for (i, (name, line)) in runs.iter().map(|r| r.0).zip(&lines).enumerate() {
+        let c = COLORS[(i + 1) % COLORS.len()];
+        chart
+            .draw_series(LineSeries::new(
+                line.iter().map(|&(t, z)| (t, z.clamp(lo, hi))),
+                c.stroke_width(3),
+            ))?
+            .label(format!("{REFERENCE_LABEL}, {name}"))
+            .legend(plot_util::line_marker(c, 3));
     }
     plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     root.present()?;
     Ok(())
+}
+
+/// The damping axis: the reference lines and the meter's estimates between their 2nd and 98th
+/// percentiles (a start-up transient of the meter does not squash the rest), and 0, with 10 %
+/// room; at least 0.1 wide.
+fn zeta_axis(reference: impl Iterator<Item = f64>, meter: impl Iterator<Item = f64>) -> (f64, f64) {
+    let mut m: Vec<f64> = meter.filter(|z| z.is_finite()).collect();
+    m.sort_by(f64::total_cmp);
+    let pick = |q: f64| {
+        m.get(((m.len().saturating_sub(1)) as f64 * q) as usize)
+            .copied()
+    };
+    let (mut lo, mut hi) = (0.0f64, 0.0f64);
+    for z in reference
+        .filter(|z| z.is_finite())
+        .chain(pick(0.02))
+        .chain(pick(0.98))
+    {
+        lo = lo.min(z);
+        hi = hi.max(z);
+    }
+    let pad = (0.1 * (hi - lo)).max(0.5 * (0.1 - (hi - lo)).max(0.0));
+    (lo - pad, hi + pad)
+}
+
+/// The runs of `rows` without a gap of more than 0.5 s (the meter was not valid in between).
+fn contiguous<'a>(rows: &'a [&'a MeterRow]) -> impl Iterator<Item = &'a [&'a MeterRow]> {
+    rows.chunk_by(|a, b| b.t_s - a.t_s <= 0.5)
 }
