@@ -16,7 +16,7 @@
 //! cannot step over it). So the Rust side does strictly more work per
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
-use crate::model::plant::{idx, Inputs, Method, Plant, Simulator, N_STATE};
+use crate::model::plant::{default_atol, idx, Inputs, Method, Plant, Simulator, N_STATE};
 use crate::sim::arg_range::{self, Range};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -36,6 +36,10 @@ pub const YAW_DEG: Range = Range::closed(-20.0, 20.0, "deg");
 pub const CL_RAMP_S: Range = Range::closed(1.0, 600.0, "s");
 /// Python current-law gain: 0 to 1000 A per rad/s.
 pub const CL_GAIN: Range = Range::closed(0.0, 1000.0, "A/(rad/s)");
+
+/// The simulator's integrator tolerance in every row (its default, `Method::default`); SciPy
+/// gets the same rtol and the same per-state atol (`default_atol`).
+const SIM_RTOL: f64 = 1e-7;
 
 /// Options of `shimmy-sim reference-bench`.
 #[derive(Args, Debug)]
@@ -61,9 +65,10 @@ pub struct ReferenceBenchArgs {
     /// Points of the eigenvalue sweep (1-150 km/h): 2 to 100000.
     #[arg(long, default_value_t = 2000, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..=100_000))]
     pub sweep_points: usize,
-    /// SciPy integrator (`LSODA`, `Radau`, `BDF`, `RK45`).
-    #[arg(long, default_value = "LSODA")]
-    pub scipy_method: String,
+    /// SciPy integrators timed on the time-domain run (each at the simulator's rtol and
+    /// per-state atol); the fastest is the peer, and it runs the closed-loop row.
+    #[arg(long, alias = "scipy-method", value_delimiter = ',', default_value = "LSODA,RK45,DOP853,BDF,Radau", value_parser = ["LSODA", "RK45", "RK23", "DOP853", "BDF", "Radau"])]
+    pub scipy_methods: Vec<String>,
     /// Python interpreter with numpy and scipy.
     #[arg(long, default_value = "python3")]
     pub python: String,
@@ -83,12 +88,21 @@ pub struct ReferenceBenchArgs {
 pub struct ReferenceResult {
     /// Simulated seconds per wall second, Rust.
     pub rust_sim_rate: f64,
-    /// Simulated seconds per wall second, SciPy.
+    /// Simulated seconds per wall second, SciPy's fastest method.
     pub scipy_sim_rate: f64,
-    /// Eigen-sweep points per wall second, Rust.
+    /// SciPy's methods: (name, simulated seconds per wall second, right-hand-side calls).
+    pub scipy_methods: Vec<(String, f64, u64)>,
+    /// The fastest of them.
+    pub scipy_fastest: String,
+    /// Eigen-sweep points per wall second, Rust: A(V) and its eigenvalues.
     pub rust_sweep_rate: f64,
-    /// Eigen-sweep points per wall second, NumPy.
+    /// The same, eigenvalues of the prebuilt matrices only.
+    pub rust_eig_rate: f64,
+    /// Eigen-sweep points per wall second, NumPy: A(V) (a Python loop) and one batched
+    /// `eigvals`.
     pub numpy_sweep_rate: f64,
+    /// The same, the batched `eigvals` call only.
+    pub numpy_eig_rate: f64,
     /// Largest |psi_L(Rust) - psi_L(SciPy)| over the sample times, rad.
     pub max_traj_diff_rad: f64,
     /// Largest |psi_L| of the run, rad (scale of the difference).
@@ -137,7 +151,11 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let mut x0 = [0.0; N_STATE];
     x0[idx::PSI_L] = a.initial_yaw_deg.to_radians();
     x0[idx::PSI_R] = x0[idx::PSI_L];
-    let mut sim = Simulator::new(Plant::with_mr_damper(params), x0);
+    let mut sim = Simulator::with_method(
+        Plant::with_mr_damper(params),
+        x0,
+        Method::Dopri5 { rtol: SIM_RTOL },
+    );
     let inputs = Inputs {
         current_cmd_a: a.current_a,
         driver_torque_nm: 0.0,
@@ -155,13 +173,18 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let rust_sim_wall = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
+    let matrices: Vec<_> = sweep
+        .iter()
+        .map(|&v| shimmy_core::vehicles::car::linearise(&params, v, 0.0))
+        .collect();
+    let rust_build_wall = start.elapsed().as_secs_f64();
+    let start = Instant::now();
     let mut max_re_rust = Vec::with_capacity(sweep.len());
-    for &v in &sweep {
-        let m = shimmy_core::vehicles::car::linearise(&params, v, 0.0);
-        let ev = shimmy_core::eigen::eigenvalues(&m).context("eigen")?;
+    for m in &matrices {
+        let ev = shimmy_core::eigen::eigenvalues(m).context("eigen")?;
         max_re_rust.push(ev.iter().map(|l| l.re).fold(f64::NEG_INFINITY, f64::max));
     }
-    let rust_sweep_wall = start.elapsed().as_secs_f64();
+    let rust_eig_wall = start.elapsed().as_secs_f64();
 
     // Closed loop: the demo's ASMC run (nominal plant, as the demo).
     let ramp_s = a.cl_ramp_s;
@@ -216,6 +239,16 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
             .collect()
     };
     let psi_scipy = list("psi_l_rad")?;
+    let scipy_methods = json["methods"]
+        .as_object()
+        .context("scipy.json: `methods`")?
+        .iter()
+        .map(|(name, m)| -> Result<(String, f64, u64)> {
+            let wall = m["wall_s"].as_f64().context("scipy.json: method wall_s")?;
+            let evals = m["rhs_evals"].as_u64().context("scipy.json: rhs_evals")?;
+            Ok((name.clone(), a.duration_s / wall, evals))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let max_re_numpy = list("max_re")?;
     if psi_scipy.len() != psi_rust.len() || max_re_numpy.len() != max_re_rust.len() {
         bail!("the SciPy result has a different number of samples");
@@ -229,8 +262,16 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     Ok(ReferenceResult {
         rust_sim_rate: a.duration_s / rust_sim_wall,
         scipy_sim_rate: a.duration_s / num("sim_wall_s")?,
-        rust_sweep_rate: sweep.len() as f64 / rust_sweep_wall,
-        numpy_sweep_rate: sweep.len() as f64 / num("sweep_wall_s")?,
+        scipy_methods,
+        scipy_fastest: json["fastest"]
+            .as_str()
+            .context("scipy.json: `fastest`")?
+            .to_string(),
+        rust_sweep_rate: sweep.len() as f64 / (rust_build_wall + rust_eig_wall),
+        rust_eig_rate: sweep.len() as f64 / rust_eig_wall,
+        numpy_sweep_rate: sweep.len() as f64
+            / (num("sweep_build_wall_s")? + num("sweep_eig_wall_s")?),
+        numpy_eig_rate: sweep.len() as f64 / num("sweep_eig_wall_s")?,
         max_traj_diff_rad: max_abs_diff(&psi_rust, &psi_scipy),
         max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
         max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
@@ -284,9 +325,6 @@ fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> 
         hole.t0_s, hole.duration_s, hole.peak_nm[0]
     );
     let _ = writeln!(s, "i_max_a = {i_max:e}\ngain_a_per_radps = {gain:e}");
-    // The simulator's Dopri5 runs at rtol 1e-7 (per-state absolute tolerances well below the
-    // 1e-3 rad scale of the run): the same relative accuracy for SciPy.
-    let _ = writeln!(s, "rtol = 1e-7\natol = 1e-10");
     let _ = writeln!(s, "[ramp.plant]");
     for q in Param::ALL {
         let _ = writeln!(s, "{} = {:e}", q.name(), case.plant.plant.get(q));
@@ -341,11 +379,16 @@ fn case_toml(
     let _ = write!(
         s,
         "\n[case]\nspeed_mps = {v_mps:e}\ncurrent_a = {:e}\ninitial_yaw_deg = {:e}\nduration_s = {:e}\n\
-         method = \"{}\"\nrtol = 1e-8\natol = 1e-12\nsample_times_s = [{}]\nsweep_speeds_mps = [{}]\n",
+         methods = [{}]\nrtol = {SIM_RTOL:e}\natol = [{}]\nsample_times_s = [{}]\nsweep_speeds_mps = [{}]\n",
         a.current_a,
         a.initial_yaw_deg,
         a.duration_s,
-        a.scipy_method,
+        a.scipy_methods
+            .iter()
+            .map(|m| format!("\"{m}\""))
+            .collect::<Vec<_>>()
+            .join(", "),
+        list(&default_atol(SIM_RTOL)),
         list(sample_times),
         list(sweep)
     );
@@ -369,7 +412,7 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
     let _ = writeln!(
         t,
         "  {:<34} {:>14.1} {:>14.2} {:>7.0}x",
-        "time domain [sim s / wall s]",
+        format!("time domain, {} [sim s / wall s]", r.scipy_fastest),
         r.rust_sim_rate,
         r.scipy_sim_rate,
         r.rust_sim_rate / r.scipy_sim_rate
@@ -377,10 +420,18 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
     let _ = writeln!(
         t,
         "  {:<34} {:>14.0} {:>14.0} {:>7.1}x",
-        "eigen sweep [points / wall s]",
+        "eigen sweep, A(V) + eig [points/s]",
         r.rust_sweep_rate,
         r.numpy_sweep_rate,
         r.rust_sweep_rate / r.numpy_sweep_rate
+    );
+    let _ = writeln!(
+        t,
+        "  {:<34} {:>14.0} {:>14.0} {:>7.1}x",
+        "eigen sweep, eig only [points/s]",
+        r.rust_eig_rate,
+        r.numpy_eig_rate,
+        r.rust_eig_rate / r.numpy_eig_rate
     );
     let _ = writeln!(
         t,
@@ -402,10 +453,26 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
         t,
         "    closed loop: Rust = the demo's ASMC run (sensors, core controller and mode meter at 1 kHz, road noise);\n    \
          SciPy = the same plant and drive (ramp, imbalance, pothole) with no controller: I = min(i_max, {} A s/rad |mean yaw rate|)\n    \
-         inside the RHS, solve_ivp in 3 pieces (before, over, after the pothole), no noise. Peak |psi_L|: {:.3} deg (ASMC) vs {:.3} deg (simple law).",
+         inside the RHS, solve_ivp ({}) in 3 pieces (before, over, after the pothole), no noise. Peak |psi_L|: {:.3} deg (ASMC) vs {:.3} deg (simple law).",
         a.cl_gain_a_per_radps,
+        r.scipy_fastest,
         r.cl_peak_psi_rad.0.to_degrees(),
         r.cl_peak_psi_rad.1.to_degrees()
+    );
+    let _ = writeln!(
+        t,
+        "    time domain: both at rtol {SIM_RTOL:e} with the same per-state atol; Rust in 1 ms periods (as in closed loop),\n    \
+         SciPy in one solve_ivp call; every SciPy method timed, the fastest is the peer [sim s / wall s, rhs calls]: {}",
+        r.scipy_methods
+            .iter()
+            .map(|(m, rate, n)| format!("{m} {rate:.2} ({n})"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        t,
+        "    eigen sweep: Rust = linearise + eigenvalues (balancing, Hessenberg QR) per speed, one thread;\n    \
+         NumPy = A(V) in a Python loop + one batched numpy.linalg.eigvals (LAPACK); 'eig only' times the eigenvalues alone."
     );
     let _ = writeln!(
         t,
