@@ -98,7 +98,7 @@ class Controller:
 
 
 def cosimulate(fmu_path, vehicle, speed_kmh, yaw0_deg, duration_s, fmu_vehicle="nominal"):
-    """Closed loop: reference plant of `vehicle` (a shimmy.Vehicle) at constant speed from an
+    """Closed loop: reference plant of `vehicle` (a shimmy_sim.Vehicle) at constant speed from an
     in-phase wheel-yaw kick, FMU controller with the parameter `vehicle = fmu_vehicle`.
     Returns per-sample arrays (t_s, psi_l_rad, current_cmd_a, ...) and the final FMU outputs."""
     ref = load_reference()

@@ -1,5 +1,5 @@
 """The FMU: valid FMI 3.0 (fmpy's validation), and in a co-simulation with the independent
-SciPy plant it reproduces the simulator's closed loop (shimmy.run_scenario_toml with the same
+SciPy plant it reproduces the simulator's closed loop (shimmy_sim.run_scenario_toml with the same
 noise-free sensors): the same coil commands and wheel yaw within the stated tolerances."""
 import os
 import pathlib
@@ -9,7 +9,7 @@ import pytest
 from fmpy.validation import validate_fmu
 
 import cosim
-import shimmy
+import shimmy_sim
 
 FMU = pathlib.Path(os.environ.get("SHIMMY_FMU", cosim.ROOT / "target" / "fmu" / "shimmy_fmu.fmu"))
 
@@ -42,7 +42,7 @@ def fmu_path():
 def differences(plant, fmu_vehicle, speed_kmh=55.0, yaw_deg=0.5, duration_s=3.0):
     """Largest wheel-yaw and command differences between the co-simulation and the simulator."""
     rows, last = cosim.cosimulate(fmu_path(), plant, speed_kmh, yaw_deg, duration_s, fmu_vehicle)
-    sim = shimmy.run_scenario_toml(
+    sim = shimmy_sim.run_scenario_toml(
         KICK.format(duration=duration_s, speed=speed_kmh, yaw=yaw_deg), sensor_noise=False)
     tr = sim["trace"]
     assert len(tr["t_s"]) == len(rows["t_s"])
@@ -57,7 +57,7 @@ def test_fmpy_finds_the_fmu_valid():
 
 
 def test_cosimulation_matches_the_simulators_closed_loop():
-    d_yaw, d_cmd, rows, sim, last = differences(shimmy.Vehicle(), "nominal")
+    d_yaw, d_cmd, rows, sim, last = differences(shimmy_sim.Vehicle(), "nominal")
     print(f"co-simulation vs simulator: max |d psi_L| = {d_yaw:.3e} rad, "
           f"max |d I_cmd| = {d_cmd:.3e} A")
     assert d_yaw <= YAW_TOL_RAD
@@ -78,7 +78,7 @@ def test_a_controller_for_another_vehicle_fails_the_comparison(tmp_path):
     (the nominal: 2 A) on the nominal plant does not match the nominal simulator run."""
     weak = tmp_path / "weak-coil.toml"
     weak.write_text('base = "nominal"\n[damper]\nrated_current_a = 1.0\n')
-    d_yaw, d_cmd, rows, *_ = differences(shimmy.Vehicle(), str(weak), duration_s=1.0)
+    d_yaw, d_cmd, rows, *_ = differences(shimmy_sim.Vehicle(), str(weak), duration_s=1.0)
     assert np.max(rows["current_cmd_a"]) <= 1.0
     assert d_yaw > YAW_TOL_RAD and d_cmd > CMD_TOL_A
 

@@ -6,23 +6,23 @@
 # %%
 import numpy as np
 
-import shimmy
+import shimmy_sim
 
-nominal = shimmy.Vehicle("nominal")            # or shimmy.Vehicle("truck.toml")
+nominal = shimmy_sim.Vehicle("nominal")            # or a car file: shimmy_sim.Vehicle("my-car.toml")
 worn = nominal.with_fields({"plant.c_a": 72000.0, "plant.sigma": 0.36})
 for name, v in [("nominal", nominal), ("worn tyres", worn)]:
-    window = shimmy.hopf_window(v)
+    window = shimmy_sim.hopf_window(v)
     print(f"{name:>10}: " + ", ".join(
         f"{c['kind']} {c['speed_kmh']:.2f} km/h ({c['freq_hz']:.2f} Hz)" for c in window))
 
 # %% The MR damper at 0.5 A as its equivalent viscous damper closes the window.
-print("with 0.5 A:", shimmy.hopf_window(nominal, damper_current_a=0.5) or "no crossing")
+print("with 0.5 A:", shimmy_sim.hopf_window(nominal, damper_current_a=0.5) or "no crossing")
 
 # %% Growth rate of the critical mode over speed x steering-column stiffness.
 speeds = np.arange(10.0, 151.0, 1.0)
 k_d = np.linspace(5000.0, 15000.0, 11)
 growth = np.array([
-    shimmy.eigen_sweep(nominal.with_fields({"plant.k_d": k}), speeds)["critical_re"]
+    shimmy_sim.eigen_sweep(nominal.with_fields({"plant.k_d": k}), speeds)["critical_re"]
     for k in k_d
 ])
 unstable = (growth > 0).sum(axis=1)
@@ -38,7 +38,7 @@ constant_kmh = 55.0
 [initial]
 yaw_deg = 0.5
 """
-runs = {kind: shimmy.run_scenario_toml(KICK.format(kind=kind)) for kind in ("no-damper", "asmc")}
+runs = {kind: shimmy_sim.run_scenario_toml(KICK.format(kind=kind)) for kind in ("no-damper", "asmc")}
 for kind, r in runs.items():
     m = r["metrics"]
     print(f"{kind:>9}: peak {np.degrees(m['peak_yaw_rad']):.3f} deg, "

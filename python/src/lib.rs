@@ -1,4 +1,4 @@
-//! `shimmy` for Python (PyO3): the simulator's library functions with NumPy arrays in and out.
+//! `shimmy_sim` for Python (PyO3; on PyPI `shimmy-sim`: `shimmy` is another project's name there): the simulator's library functions with NumPy arrays in and out.
 //!
 //! - `Vehicle`: load and validate a vehicle (a named set or a vehicle file, the same loader
 //!   as `shimmy-sim --vehicle`), read and set fields by `section.name` through the core's one
@@ -575,9 +575,10 @@ fn analyze<'py>(
     Ok(out)
 }
 
-/// The Python module `shimmy`.
-#[pymodule]
-fn shimmy(m: &Bound<'_, PyModule>) -> PyResult<()> {
+/// The Python module `shimmy_sim` (the Rust function has another name: `shimmy_sim` is the
+/// simulator crate's).
+#[pymodule(name = "shimmy_sim")]
+fn python_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Vehicle>()?;
     m.add_function(wrap_pyfunction!(field_table, m)?)?;

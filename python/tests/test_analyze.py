@@ -1,9 +1,9 @@
-"""shimmy.analyze: the simulator's `analyze` (mode meter, fusion, monitor on a measured log)
+"""shimmy_sim.analyze: the simulator's `analyze` (mode meter, fusion, monitor on a measured log)
 on logs written from simulator runs, with the column names, units and separator of the file."""
 import numpy as np
 import pytest
 
-import shimmy
+import shimmy_sim
 
 RUN = """duration_s = {duration}
 [controller]
@@ -18,7 +18,7 @@ trace_every = 1
 
 
 def trace(kind, yaw, duration):
-    return shimmy.run_scenario_toml(RUN.format(kind=kind, yaw=yaw, duration=duration))["trace"]
+    return shimmy_sim.run_scenario_toml(RUN.format(kind=kind, yaw=yaw, duration=duration))["trace"]
 
 
 def write_si(path, t):
@@ -36,10 +36,10 @@ def limit_cycle():
 def test_shimmy_without_a_damper_is_found(tmp_path, limit_cycle):
     log = tmp_path / "cycle.csv"
     write_si(log, limit_cycle)
-    a = shimmy.analyze(log)
+    a = shimmy_sim.analyze(log)
     assert a["summary"]["max_level"] == 3  # shimmy present
     assert len(a["events"]) == 1 and a["events"][0]["open"]
-    linear_hz = shimmy.eigen_sweep(shimmy.Vehicle(), [45.0])["shimmy_freq_hz"][0]
+    linear_hz = shimmy_sim.eigen_sweep(shimmy_sim.Vehicle(), [45.0])["shimmy_freq_hz"][0]
     # The limit cycle runs near the linear shimmy mode's frequency.
     assert a["events"][0]["freq_hz"] == pytest.approx(linear_hz, rel=0.1)
     assert len(a["rows"]["t_s"]) == pytest.approx(100 * 15.0, abs=2)  # 100 Hz
@@ -52,8 +52,8 @@ def test_units_columns_and_separator_do_not_change_the_result(tmp_path, limit_cy
     np.savetxt(other, np.c_[t["t_s"] * 1e3, np.degrees(t["psi_l_rad"]),
                             np.degrees(t["psi_r_rad"]), t["speed_mps"] * 3.6],
                delimiter=";", header="time_ms;L;R;v", comments="")
-    a = shimmy.analyze(si)
-    b = shimmy.analyze(other, delimiter=";", time_column="time_ms", time_unit="ms",
+    a = shimmy_sim.analyze(si)
+    b = shimmy_sim.analyze(other, delimiter=";", time_column="time_ms", time_unit="ms",
                        yaw_left="L", yaw_right="R", yaw_unit="deg", speed_column="v",
                        speed_unit="km/h")
     assert a["events"][0]["start_s"] == pytest.approx(b["events"][0]["start_s"], abs=1e-9)
@@ -65,13 +65,13 @@ def test_units_columns_and_separator_do_not_change_the_result(tmp_path, limit_cy
 def test_a_damped_kick_is_not_shimmy(tmp_path):
     log = tmp_path / "asmc.csv"
     write_si(log, trace("asmc", 0.5, 6.0))
-    assert shimmy.analyze(log)["summary"]["max_level"] < 3
+    assert shimmy_sim.analyze(log)["summary"]["max_level"] < 3
 
 
 def test_bad_logs_name_the_column(tmp_path, limit_cycle):
     log = tmp_path / "cycle.csv"
     write_si(log, limit_cycle)
     with pytest.raises(ValueError, match="wheel_yaw"):
-        shimmy.analyze(log, yaw_column="wheel_yaw")
+        shimmy_sim.analyze(log, yaw_column="wheel_yaw")
     with pytest.raises(ValueError, match="no-such.csv"):
-        shimmy.analyze(tmp_path / "no-such.csv")
+        shimmy_sim.analyze(tmp_path / "no-such.csv")

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-import shimmy
+import shimmy_sim
 
 KICK = """
 duration_s = {duration}
@@ -18,7 +18,7 @@ trace_every = 5
 
 
 def run(kind, duration=4.0):
-    return shimmy.run_scenario_toml(KICK.format(kind=kind, duration=duration), name=kind)
+    return shimmy_sim.run_scenario_toml(KICK.format(kind=kind, duration=duration), name=kind)
 
 
 def test_arrays_have_the_trace_shape():
@@ -56,14 +56,14 @@ def test_runs_are_deterministic():
 
 
 def test_scenario_files_run(root):
-    r = shimmy.run_scenario(root / "host-sim" / "scenarios" / "pothole.toml")
+    r = shimmy_sim.run_scenario(root / "host-sim" / "scenarios" / "pothole.toml")
     assert r["sim_s"] > 1.0 and r["metrics"]["settle_s"] is not None
 
 
 def test_bad_scenarios_name_the_field():
     with pytest.raises(ValueError, match=r"duration_s"):
-        shimmy.run_scenario_toml(KICK.format(kind="asmc", duration=-1.0))
+        shimmy_sim.run_scenario_toml(KICK.format(kind="asmc", duration=-1.0))
     with pytest.raises(ValueError, match=r"controller\.kind"):
-        shimmy.run_scenario_toml(KICK.format(kind="pid", duration=1.0))
+        shimmy_sim.run_scenario_toml(KICK.format(kind="pid", duration=1.0))
     with pytest.raises(ValueError, match=r"no-such\.toml"):
-        shimmy.run_scenario("no-such.toml")
+        shimmy_sim.run_scenario("no-such.toml")

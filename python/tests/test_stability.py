@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-import shimmy
+import shimmy_sim
 
 VEHICLES = [
     ("nominal", {}),
@@ -38,8 +38,8 @@ def reference_crossings(reference, plant, lo=5.0, hi=150.0, step=1.0):
 
 @pytest.mark.parametrize("base,changes", VEHICLES)
 def test_hopf_window_matches_scipy(reference, base, changes):
-    vehicle = shimmy.Vehicle(base).with_fields(changes)
-    ours = shimmy.hopf_window(vehicle)
+    vehicle = shimmy_sim.Vehicle(base).with_fields(changes)
+    ours = shimmy_sim.hopf_window(vehicle)
     theirs = reference_crossings(reference, vehicle.plant())
     assert len(theirs) >= 1, "every test vehicle has a Hopf window"
     assert [c["kind"] for c in ours] == [k for _, k, _ in theirs]
@@ -51,28 +51,28 @@ def test_hopf_window_matches_scipy(reference, base, changes):
 
 
 def test_no_window_on_both_sides(reference):
-    stiff = shimmy.Vehicle("gentle").with_fields({"plant.k_d": 14000.0})
-    assert shimmy.hopf_window(stiff) == []
+    stiff = shimmy_sim.Vehicle("gentle").with_fields({"plant.k_d": 14000.0})
+    assert shimmy_sim.hopf_window(stiff) == []
     assert reference_crossings(reference, stiff.plant()) == []
 
 
 def test_the_window_moves_with_the_vehicle():
-    nominal = shimmy.hopf_window(shimmy.Vehicle())
-    hard = shimmy.hopf_window(shimmy.Vehicle("hard"))
+    nominal = shimmy_sim.hopf_window(shimmy_sim.Vehicle())
+    hard = shimmy_sim.hopf_window(shimmy_sim.Vehicle("hard"))
     assert hard[0]["speed_kmh"] < nominal[0]["speed_kmh"] - 1.0
 
 
 def test_the_damper_closes_the_window():
-    v = shimmy.Vehicle()
-    assert shimmy.hopf_window(v)
-    assert shimmy.hopf_window(v, damper_current_a=0.5) == []
+    v = shimmy_sim.Vehicle()
+    assert shimmy_sim.hopf_window(v)
+    assert shimmy_sim.hopf_window(v, damper_current_a=0.5) == []
 
 
 @pytest.mark.parametrize("base,changes", VEHICLES)
 def test_eigen_sweep_matches_numpy(reference, base, changes):
-    vehicle = shimmy.Vehicle(base).with_fields(changes)
+    vehicle = shimmy_sim.Vehicle(base).with_fields(changes)
     speeds = np.linspace(5.0, 150.0, 30)
-    s = shimmy.eigen_sweep(vehicle, speeds)
+    s = shimmy_sim.eigen_sweep(vehicle, speeds)
     assert set(s) >= {"speed_kmh", "max_re", "critical_re", "critical_freq_hz", "shimmy_zeta"}
     np.testing.assert_array_equal(s["speed_kmh"], speeds)
     ref = np.array([reference_growth(reference, vehicle.plant(), v) for v in speeds])
@@ -84,15 +84,15 @@ def test_eigen_sweep_matches_numpy(reference, base, changes):
 
 
 def test_bad_ranges_are_named():
-    v = shimmy.Vehicle()
+    v = shimmy_sim.Vehicle()
     with pytest.raises(ValueError, match=r"step_kmh.*0\.01 <= value <= 50"):
-        shimmy.hopf_window(v, step_kmh=0.0)
+        shimmy_sim.hopf_window(v, step_kmh=0.0)
     with pytest.raises(ValueError, match=r"v_min_kmh 100 must be below v_max_kmh 50"):
-        shimmy.hopf_window(v, v_min_kmh=100.0, v_max_kmh=50.0)
+        shimmy_sim.hopf_window(v, v_min_kmh=100.0, v_max_kmh=50.0)
     with pytest.raises(ValueError, match=r"speeds_kmh.*1 <= value <= 250"):
-        shimmy.eigen_sweep(v, [30.0, 400.0])
+        shimmy_sim.eigen_sweep(v, [30.0, 400.0])
     with pytest.raises(ValueError, match=r"damper_current_a"):
-        shimmy.eigen_sweep(v, [30.0], damper_current_a=9.0)
+        shimmy_sim.eigen_sweep(v, [30.0], damper_current_a=9.0)
 
 
 def test_parallel_threads_give_the_serial_answer():
@@ -104,7 +104,7 @@ def test_parallel_threads_give_the_serial_answer():
     k_d = [6000.0, 8000.0, 10000.0, 12000.0]
 
     def row(k):
-        return shimmy.eigen_sweep(shimmy.Vehicle().with_fields({"plant.k_d": k}), speeds)["max_re"]
+        return shimmy_sim.eigen_sweep(shimmy_sim.Vehicle().with_fields({"plant.k_d": k}), speeds)["max_re"]
 
     serial = [row(k) for k in k_d]
     with ThreadPoolExecutor(4) as pool:

@@ -1,11 +1,11 @@
 """Vehicles: the same loader and validation as `shimmy-sim --vehicle`."""
 import pytest
 
-import shimmy
+import shimmy_sim
 
 
 def test_named_sets_differ_and_match_their_fields():
-    nominal, hard = shimmy.Vehicle("nominal"), shimmy.Vehicle("hard")
+    nominal, hard = shimmy_sim.Vehicle("nominal"), shimmy_sim.Vehicle("hard")
     assert nominal != hard
     # `hard` is the nominal car with half the steering-column stiffness (docs/plant-model.md).
     assert hard.get("plant.k_d") == pytest.approx(0.5 * nominal.get("plant.k_d"))
@@ -16,17 +16,17 @@ def test_file_text_and_set_agree(tmp_path):
     text = 'base = "gentle"\n[plant]\nk_d = 5000\n[damper]\nrated_current_a = 2.5\n'
     path = tmp_path / "car.toml"
     path.write_text(text)
-    from_file, from_text = shimmy.Vehicle(str(path)), shimmy.Vehicle.from_toml(text)
+    from_file, from_text = shimmy_sim.Vehicle(str(path)), shimmy_sim.Vehicle.from_toml(text)
     assert from_file == from_text
-    by_hand = shimmy.Vehicle("gentle").with_fields(
+    by_hand = shimmy_sim.Vehicle("gentle").with_fields(
         {"plant.k_d": 5000.0, "damper.rated_current_a": 2.5})
     assert by_hand == from_file
     assert from_file.rated_current_a == 2.5
 
 
 def test_fields_cover_the_field_table():
-    table = shimmy.field_table()
-    fields = shimmy.Vehicle().fields()
+    table = shimmy_sim.field_table()
+    fields = shimmy_sim.Vehicle().fields()
     assert len(table) == len(fields) > 50
     for f in table:
         value = fields[f"{f['section']}.{f['name']}"]
@@ -34,7 +34,7 @@ def test_fields_cover_the_field_table():
 
 
 def test_bad_values_name_the_field_and_range():
-    v = shimmy.Vehicle()
+    v = shimmy_sim.Vehicle()
     before = v.fields()
     with pytest.raises(ValueError, match=r"plant\.k_d.*10 <= value <= 100000000"):
         v.set("plant.k_d", -1.0)
@@ -44,6 +44,6 @@ def test_bad_values_name_the_field_and_range():
     with pytest.raises(ValueError, match=r"section\.name"):
         v.get("k_d")
     with pytest.raises(ValueError, match=r"no such file.*not a named set"):
-        shimmy.Vehicle("no-such-vehicle.toml")
+        shimmy_sim.Vehicle("no-such-vehicle.toml")
     with pytest.raises(ValueError, match=r"overrides\.sigma"):
-        shimmy.Vehicle.from_toml("[overrides]\nsigma = -0.6\n")
+        shimmy_sim.Vehicle.from_toml("[overrides]\nsigma = -0.6\n")

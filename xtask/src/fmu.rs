@@ -1,7 +1,7 @@
 //! The FMU: `fmu/` (crate `shimmy-fmu`, fmi-export) from the host build (dev profile), packed
 //! into `target/fmu/shimmy_fmu.fmu` by its `shimmy-fmu-bundle` binary, then validated and
 //! co-simulated with fmpy against the SciPy reference plant (`fmu/tests/`, pytest; the
-//! simulator's side of the comparison through the `shimmy` module of the host build).
+//! simulator's side of the comparison through the `shimmy_sim` module of the host build).
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! `cargo xtask python` (a step of `cargo xtask test`): a virtual environment in
 //! `target/py-venv` (it sees the system's numpy/scipy; what is missing is installed into it with
-//! pip, never into the system) and the pytest suite, run on the `shimmy` module that the host
-//! build made (`target/debug/libshimmy.so`, staged as `target/py-module/shimmy.so` and put
+//! pip, never into the system) and the pytest suite, run on the `shimmy_sim` module that the host
+//! build made (`target/debug/libshimmy_py.so`, staged as `target/py-module/shimmy_sim.so` and put
 //! first on `PYTHONPATH`). `--wheel` runs it on the wheel that `pip install ./python` builds
 //! instead (maturin), which compiles the simulator's dependencies a second time: maturin builds
 //! `python/` alone, with that package's feature resolution.
@@ -49,46 +49,46 @@ pub fn ensure_packages(python: &Path, packages: &[(&str, &str)]) -> Result<(), S
         .args(&missing))
 }
 
-/// What the Python tests import besides `shimmy` (pip name, import name).
+/// What the Python tests import besides `shimmy_sim` (pip name, import name).
 const TEST_PACKAGES: &[(&str, &str)] =
     &[("pytest", "pytest"), ("numpy", "numpy"), ("scipy", "scipy")];
 
-/// The `shimmy` extension module of [`crate::host_build`], copied under the name Python imports
-/// (`shimmy.so`) into a directory of its own; returns that directory, for `PYTHONPATH`.
+/// The `shimmy_sim` extension module of [`crate::host_build`], copied under the name Python imports
+/// (`shimmy_sim.so`) into a directory of its own; returns that directory, for `PYTHONPATH`.
 pub fn module_dir() -> Result<PathBuf, String> {
     let built = crate::host_build()?.join(format!(
-        "{}shimmy{}",
+        "{}shimmy_py{}",
         std::env::consts::DLL_PREFIX,
         std::env::consts::DLL_SUFFIX
     ));
     let dir = root().join("target").join("py-module");
     std::fs::create_dir_all(&dir).map_err(|e| format!("create {}: {e}", dir.display()))?;
     let module = dir.join(if cfg!(windows) {
-        "shimmy.pyd"
+        "shimmy_sim.pyd"
     } else {
-        "shimmy.so"
+        "shimmy_sim.so"
     });
     std::fs::copy(&built, &module).map_err(|e| format!("copy {}: {e}", built.display()))?;
     Ok(dir)
 }
 
-/// `python` imports `shimmy` from `dir` (not from a wheel installed in the venv by `--wheel`).
+/// `python` imports `shimmy_sim` from `dir` (not from a wheel installed in the venv by `--wheel`).
 pub fn check_module_origin(python: &Path, dir: &Path) -> Result<(), String> {
     let out = Command::new(python)
-        .args(["-c", "import shimmy; print(shimmy.__file__)"])
+        .args(["-c", "import shimmy_sim; print(shimmy_sim.__file__)"])
         .env("PYTHONPATH", dir)
         .output()
         .map_err(|e| format!("cannot run {}: {e}", python.display()))?;
     let file = String::from_utf8_lossy(&out.stdout).trim().to_string();
     if !out.status.success() {
         return Err(format!(
-            "import shimmy failed: {}",
+            "import shimmy_sim failed: {}",
             String::from_utf8_lossy(&out.stderr).trim()
         ));
     }
     if Path::new(&file).parent() != Some(dir) {
         return Err(format!(
-            "import shimmy found {file}, not the module in {}",
+            "import shimmy_sim found {file}, not the module in {}",
             dir.display()
         ));
     }
@@ -104,7 +104,7 @@ pub fn module_tests() -> Step {
     pytest_with(&python, "python/tests", &[("PYTHONPATH", dir.as_os_str())])
 }
 
-/// Builds the `shimmy` wheel as `pip install ./python` does (maturin), installs it into the
+/// Builds the `shimmy-sim` wheel as `pip install ./python` does (maturin), installs it into the
 /// venv and runs `python/tests` with pytest on it.
 pub fn wheel_tests() -> Step {
     let python = venv_python()?;

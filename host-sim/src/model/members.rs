@@ -391,13 +391,14 @@ mod tests {
     }
 
     /// The core's compiled-in factor (the truck image's default vehicle) is the sizing
-    /// computed here, to the last bits.
+    /// computed here, within the describing function's accuracy (1e-6 against a ten times finer
+    /// grid, `damper_equiv`): a closer check would tie the firmware to the integration grid.
     #[test]
     fn the_cores_truck_damper_scale_is_the_computed_one() {
         use shimmy_core::vehicles::truck::board::TRUCK_DAMPER_SCALE;
         let computed = truck_damper_scale().unwrap();
         assert!(
-            (TRUCK_DAMPER_SCALE / computed - 1.0).abs() < 1e-12,
+            (TRUCK_DAMPER_SCALE / computed - 1.0).abs() < 1e-6,
             "core {TRUCK_DAMPER_SCALE:?}, computed {computed:?}: update TRUCK_DAMPER_SCALE"
         );
     }
