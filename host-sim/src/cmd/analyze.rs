@@ -138,7 +138,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     }
 
     let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     analysis::write_rows_csv(&out.join("analysis.csv"), &result)?;
     analysis::write_events_csv(&out.join("events.csv"), &result)?;
     let source = a.log.display().to_string();
