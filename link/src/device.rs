@@ -535,4 +535,106 @@ mod tests {
             Some(Response::Ready(_))
         ));
     }
+
+    /// Deterministic pseudo-random numbers (xorshift64*), so a failure replays.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        }
+        fn below(&mut self, n: usize) -> usize {
+            (self.next() % n as u64) as usize
+        }
+    }
+
+    /// Bytes serialised as they are (postcard writes a tuple's elements without a length):
+    /// a random message behind a valid header and CRC, which random bytes alone almost never
+    /// reach.
+    struct Raw<'a>(&'a [u8]);
+    impl serde::Serialize for Raw<'_> {
+        fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+            use serde::ser::SerializeTuple;
+            let mut t = s.serialize_tuple(self.0.len())?;
+            for b in self.0 {
+                t.serialize_element(b)?;
+            }
+            t.end()
+        }
+    }
+
+    /// Random bytes, and random messages in valid frames of this and other versions, into the
+    /// host's decoder and the device's handler: no panic; the decoder reads only replies of
+    /// this version; the handler answers every frame with a reply of this version that the
+    /// host reads, and changes the backend only for a request it acknowledged.
+    #[test]
+    fn random_frames_get_clean_errors_from_the_host_decoder_and_the_handler() {
+        use crate::frame::{FrameReader, MAX_PAYLOAD};
+        use crate::host::decode_reply;
+        let mut rng = Rng(0x5eed_1234_abcd_0001);
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let mut out = [0u8; REPLY_BYTES];
+        let (mut frames, mut replies, mut read_ok) = (0, 0, 0);
+        for case in 0..20_000 {
+            let len = rng.below(MAX_PAYLOAD + 64);
+            let mut body: Vec<u8> = (0..len).map(|_| rng.next() as u8).collect();
+            // Mostly a known message kind first (the enums' first byte), so the fields behind
+            // it are read too.
+            if let Some(kind) = body.first_mut().filter(|_| case % 4 == 1) {
+                *kind = rng.below(12) as u8;
+            }
+            let stream = if case % 2 == 0 {
+                let mut s = body;
+                s.push(0);
+                s
+            } else {
+                let version = match rng.below(4) {
+                    0 => rng.next() as u16,
+                    _ => PROTOCOL_VERSION,
+                };
+                let h = Header {
+                    version,
+                    seq: rng.next() as u16,
+                };
+                let mut f = [0u8; MAX_FRAME + 1];
+                let n = encode(h, &Raw(&body[..len.min(MAX_PAYLOAD - 8)]), &mut f)
+                    .expect("fits a frame");
+                f[..n].to_vec()
+            };
+            let mut reader = FrameReader::new();
+            for &x in &stream {
+                if let crate::frame::Fed::Frame(f) = reader.feed(x) {
+                    frames += 1;
+                    let (h, r) = decode_reply(f);
+                    if r.is_ok() {
+                        read_ok += 1;
+                        assert_eq!(h.version, PROTOCOL_VERSION, "case {case}");
+                    }
+                }
+            }
+            let before = (b.vehicle, b.log.len());
+            let mut acknowledged = false;
+            for &x in &stream {
+                if let Some(n) = dev.on_byte(x, &mut b, &mut out) {
+                    replies += 1;
+                    assert!(n > 0 && out[n - 1] == 0, "case {case}: a reply frame");
+                    let (h, r) = decode_reply(&mut out[..n - 1]);
+                    assert_eq!(h.version, PROTOCOL_VERSION, "case {case}");
+                    let r = r.unwrap_or_else(|e| panic!("case {case}: unreadable reply: {e}"));
+                    acknowledged |=
+                        matches!(r, Response::ConfigStored { .. } | Response::Cleared { .. });
+                }
+            }
+            if !acknowledged {
+                assert_eq!((b.vehicle, b.log.len()), before, "case {case}");
+            }
+        }
+        // The cases reached every stage: frames, replies, and messages past the CRC.
+        assert!(
+            frames > 20_000 && replies > 20_000 && read_ok > 300,
+            "{frames} {replies} {read_ok}"
+        );
+    }
 }

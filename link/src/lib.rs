@@ -12,6 +12,8 @@
 //! - [`device`]: the device side as a transport-independent handler (request bytes in, response
 //!   bytes out) over a [`device::Backend`] (configuration, event log, fault record, identity,
 //!   telemetry). Anything it does not understand gets an error reply, never a hang or a panic.
+//! - [`host`]: the host side's reading of a device frame ([`host::decode_reply`]): a reply of
+//!   another protocol version is refused, never read as this version's.
 #![no_std]
 
 #[cfg(test)]
@@ -19,6 +21,7 @@ extern crate std;
 
 pub mod device;
 pub mod frame;
+pub mod host;
 pub mod log;
 pub mod wire;
 

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 /// The fuzz targets (binaries of `fuzz/Cargo.toml`).
-pub const TARGETS: &[&str] = &["safe_step", "store_ops"];
+pub const TARGETS: &[&str] = &["safe_step", "store_ops", "link_frames"];
 
 /// Default length of the run in `cargo xtask test`, s: about as long as the QEMU steps it
 /// runs alongside (at 60 s a cold CI run waited ~46 s for it at the end).

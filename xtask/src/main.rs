@@ -316,7 +316,7 @@ fn test() -> Result<(), String> {
                 ))
             },
         ),
-        ("fuzz safe_step: build, then 30 s in the background", || {
+        ("fuzz targets: build, then 30 s in the background", || {
             let run = fuzz::start_in_background()?;
             *FUZZ_RUN.lock().map_err(|_| "fuzz handle lock poisoned")? = Some(run);
             Ok(format!(
@@ -418,7 +418,7 @@ fn test() -> Result<(), String> {
     results.extend(run_steps(joint_steps));
     let fuzz_run = FUZZ_RUN.lock().ok().and_then(|mut h| h.take());
     if let Some(run) = fuzz_run {
-        let name = "fuzz safe_step run (time waited for it here)";
+        let name = "fuzz run (time waited for it here)";
         println!("\n==> {name}");
         let start = Instant::now();
         let outcome = run

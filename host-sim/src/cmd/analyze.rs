@@ -14,7 +14,7 @@ use crate::sim::analyze::{analyze_with_progress, level_name, AnalyzeOptions, MAX
 use crate::sim::arg_range::{self, Range};
 use crate::sim::log_file::{self, MappingChanges};
 use crate::sim::vehicle_file;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
@@ -138,7 +138,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     }
 
     let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     analysis::write_rows_csv(&out.join("analysis.csv"), &result)?;
     analysis::write_events_csv(&out.join("events.csv"), &result)?;
     let source = a.log.display().to_string();
@@ -190,5 +190,17 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         "  wrote {} (and report.md, summary.json, analysis.csv, events.csv, analysis.png)",
         pages.html.display()
     );
+    // Without one valid estimate "no warning" says nothing about the vehicle: a failure, so a
+    // script that checks the exit code does not take an unusable log for a normal one.
+    if s.valid_fraction == 0.0 {
+        bail!(
+            "{source}: no damping estimate in {:.1} s of log: the mode meter found no stretch it \
+             could estimate (it needs the vehicle moving, above walking pace, with the shimmy \
+             mode excited); check the mapping (yaw and speed columns, units, gain); the report \
+             in {} shows what it saw",
+            s.duration_s,
+            out.display()
+        );
+    }
     Ok(())
 }

@@ -146,7 +146,7 @@ pub fn sweep<M: SimModel<N>, const N: usize>(
 
 /// The `bifurcation` command: sweep, table, CSV, PNG.
 pub fn run<M: SimModel<N>, const N: usize>(o: &BifurcationOptions<M, N>) -> Result<()> {
-    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&o.out)?;
     let t0 = std::time::Instant::now();
     let rows = sweep(o, true)?;
     let wall = t0.elapsed().as_secs_f64();
@@ -214,7 +214,7 @@ pub fn window(
 }
 
 fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut w = Vec::new();
     writeln!(
         w,
         "v_kmh,small_start_deg,small_amp_deg,small_prev_amp_deg,small_trend,large_start_deg,large_amp_deg,large_prev_amp_deg,large_trend,eig_re_shimmy_per_s"
@@ -235,7 +235,7 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
             r.eig_re_per_s
         )?;
     }
-    w.flush()?;
+    crate::sim::files::write_file(path, &w)?;
     Ok(())
 }
 
@@ -246,7 +246,8 @@ fn plot<M: SimModel<N>, const N: usize>(
     damper: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let root = BitMapBackend::new(path, (1000, 620)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let y_max = rows
         .iter()
@@ -304,7 +305,7 @@ fn plot<M: SimModel<N>, const N: usize>(
         .border_style(BLACK)
         .position(SeriesLabelPosition::UpperRight)
         .draw()?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 
@@ -448,7 +449,7 @@ pub fn dual_axle(
     a: &BifurcationArgs,
 ) -> Result<()> {
     use crate::sim::dual_axle_study::{self as study, CycleRuns};
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let runs = CycleRuns {
         small_deg: a.small_deg,
         large_deg: a.large_deg,
@@ -532,7 +533,7 @@ pub fn dual_axle(
         );
     }
     let csv = a.out.join("bifurcation.csv");
-    let mut w = std::io::BufWriter::new(std::fs::File::create(&csv)?);
+    let mut w = Vec::new();
     writeln!(
         w,
         "v_kmh,free_small_amp_deg,free_small_shimmy,fric_small_amp_deg,fric_small_shimmy,fric_large_amp_deg,fric_large_shimmy,eig_re_per_s,small_start_deg,large_start_deg,m_f_nm,eps_radps"
@@ -555,7 +556,7 @@ pub fn dual_axle(
             a.friction_eps_radps
         )?;
     }
-    w.flush()?;
+    crate::sim::files::write_file(&csv, &w)?;
     let png = a.out.join("bifurcation.png");
     plot_dual(&png, &rows, a, lin, on_large)?;
     println!("wrote {} and {}", csv.display(), png.display());
@@ -567,7 +568,7 @@ pub fn dual_axle(
             a.large_deg, a.large_deg
         );
         let path = a.out.join("directions.csv");
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&path)?);
+        let mut f = Vec::new();
         writeln!(
             f,
             "param,what,factor,linear_onset_kmh,friction_onset_kmh,amp_ref_deg,ref_kmh,agrees_linear_onset,agrees_friction_onset,agrees_amplitude"
@@ -600,7 +601,7 @@ pub fn dual_axle(
                 agrees.map_or(String::new(), |g| g.amplitude.to_string())
             )?;
         }
-        f.flush()?;
+        crate::sim::files::write_file(&path, &f)?;
         println!("wrote {}", path.display());
     }
     let simulated = 3.0 * rows.len() as f64 * a.duration_s;
@@ -620,7 +621,8 @@ fn plot_dual(
     friction_onset_kmh: Option<f64>,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let root = BitMapBackend::new(path, (1000, 620)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let y_max = rows
         .iter()
@@ -705,7 +707,7 @@ fn plot_dual(
         .border_style(BLACK)
         .position(SeriesLabelPosition::UpperLeft)
         .draw()?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 

@@ -488,7 +488,7 @@ pub fn margin_verdict<M: SimModel<N>, const N: usize>(
 
 /// Writes the per-run summary CSV.
 pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut w = Vec::new();
     writeln!(
         w,
         "scenario,controller,{},sim_per_wall",
@@ -504,7 +504,7 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             r.speedup
         )?;
     }
-    w.flush()?;
+    crate::sim::files::write_file(path, &w)?;
     Ok(())
 }
 
@@ -585,7 +585,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
             keep
         })
         .collect();
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let mut specs = standard_scenarios_on::<M, N>(&vehicle, a.quick)?;
     for s in &mut specs {
         s.model_vehicle = Some(model);
@@ -685,7 +685,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     write_csv(&a.out.join("compare.csv"), &rows)?;
     let md = format!("{tab}\n```\n{ver}```\n\n{mtab}\n```\n{mver}```\n");
     crate::out::html::check_tables(&md).context("compare.md")?;
-    std::fs::write(a.out.join("compare.md"), md)?;
+    crate::sim::files::write_file(&a.out.join("compare.md"), md)?;
     for spec in &specs {
         let runs: Vec<(&str, &LoopResult)> = rows
             .iter()

@@ -123,7 +123,8 @@ fn plot_meter(
     window_kmh: Option<(f64, f64)>,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let root = BitMapBackend::new(path, (1100, 700)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1100, 700)).into_drawing_area();
     root.fill(&WHITE)?;
     let (a, b) = root.split_vertically(350);
     let colors = [RGBColor(220, 50, 32), RGBColor(0, 158, 115)];
@@ -165,14 +166,14 @@ fn plot_meter(
             plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
     }
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 
 /// Runs the demo and writes `report.md` with its plots into `o.out` (through
 /// [`report::write`], the same writer as `shimmy-sim report`).
 pub fn run_demo<M: ScenarioModel<N>, const N: usize>(o: &DemoOptions<M, N>) -> Result<DemoOutput> {
-    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let out_dir = crate::sim::files::OutDir::claim(&o.out)?;
     let (plant_name, plant) = &o.plant;
     let model = o.model.as_ref().map_or(plant, |(_, m)| m);
     let mut case = demo_case_on::<M, N>(plant, model, o.ramp_s)?;
@@ -257,7 +258,7 @@ pub fn run_demo<M: ScenarioModel<N>, const N: usize>(o: &DemoOptions<M, N>) -> R
         }],
         provenance: Some(provenance),
     };
-    let w = report::write(&o.out, &report)?;
+    let w = report::write(&out_dir, &report)?;
     Ok(DemoOutput {
         report: w.report,
         plots: w.plots,

@@ -8,7 +8,7 @@ use crate::sim::device_link::{
 };
 use crate::sim::sim_device::SimDevice;
 use crate::sim::vehicle_file::{self, ModelVehicle};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
 use shimmy_core::vehicle::{
@@ -138,7 +138,7 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
             let text = record_toml(&rec)?;
             match out {
                 Some(p) => {
-                    std::fs::write(p, &text).with_context(|| format!("writing {}", p.display()))?;
+                    crate::sim::files::write_file(p, &text)?;
                     eprintln!(
                         "vehicle written to {}{}",
                         p.display(),
@@ -183,8 +183,7 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
             match csv.as_deref() {
                 Some(p) if p.as_os_str() == "-" => print!("{}", events_csv(&log)),
                 Some(p) => {
-                    std::fs::write(p, events_csv(&log))
-                        .with_context(|| format!("writing {}", p.display()))?;
+                    crate::sim::files::write_file(p, events_csv(&log))?;
                     print!("{}", events_table(&log));
                     eprintln!("CSV written to {}", p.display());
                 }

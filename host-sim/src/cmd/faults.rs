@@ -886,9 +886,9 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         wall.elapsed().as_secs_f64()
     );
     println!("{md}");
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    std::fs::write(a.out.join("faults.csv"), csv(&rows))?;
-    std::fs::write(a.out.join("faults.md"), &md)?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    crate::sim::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
+    crate::sim::files::write_file(&a.out.join("faults.md"), &md)?;
     let bad = check(&rows);
     if bad.is_empty() {
         println!("every injected fault detected (where expected); shimmy suppressed in every ASMC run with a working actuator; coil faults at 0 A fail-safe; every mode settled; every steady command carried by the coil");

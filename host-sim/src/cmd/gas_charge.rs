@@ -1,7 +1,6 @@
 //! `shimmy-sim gas-charge`: the mining truck's struts (`docs/mining-truck.md`): which initial
 //! gas volumes keep the truck free of shimmy at a load and speed (Gao et al.'s question), and
 //! the Hopf-window maps over speed x gas volume and speed x payload (PNG + CSV).
-use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -102,7 +101,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             );
         }
     }
-    fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("gas-charge.csv");
     write_charge_csv(&csv, &ans)?;
 
@@ -187,7 +186,7 @@ fn describe(w: &WindowPoint) -> String {
 }
 
 fn write_charge_csv(path: &Path, ans: &truck_study::ChargeAnswer) -> Result<()> {
-    let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "v0_l,feasible,growth_1ps,freq_hz,stroke_mm,k_strut_npm,speed_kmh"
@@ -205,7 +204,7 @@ fn write_charge_csv(path: &Path, ans: &truck_study::ChargeAnswer) -> Result<()> 
             ans.speed_kmh
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 /// Growth rate over speed x one truck parameter, and the first window per row.
@@ -248,8 +247,7 @@ impl Map {
     }
 
     fn write_csv(&self, path: &Path, y_name: &str, y_scale: f64) -> Result<()> {
-        let mut f =
-            fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut f = Vec::new();
         writeln!(f, "{y_name},speed_kmh,growth_1ps,onset_kmh,offset_kmh")?;
         for ((y, row), w) in self.ys.iter().zip(&self.growth).zip(&self.windows) {
             let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
@@ -263,12 +261,13 @@ impl Map {
                 )?;
             }
         }
-        Ok(())
+        crate::sim::files::write_file(path, &f)
     }
 }
 
 fn plot(path: &Path, by_gas: &Map, by_load: &Map, name: &str, v0_l: f64) -> Result<()> {
-    let root = BitMapBackend::new(path, (1000, 900)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(450);
     panel(
@@ -285,7 +284,7 @@ fn plot(path: &Path, by_gas: &Map, by_load: &Map, name: &str, v0_l: f64) -> Resu
         "payload [t]",
         1e-3,
     )?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 

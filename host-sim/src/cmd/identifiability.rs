@@ -219,8 +219,8 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
         a.from_fraction * 100.0
     );
     print!("{md}");
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    std::fs::write(a.out.join("identifiability.md"), md.trim_start())?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    crate::sim::files::write_file(&a.out.join("identifiability.md"), md.trim_start())?;
     let mut csv = String::from("sigma_zeta,speed_kmh,field,sigma_ln,onset_sigma_kmh\n");
     for r in &rows {
         for (u, s) in M::UPDATE_PARAMS.iter().zip(&r.sigma_ln) {
@@ -231,7 +231,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
             );
         }
     }
-    std::fs::write(a.out.join("identifiability.csv"), csv)?;
+    crate::sim::files::write_file(&a.out.join("identifiability.csv"), csv)?;
     Ok(())
 }
 

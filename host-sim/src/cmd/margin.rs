@@ -117,7 +117,7 @@ pub fn summary_json<M: SimModel<N>, const N: usize>(
 
 /// Writes the rows as CSV.
 pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut f = Vec::new();
     writeln!(
         f,
         "t_s,speed_kmh,zeta_true,freq_true_hz,margin_true_kmh,zeta_model,zeta_data,sigma_zeta_data,\
@@ -150,7 +150,7 @@ pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
             r.zeta_correction
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
@@ -200,7 +200,8 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
         return Ok(());
     };
     let t = (a.t_s, b.t_s);
-    let root = BitMapBackend::new(path, (1200, 1000)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1200, 1000)).into_drawing_area();
     root.fill(&WHITE)?;
     let parts = root.split_evenly((3, 1));
     let col = |f: &dyn Fn(&MarginRow) -> f64| rows.iter().map(|r| (r.t_s, f(r))).collect();
@@ -251,7 +252,7 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
         ],
         &v,
     )?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 
@@ -342,7 +343,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
         pipeline.update = shimmy_core::estimator::model_update::ModelUpdateConfig::ON;
     }
     let provenance = provenance.seed("road noise", sc.seed);
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let bar = progress::bar(0, "1 ms steps");
     let run = run_with_progress(&sc, pipeline, 10, &mut |done, total| {
         bar.set_length(total as u64);
@@ -422,8 +423,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
     let json = a.out.join("summary.json");
     let mut summary = summary_json(&sc, &run);
     summary["provenance"] = provenance.json();
-    std::fs::write(&json, serde_json::to_string_pretty(&summary)? + "\n")
-        .with_context(|| format!("writing {}", json.display()))?;
+    crate::sim::files::write_file(&json, serde_json::to_string_pretty(&summary)? + "\n")?;
     println!(
         "wrote {}, {} and {}",
         csv.display(),

@@ -425,9 +425,9 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
-    std::fs::write(a.out.join("meter_accuracy.md"), &md)?;
-    let mut f = std::fs::File::create(a.out.join("meter_accuracy.csv"))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    crate::sim::files::write_file(&a.out.join("meter_accuracy.md"), &md)?;
+    let mut f = Vec::new();
     writeln!(f, "current_a,speed_kmh,zeta_true,freq_true_hz,freq_est_hz,b,bias_b,spread_b,sigma_b,coverage_pct,n,valid_pct,passes")?;
     for r in &rows {
         writeln!(
@@ -448,6 +448,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             r.passes()
         )?;
     }
+    crate::sim::files::write_file(&a.out.join("meter_accuracy.csv"), &f)?;
     let missed = rows.iter().filter(|r| !r.passes()).count();
     if missed > 0 {
         bail!(

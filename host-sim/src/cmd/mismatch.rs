@@ -793,16 +793,16 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {:?}", a.out))?;
-    std::fs::write(
-        a.out.join("mismatch.md"),
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    crate::sim::files::write_file(
+        &a.out.join("mismatch.md"),
         format!("{}\n\n{}", md.trim_end(), provenance.markdown()),
     )?;
-    std::fs::write(
-        a.out.join("summary.json"),
+    crate::sim::files::write_file(
+        &a.out.join("summary.json"),
         serde_json::to_string_pretty(&summary_json(&rows, &provenance))? + "\n",
     )?;
-    let mut f = std::fs::File::create(a.out.join("mismatch.csv"))?;
+    let mut f = Vec::new();
     writeln!(f, "case,plant_onset_kmh,model_onset_kmh,rate_kmh_per_s,lead_kmh,lead_s,first_inconsistent_kmh,data_only_lead_kmh,data_only_lead_s,drive_kmh,false_warnings_per_h,data_only_false_warnings_per_h,drive_margin_true_kmh,warning_due,drive_warned_fraction,data_only_drive_warned_fraction,passes,seed,limit_lead_kmh")?;
     let o = |v: Option<f64>| v.map_or(String::new(), |x| format!("{x:.3}"));
     for r in &rows {
@@ -832,6 +832,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             )?;
         }
     }
+    crate::sim::files::write_file(&a.out.join("mismatch.csv"), &f)?;
     let mut missed: Vec<String> = rows
         .iter()
         .filter(|r| !r.passes())

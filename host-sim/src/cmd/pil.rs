@@ -84,7 +84,7 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
         .clone()
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     let elf = a.elf.clone().unwrap_or_else(|| PathBuf::from(M::ELF));
     if !elf.exists() {
         bail!(
@@ -156,11 +156,10 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
     println!("\ninstructions per task (QEMU -icount shift=0, closed-loop data):\n{table}");
     println!("histogram of the control step:\n{hist}");
     let report = out.join("instructions.md");
-    std::fs::write(
+    crate::sim::files::write_file(
         &report,
         format!("# Instructions per task: {}\n\n{table}\n{hist}", spec.name),
-    )
-    .with_context(|| format!("writing {}", report.display()))?;
+    )?;
     println!(
         "  wrote {}, {}, {}, {}",
         trace.display(),

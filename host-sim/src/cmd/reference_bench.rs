@@ -18,6 +18,7 @@
 
 use crate::model::plant::{default_atol, idx, Inputs, Method, Plant, Simulator, N_STATE};
 use crate::sim::arg_range::{self, Range};
+use crate::sim::files;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -135,7 +136,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
 
     let sample_every = 10; // every 10 ms
     let n_periods = (a.duration_s * 1000.0).round() as usize;
@@ -208,7 +209,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     let case = a.out.join("case.toml");
     let mut text = case_toml(&params, &damper, a, v_mps, &sample_times, &sweep);
     text.push_str(&ramp_toml(&demo_case, ramp_s, a.cl_gain_a_per_radps)?);
-    std::fs::write(&case, text)?;
+    crate::sim::files::write_file(&case, text)?;
     let result = a.out.join("scipy.json");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference/plant_scipy.py");
     let status = Command::new(&a.python)
@@ -224,7 +225,8 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
             script.display()
         );
     }
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&result)?)?;
+    let json: serde_json::Value =
+        serde_json::from_str(&files::read_text(&result, files::DATA_LIMIT)?)?;
     let num = |k: &str| {
         json[k]
             .as_f64()
@@ -480,6 +482,6 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
         r.max_traj_diff_rad, r.max_psi_rad, r.max_eig_diff
     );
     print!("{t}");
-    std::fs::write(a.out.join("summary.txt"), &t)?;
+    crate::sim::files::write_file(&a.out.join("summary.txt"), &t)?;
     Ok(())
 }

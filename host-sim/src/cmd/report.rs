@@ -223,7 +223,8 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 /// The command on scenarios of the model `M`.
 fn command_on<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<()> {
     let report = build::<M, N>(a)?;
-    let w = report::write(&a.out, &report)?;
+    let out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let w = report::write(&out_dir, &report)?;
     let rows: Vec<(&str, &ReportRun<M, N>)> = report
         .sections
         .iter()

@@ -79,7 +79,7 @@ fn run_spec<M: FileModel<N>, const N: usize>(
         spec.trace_every = n as usize;
     }
     let out = out_dir(a, &spec);
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     let (cfg, r) = scenario::run(&spec)?;
     let m = r.metrics(&cfg, spec.t_dist_s);
 

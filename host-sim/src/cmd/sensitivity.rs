@@ -1,7 +1,6 @@
 //! `shimmy-sim sensitivity`: how the Hopf onset/offset speeds and the onset frequency move with
 //! a relative change of each parameter the linear model depends on (table and CSV).
 
-use std::fs;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -235,9 +234,9 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
         "param", "on -", "off -", "f -", "on +", "off +", "f +", "d on/d%", "d off/d%"
     );
-    fs::create_dir_all(&args.out)?;
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let path = args.out.join("sensitivity.csv");
-    let mut f = fs::File::create(&path)?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "param,unit,base_value,factor,onset_kmh,offset_kmh,onset_freq_hz,base_onset_kmh,base_offset_kmh,base_onset_freq_hz,crossings,further_crossings"
@@ -303,6 +302,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
             println!("  {l}");
         }
     }
+    crate::sim::files::write_file(&path, &f)?;
     println!("wrote {}", path.display());
     Ok(())
 }

@@ -1,6 +1,5 @@
 //! `shimmy-sim stability`: eigenvalue analysis of the linearised plant over speed (optionally
 //! with the MR damper as its equivalent viscous damper), Hopf crossings, CSV and PNG.
-use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -192,7 +191,7 @@ fn report<M: LinearModel<N>, const N: usize>(p: &M, c: f64, args: &StabilityArgs
     println!();
     print_crossings(&crossings, args.v_min_kmh, args.v_max_kmh);
 
-    fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("stability.csv");
     write_sweep_csv(&csv, p, c, &rows)?;
     let ccsv = args.out.join("crossings.csv");
@@ -269,7 +268,7 @@ fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
     c: f64,
     rows: &[ModeSummary],
 ) -> Result<()> {
-    let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "speed_kmh,speed_mps,max_re_1ps,crit_re_1ps,crit_zeta,crit_freq_hz,crit_shape,\
@@ -296,11 +295,11 @@ fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
             c
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 fn write_crossings_csv(path: &Path, crossings: &Crossings) -> Result<()> {
-    let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "kind,speed_kmh,speed_mps,freq_hz,shape,bracket_mps,converged"
@@ -318,7 +317,7 @@ fn write_crossings_csv(path: &Path, crossings: &Crossings) -> Result<()> {
             x.converged
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 fn plot(
@@ -328,7 +327,8 @@ fn plot(
     name: &str,
     c: f64,
 ) -> Result<()> {
-    let root = BitMapBackend::new(path, (1000, 800)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 800)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(400);
     let xs: Vec<f64> = rows.iter().map(|r| mps_to_kmh(r.v_mps)).collect();
@@ -350,7 +350,7 @@ fn plot(
         &rows.iter().map(|r| r.least_damped.zeta).collect::<Vec<_>>(),
         crossings,
     )?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 

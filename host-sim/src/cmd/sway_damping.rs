@@ -2,7 +2,6 @@
 //! to stay stable (and to keep a damping-ratio target) over speed, and Diboll & Hagen's
 //! dimensionless map, the damping ratio needed over the Strouhal number `s omega / V` with the
 //! energy term `mu G z / V^2` as parameter (PNG + CSV).
-use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -190,7 +189,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
         );
     }
 
-    fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("damping.csv");
     write_speed_csv(&csv, &t, &rows, args.zeta)?;
     let dcsv = args.out.join("diboll-hagen.csv");
@@ -207,7 +206,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
 }
 
 fn write_speed_csv(path: &Path, t: &TrailerParams, rows: &[SpeedRow], zeta: f64) -> Result<()> {
-    let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "speed_kmh,c_crit_nspm,zeta_d_crit,zeta_target,c_target_nspm,zeta_d_target,l_d_m"
@@ -225,11 +224,11 @@ fn write_speed_csv(path: &Path, t: &TrailerParams, rows: &[SpeedRow], zeta: f64)
             t.l_d
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 fn write_dh_csv(path: &Path, map: &[DhPoint]) -> Result<()> {
-    let mut f = fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut f = Vec::new();
     writeln!(
         f,
         "energy_term,strouhal,speed_kmh,k_y_npm,c_needed_nspm,zeta_needed"
@@ -247,7 +246,7 @@ fn write_dh_csv(path: &Path, map: &[DhPoint]) -> Result<()> {
             o(p.zeta_needed)
         )?;
     }
-    Ok(())
+    crate::sim::files::write_file(path, &f)
 }
 
 fn plot(
@@ -259,7 +258,8 @@ fn plot(
     name: &str,
     zeta: f64,
 ) -> Result<()> {
-    let root = BitMapBackend::new(path, (1000, 900)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(430);
     // top: the damper needed over speed, kN s/m
@@ -338,6 +338,6 @@ fn plot(
             .legend(plot_util::line_marker(col, 2));
     }
     plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }

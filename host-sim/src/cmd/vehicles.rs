@@ -101,7 +101,7 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
                 .map(|v| (s.clone(), v))
         })
         .collect::<Result<_>>()?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let rows: Vec<VehicleRow> = loaded
         .par_iter()
         .map(|(name, v)| row(name, v, a).with_context(|| format!("vehicle `{name}`")))
@@ -109,10 +109,9 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
     let (header, cells) = table(&rows, a.rate_kmh_per_s);
     let md = markdown(&header, &cells);
     let md_path = a.out.join("vehicles.md");
-    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    crate::sim::files::write_file(&md_path, &md)?;
     let csv = a.out.join("vehicles.csv");
-    std::fs::write(&csv, csv_text(&header, &cells))
-        .with_context(|| format!("writing {}", csv.display()))?;
+    crate::sim::files::write_file(&csv, csv_text(&header, &cells))?;
     print!("{md}");
     let md = md_path;
     println!("wrote {} and {}", md.display(), csv.display());

@@ -14,7 +14,8 @@ pub const REFERENCE_EVERY_S: f64 = 0.25;
 
 /// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
 pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 900)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1100, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, rest) = root.split_vertically(40);
     top.draw(&Text::new(
@@ -71,7 +72,7 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
             plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
     }
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 
@@ -84,7 +85,8 @@ pub fn plot_margin<M: SimModel<N>, const N: usize>(
     title: &str,
     runs: &[(&str, &LoopConfig<M, N>, &LoopResult)],
 ) -> Result<()> {
-    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1100, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let t_end = runs
         .iter()
@@ -152,7 +154,7 @@ pub fn plot_margin<M: SimModel<N>, const N: usize>(
             .legend(plot_util::line_marker(c, 3));
     }
     plot_util::legend(&mut chart, SeriesLabelPosition::UpperRight)?;
-    root.present()?;
+    png.commit(root.present())?;
     Ok(())
 }
 

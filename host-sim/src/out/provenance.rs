@@ -89,7 +89,7 @@ impl Provenance {
 
     /// Adds a file input (its content hashed).
     pub fn file(mut self, role: &str, path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let bytes = crate::sim::files::read_bytes(path, crate::sim::files::DATA_LIMIT)?;
         self.inputs.push(Input {
             role: role.to_string(),
             source: path.display().to_string(),

@@ -129,7 +129,7 @@ pub fn write_pages(
             format!("{}\n", serde_json::to_string_pretty(&summary)?),
         ),
     ] {
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        crate::sim::files::write_file(path, text)?;
     }
     Ok(pages)
 }
@@ -252,12 +252,15 @@ fn write_metrics_csv<M: SimModel<N>, const N: usize>(
             );
         }
     }
-    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+    crate::sim::files::write_file(path, s)
 }
 
-/// Writes the report into `out` (created if missing).
-pub fn write<M: SimModel<N>, const N: usize>(out: &Path, report: &Report<M, N>) -> Result<Written> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+/// Writes the report into the output folder `out`, claimed by the caller for its run.
+pub fn write<M: SimModel<N>, const N: usize>(
+    out: &crate::sim::files::OutDir,
+    report: &Report<M, N>,
+) -> Result<Written> {
+    let out = out.path();
     let mut plots = Vec::new();
     let mut csv = Vec::new();
     let mut md = String::new();

@@ -511,9 +511,9 @@ impl LoopResult {
     }
 
     /// Writes the trace as CSV.
-    pub fn write_trace_csv(&self, path: &std::path::Path) -> std::io::Result<()> {
+    pub fn write_trace_csv(&self, path: &std::path::Path) -> anyhow::Result<()> {
         use std::io::Write;
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut w = Vec::new();
         writeln!(
             w,
             "t_s,psi_l_rad,psi_r_rad,theta_sw_rad,speed_mps,driver_torque_nm,current_cmd_a,coil_a,damper_force_n,s_radps,gain_radps2,flags,zeta,freq_hz,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps"
@@ -543,7 +543,7 @@ impl LoopResult {
                 r.speed_meas_mps
             )?;
         }
-        w.flush()
+        crate::sim::files::write_file(path, &w)
     }
 }
 

@@ -15,6 +15,7 @@ use shimmy_core::vehicle::{
 };
 use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
 use shimmy_link::frame::{self, Fed, FrameReader, DELIMITER, MAX_FRAME};
+use shimmy_link::host::decode_reply;
 use shimmy_link::wire::{
     ConfigProblem, ErrorReply, FaultReport, Header, LogEntry, Request, Response, Telemetry,
     PROTOCOL_HEADER,
@@ -146,8 +147,8 @@ enum Reply {
 
 fn owned(r: Response<'_>) -> std::result::Result<Reply, anyhow::Error> {
     let info = |i: shimmy_link::wire::Identity<'_>| DeviceInfo {
-        firmware: i.firmware.to_string(),
-        core: i.core.to_string(),
+        firmware: printable(i.firmware),
+        core: printable(i.core),
         protocol: i.protocol,
         vehicle_schema: i.vehicle_schema,
         log_capacity: i.log_capacity,
@@ -166,10 +167,29 @@ fn owned(r: Response<'_>) -> std::result::Result<Reply, anyhow::Error> {
     })
 }
 
+/// Text from the device made safe for a terminal: control characters (an escape sequence that
+/// would clear the screen or retitle the window, a bell, a carriage return that overwrites the
+/// line) are shown escaped (`\u{1b}`), printable text as it is. Every string the device sends
+/// passes through here before anything prints it.
+pub fn printable(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
+}
+
 /// The device's refusal as a message for the user.
 pub fn device_error(e: &ErrorReply<'_>) -> anyhow::Error {
     match e {
-        ErrorReply::BadFrame(why) => anyhow!("the device received a damaged frame ({why})"),
+        ErrorReply::BadFrame(why) => anyhow!(
+            "the device received a damaged frame ({})",
+            printable(why)
+        ),
         ErrorReply::TooLong => anyhow!(
             "the device received a frame longer than {MAX_FRAME} bytes and dropped it"
         ),
@@ -208,9 +228,10 @@ fn config_problem(p: &ConfigProblem<'_>) -> String {
             value,
             rule,
         } => {
+            let (section, name, rule) = (printable(section), printable(name), printable(rule));
             // The field with its range, from the table of the model whose record has it.
-            let checked = check_record_value::<Vehicle>(section, name, value)
-                .or_else(|| check_record_value::<TruckVehicle>(section, name, value));
+            let checked = check_record_value::<Vehicle>(&section, &name, value)
+                .or_else(|| check_record_value::<TruckVehicle>(&section, &name, value));
             match checked {
                 Some(Err(e)) if rule.is_empty() => e.to_string(),
                 Some(_) if rule.is_empty() => {
@@ -312,21 +333,9 @@ impl<P: Port> Client<P> {
                             "the device sent a frame longer than {MAX_FRAME} bytes"
                         )),
                     ),
-                    Fed::Frame(f) => match frame::decode(f) {
-                        Err(e) => (
-                            PROTOCOL_HEADER,
-                            Err(anyhow!("damaged frame from the device: {}", e.text())),
-                        ),
-                        Ok((h, body)) => match frame::message::<Response<'_>>(body) {
-                            None => (
-                                h,
-                                Err(anyhow!(
-                                    "the device sent a reply this tool does not know (protocol {})",
-                                    h.version
-                                )),
-                            ),
-                            Some(r) => (h, owned(r)),
-                        },
+                    Fed::Frame(f) => match decode_reply(f) {
+                        (h, Ok(r)) => (h, owned(r)),
+                        (h, Err(e)) => (h, Err(anyhow!("{e}"))),
                     },
                 };
                 return Ok(Some(decoded));

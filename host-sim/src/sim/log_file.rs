@@ -296,8 +296,8 @@ impl MappingChanges {
 
     /// Loads a mapping file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading mapping file {}", path.display()))?;
+        let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)
+            .context("reading mapping file")?;
         Self::parse_toml(&text).with_context(|| format!("mapping file {}", path.display()))
     }
 
@@ -572,7 +572,7 @@ pub fn parse(text: &str, map: &LogMapping) -> Result<Log> {
 /// Reads and parses a log file; errors start with the file name.
 pub fn load(path: &Path, map: &LogMapping) -> Result<Log> {
     let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading log {}", path.display()))?;
+        crate::sim::files::read_text(path, crate::sim::files::DATA_LIMIT).context("reading log")?;
     parse(&text, map).with_context(|| format!("log {}", path.display()))
 }
 

@@ -204,9 +204,9 @@ impl Trace {
     }
 
     /// Writes the trace as CSV (units in the header).
-    pub fn write_csv(&self, path: &std::path::Path) -> std::io::Result<()> {
+    pub fn write_csv(&self, path: &std::path::Path) -> anyhow::Result<()> {
         use std::io::Write;
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut w = Vec::new();
         write!(w, "t_s")?;
         for n in STATE_NAMES {
             write!(w, ",{n}")?;
@@ -229,7 +229,7 @@ impl Trace {
                 self.driver_torque_nm[k]
             )?;
         }
-        w.flush()
+        crate::sim::files::write_file(path, &w)
     }
 }
 

@@ -221,8 +221,8 @@ impl Qemu {
     }
 
     fn start_program(qemu: &str, elf: &Path) -> Result<Self, String> {
-        let elf_bytes =
-            std::fs::read(elf).map_err(|e| format!("PIL image {}: {e}", elf.display()))?;
+        let elf_bytes = crate::sim::files::read_bytes(elf, crate::sim::files::DATA_LIMIT)
+            .map_err(|e| format!("PIL image: {e:#}"))?;
         static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let n = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let dir = std::env::temp_dir().join(format!("shimmy-pil-{}-{n}", std::process::id()));

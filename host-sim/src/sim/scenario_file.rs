@@ -249,8 +249,7 @@ pub fn load(path: &Path) -> Result<ScenarioSpec> {
 
 /// [`load`] for a scenario on a vehicle of any model of the family.
 pub fn load_any(path: &Path) -> Result<AnyScenario> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)?;
     let stem = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

@@ -179,8 +179,8 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
             trailer_set_names()
         );
     }
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading vehicle file {}", path.display()))?;
+    let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)
+        .context("reading vehicle file")?;
     parse_model(&text).with_context(|| format!("in vehicle file {}", path.display()))
 }
 
@@ -477,8 +477,8 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
             set_names()
         );
     }
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("reading vehicle file {}", path.display()))?;
+    let text = crate::sim::files::read_text(&path, crate::sim::files::TEXT_LIMIT)
+        .context("reading vehicle file")?;
     parse(&text).with_context(|| format!("in vehicle file {}", path.display()))
 }
 

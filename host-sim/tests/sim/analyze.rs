@@ -529,3 +529,40 @@ fn analyze_refuses_a_model_its_log_cannot_feed() {
     .unwrap_err();
     assert!(format!("{e:#}").contains("dual-axle-truck-8dof"), "{e:#}");
 }
+
+/// A log of a car standing still (speed 0, a little yaw noise): the meter estimates nothing,
+/// and the command must say so and fail, not report "no warning" as if the log were normal.
+#[test]
+fn a_log_with_no_estimable_stretch_fails_instead_of_reporting_normal() {
+    let dir = temp_dir("analyze-nothing");
+    let mut rng = Lcg(5);
+    let mut s = String::from("time_ms;steer_deg;v_kmh;note\n");
+    for j in 0..(10.0 * 400.0) as usize {
+        let _ = writeln!(s, "{};{};0;x", j as f64 * 2.5, 0.01 * rng.next());
+    }
+    std::fs::write(dir.join("still.csv"), s).unwrap();
+    std::fs::write(dir.join("m.toml"), FOREIGN_MAPPING).unwrap();
+    let o = run_in(
+        &dir,
+        &[
+            "analyze",
+            "still.csv",
+            "--mapping",
+            "m.toml",
+            "--data-only",
+            "--out",
+            "a",
+        ],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "exit 0 on a log with nothing estimable: {}{err}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    assert!(
+        err.contains("still.csv") && err.contains("no damping estimate"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

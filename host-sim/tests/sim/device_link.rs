@@ -11,7 +11,7 @@ use shimmy_core::vehicle::{
 };
 use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_link::frame::{self, MAX_FRAME};
-use shimmy_link::wire::{Header, LogEntry, PROTOCOL_HEADER};
+use shimmy_link::wire::{ErrorReply, Header, Identity, LogEntry, Response, PROTOCOL_HEADER};
 use shimmy_link::PROTOCOL_VERSION;
 use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
@@ -449,4 +449,114 @@ fn the_tool_gets_and_sets_a_truck_vehicle_file() {
         "{err}"
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A device that answers each request with the frame `answer` makes for its seq: replies no
+/// firmware of this version would send.
+struct Scripted<F: FnMut(u16) -> Vec<u8>> {
+    answer: F,
+    reader: frame::FrameReader,
+    out: std::collections::VecDeque<u8>,
+}
+
+impl<F: FnMut(u16) -> Vec<u8>> Scripted<F> {
+    fn new(answer: F) -> Self {
+        Scripted {
+            answer,
+            reader: frame::FrameReader::new(),
+            out: Default::default(),
+        }
+    }
+}
+
+impl<F: FnMut(u16) -> Vec<u8>> Port for Scripted<F> {
+    fn send(&mut self, bytes: &[u8]) -> Result<()> {
+        for &b in bytes {
+            if let frame::Fed::Frame(f) = self.reader.feed(b) {
+                let (h, _) = frame::decode(f).expect("the client sends valid frames");
+                let reply = (self.answer)(h.seq);
+                self.out.extend(reply);
+            }
+        }
+        Ok(())
+    }
+    fn receive(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize> {
+        if self.out.is_empty() {
+            std::thread::sleep(timeout.min(Duration::from_millis(1)));
+        }
+        let n = buf.len().min(self.out.len());
+        for (b, x) in buf.iter_mut().zip(self.out.drain(..n)) {
+            *b = x;
+        }
+        Ok(n)
+    }
+}
+
+fn reply_frame(h: Header, r: &Response<'_>) -> Vec<u8> {
+    let mut out = vec![0u8; MAX_FRAME + 1];
+    let n = frame::encode(h, r, &mut out).unwrap();
+    out.truncate(n);
+    out
+}
+
+fn identity(firmware: &str) -> Identity<'_> {
+    Identity {
+        firmware,
+        core: "core",
+        protocol: PROTOCOL_VERSION,
+        vehicle_schema: record_schema_of::<Vehicle>(),
+        log_capacity: 8,
+    }
+}
+
+#[test]
+fn a_reply_of_another_protocol_version_is_refused_naming_both_versions() {
+    // The frame's header says another version; its identity claims this one.
+    let other = PROTOCOL_VERSION + 1;
+    let port = Scripted::new(|seq| {
+        reply_frame(
+            Header {
+                version: other,
+                seq,
+            },
+            &Response::Identity(identity("fw")),
+        )
+    });
+    let e = match Client::connect(port, Duration::ZERO) {
+        Ok((_, info)) => panic!("a reply of protocol version {other} was accepted: {info:?}"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains(&format!("protocol version {other}"))
+            && e.contains(&format!("supports version {PROTOCOL_VERSION}")),
+        "{e}"
+    );
+}
+
+#[test]
+fn device_strings_reach_the_terminal_with_control_characters_escaped() {
+    let port = Scripted::new(|seq| {
+        let h = Header {
+            seq,
+            ..PROTOCOL_HEADER
+        };
+        if seq == 1 {
+            reply_frame(h, &Response::Identity(identity("evil\x1b[2J\x07fw")))
+        } else {
+            reply_frame(
+                h,
+                &Response::Error(ErrorReply::BadFrame("x\x1b]0;pwned\x07\r")),
+            )
+        }
+    });
+    let (mut c, info) = Client::connect(port, Duration::ZERO).expect("identity");
+    assert!(
+        !info.firmware.chars().any(char::is_control),
+        "{:?}",
+        info.firmware
+    );
+    assert_eq!(info.firmware, "evil\\u{1b}[2J\\u{7}fw");
+    let e = c.faults().unwrap_err().to_string();
+    assert!(!e.chars().any(char::is_control), "{e:?}");
+    assert!(e.contains("x\\u{1b}]0;pwned"), "{e}");
 }

@@ -9,6 +9,7 @@ mod cli;
 mod closed_loop;
 mod device_link;
 mod faults;
+mod files;
 mod golden;
 mod markdown_tables;
 mod meter_accuracy;

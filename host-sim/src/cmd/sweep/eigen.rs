@@ -150,7 +150,7 @@ fn row<M: LinearModel<N>, const N: usize>(
 /// The command: compute, write CSV + PNG per map, print the boundary table.
 pub fn command(a: &SweepArgs) -> Result<()> {
     let (param, maps) = compute(a)?;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     for (k, map) in maps.iter().enumerate() {
         let tag = if map.c_nspm == 0.0 {
             "no-damper".to_string()
@@ -209,7 +209,7 @@ fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> 
             let _ = writeln!(s, "{:e},{v},{re:e}", r.value);
         }
     }
-    std::fs::write(grid, s)?;
+    crate::sim::files::write_file(grid, s)?;
     let mut b = format!(
         "{} [{}],crossing speed [km/h],kind\n",
         param.name, param.unit
@@ -224,13 +224,14 @@ fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> 
             );
         }
     }
-    std::fs::write(boundary, b)?;
+    crate::sim::files::write_file(boundary, b)?;
     Ok(())
 }
 
 fn plot(path: &Path, param: ParamInfo, map: &SweepMap, set: &str) -> Result<()> {
+    let png = crate::sim::files::PendingFile::new(path);
     let picture =
-        BitMapBackend::new(path, (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
+        BitMapBackend::new(png.tmp(), (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
     picture.fill(&WHITE)?;
     let (root, bar) = picture.split_horizontally(1000);
     let cells = plot_util::cells(
@@ -293,7 +294,7 @@ fn plot(path: &Path, param: ParamInfo, map: &SweepMap, set: &str) -> Result<()> 
             .iter()
             .map(move |&(v, _)| Circle::new((v, r.value), 3, BLACK.filled()))
     }))?;
-    picture.present()?;
+    png.commit(picture.present())?;
     Ok(())
 }
 

@@ -260,8 +260,9 @@ fn boundary_csv(g: &TdGrid) -> String {
 /// Heat map of the end amplitude (white 0 -> red at `scale_deg`), shimmy cells marked with a
 /// black cross, the linear no-damper Hopf boundary as black dots joined per onset/offset.
 pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Result<()> {
+    let png = crate::sim::files::PendingFile::new(path);
     let picture =
-        BitMapBackend::new(path, (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
+        BitMapBackend::new(png.tmp(), (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
     picture.fill(&WHITE)?;
     let (root, bar) = picture.split_horizontally(1000);
     let cells = plot_util::cells(
@@ -321,7 +322,7 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
         chart.draw_series(LineSeries::new(line.clone(), BLACK.stroke_width(2)))?;
         chart.draw_series(line.iter().map(|&p| Circle::new(p, 3, BLACK.filled())))?;
     }
-    picture.present()?;
+    png.commit(picture.present())?;
     Ok(())
 }
 
@@ -330,10 +331,10 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
     let wall = std::time::Instant::now();
     let (g, maps) = compute(a)?;
     let wall_s = wall.elapsed().as_secs_f64();
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let name = g.param.name;
     let boundary = a.out.join(format!("td-boundary-{name}.csv"));
-    std::fs::write(&boundary, boundary_csv(&g))?;
+    crate::sim::files::write_file(&boundary, boundary_csv(&g))?;
     let mut files = vec![boundary];
     // One colour scale for all controllers (so maps compare), at least 1 deg.
     let scale_deg = maps
@@ -401,7 +402,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
             amp
         );
         let c = a.out.join(format!("td-{name}-{}.csv", m.controller));
-        std::fs::write(&c, csv(&g, m))?;
+        crate::sim::files::write_file(&c, csv(&g, m))?;
         let png = a.out.join(format!("td-{name}-{}.png", m.controller));
         plot(&png, &g, m, &a.vehicle, scale_deg)?;
         files.push(c);
