@@ -1,6 +1,7 @@
 //! The vehicle models, one folder each and laid out alike:
 //!
-//! - `params.rs`: the model's parameters and their field table (names, units, plausible ranges);
+//! - `params.rs`: the model's parameters and their field table (names, units, plausible ranges;
+//!   reading and setting by name through [`fields::FieldTable`]);
 //! - `linear.rs`: the linear model (states, A(V), inputs, mode shapes: [`crate::model::LinearModel`]);
 //! - `sets.rs`: the named parameter sets;
 //! - `board.rs`, where the model runs on the board: its stored vehicle record and the board's
@@ -12,5 +13,8 @@
 
 pub mod car;
 pub mod dual_axle;
+pub mod fields;
 pub mod trailer;
 pub mod truck;
+
+pub use fields::{FieldError, FieldTable, ModelField};

@@ -4,6 +4,7 @@ use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::Result;
 use shimmy_core::vehicle::{Vehicle, FIELDS, SECTIONS};
 use shimmy_core::vehicles::truck::TRUCK_FIELDS;
+use shimmy_core::vehicles::FieldTable;
 
 /// Prints every field of the vehicle `spec`, section by section, with its unit and allowed range
 /// (after validating it); a truck's `[truck]` section first, then the shared sections.

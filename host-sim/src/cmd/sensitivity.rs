@@ -1,6 +1,7 @@
 //! `shimmy-sim sensitivity`: how the Hopf onset/offset speeds and the onset frequency move with
 //! a relative change of each parameter the linear model depends on (table and CSV).
 
+use shimmy_core::vehicles::FieldTable;
 use std::io::Write;
 use std::path::PathBuf;
 

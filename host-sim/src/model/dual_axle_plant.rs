@@ -21,6 +21,7 @@ use shimmy_core::vehicles::dual_axle::{
     DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, PSI_2L,
     PSI_2R, WHEELS,
 };
+use shimmy_core::vehicles::FieldTable;
 
 use super::integrator::rk4_step;
 
@@ -633,7 +634,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
         let mut t = *self;
         match t.set(name, value) {
             Ok(()) => Ok(t),
-            Err(shimmy_core::vehicles::dual_axle::DualAxleFieldError::Unknown) => anyhow::bail!(
+            Err(shimmy_core::vehicles::FieldError::Unknown) => anyhow::bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 <DualAxleParams as LinearModel<N_STATES>>::NAME,
                 super::family::param_names::<Self, N_STATES>()

@@ -12,6 +12,7 @@ use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
 use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
+use shimmy_core::vehicles::FieldTable;
 use shimmy_firmware::monitoring::BoardCalibration;
 
 use super::damper_equiv::damper_equivalent;
@@ -222,7 +223,7 @@ impl SimModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
         let mut t = *self;
         match t.set(name, value) {
             Ok(()) => Ok(t),
-            Err(shimmy_core::vehicles::truck::TruckFieldError::Unknown) => bail!(
+            Err(shimmy_core::vehicles::FieldError::Unknown) => bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 TruckParams::NAME,
                 param_names::<Self, { shimmy_core::vehicles::truck::N_STATES }>()

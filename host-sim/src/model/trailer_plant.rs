@@ -19,8 +19,9 @@ use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::trailer::{
-    TrailerFieldError, TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, TRAILER_FIELDS, Y,
+    TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, TRAILER_FIELDS, Y,
 };
+use shimmy_core::vehicles::FieldTable;
 
 use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
@@ -450,7 +451,7 @@ impl SimModel<N_STATES> for TrailerParams {
         let mut t = *self;
         match t.set(name, value) {
             Ok(()) => Ok(t),
-            Err(TrailerFieldError::Unknown) => bail!(
+            Err(shimmy_core::vehicles::FieldError::Unknown) => bail!(
                 "parameter `{name}`: no such parameter of {}, allowed: {}",
                 <TrailerParams as LinearModel<N_STATES>>::NAME,
                 param_names::<Self, N_STATES>()

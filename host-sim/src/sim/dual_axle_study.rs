@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicles::dual_axle::DualAxleParams;
+use shimmy_core::vehicles::FieldTable;
 
 use crate::model::dual_axle_plant::{run_cycle, CycleSummary};
 
@@ -369,6 +370,7 @@ mod margin_tests {
     use shimmy_core::units::kmh_to_mps;
     use shimmy_core::vehicles::dual_axle::DualAxleSet;
     use shimmy_core::vehicles::dual_axle::{DualAxleParams, N_STATES};
+    use shimmy_core::vehicles::FieldTable;
 
     fn parts_of(t: DualAxleParams) -> crate::model::family::FamilyVehicle<DualAxleParams> {
         crate::model::family::FamilyVehicle {

@@ -35,13 +35,10 @@ use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
 use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
 use shimmy_core::vehicles::car::{ParamSet, PlantParams};
-use shimmy_core::vehicles::dual_axle::{
-    DualAxleFieldError, DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS,
-};
-use shimmy_core::vehicles::trailer::{
-    TrailerFieldError, TrailerParams, TrailerSet, TRAILER_FIELDS,
-};
-use shimmy_core::vehicles::truck::{TruckFieldError, TruckParams, TruckSet, TRUCK_FIELDS};
+use shimmy_core::vehicles::dual_axle::{DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
+use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet, TRAILER_FIELDS};
+use shimmy_core::vehicles::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
+use shimmy_core::vehicles::{FieldError, FieldTable};
 use std::path::{Path, PathBuf};
 
 /// A vehicle of any model of the family, as a vehicle file or a set name gives it (read once
@@ -319,7 +316,7 @@ fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
             fields: || TRUCK_FIELDS.iter().map(|f| f.name).collect(),
             set_field: |t, n, x| match t.set(n, x) {
                 Ok(()) => Ok(()),
-                Err(TruckFieldError::Unknown) => Err(None),
+                Err(FieldError::Unknown) => Err(None),
                 Err(e) => Err(Some(e.to_string())),
             },
             validate: |t| t.validate().map_err(|e| anyhow::anyhow!("truck: {e}")),
@@ -342,7 +339,7 @@ fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
             fields: || DUAL_AXLE_FIELDS.iter().map(|f| f.name).collect(),
             set_field: |t, n, x| match t.set(n, x) {
                 Ok(()) => Ok(()),
-                Err(DualAxleFieldError::Unknown) => Err(None),
+                Err(FieldError::Unknown) => Err(None),
                 Err(e) => Err(Some(e.to_string())),
             },
             validate: |t| {
@@ -368,7 +365,7 @@ fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
             fields: || TRAILER_FIELDS.iter().map(|f| f.name).collect(),
             set_field: |t, n, x| match t.set(n, x) {
                 Ok(()) => Ok(()),
-                Err(TrailerFieldError::Unknown) => Err(None),
+                Err(FieldError::Unknown) => Err(None),
                 Err(e) => Err(Some(e.to_string())),
             },
             validate: |t| {

@@ -14,6 +14,7 @@ use shimmy_core::vehicles::trailer;
 use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet};
 use shimmy_core::vehicles::truck;
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
+use shimmy_core::vehicles::FieldTable;
 use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};
 
 #[test]

@@ -22,6 +22,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::vehicles::fields::{FieldError, FieldTable, ModelField};
 
 use crate::units::G_MPS2;
 
@@ -166,18 +167,10 @@ impl DualAxleParams {
     }
 }
 
-/// One field of the dual-axle truck's parameters in a vehicle file: name, unit, plausible
-/// range (both ends included).
-pub type DualAxleField = crate::vehicles::truck::TruckField;
-
 /// Every field of [`DualAxleParams`], in the order of `docs/dual-axle-truck.md`.
-pub const DUAL_AXLE_FIELDS: [DualAxleField; 32] = {
-    const fn f(name: &'static str, unit: &'static str, lo: f64, hi: f64) -> DualAxleField {
-        DualAxleField {
-            name,
-            unit,
-            range: (lo, hi),
-        }
+pub const DUAL_AXLE_FIELDS: [ModelField; 32] = {
+    const fn f(name: &'static str, unit: &'static str, lo: f64, hi: f64) -> ModelField {
+        ModelField::new(name, unit, lo, hi)
     }
     [
         f("i_k", "kg m^2", 1.0, 1000.0),
@@ -218,23 +211,9 @@ pub const DUAL_AXLE_FIELDS: [DualAxleField; 32] = {
 /// Why a dual-axle parameter set is rejected.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum DualAxleFieldError {
-    /// No field of that name.
-    #[error("no dual-axle field of that name")]
-    Unknown,
-    /// A value outside its field's plausible range (or not finite).
-    #[error("field `{name}` = {value} {unit} is outside {lo} ..= {hi} {unit}")]
-    OutOfRange {
-        /// The field.
-        name: &'static str,
-        /// The value given.
-        value: f64,
-        /// Lower end of the range.
-        lo: f64,
-        /// Upper end of the range.
-        hi: f64,
-        /// The field's unit.
-        unit: &'static str,
-    },
+    /// A field unknown or out of its range.
+    #[error(transparent)]
+    Field(#[from] FieldError),
     /// The second axle is not between the first and the rear bogie.
     #[error("field `axle_spacing` = {axle_spacing} m must be below `wheelbase` = {wheelbase} m (axle 2 lies between axle 1 and the rear bogie)")]
     AxleOrder {
@@ -245,7 +224,9 @@ pub enum DualAxleFieldError {
     },
 }
 
-impl DualAxleParams {
+impl FieldTable for DualAxleParams {
+    const FIELDS: &'static [ModelField] = &DUAL_AXLE_FIELDS;
+
     fn field_mut(&mut self, name: &str) -> Option<&mut f64> {
         Some(match name {
             "i_k" => &mut self.i_k,
@@ -283,30 +264,13 @@ impl DualAxleParams {
             _ => return None,
         })
     }
+}
 
-    /// The value of the field `name`.
-    pub fn get(&self, name: &str) -> Option<f64> {
-        let mut copy = *self;
-        copy.field_mut(name).map(|v| *v)
-    }
-
-    /// Sets the field `name` to `value` if it is inside the field's range.
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), DualAxleFieldError> {
-        let field = DUAL_AXLE_FIELDS
-            .iter()
-            .find(|f| f.name == name)
-            .ok_or(DualAxleFieldError::Unknown)?;
-        check(field, value)?;
-        *self.field_mut(name).ok_or(DualAxleFieldError::Unknown)? = value;
-        Ok(())
-    }
-
+impl DualAxleParams {
     /// Every field inside its range and the second axle ahead of the rear bogie; the first
     /// offender.
     pub fn validate(&self) -> Result<(), DualAxleFieldError> {
-        for f in &DUAL_AXLE_FIELDS {
-            check(f, self.get(f.name).ok_or(DualAxleFieldError::Unknown)?)?;
-        }
+        self.check_ranges()?;
         if self.axle_spacing >= self.wheelbase {
             return Err(DualAxleFieldError::AxleOrder {
                 axle_spacing: self.axle_spacing,
@@ -314,20 +278,5 @@ impl DualAxleParams {
             });
         }
         Ok(())
-    }
-}
-
-fn check(f: &DualAxleField, value: f64) -> Result<(), DualAxleFieldError> {
-    let (lo, hi) = f.range;
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(DualAxleFieldError::OutOfRange {
-            name: f.name,
-            value,
-            lo,
-            hi,
-            unit: f.unit,
-        })
     }
 }

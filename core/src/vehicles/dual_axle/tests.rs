@@ -4,6 +4,7 @@ mod model {
     use crate::model::{LinearModel, ModeShape};
     use crate::stability::{self, CrossingKind};
     use crate::vehicles::dual_axle::*;
+    use crate::vehicles::FieldTable;
     #[allow(unused_imports)]
     use nalgebra::SVector;
 
@@ -53,21 +54,7 @@ mod model {
     fn the_field_table_covers_every_field_and_checks_ranges() {
         let mut t = DualAxleSet::Rated.params();
         t.validate().unwrap();
-        for f in &DUAL_AXLE_FIELDS {
-            let v = t.get(f.name).unwrap();
-            assert!((f.range.0..=f.range.1).contains(&v), "{} = {v}", f.name);
-            let mid = 0.5 * (f.range.0 + f.range.1);
-            let mut u = t;
-            u.set(f.name, mid).unwrap();
-            assert_eq!(u.get(f.name), Some(mid), "{}", f.name);
-            assert!(u != t || v == mid, "{} sets nothing", f.name);
-        }
-        let e = t.set("k_t", -1.0).unwrap_err();
-        assert!(
-            matches!(e, DualAxleFieldError::OutOfRange { name: "k_t", .. }),
-            "{e}"
-        );
-        assert_eq!(t.set("no_such", 1.0), Err(DualAxleFieldError::Unknown));
+        crate::vehicles::fields::assert_table_covers_every_field(t);
         t.set("axle_spacing", 4.0).unwrap();
         t.set("wheelbase", 3.0).unwrap();
         assert!(matches!(

@@ -26,6 +26,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::vehicles::fields::{FieldError, FieldTable, ModelField};
 
 use crate::units::G_MPS2;
 
@@ -107,98 +108,27 @@ impl TrailerParams {
     }
 }
 
-/// One field of the trailer's parameters in a vehicle file: name, unit, plausible range (both
-/// ends included: from a laboratory model trailer to a heavy car trailer, narrow enough to
-/// reject a typo by orders of magnitude).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TrailerField {
-    /// Field name (`[trailer]` section of a vehicle file).
-    pub name: &'static str,
-    /// SI unit.
-    pub unit: &'static str,
-    /// Plausible range (lo, hi).
-    pub range: (f64, f64),
-}
-
 /// Every field of [`TrailerParams`], in the order of `docs/trailer.md`'s table.
-pub const TRAILER_FIELDS: [TrailerField; 11] = [
-    TrailerField {
-        name: "m",
-        unit: "kg",
-        range: (1.0, 20000.0),
-    },
-    TrailerField {
-        name: "i_z",
-        unit: "kg m^2",
-        range: (0.01, 500000.0),
-    },
-    TrailerField {
-        name: "l",
-        unit: "m",
-        range: (0.1, 15.0),
-    },
-    TrailerField {
-        name: "a",
-        unit: "m",
-        range: (0.05, 15.0),
-    },
-    TrailerField {
-        name: "c_a_per_fz",
-        unit: "1/rad",
-        range: (0.5, 30.0),
-    },
-    TrailerField {
-        name: "sigma",
-        unit: "m",
-        range: (0.001, 3.0),
-    },
-    TrailerField {
-        name: "k_y",
-        unit: "N/m",
-        range: (1.0, 100000000.0),
-    },
-    TrailerField {
-        name: "c_y",
-        unit: "N s/m",
-        range: (0.0, 1000000.0),
-    },
-    TrailerField {
-        name: "l_d",
-        unit: "m",
-        range: (0.01, 2.0),
-    },
-    TrailerField {
-        name: "mu",
-        unit: "-",
-        range: (0.05, 1.5),
-    },
-    TrailerField {
-        name: "c_s",
-        unit: "-",
-        range: (0.5, 3.0),
-    },
+pub const TRAILER_FIELDS: [ModelField; 11] = [
+    ModelField::new("m", "kg", 1.0, 20000.0),
+    ModelField::new("i_z", "kg m^2", 0.01, 500000.0),
+    ModelField::new("l", "m", 0.1, 15.0),
+    ModelField::new("a", "m", 0.05, 15.0),
+    ModelField::new("c_a_per_fz", "1/rad", 0.5, 30.0),
+    ModelField::new("sigma", "m", 0.001, 3.0),
+    ModelField::new("k_y", "N/m", 1.0, 100000000.0),
+    ModelField::new("c_y", "N s/m", 0.0, 1000000.0),
+    ModelField::new("l_d", "m", 0.01, 2.0),
+    ModelField::new("mu", "-", 0.05, 1.5),
+    ModelField::new("c_s", "-", 0.5, 3.0),
 ];
 
 /// Why a trailer parameter set is rejected.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum TrailerFieldError {
-    /// No field of that name.
-    #[error("no trailer field of that name")]
-    Unknown,
-    /// A value outside its field's plausible range (or not finite).
-    #[error("field `{name}` = {value} {unit} is outside {lo} ..= {hi} {unit}")]
-    OutOfRange {
-        /// The field.
-        name: &'static str,
-        /// The value given.
-        value: f64,
-        /// Lower end of the range.
-        lo: f64,
-        /// Upper end of the range.
-        hi: f64,
-        /// The field's unit.
-        unit: &'static str,
-    },
+    /// A field unknown or out of its range.
+    #[error(transparent)]
+    Field(#[from] FieldError),
     /// The centre of gravity is too far behind the axle for a single-axle trailer on a ball.
     #[error(
         "field `a` = {a} m: the centre of gravity must lie ahead of 1.5 l = {max:.3} m (at most a \
@@ -212,7 +142,9 @@ pub enum TrailerFieldError {
     },
 }
 
-impl TrailerParams {
+impl FieldTable for TrailerParams {
+    const FIELDS: &'static [ModelField] = &TRAILER_FIELDS;
+
     fn field_mut(&mut self, name: &str) -> Option<&mut f64> {
         Some(match name {
             "m" => &mut self.m,
@@ -229,49 +161,17 @@ impl TrailerParams {
             _ => return None,
         })
     }
+}
 
-    /// The value of the field `name`.
-    pub fn get(&self, name: &str) -> Option<f64> {
-        let mut copy = *self;
-        copy.field_mut(name).map(|v| *v)
-    }
-
-    /// Sets the field `name` to `value` if it is inside the field's range.
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), TrailerFieldError> {
-        let field = TRAILER_FIELDS
-            .iter()
-            .find(|f| f.name == name)
-            .ok_or(TrailerFieldError::Unknown)?;
-        check(field, value)?;
-        *self.field_mut(name).ok_or(TrailerFieldError::Unknown)? = value;
-        Ok(())
-    }
-
+impl TrailerParams {
     /// Every field inside its range, and a centre of gravity ahead of 1.5 l; the first
     /// offender.
     pub fn validate(&self) -> Result<(), TrailerFieldError> {
-        for f in &TRAILER_FIELDS {
-            check(f, self.get(f.name).ok_or(TrailerFieldError::Unknown)?)?;
-        }
+        self.check_ranges()?;
         let max = 1.5 * self.l;
         if self.a > max {
             return Err(TrailerFieldError::TailHeavy { a: self.a, max });
         }
         Ok(())
-    }
-}
-
-fn check(f: &TrailerField, value: f64) -> Result<(), TrailerFieldError> {
-    let (lo, hi) = f.range;
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(TrailerFieldError::OutOfRange {
-            name: f.name,
-            value,
-            lo,
-            hi,
-            unit: f.unit,
-        })
     }
 }

@@ -5,6 +5,7 @@ mod model {
     use crate::model::{LinearModel, ModeShape};
     use crate::stability::{self, CrossingKind};
     use crate::vehicles::trailer::*;
+    use crate::vehicles::FieldTable;
     #[allow(unused_imports)]
     use nalgebra::SVector;
 
@@ -22,21 +23,7 @@ mod model {
     fn the_field_table_covers_every_field_and_checks_ranges() {
         let mut t = TrailerSet::Caravan.params();
         t.validate().unwrap();
-        for f in &TRAILER_FIELDS {
-            let v = t.get(f.name).unwrap();
-            let mid = 0.5 * (f.range.0 + f.range.1);
-            let mut u = t;
-            u.set(f.name, mid).unwrap();
-            assert_eq!(u.get(f.name), Some(mid), "{}", f.name);
-            assert!(u != t || v == mid, "{} sets nothing", f.name);
-        }
-        let e = t.set("k_y", -5.0).unwrap_err();
-        assert!(
-            matches!(e, TrailerFieldError::OutOfRange { name: "k_y", .. }),
-            "{e}"
-        );
-        assert!(t.set("sigma", f64::NAN).is_err());
-        assert_eq!(t.set("no_such", 1.0), Err(TrailerFieldError::Unknown));
+        crate::vehicles::fields::assert_table_covers_every_field(t);
         t.set("a", 7.0).unwrap();
         let e = t.validate().unwrap_err();
         assert!(matches!(e, TrailerFieldError::TailHeavy { .. }), "{e}");

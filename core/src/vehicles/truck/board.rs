@@ -10,6 +10,7 @@ use crate::estimator::pipeline::PipelineParams;
 use crate::model::LinearModel;
 use crate::vehicle::{BoardVehicle, Problem, RecordVehicle, Vehicle, VehicleError, FIELDS};
 use crate::vehicles::car::Param;
+use crate::vehicles::fields::{FieldError, FieldTable};
 use crate::vehicles::truck::{
     HpsError, TruckFieldError, TruckParams, TruckSet, N_STATES, TRUCK_FIELDS,
 };
@@ -74,13 +75,13 @@ impl TruckVehicle {
 /// The truck field's error in the vehicle's words (section `truck`, the field, its range).
 fn truck_error(e: TruckFieldError, t: &TruckParams) -> VehicleError {
     match e {
-        TruckFieldError::OutOfRange {
+        TruckFieldError::Field(FieldError::OutOfRange {
             name,
             value,
             lo,
             hi,
             unit,
-        } => VehicleError {
+        }) => VehicleError {
             section: TRUCK_SECTION,
             name,
             value,
@@ -102,7 +103,7 @@ fn truck_error(e: TruckFieldError, t: &TruckParams) -> VehicleError {
             }),
         },
         // Only from a name that is not in the table; the record's names all are.
-        TruckFieldError::Unknown => VehicleError {
+        TruckFieldError::Field(FieldError::Unknown) => VehicleError {
             section: TRUCK_SECTION,
             name: "?",
             value: f64::NAN,
@@ -147,7 +148,7 @@ impl RecordVehicle for TruckVehicle {
             Some(f) => self
                 .truck
                 .set(f.name, x)
-                .map_err(|e| truck_error(e, &self.truck)),
+                .map_err(|e| truck_error(e.into(), &self.truck)),
             None => match Self::shared().get(i - TRUCK_FIELDS.len()) {
                 Some(f) => self.parts.set(f.section(), f.name, x).map_err(|e| match e {
                     crate::vehicle::SetError::Invalid(v) => v,

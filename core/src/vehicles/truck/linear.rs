@@ -10,6 +10,7 @@ use crate::model::{
     wheel_phase_rad, wheel_yaw_shape, ComplexVector, LinearModel, Matrix, ModeShape, ModeShapeInfo,
     UpdatableModel, UpdateParam,
 };
+use crate::vehicles::fields::FieldTable;
 
 /// Number of states of the truck's linear model.
 pub const N_STATES: usize = 12;

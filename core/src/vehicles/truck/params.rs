@@ -22,6 +22,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::vehicles::fields::{FieldError, FieldTable, ModelField};
 
 use crate::units::G_MPS2;
 
@@ -279,210 +280,57 @@ impl TruckParams {
     }
 }
 
-/// One field of the truck's parameters in a vehicle file: name, unit, plausible range (both
-/// ends included: wide enough for any heavy truck's front axle, narrow enough to reject a typo
-/// by orders of magnitude).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TruckField {
-    /// Field name (`[truck]` section of a vehicle file; the strut's with an `hps_` prefix).
-    pub name: &'static str,
-    /// SI unit.
-    pub unit: &'static str,
-    /// Plausible range (lo, hi).
-    pub range: (f64, f64),
-}
-
 /// Every field of [`TruckParams`], in the order of `docs/mining-truck.md`'s model.
-pub const TRUCK_FIELDS: [TruckField; 32] = [
-    TruckField {
-        name: "i_k",
-        unit: "kg m^2",
-        range: (100.0, 100000.0),
-    },
-    TruckField {
-        name: "i_p",
-        unit: "kg m^2",
-        range: (0.0, 100000.0),
-    },
-    TruckField {
-        name: "r",
-        unit: "m",
-        range: (0.3, 2.5),
-    },
-    TruckField {
-        name: "h_r",
-        unit: "m",
-        range: (0.0, 3.0),
-    },
-    TruckField {
-        name: "sigma",
-        unit: "m",
-        range: (0.05, 5.0),
-    },
-    TruckField {
-        name: "e",
-        unit: "m",
-        range: (0.0, 0.5),
-    },
-    TruckField {
-        name: "t_p",
-        unit: "m",
-        range: (0.0, 0.5),
-    },
-    TruckField {
-        name: "c_a_per_fz",
-        unit: "1/rad",
-        range: (0.5, 30.0),
-    },
-    TruckField {
-        name: "l_t",
-        unit: "m",
-        range: (0.05, 2.0),
-    },
-    TruckField {
-        name: "k_tr",
-        unit: "N m/rad",
-        range: (10000.0, 10000000000.0),
-    },
-    TruckField {
-        name: "c_k",
-        unit: "N m s/rad",
-        range: (0.0, 1000000.0),
-    },
-    TruckField {
-        name: "i_phi",
-        unit: "kg m^2",
-        range: (100.0, 10000000.0),
-    },
-    TruckField {
-        name: "m_axle",
-        unit: "kg",
-        range: (100.0, 100000.0),
-    },
-    TruckField {
-        name: "k_y",
-        unit: "N/m",
-        range: (10000.0, 10000000000.0),
-    },
-    TruckField {
-        name: "c_y",
-        unit: "N s/m",
-        range: (0.0, 100000000.0),
-    },
-    TruckField {
-        name: "track",
-        unit: "m",
-        range: (0.5, 8.0),
-    },
-    TruckField {
-        name: "k_tz",
-        unit: "N/m",
-        range: (10000.0, 1000000000.0),
-    },
-    TruckField {
-        name: "strut_spacing",
-        unit: "m",
-        range: (0.2, 8.0),
-    },
-    TruckField {
-        name: "c_strut",
-        unit: "N s/m",
-        range: (0.0, 100000000.0),
-    },
-    TruckField {
-        name: "hps_v0_m3",
-        unit: "m^3",
-        range: (0.0001, 0.2),
-    },
-    TruckField {
-        name: "hps_p0_pa",
-        unit: "Pa",
-        range: (10000.0, 50000000.0),
-    },
-    TruckField {
-        name: "hps_area_m2",
-        unit: "m^2",
-        range: (0.0001, 1.0),
-    },
-    TruckField {
-        name: "hps_n",
-        unit: "-",
-        range: (1.0, 1.67),
-    },
-    TruckField {
-        name: "j_c",
-        unit: "kg m^2",
-        range: (0.01, 100000.0),
-    },
-    TruckField {
-        name: "k_d",
-        unit: "N m/rad",
-        range: (1000.0, 10000000000.0),
-    },
-    TruckField {
-        name: "k_h",
-        unit: "N m/rad",
-        range: (0.0, 10000000000.0),
-    },
-    TruckField {
-        name: "c_h",
-        unit: "N m s/rad",
-        range: (0.0, 10000000.0),
-    },
-    TruckField {
-        name: "front_empty_kg",
-        unit: "kg",
-        range: (100.0, 500000.0),
-    },
-    TruckField {
-        name: "payload_kg",
-        unit: "kg",
-        range: (0.0, 1000000.0),
-    },
-    TruckField {
-        name: "payload_front_share",
-        unit: "-",
-        range: (0.0, 1.0),
-    },
-    TruckField {
-        name: "mu",
-        unit: "-",
-        range: (0.05, 1.5),
-    },
-    TruckField {
-        name: "c_s",
-        unit: "-",
-        range: (0.5, 3.0),
-    },
+pub const TRUCK_FIELDS: [ModelField; 32] = [
+    ModelField::new("i_k", "kg m^2", 100.0, 100000.0),
+    ModelField::new("i_p", "kg m^2", 0.0, 100000.0),
+    ModelField::new("r", "m", 0.3, 2.5),
+    ModelField::new("h_r", "m", 0.0, 3.0),
+    ModelField::new("sigma", "m", 0.05, 5.0),
+    ModelField::new("e", "m", 0.0, 0.5),
+    ModelField::new("t_p", "m", 0.0, 0.5),
+    ModelField::new("c_a_per_fz", "1/rad", 0.5, 30.0),
+    ModelField::new("l_t", "m", 0.05, 2.0),
+    ModelField::new("k_tr", "N m/rad", 10000.0, 10000000000.0),
+    ModelField::new("c_k", "N m s/rad", 0.0, 1000000.0),
+    ModelField::new("i_phi", "kg m^2", 100.0, 10000000.0),
+    ModelField::new("m_axle", "kg", 100.0, 100000.0),
+    ModelField::new("k_y", "N/m", 10000.0, 10000000000.0),
+    ModelField::new("c_y", "N s/m", 0.0, 100000000.0),
+    ModelField::new("track", "m", 0.5, 8.0),
+    ModelField::new("k_tz", "N/m", 10000.0, 1000000000.0),
+    ModelField::new("strut_spacing", "m", 0.2, 8.0),
+    ModelField::new("c_strut", "N s/m", 0.0, 100000000.0),
+    ModelField::new("hps_v0_m3", "m^3", 0.0001, 0.2),
+    ModelField::new("hps_p0_pa", "Pa", 10000.0, 50000000.0),
+    ModelField::new("hps_area_m2", "m^2", 0.0001, 1.0),
+    ModelField::new("hps_n", "-", 1.0, 1.67),
+    ModelField::new("j_c", "kg m^2", 0.01, 100000.0),
+    ModelField::new("k_d", "N m/rad", 1000.0, 10000000000.0),
+    ModelField::new("k_h", "N m/rad", 0.0, 10000000000.0),
+    ModelField::new("c_h", "N m s/rad", 0.0, 10000000.0),
+    ModelField::new("front_empty_kg", "kg", 100.0, 500000.0),
+    ModelField::new("payload_kg", "kg", 0.0, 1000000.0),
+    ModelField::new("payload_front_share", "-", 0.0, 1.0),
+    ModelField::new("mu", "-", 0.05, 1.5),
+    ModelField::new("c_s", "-", 0.5, 3.0),
 ];
 
 /// Why a truck parameter set is rejected.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum TruckFieldError {
-    /// No field of that name.
-    #[error("no truck field of that name")]
-    Unknown,
-    /// A value outside its field's plausible range (or not finite).
-    #[error("field `{name}` = {value} {unit} is outside {lo} ..= {hi} {unit}")]
-    OutOfRange {
-        /// The field.
-        name: &'static str,
-        /// The value given.
-        value: f64,
-        /// Lower end of the range.
-        lo: f64,
-        /// Upper end of the range.
-        hi: f64,
-        /// The field's unit.
-        unit: &'static str,
-    },
+    /// A field unknown or out of its range.
+    #[error(transparent)]
+    Field(#[from] FieldError),
     /// The struts cannot carry the load at this charge.
     #[error("the struts cannot carry the load: {0}")]
     Strut(HpsError),
 }
 
-impl TruckParams {
-    pub(super) fn field_mut(&mut self, name: &str) -> Option<&mut f64> {
+impl FieldTable for TruckParams {
+    const FIELDS: &'static [ModelField] = &TRUCK_FIELDS;
+
+    fn field_mut(&mut self, name: &str) -> Option<&mut f64> {
         Some(match name {
             "i_k" => &mut self.i_k,
             "i_p" => &mut self.i_p,
@@ -519,47 +367,15 @@ impl TruckParams {
             _ => return None,
         })
     }
+}
 
-    /// The value of the field `name`.
-    pub fn get(&self, name: &str) -> Option<f64> {
-        let mut copy = *self;
-        copy.field_mut(name).map(|v| *v)
-    }
-
-    /// Sets the field `name` to `value` if it is inside the field's range.
-    pub fn set(&mut self, name: &str, value: f64) -> Result<(), TruckFieldError> {
-        let field = TRUCK_FIELDS
-            .iter()
-            .find(|f| f.name == name)
-            .ok_or(TruckFieldError::Unknown)?;
-        check(field, value)?;
-        *self.field_mut(name).ok_or(TruckFieldError::Unknown)? = value;
-        Ok(())
-    }
-
+impl TruckParams {
     /// Every field inside its range, and struts that carry the load (neither topped nor
     /// bottomed out); the first offender.
     pub fn validate(&self) -> Result<(), TruckFieldError> {
-        for f in &TRUCK_FIELDS {
-            check(f, self.get(f.name).ok_or(TruckFieldError::Unknown)?)?;
-        }
+        self.check_ranges()?;
         self.operating_point()
             .map(|_| ())
             .map_err(TruckFieldError::Strut)
-    }
-}
-
-fn check(f: &TruckField, value: f64) -> Result<(), TruckFieldError> {
-    let (lo, hi) = f.range;
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(TruckFieldError::OutOfRange {
-            name: f.name,
-            value,
-            lo,
-            hi,
-            unit: f.unit,
-        })
     }
 }

@@ -4,6 +4,7 @@ mod model {
     use crate::model::{LinearModel, ModeShape};
     use crate::stability::{self, CrossingKind};
     use crate::vehicles::truck::*;
+    use crate::vehicles::FieldTable;
     #[allow(unused_imports)]
     use nalgebra::SVector;
 
@@ -61,26 +62,7 @@ mod model {
     fn the_field_table_covers_every_field_and_checks_ranges() {
         let mut t = TruckSet::Full.params();
         t.validate().unwrap();
-        for f in &TRUCK_FIELDS {
-            let v = t.get(f.name).unwrap();
-            let mid = 0.5 * (f.range.0 + f.range.1);
-            let mut u = t;
-            u.set(f.name, mid).unwrap();
-            assert_eq!(u.get(f.name), Some(mid), "{}", f.name);
-            assert!(u != t || v == mid, "{} sets nothing", f.name);
-        }
-        let e = t.set("hps_v0_m3", 5.0).unwrap_err();
-        assert!(
-            matches!(
-                e,
-                TruckFieldError::OutOfRange {
-                    name: "hps_v0_m3",
-                    ..
-                }
-            ),
-            "{e}"
-        );
-        assert_eq!(t.set("no_such", 1.0), Err(TruckFieldError::Unknown));
+        crate::vehicles::fields::assert_table_covers_every_field(t);
         t.set("hps_p0_pa", 2.0e7).unwrap();
         assert!(matches!(
             t.validate(),
