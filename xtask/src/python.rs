@@ -50,8 +50,13 @@ pub fn ensure_packages(python: &Path, packages: &[(&str, &str)]) -> Result<(), S
 }
 
 /// What the Python tests import besides `shimmy_sim` (pip name, import name).
-const TEST_PACKAGES: &[(&str, &str)] =
-    &[("pytest", "pytest"), ("numpy", "numpy"), ("scipy", "scipy")];
+const TEST_PACKAGES: &[(&str, &str)] = &[
+    ("pytest", "pytest"),
+    ("numpy", "numpy"),
+    ("scipy", "scipy"),
+    ("dask", "dask"),
+    ("distributed", "distributed"),
+];
 
 /// The `shimmy_sim` extension module of [`crate::host_build`], copied under the name Python imports
 /// (`shimmy_sim.so`) into a directory of its own; returns that directory, for `PYTHONPATH`.
