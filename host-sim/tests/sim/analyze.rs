@@ -160,6 +160,7 @@ unit = "ms"
 [yaw]
 column = "steer_deg"
 unit = "deg"
+gain = 1.0
 [speed]
 column = "v_kmh"
 unit = "km/h"
@@ -309,7 +310,7 @@ fn the_command_writes_its_report_and_rejects_bad_logs() {
     // km/h) is read, hashed into the provenance, and overridden by an option (m/s).
     std::fs::write(
         dir.join("m.toml"),
-        "[yaw]\ncolumn = \"psi_l_meas_rad\"\n[speed]\ncolumn = \"speed_mps\"\nunit = \"km/h\"\n",
+        "[yaw]\ncolumn = \"psi_l_meas_rad\"\ngain = 1.0\n[speed]\ncolumn = \"speed_mps\"\nunit = \"km/h\"\n",
     )
     .unwrap();
     ok(&[
