@@ -104,6 +104,13 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
 
     /// A copy with the parameter `name` set to `value`, or an error naming it and its range.
     fn with_param(&self, name: &str, value: f64) -> Result<Self>;
+
+    /// What keeps the plant's right-hand side with `damper` from being three times
+    /// differentiable at straight running, if anything (the Hopf type needs its third
+    /// derivatives, `super::hopf_type`): by default the MR damper (the Bouc-Wen `|z|` terms).
+    fn non_smooth(&self, damper: &Damper) -> Option<&'static str> {
+        matches!(damper, Damper::Mr(_)).then_some("MR damper: Bouc-Wen |z|")
+    }
 }
 
 /// The models a firmware image is built for (those with a [`SimModel::host_app_model`]), for
@@ -172,6 +179,9 @@ pub trait SimPlant {
     fn state_names(&self) -> &'static [&'static str];
     /// Simulated time, s.
     fn time_s(&self) -> f64;
+    /// The right-hand side dx/dt at the whole state `x` ([`Self::state`]'s order) under
+    /// `inputs` held: what [`Self::advance`] integrates (the plant's own state is not used).
+    fn vector_field(&self, x: &[f64], inputs: &Inputs, dx: &mut [f64]);
 }
 
 /// A vehicle of the model `M`: the model's parameters and the sections every model shares, in
