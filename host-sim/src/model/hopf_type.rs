@@ -144,22 +144,7 @@ pub fn first_lyapunov(
     let s = p.dotc(&q);
     p /= s.conj();
     let omega = lambda.im;
-    // the solves of the formula: A^-1 (real) and (2 i omega I - A)^-1 (complex)
-    let a_lu = a.clone().lu();
-    let shifted = (ident * C64::new(0.0, 2.0 * omega) - &ac).lu();
-    let xz = DVector::from_column_slice(x0);
-    let l1_at = |h: f64| -> Option<f64> {
-        let fd = Fd { f, x0: &xz, h };
-        let qb = q.conjugate();
-        let b_qqb = fd.b(&q, &qb)?.map(|z| z.re);
-        let b_qq = fd.b(&q, &q)?;
-        let c_qqqb = fd.c(&q, &q, &qb)?;
-        let r = a_lu.solve(&b_qqb)?.map(|v| C64::new(v, 0.0));
-        let s = shifted.solve(&b_qq)?;
-        let sum = p.dotc(&c_qqqb) - p.dotc(&fd.b(&q, &r)?).scale(2.0) + p.dotc(&fd.b(&qb, &s)?);
-        let l1 = sum.re / (2.0 * omega);
-        l1.is_finite().then_some(l1)
-    };
+    let l1_at = |h: f64| l1_at_step(f, x0, &q, &p, omega, a, h);
     let steps: Vec<(f64, Option<f64>)> = (0..STEPS)
         .map(|k| {
             let h = STEP_MAX * 0.5_f64.powi(k as i32);
@@ -198,20 +183,34 @@ pub fn first_lyapunov_at_step(
     a: &DMatrix<f64>,
     h: f64,
 ) -> Option<f64> {
+    l1_at_step(f, x0, &lyap.q, &lyap.p, lyap.omega(), a, h)
+}
+
+/// Kuznetsov's formula with B and C by differences at step `h`; `None` if a value is not
+/// finite or a solve fails.
+fn l1_at_step(
+    f: &dyn Fn(&[f64], &mut [f64]),
+    x0: &[f64],
+    q: &DVector<C64>,
+    p: &DVector<C64>,
+    omega: f64,
+    a: &DMatrix<f64>,
+    h: f64,
+) -> Option<f64> {
     let n = x0.len();
-    let omega = lyap.omega();
-    let (q, p) = (&lyap.q, &lyap.p);
     let ac = a.map(|v| C64::new(v, 0.0));
-    let shifted = (DMatrix::<C64>::identity(n, n) * C64::new(0.0, 2.0 * omega) - ac).lu();
+    let shifted = DMatrix::<C64>::identity(n, n) * C64::new(0.0, 2.0 * omega) - ac;
     let xz = DVector::from_column_slice(x0);
     let fd = Fd { f, x0: &xz, h };
     let qb = q.conjugate();
+    // A^-1 B(q, q̄) is real; (2 i omega I - A)^-1 B(q, q) complex
     let r = a.clone().lu().solve(&fd.b(q, &qb)?.map(|z| z.re))?;
     let r = r.map(|v| C64::new(v, 0.0));
-    let s = shifted.solve(&fd.b(q, q)?)?;
+    let s = shifted.lu().solve(&fd.b(q, q)?)?;
     let sum =
         p.dotc(&fd.c(q, q, &qb)?) - p.dotc(&fd.b(q, &r)?).scale(2.0) + p.dotc(&fd.b(&qb, &s)?);
-    Some(sum.re / (2.0 * omega))
+    let l1 = sum.re / (2.0 * omega);
+    l1.is_finite().then_some(l1)
 }
 
 /// The unit vector spanning the (numerical) null space of a square matrix: the right singular
