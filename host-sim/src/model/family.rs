@@ -6,7 +6,8 @@
 //! model-margin tracker run on it). [`SimModel`] adds the simulator's side: the nonlinear plant
 //! ([`SimPlant`]: stepped one control period at a time with the MR damper's coil current, the
 //! speed and the disturbances' kingpin yaw torques as held [`Inputs`], the measured wheel yaw
-//! angles out), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
+//! angles out; its right-hand side at held inputs for `super::hopf_type`, with
+//! [`SimModel::non_smooth`] saying when it has no third derivatives), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
 //! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
 //!
 //! Members (`super::members`): the 4-DOF car (`PlantParams`, 10 states) and the 5-DOF mining
