@@ -290,7 +290,7 @@ fn print_hopf_types(crossings: &Crossings, types: &[Result<HopfType, HopfTypeErr
     }
     println!(
         "Hopf type (first Lyapunov coefficient l1 of the nonlinear plant at each crossing, \
-         <q,q> = 1 in SI states; cycle: measured wheel yaw, normal form):"
+         <q,q> = 1 in SI states; cycle: the measured yaw output, normal form):"
     );
     for (x, t) in crossings.iter().zip(types) {
         let head = format!(
