@@ -505,6 +505,18 @@ pub fn dual_axle(
     let text =
         |x: Option<f64>| x.map_or("none in the range".to_string(), |v| format!("{v:.2} km/h"));
     println!("linear (friction-free) Hopf onset: {}", text(lin));
+    if let Some(h) = study::friction_free_hopf_type(t, lo, hi)? {
+        let at = h.speed_mps + h.cycle_side() * kmh_to_mps(1.0);
+        println!(
+            "friction-free Hopf type: {} (l1 = {:.4e}; normal-form cycle {} at {:.2} km/h; \
+             with friction the plant is not smooth: the runs above)",
+            h.criticality().name(),
+            h.lyapunov.l1,
+            h.cycle_amplitude_rad(at)
+                .map_or("-".into(), |a| format!("{:.2} deg", a.to_degrees())),
+            shimmy_core::units::mps_to_kmh(at)
+        );
+    }
     println!(
         "with friction: shimmy from the {} deg start from {}, from the {} deg start from {} \
          (bisection to 0.25 km/h)",

@@ -12,6 +12,8 @@ use shimmy_core::stability::{self, Crossings, ModeSelect, ModeSummary, DEFAULT_T
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 
 use crate::model::damper_equiv::damper_equivalent;
+use crate::model::hopf_type::{hopf_type_at, Criticality, HopfType, HopfTypeError};
+use crate::model::plant::Damper;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::vehicle_file;
 
@@ -93,7 +95,7 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
             );
             println!("stability of straight running: vehicle `{}`", args.vehicle);
             println!("damper: none (F_d = 0)");
-            report(&t, 0.0, args)
+            report(&t, Damper::None, 0.0, args)
         }
     }
 }
@@ -136,11 +138,24 @@ fn with_damper<M: SimModel<N>, const N: usize>(
             args.ref_amplitude_deg
         ),
     }
-    report(&p.linear(), c, args)
+    // the Hopf type is of the plant the crossings are of: the MR damper's own model with a
+    // current, else none
+    let plant_damper = match args.damper_current_a {
+        None => Damper::None,
+        Some(_) => Damper::Mr(parts.damper.spencer),
+    };
+    report(p, plant_damper, c, args)
 }
 
-/// The sweep, the crossings, the table and the files for any model of the family.
-fn report<M: LinearModel<N>, const N: usize>(p: &M, c: f64, args: &StabilityArgs) -> Result<()> {
+/// The sweep, the crossings, their Hopf type, the table and the files for any model of the
+/// family (`damper` the plant's, for the Hopf type; `c` the linear model's).
+fn report<M: SimModel<N>, const N: usize>(
+    m: &M,
+    damper: Damper,
+    c: f64,
+    args: &StabilityArgs,
+) -> Result<()> {
+    let p = &m.linear();
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let rows = sweep(p, c, args.v_min_kmh, args.v_max_kmh, args.step_kmh)?;
     let crossings = stability::hopf_crossings(
@@ -190,12 +205,17 @@ fn report<M: LinearModel<N>, const N: usize>(p: &M, c: f64, args: &StabilityArgs
     }
     println!();
     print_crossings(&crossings, args.v_min_kmh, args.v_max_kmh);
+    let types: Vec<Result<HopfType, HopfTypeError>> = crossings
+        .iter()
+        .map(|x| hopf_type_at(m, damper, x.speed_mps, x.freq_hz))
+        .collect();
+    print_hopf_types(&crossings, &types);
 
     let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("stability.csv");
     write_sweep_csv(&csv, p, c, &rows)?;
     let ccsv = args.out.join("crossings.csv");
-    write_crossings_csv(&ccsv, &crossings)?;
+    write_crossings_csv(&ccsv, &crossings, &types)?;
     let png = args.out.join("stability.png");
     plot(&png, &rows, &crossings, &args.vehicle, c)?;
     println!(
@@ -262,6 +282,52 @@ fn print_crossings(crossings: &Crossings, v_min_kmh: f64, v_max_kmh: f64) {
     }
 }
 
+/// Per crossing: l1 and the type, and the small cycle predicted 1 km/h past it on the side
+/// where it exists.
+fn print_hopf_types(crossings: &Crossings, types: &[Result<HopfType, HopfTypeError>]) {
+    if crossings.is_empty() {
+        return;
+    }
+    println!(
+        "Hopf type (first Lyapunov coefficient l1 of the nonlinear plant at each crossing, \
+         <q,q> = 1 in SI states; cycle: the measured yaw output, normal form):"
+    );
+    for (x, t) in crossings.iter().zip(types) {
+        let head = format!(
+            "  {:<6} at {:>9.4} km/h:",
+            x.kind.name(),
+            mps_to_kmh(x.speed_mps)
+        );
+        match t {
+            Err(e) => println!("{head} {e}"),
+            Ok(h) => {
+                let side = h.cycle_side();
+                let at = h.speed_mps + side * kmh_to_mps(1.0);
+                let amp = h.cycle_amplitude_rad(at).map_or("-".into(), |a| {
+                    format!("{:.4} deg at {:.2} km/h", a.to_degrees(), mps_to_kmh(at))
+                });
+                let what = match h.criticality() {
+                    Criticality::Supercritical => {
+                        "a stable cycle grows from zero on the unstable side"
+                    }
+                    Criticality::Subcritical => {
+                        "an unstable cycle on the stable side: a large enough disturbance \
+                         starts shimmy there"
+                    }
+                    Criticality::Degenerate => "the cubic term does not decide",
+                };
+                println!(
+                    "{head} l1 = {:.4e} (+- {:.1e}), {} ({what}); cycle {amp} \
+                     (~ sqrt|V - V_c|)",
+                    h.lyapunov.l1,
+                    h.lyapunov.l1_err,
+                    h.criticality().name()
+                );
+            }
+        }
+    }
+}
+
 fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
     path: &Path,
     p: &M,
@@ -298,16 +364,38 @@ fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
     crate::sim::files::write_file(path, &f)
 }
 
-fn write_crossings_csv(path: &Path, crossings: &Crossings) -> Result<()> {
+fn write_crossings_csv(
+    path: &Path,
+    crossings: &Crossings,
+    types: &[Result<HopfType, HopfTypeError>],
+) -> Result<()> {
     let mut f = Vec::new();
     writeln!(
         f,
-        "kind,speed_kmh,speed_mps,freq_hz,shape,bracket_mps,converged"
+        "kind,speed_kmh,speed_mps,freq_hz,shape,bracket_mps,converged,hopf_type,l1,l1_err,\
+         dmu_dv_per_m,cycle_side,cycle_amp_deg_1kmh"
     )?;
-    for x in crossings {
+    for (x, t) in crossings.iter().zip(types) {
+        let hopf = match t {
+            Ok(h) => {
+                let side = h.cycle_side();
+                let amp = h
+                    .cycle_amplitude_rad(h.speed_mps + side * kmh_to_mps(1.0))
+                    .map_or(String::new(), |a| format!("{:.6}", a.to_degrees()));
+                format!(
+                    "{},{:.9e},{:.3e},{:.9e},{side},{amp}",
+                    h.criticality().name(),
+                    h.lyapunov.l1,
+                    h.lyapunov.l1_err,
+                    h.dmu_dv
+                )
+            }
+            Err(HopfTypeError::NonSmooth(_)) => "non-smooth,,,,,".into(),
+            Err(_) => "failed,,,,,".into(),
+        };
         writeln!(
             f,
-            "{},{:.6},{:.8},{:.6},{},{:.3e},{}",
+            "{},{:.6},{:.8},{:.6},{},{:.3e},{},{hopf}",
             x.kind.name(),
             mps_to_kmh(x.speed_mps),
             x.speed_mps,

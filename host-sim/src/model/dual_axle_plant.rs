@@ -562,6 +562,14 @@ impl super::family::SimPlant for DualAxlePlant {
     fn time_s(&self) -> f64 {
         self.t_s
     }
+
+    fn vector_field(&self, x: &[f64], inputs: &super::plant::Inputs, dx: &mut [f64]) {
+        let mut s = [0.0; N_SIM];
+        s.copy_from_slice(x);
+        let mut ds = [0.0; N_SIM];
+        self.rhs(&s, inputs, &mut ds);
+        dx.copy_from_slice(&ds);
+    }
 }
 
 impl super::family::SimModel<N_STATES> for DualAxleParams {
@@ -640,6 +648,16 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
                 super::family::param_names::<Self, N_STATES>()
             ),
             Err(e) => anyhow::bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
+        }
+    }
+
+    /// The kingpins' dry friction (smoothed for the integrator, but a Coulomb torque in the
+    /// model), and the MR damper's Bouc-Wen `|z|`.
+    fn non_smooth(&self, damper: &super::plant::Damper) -> Option<&'static str> {
+        if self.m_f > 0.0 {
+            Some("kingpin dry friction")
+        } else {
+            matches!(damper, super::plant::Damper::Mr(_)).then_some("MR damper: Bouc-Wen |z|")
         }
     }
 }

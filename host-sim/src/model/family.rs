@@ -6,7 +6,8 @@
 //! model-margin tracker run on it). [`SimModel`] adds the simulator's side: the nonlinear plant
 //! ([`SimPlant`]: stepped one control period at a time with the MR damper's coil current, the
 //! speed and the disturbances' kingpin yaw torques as held [`Inputs`], the measured wheel yaw
-//! angles out), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
+//! angles out; its right-hand side at held inputs for `super::hopf_type`, with
+//! [`SimModel::non_smooth`] saying when it has no third derivatives), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
 //! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
 //!
 //! Members (`super::members`): the 4-DOF car (`PlantParams`, 10 states) and the 5-DOF mining
@@ -104,6 +105,13 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
 
     /// A copy with the parameter `name` set to `value`, or an error naming it and its range.
     fn with_param(&self, name: &str, value: f64) -> Result<Self>;
+
+    /// What keeps the plant's right-hand side with `damper` from being three times
+    /// differentiable at straight running, if anything (the Hopf type needs its third
+    /// derivatives, `super::hopf_type`): by default the MR damper (the Bouc-Wen `|z|` terms).
+    fn non_smooth(&self, damper: &Damper) -> Option<&'static str> {
+        matches!(damper, Damper::Mr(_)).then_some("MR damper: Bouc-Wen |z|")
+    }
 }
 
 /// The models a firmware image is built for (those with a [`SimModel::host_app_model`]), for
@@ -172,6 +180,9 @@ pub trait SimPlant {
     fn state_names(&self) -> &'static [&'static str];
     /// Simulated time, s.
     fn time_s(&self) -> f64;
+    /// The right-hand side dx/dt at the whole state `x` ([`Self::state`]'s order) under
+    /// `inputs` held: what [`Self::advance`] integrates (the plant's own state is not used).
+    fn vector_field(&self, x: &[f64], inputs: &Inputs, dx: &mut [f64]);
 }
 
 /// A vehicle of the model `M`: the model's parameters and the sections every model shares, in

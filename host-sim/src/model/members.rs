@@ -70,6 +70,14 @@ impl SimPlant for Simulator {
     fn time_s(&self) -> f64 {
         Simulator::time_s(self)
     }
+
+    fn vector_field(&self, x: &[f64], inputs: &Inputs, dx: &mut [f64]) {
+        let mut s = [0.0; super::plant::N_STATE];
+        s.copy_from_slice(x);
+        let mut d = [0.0; super::plant::N_STATE];
+        self.plant().rhs(&s, inputs, &mut d);
+        dx.copy_from_slice(&d);
+    }
 }
 
 /// The tyre yaw stiffness `(e + t_p) C_a` the scenario files' disturbances are written for (the

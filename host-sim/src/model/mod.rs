@@ -10,6 +10,7 @@ pub mod disturbance;
 pub mod dual_axle_plant;
 pub mod family;
 pub mod faults;
+pub mod hopf_type;
 pub mod integrator;
 pub mod members;
 pub mod plant;

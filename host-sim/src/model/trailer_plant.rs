@@ -364,6 +364,16 @@ impl SimPlant for TrailerPlant {
     fn time_s(&self) -> f64 {
         self.t_s
     }
+
+    fn vector_field(&self, x: &[f64], inputs: &Inputs, dx: &mut [f64]) {
+        let mut at_speed = self.clone();
+        at_speed.a = self.a0 + self.da * inputs.speed_mps;
+        let mut s = [0.0; N_SIM];
+        s.copy_from_slice(x);
+        let mut ds = [0.0; N_SIM];
+        at_speed.rhs(&s, inputs, &mut ds);
+        dx.copy_from_slice(&ds);
+    }
 }
 
 impl SimModel<N_STATES> for TrailerParams {

@@ -329,6 +329,16 @@ impl SimPlant for TruckPlant {
     fn time_s(&self) -> f64 {
         self.t_s
     }
+
+    fn vector_field(&self, x: &[f64], inputs: &Inputs, dx: &mut [f64]) {
+        let mut d = self.dynamics.clone();
+        d.a = self.a0 + self.da * inputs.speed_mps;
+        let mut s = [0.0; N_SIM];
+        s.copy_from_slice(x);
+        let mut ds = [0.0; N_SIM];
+        d.rhs(&s, inputs, &mut ds);
+        dx.copy_from_slice(&ds);
+    }
 }
 
 /// Growth rate of the wheel-yaw envelope, 1/s: the log ratio of the largest |psi_L + psi_R|/2

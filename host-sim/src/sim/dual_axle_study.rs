@@ -124,6 +124,36 @@ pub fn linear_onset_kmh(t: &DualAxleParams, lo_kmh: f64, hi_kmh: f64) -> Result<
         .map(|c| mps_to_kmh(c.speed_mps)))
 }
 
+/// The Hopf type of the friction-free truck (`m_f` = 0) at its linear onset in `lo..hi` km/h
+/// (`model::hopf_type`; with friction the plant is not smooth and has no l1); `None` without
+/// an onset there.
+pub fn friction_free_hopf_type(
+    t: &DualAxleParams,
+    lo_kmh: f64,
+    hi_kmh: f64,
+) -> Result<Option<crate::model::hopf_type::HopfType>> {
+    let cs = stability::hopf_crossings(
+        t,
+        0.0,
+        kmh_to_mps(lo_kmh),
+        kmh_to_mps(hi_kmh),
+        kmh_to_mps(1.0),
+        DEFAULT_TOL_MPS,
+    )
+    .context("Hopf search")?;
+    let Some(c) = cs.iter().find(|c| c.kind == CrossingKind::Onset) else {
+        return Ok(None);
+    };
+    let free = DualAxleParams { m_f: 0.0, ..*t };
+    let ty = crate::model::hopf_type::hopf_type_at(
+        &free,
+        crate::model::plant::Damper::None,
+        c.speed_mps,
+        c.freq_hz,
+    )?;
+    Ok(Some(ty))
+}
+
 /// The lowest speed in `lo..hi` km/h at which a start of `deg` ends in shimmy with friction
 /// on, by bisection to `tol_kmh` (assuming no shimmy at `lo` and shimmy from the answer up to
 /// `hi`); `None` when it does not shimmy at `hi`.

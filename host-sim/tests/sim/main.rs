@@ -11,6 +11,7 @@ mod device_link;
 mod faults;
 mod files;
 mod golden;
+mod hopf_type;
 mod markdown_tables;
 mod meter_accuracy;
 mod plant_time_domain;
