@@ -1,6 +1,6 @@
 //! The type of a Hopf bifurcation from the nonlinear right-hand side: the first Lyapunov
 //! coefficient l1 at an equilibrium whose Jacobian has a pair `+-i omega`, and the small
-//! limit cycle the normal form predicts near it (`docs/simulator.md`, "Hopf type").
+//! limit cycle the normal form predicts near it (`docs/plant-model.md`, "Hopf type").
 //!
 //! l1 is Kuznetsov's projection formula (Elements of Applied Bifurcation Theory, 3rd ed.,
 //! eq. 3.20, the n-dimensional form):
