@@ -44,7 +44,7 @@ fn value_error(e: impl Into<anyhow::Error>) -> PyErr {
 
 /// A validated vehicle: plant, damper, sensors, controller gains, warning thresholds
 /// (`docs/vehicle-file.md`).
-#[pyclass(module = "shimmy", from_py_object)]
+#[pyclass(module = "shimmy_sim", from_py_object)]
 #[derive(Clone)]
 struct Vehicle {
     inner: core_vehicle::Vehicle,
