@@ -1,5 +1,5 @@
 //! The board's memory in flash: the vehicle configuration and the event log, safe against power
-//! cuts (issue 23).
+//! cuts.
 //!
 //! - Configuration: the core's vehicle record ([`Vehicle::encode_record`](shimmy_core::vehicle::Vehicle::encode_record): schema id over the
 //!   field table, every field as an f64, validated whole by [`Vehicle::decode_record`](shimmy_core::vehicle::Vehicle::decode_record))

@@ -299,7 +299,7 @@ pub fn settles_no_later(a_s: f64, b_s: f64) -> bool {
     a_s <= 1.05 * b_s + 0.02
 }
 
-/// The acceptance checks of issue 4, as lines of text (and whether all passed).
+/// The controllers' acceptance checks, as lines of text (and whether all passed).
 pub fn verdict<M: SimModel<N>, const N: usize>(
     rows: &[RunRow],
     specs: &[ScenarioSpec<M, N>],
@@ -477,7 +477,7 @@ pub fn margin_verdict<M: SimModel<N>, const N: usize>(
         lines.push_str(&format!(
             "{sc:<22} margin-asmc: {}\n",
             if ok {
-                "all issue-19 targets met".to_string()
+                "all margin-scheduled ASMC targets met".to_string()
             } else {
                 format!("MISSED: {}", missed.join("; "))
             }
@@ -654,9 +654,9 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     println!("{ver}");
     let (mtab, mver, mall) = margin_verdict(&rows, &specs);
     if !mver.is_empty() {
-        println!("margin-scheduled ASMC (issue 19):\n\n{mtab}\n{mver}");
+        println!("margin-scheduled ASMC:\n\n{mtab}\n{mver}");
         println!(
-            "issue-19 targets: {}",
+            "margin-scheduled ASMC targets: {}",
             if mall {
                 "all met"
             } else {

@@ -1,4 +1,4 @@
-//! `shimmy-sim margin`: the open-loop eigenvalue-margin demonstration (issue 5, "what to show").
+//! `shimmy-sim margin`: the open-loop eigenvalue-margin demonstration.
 //!
 //! The run itself (plant, disturbances, pipeline, true eigenvalues) is
 //! [`crate::sim::margin_run`]; this command prints the report once a second next to the true

@@ -1,4 +1,4 @@
-//! `shimmy-sim meter-accuracy`: the mode meter's accuracy on the simulated plant (issue 14).
+//! `shimmy-sim meter-accuracy`: the mode meter's accuracy on the simulated plant.
 //!
 //! The vehicle's nonlinear plant (the car's 10-state plant or the mining truck's, any
 //! [`SimModel`]; Magic-Formula tyres) runs open loop at constant speed with
@@ -48,7 +48,7 @@ pub const SEEDS: Range = Range::closed(1.0, 1000.0, "seeds");
 /// Recorded time per run after the warm-up: 10 to 3600 s.
 pub const RECORD_S: Range = Range::closed(10.0, 3600.0, "s");
 
-/// Targets of issue 14.
+/// The meter's accuracy targets.
 pub const MAX_ABS_BIAS_B: f64 = 0.5;
 /// Largest spread, in b.
 pub const MAX_SPREAD_B: f64 = 1.5;

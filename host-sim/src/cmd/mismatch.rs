@@ -1,4 +1,4 @@
-//! `shimmy-sim mismatch`: does the warning survive a model that is wrong? (issue 14)
+//! `shimmy-sim mismatch`: does the warning survive a model that is wrong?
 //!
 //! The pipeline's model is the `--vehicle` (nominal by default); the simulated plant differs: on
 //! the car each of C_a, sigma, K_d, e, t_p and the load -20 % and +20 % (the load scales F_z and

@@ -1,4 +1,4 @@
-//! The mining truck through every command (issue 21): `meter-accuracy`, `mismatch`, `report`,
+//! The mining truck through every command: `meter-accuracy`, `mismatch`, `report`,
 //! `compare` and the demo each run on a truck vehicle file (short settings, the built binary)
 //! and write their outputs; and the truck's warning thresholds, on a plant that differs from the
 //! pipeline's model, warn before the onset on a ramp and not at all on a constant drive at 70 %

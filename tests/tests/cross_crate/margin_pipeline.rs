@@ -82,7 +82,7 @@ mod wrong_model {
     }
 
     /// The pipeline with the data correction switched off: data and model always "agree",
-    /// so the margin is the (wrong) model's alone, as before issue 14.
+    /// so the margin is the (wrong) model's alone.
     fn model_only() -> PipelineParams {
         let mut pp = PipelineParams::default();
         pp.fusion.mismatch_sigmas = f32::INFINITY;
