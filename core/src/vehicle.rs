@@ -568,8 +568,8 @@ pub enum SetError {
 pub fn find_field(section: &str, name: &str) -> Option<&'static Field> {
     FIELDS
         .iter()
-        // the name first: it tells the fields apart nearly always, the section lookup is then
-        // paid once (a truck record's load 308,933 -> 205,598 instructions, `cargo xtask bench`)
+        // the name first: it tells the fields apart nearly always, so the costlier section
+        // lookup is paid about once per call
         .find(|f| f.name == name && f.section() == section)
 }
 
