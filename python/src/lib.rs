@@ -31,8 +31,9 @@ use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
 use shimmy_core::vehicles::car::{Param, PlantParams};
 use shimmy_core::vehicles::dual_axle::DualAxleParams;
+use shimmy_core::vehicles::trailer::TrailerParams;
 use shimmy_core::vehicles::truck::TruckParams;
-use shimmy_core::vehicles::{FieldError, FieldTable};
+use shimmy_core::vehicles::{FieldError, FieldTable, ModelField};
 use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
@@ -375,23 +376,48 @@ fn unknown_field(section: &str, name: &str) -> PyErr {
     ))
 }
 
-/// The field table: one dict per field (section, name, unit, lo, hi, integer, doc).
+/// The field table of `vehicle`'s model (default: the car's), the fields [`Vehicle::fields`]
+/// lists: one dict per field (section, name, unit, lo, hi, integer, doc; a model's own section
+/// has no doc: None).
 #[pyfunction]
-fn field_table(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
-    FIELDS
-        .iter()
-        .map(|f| {
-            let d = PyDict::new(py);
-            d.set_item("section", f.section())?;
-            d.set_item("name", f.name)?;
-            d.set_item("unit", f.unit())?;
-            d.set_item("lo", f.lo)?;
-            d.set_item("hi", f.hi)?;
-            d.set_item("integer", f.integer)?;
-            d.set_item("doc", f.doc)?;
-            Ok(d)
-        })
-        .collect()
+#[pyo3(signature = (vehicle = None))]
+fn field_table<'py>(
+    py: Python<'py>,
+    vehicle: Option<&Vehicle>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let car = ModelVehicle::Car(core_vehicle::Vehicle::nominal());
+    let v = vehicle.map_or(&car, |v| &v.inner);
+    let own: &[ModelField] = match v {
+        ModelVehicle::Car(_) => &[],
+        ModelVehicle::Truck(_) => TruckParams::FIELDS,
+        ModelVehicle::DualAxle(_) => DualAxleParams::FIELDS,
+        ModelVehicle::Trailer(_) => TrailerParams::FIELDS,
+    };
+    let mut rows = Vec::new();
+    for f in own {
+        let d = PyDict::new(py);
+        d.set_item("section", model_section(v))?;
+        d.set_item("name", f.name)?;
+        d.set_item("unit", f.unit)?;
+        d.set_item("lo", f.range.0)?;
+        d.set_item("hi", f.range.1)?;
+        d.set_item("integer", false)?;
+        d.set_item("doc", py.None())?;
+        rows.push(d);
+    }
+    let shared = shared_sections(v);
+    for f in FIELDS.iter().filter(|f| shared.contains(&f.section())) {
+        let d = PyDict::new(py);
+        d.set_item("section", f.section())?;
+        d.set_item("name", f.name)?;
+        d.set_item("unit", f.unit())?;
+        d.set_item("lo", f.lo)?;
+        d.set_item("hi", f.hi)?;
+        d.set_item("integer", f.integer)?;
+        d.set_item("doc", f.doc)?;
+        rows.push(d);
+    }
+    Ok(rows)
 }
 
 /// `$body` with `$m` the vehicle's model (a [`SimModel`]) and `$parts` its shared sections

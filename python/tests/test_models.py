@@ -184,3 +184,18 @@ def test_the_damper_moves_the_trucks_window():
     assert bare
     assert [(c["kind"], round(c["speed_kmh"], 3)) for c in damped] != [
         (c["kind"], round(c["speed_kmh"], 3)) for c in bare]
+
+
+@pytest.mark.parametrize("name", ["nominal", "truck-full", "truck-empty", "dual-axle", "trailer"])
+def test_fields_are_the_models_table(name):
+    """`fields()` lists exactly the rows of the model's `field_table`, each inside its range."""
+    v = shimmy_sim.Vehicle(name)
+    table = shimmy_sim.field_table(v)
+    fields = v.fields()
+    assert sorted(f"{f['section']}.{f['name']}" for f in table) == sorted(fields)
+    for f in table:
+        assert f["lo"] <= fields[f"{f['section']}.{f['name']}"] <= f["hi"], f
+    # a value past the row's range is refused naming the field
+    f = table[0]
+    with pytest.raises(ValueError, match=rf"{f['section']}\.{f['name']}"):
+        v.set(f"{f['section']}.{f['name']}", f["hi"] * 2 + 1)
