@@ -1,10 +1,12 @@
 //! `shimmy_sim` for Python (PyO3; on PyPI `shimmy-sim`: `shimmy` is another project's name there): the simulator's library functions with NumPy arrays in and out.
 //!
-//! - `Vehicle`: load and validate a vehicle (a named set or a vehicle file, the same loader
-//!   as `shimmy-sim --vehicle`), read and set fields by `section.name` through the core's one
-//!   validation, the plant parameters as a dict (the names of `host-sim/reference/plant_scipy.py`).
-//! - `hopf_window`: the Hopf crossings of the linearised plant (`shimmy-sim stability`).
-//! - `eigen_sweep`: least-damped / critical mode at given speeds, as arrays.
+//! - `Vehicle`: load and validate a vehicle of any model (a named set or a vehicle file, the
+//!   same loader as `shimmy-sim --vehicle`), read and set the fields of its model's table by
+//!   `section.name` through the validation of a vehicle file, the car's plant parameters as a
+//!   dict (the names of `host-sim/reference/plant_scipy.py`).
+//! - `hopf_window`: the Hopf crossings of the linearised plant of any model (`shimmy-sim
+//!   stability`).
+//! - `eigen_sweep`: least-damped / critical mode at given speeds, as arrays, any model.
 //! - `run_scenario` / `run_scenario_toml`: one closed-loop scenario run (`shimmy-sim run`), its
 //!   trace and mode-meter rows as arrays and its metrics.
 //! - `analyze`: the mode meter, fusion and monitor on a measured log (`shimmy-sim analyze`,
@@ -23,18 +25,25 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::stability::{self, ModeSelect, DEFAULT_TOL_MPS};
+use shimmy_core::model::LinearModel;
+use shimmy_core::stability::{self, Crossings, ModeSelect, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
-use shimmy_core::vehicles::car::Param;
+use shimmy_core::vehicles::car::{Param, PlantParams};
+use shimmy_core::vehicles::dual_axle::DualAxleParams;
+use shimmy_core::vehicles::trailer::TrailerParams;
+use shimmy_core::vehicles::truck::TruckParams;
+use shimmy_core::vehicles::{FieldError, FieldTable, ModelField};
 use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
+use shimmy_sim::model::family::SimModel;
 use shimmy_sim::sim::analyze::{self as sim_analyze, Analysis, AnalysisRow, AnalyzeOptions};
 use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
 use shimmy_sim::sim::closed_loop::{LoopResult, RunMetrics};
 use shimmy_sim::sim::log_file::{self, MappingChanges};
 use shimmy_sim::sim::scenario::ScenarioSpec;
+use shimmy_sim::sim::vehicle_file::ModelVehicle;
 use shimmy_sim::sim::{scenario, scenario_file, vehicle_file};
 
 /// The Rust error as a Python `ValueError` with the whole context chain.
@@ -42,50 +51,82 @@ fn value_error(e: impl Into<anyhow::Error>) -> PyErr {
     PyValueError::new_err(format!("{:#}", e.into()))
 }
 
-/// A validated vehicle: plant, damper, sensors, controller gains, warning thresholds
-/// (`docs/vehicle-file.md`).
+/// A validated vehicle of any model of the family (`docs/vehicle-file.md`): the car's whole
+/// vehicle, or another model's parameters with the shared sections it has.
 #[pyclass(module = "shimmy_sim", from_py_object)]
 #[derive(Clone)]
 struct Vehicle {
-    inner: core_vehicle::Vehicle,
+    inner: ModelVehicle,
 }
 
 #[pymethods]
 impl Vehicle {
-    /// A named set (`nominal`, `gentle`, `hard`) or the path of a vehicle file (TOML).
+    /// A named set of any model (`nominal`, `gentle`, `hard`, `truck-full`, `truck-empty`,
+    /// `dual-axle`, `trailer`, ...) or the path of a vehicle file (TOML, its `model` key).
     #[new]
     #[pyo3(signature = (spec = "nominal"))]
     fn new(spec: &str) -> PyResult<Self> {
-        vehicle_file::load(spec)
+        vehicle_file::load_model(spec)
             .map(|inner| Self { inner })
             .map_err(value_error)
     }
 
-    /// A vehicle from the TOML text of a vehicle file.
+    /// A vehicle from the TOML text of a vehicle file of any model.
     #[staticmethod]
     fn from_toml(text: &str) -> PyResult<Self> {
-        vehicle_file::parse(text)
+        vehicle_file::parse_model(text)
             .map(|inner| Self { inner })
             .map_err(value_error)
     }
 
-    /// The value of `field` (`"plant.k_d"`), in the unit of the field table.
-    fn get(&self, field: &str) -> PyResult<f64> {
-        let (section, name) = split_field(field)?;
-        core_vehicle::find_field(section, name)
-            .map(|f| self.inner.get(f))
-            .ok_or_else(|| unknown_field(section, name))
+    /// The model's name (`car-4dof`, `mining-truck-5dof`, `dual-axle-truck-8dof`,
+    /// `trailer-2dof`).
+    #[getter]
+    fn model(&self) -> &'static str {
+        self.inner.model_name()
     }
 
-    /// Sets `field` (`"plant.k_d"`) to `value`; the field's range and the whole vehicle are
-    /// checked, and on an error nothing changes.
+    /// The value of `field` (`"plant.k_d"`, `"truck.k_d"`), in the unit of the field table.
+    fn get(&self, field: &str) -> PyResult<f64> {
+        let (section, name) = split_field(&self.inner, field)?;
+        match (&self.inner, model_section(&self.inner)) {
+            (ModelVehicle::Truck(t), Some(s)) if section == s => model_get(&t.model, s, name),
+            (ModelVehicle::DualAxle(t), Some(s)) if section == s => model_get(&t.model, s, name),
+            (ModelVehicle::Trailer(t), Some(s)) if section == s => model_get(t, s, name),
+            (v, _) if shared_sections(v).contains(&section) => {
+                let parts = parts(v).ok_or_else(|| no_section(v, section))?;
+                core_vehicle::find_field(section, name)
+                    .map(|f| parts.get(f))
+                    .ok_or_else(|| unknown_field(section, name))
+            }
+            (v, _) => Err(no_section(v, section)),
+        }
+    }
+
+    /// Sets `field` (`"plant.k_d"`, `"truck.k_d"`) to `value`; the field's range and the whole
+    /// vehicle are checked (as in a vehicle file), and on an error nothing changes.
     fn set(&mut self, field: &str, value: f64) -> PyResult<()> {
-        let (section, name) = split_field(field)?;
-        let mut v = self.inner;
-        vehicle_file::set_field(&mut v, section, section, name, value).map_err(value_error)?;
-        v.validate().map_err(value_error)?;
-        self.inner = v;
-        Ok(())
+        let (section, name) = split_field(&self.inner, field)?;
+        let shared = shared_sections(&self.inner).contains(&section);
+        let own = model_section(&self.inner) == Some(section);
+        // the messages of the vehicle file's reader (`vehicle_file::parse_model`)
+        let r = match &mut self.inner {
+            ModelVehicle::Truck(t) if own => model_set(&mut t.model, section, name, value, |t| {
+                t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))
+            }),
+            ModelVehicle::DualAxle(t) if own => {
+                model_set(&mut t.model, section, name, value, |t| {
+                    t.validate().map_err(|e| prefixed(e, section))
+                })
+            }
+            ModelVehicle::Trailer(t) if own => model_set(t, section, name, value, |t| {
+                t.validate().map_err(|e| prefixed(e, section))
+            }),
+            ModelVehicle::Car(v) if shared => set_shared(v, section, name, value),
+            ModelVehicle::Truck(t) if shared => set_shared(&mut t.parts, section, name, value),
+            v => return Err(no_section(v, section)),
+        };
+        r.map_err(value_error)
     }
 
     /// A copy with the fields of `changes` (`{"plant.k_d": 5000.0, ...}`) set.
@@ -97,56 +138,233 @@ impl Vehicle {
         Ok(out)
     }
 
-    /// Every field as `{"section.name": value}`, in the order of the field table.
+    /// Every field of the vehicle's model as `{"section.name": value}` (the model's own
+    /// section, then the shared sections its vehicle files take).
     fn fields(&self) -> BTreeMap<String, f64> {
-        FIELDS
-            .iter()
-            .map(|f| (format!("{}.{}", f.section(), f.name), self.inner.get(f)))
-            .collect()
+        let mut out = match &self.inner {
+            ModelVehicle::Truck(t) => model_fields("truck", &t.model),
+            ModelVehicle::DualAxle(t) => model_fields("dual_axle", &t.model),
+            ModelVehicle::Trailer(t) => model_fields("trailer", t),
+            ModelVehicle::Car(_) => BTreeMap::new(),
+        };
+        if let Some(parts) = parts(&self.inner) {
+            let sections = shared_sections(&self.inner);
+            out.extend(
+                FIELDS
+                    .iter()
+                    .filter(|f| sections.contains(&f.section()))
+                    .map(|f| (format!("{}.{}", f.section(), f.name), parts.get(f))),
+            );
+        }
+        out
     }
 
-    /// The plant parameters by their names in `shimmy_core::vehicles::car` (and in
-    /// `host-sim/reference/plant_scipy.py`), SI units.
-    fn plant(&self) -> BTreeMap<&'static str, f64> {
-        Param::ALL
+    /// The car's plant parameters by their names in `shimmy_core::vehicles::car` (and in
+    /// `host-sim/reference/plant_scipy.py`), SI units; the car only (another model's are its
+    /// section of [`Vehicle::fields`]).
+    fn plant(&self) -> PyResult<BTreeMap<&'static str, f64>> {
+        let v = self.car("plant()")?;
+        Ok(Param::ALL
             .into_iter()
-            .map(|q| (q.name(), self.inner.plant.get(q)))
-            .collect()
+            .map(|q| (q.name(), v.plant.get(q)))
+            .collect())
     }
 
     /// The MR damper (Spencer model, scaled to the steering damper) by the names of the
-    /// reference's `[damper]` section (`host-sim/reference/plant_scipy.py`).
-    fn damper(&self) -> BTreeMap<&'static str, f64> {
-        spencer_fields(&self.inner.damper.spencer)
-            .into_iter()
-            .collect()
+    /// reference's `[damper]` section (`host-sim/reference/plant_scipy.py`); a model without
+    /// an MR damper (the trailer) is refused.
+    fn damper(&self) -> PyResult<BTreeMap<&'static str, f64>> {
+        let parts = self.damped("damper()")?;
+        Ok(spencer_fields(&parts.damper.spencer).into_iter().collect())
     }
 
-    /// The coil rating (largest allowed current), A.
+    /// The coil rating (largest allowed current), A; a model without an MR damper (the
+    /// trailer) is refused.
     #[getter]
-    fn rated_current_a(&self) -> f64 {
-        f64::from(self.inner.rated_current_a())
+    fn rated_current_a(&self) -> PyResult<f64> {
+        Ok(f64::from(self.damped("rated_current_a")?.rated_current_a()))
     }
 
     fn __repr__(&self) -> String {
-        format!(
-            "Vehicle(k_d={} N m/rad, c_a={} N/rad, rated_current_a={} A)",
-            self.inner.plant.k_d,
-            self.inner.plant.c_a,
-            self.rated_current_a()
-        )
+        match &self.inner {
+            ModelVehicle::Car(v) => format!(
+                "Vehicle(model={}, k_d={} N m/rad, c_a={} N/rad, rated_current_a={} A)",
+                self.model(),
+                v.plant.k_d,
+                v.plant.c_a,
+                v.rated_current_a()
+            ),
+            other => format!("Vehicle(model={})", other.model_name()),
+        }
     }
 
     fn __eq__(&self, other: &Self) -> bool {
-        self.inner == other.inner
+        match (&self.inner, &other.inner) {
+            (ModelVehicle::Car(a), ModelVehicle::Car(b)) => a == b,
+            (ModelVehicle::Truck(a), ModelVehicle::Truck(b)) => a == b,
+            (ModelVehicle::DualAxle(a), ModelVehicle::DualAxle(b)) => a == b,
+            (ModelVehicle::Trailer(a), ModelVehicle::Trailer(b)) => a == b,
+            _ => false,
+        }
     }
 }
 
-fn split_field(field: &str) -> PyResult<(&str, &str)> {
+impl Vehicle {
+    /// The car's vehicle, or a `ValueError` naming this vehicle's model for `what`, a
+    /// function of the car only.
+    fn car(&self, what: &str) -> PyResult<&core_vehicle::Vehicle> {
+        match &self.inner {
+            ModelVehicle::Car(v) => Ok(v),
+            other => Err(PyValueError::new_err(format!(
+                "{what}: the vehicle is a {} model; supported for the {} model only",
+                other.model_name(),
+                PlantParams::NAME
+            ))),
+        }
+    }
+
+    /// The shared sections of a model with an MR damper, or a `ValueError` for `what`.
+    fn damped(&self, what: &str) -> PyResult<&core_vehicle::Vehicle> {
+        parts(&self.inner).ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "{what}: the {} model has no MR damper; supported for {}, {} and {}",
+                self.inner.model_name(),
+                PlantParams::NAME,
+                TruckParams::NAME,
+                DualAxleParams::NAME
+            ))
+        })
+    }
+}
+
+/// The model's own section of the field table (the car has none: its plant is `[plant]`).
+fn model_section(v: &ModelVehicle) -> Option<&'static str> {
+    match v {
+        ModelVehicle::Car(_) => None,
+        ModelVehicle::Truck(_) => Some("truck"),
+        ModelVehicle::DualAxle(_) => Some("dual_axle"),
+        ModelVehicle::Trailer(_) => Some("trailer"),
+    }
+}
+
+/// The shared sections a vehicle file of the model sets (the car: all; the truck: all but
+/// `plant`, which is its `[truck]`; the dual-axle truck and the trailer: none, their files
+/// take their own section only).
+fn shared_sections(v: &ModelVehicle) -> &'static [&'static str] {
+    // a static: a slice of the const table would borrow a temporary
+    static SECTIONS: [&str; core_vehicle::SECTIONS.len()] = core_vehicle::SECTIONS;
+    match v {
+        ModelVehicle::Car(_) => &SECTIONS,
+        ModelVehicle::Truck(_) => &SECTIONS[1..],
+        ModelVehicle::DualAxle(_) | ModelVehicle::Trailer(_) => &[],
+    }
+}
+
+/// The shared sections (damper, sensors, gains, thresholds) of a model with an MR damper.
+fn parts(v: &ModelVehicle) -> Option<&core_vehicle::Vehicle> {
+    match v {
+        ModelVehicle::Car(v) => Some(v),
+        ModelVehicle::Truck(t) => Some(&t.parts),
+        ModelVehicle::DualAxle(t) => Some(&t.parts),
+        ModelVehicle::Trailer(_) => None,
+    }
+}
+
+/// Every section a field of the model's vehicle may name.
+fn sections_of(v: &ModelVehicle) -> Vec<&'static str> {
+    model_section(v)
+        .into_iter()
+        .chain(shared_sections(v).iter().copied())
+        .collect()
+}
+
+fn no_section(v: &ModelVehicle, section: &str) -> PyErr {
+    PyValueError::new_err(format!(
+        "section `{section}`: no such section for model {}, allowed: {}",
+        v.model_name(),
+        sections_of(v).join(", ")
+    ))
+}
+
+/// The field `name` of a model's own section.
+fn model_get<T: FieldTable>(t: &T, section: &str, name: &str) -> PyResult<f64> {
+    t.get(name).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "field `{section}.{name}`: no such field, allowed in `{section}`: {}",
+            field_list::<T>()
+        ))
+    })
+}
+
+/// Sets the field `name` of a model's own section, then `validate`s the whole; on an error
+/// `t` is unchanged.
+fn model_set<T: FieldTable>(
+    t: &mut T,
+    section: &str,
+    name: &str,
+    x: f64,
+    validate: impl Fn(&T) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let mut u = *t;
+    match u.set(name, x) {
+        Ok(()) => {}
+        Err(FieldError::Unknown) => anyhow::bail!(
+            "field `{section}.{name}`: no such field, allowed in `{section}`: {}",
+            field_list::<T>()
+        ),
+        Err(e) => return Err(prefixed(e, section)),
+    }
+    validate(&u)?;
+    *t = u;
+    Ok(())
+}
+
+/// Sets a field of the shared sections through the core's validation; on an error `v` is
+/// unchanged.
+fn set_shared(
+    v: &mut core_vehicle::Vehicle,
+    section: &str,
+    name: &str,
+    x: f64,
+) -> anyhow::Result<()> {
+    let mut u = *v;
+    vehicle_file::set_field(&mut u, section, section, name, x)?;
+    u.validate()?;
+    *v = u;
+    Ok(())
+}
+
+/// A model's field error with the field named as `section.name`.
+fn prefixed(e: impl std::fmt::Display, section: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}",
+        e.to_string()
+            .replacen("field `", &format!("field `{section}."), 1)
+    )
+}
+
+fn field_list<T: FieldTable>() -> String {
+    T::FIELDS
+        .iter()
+        .map(|f| f.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A model's own section as `{"section.name": value}`.
+fn model_fields<T: FieldTable>(section: &str, t: &T) -> BTreeMap<String, f64> {
+    T::FIELDS
+        .iter()
+        .filter_map(|f| Some((format!("{section}.{}", f.name), t.get(f.name)?)))
+        .collect()
+}
+
+fn split_field<'a>(v: &ModelVehicle, field: &'a str) -> PyResult<(&'a str, &'a str)> {
     field.split_once('.').ok_or_else(|| {
         PyValueError::new_err(format!(
-            "field `{field}`: expected `section.name`, sections: {}",
-            core_vehicle::SECTIONS.join(", ")
+            "field `{field}`: expected `section.name`, sections of model {}: {}",
+            v.model_name(),
+            sections_of(v).join(", ")
         ))
     })
 }
@@ -158,29 +376,82 @@ fn unknown_field(section: &str, name: &str) -> PyErr {
     ))
 }
 
-/// The field table: one dict per field (section, name, unit, lo, hi, integer, doc).
+/// The field table of `vehicle`'s model (default: the car's), the fields [`Vehicle::fields`]
+/// lists: one dict per field (section, name, unit, lo, hi, integer, doc; a model's own section
+/// has no doc: None).
 #[pyfunction]
-fn field_table(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
-    FIELDS
-        .iter()
-        .map(|f| {
-            let d = PyDict::new(py);
-            d.set_item("section", f.section())?;
-            d.set_item("name", f.name)?;
-            d.set_item("unit", f.unit())?;
-            d.set_item("lo", f.lo)?;
-            d.set_item("hi", f.hi)?;
-            d.set_item("integer", f.integer)?;
-            d.set_item("doc", f.doc)?;
-            Ok(d)
-        })
-        .collect()
+#[pyo3(signature = (vehicle = None))]
+fn field_table<'py>(
+    py: Python<'py>,
+    vehicle: Option<&Vehicle>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    let car = ModelVehicle::Car(core_vehicle::Vehicle::nominal());
+    let v = vehicle.map_or(&car, |v| &v.inner);
+    let own: &[ModelField] = match v {
+        ModelVehicle::Car(_) => &[],
+        ModelVehicle::Truck(_) => TruckParams::FIELDS,
+        ModelVehicle::DualAxle(_) => DualAxleParams::FIELDS,
+        ModelVehicle::Trailer(_) => TrailerParams::FIELDS,
+    };
+    let mut rows = Vec::new();
+    for f in own {
+        let d = PyDict::new(py);
+        d.set_item("section", model_section(v))?;
+        d.set_item("name", f.name)?;
+        d.set_item("unit", f.unit)?;
+        d.set_item("lo", f.range.0)?;
+        d.set_item("hi", f.range.1)?;
+        d.set_item("integer", false)?;
+        d.set_item("doc", py.None())?;
+        rows.push(d);
+    }
+    let shared = shared_sections(v);
+    for f in FIELDS.iter().filter(|f| shared.contains(&f.section())) {
+        let d = PyDict::new(py);
+        d.set_item("section", f.section())?;
+        d.set_item("name", f.name)?;
+        d.set_item("unit", f.unit())?;
+        d.set_item("lo", f.lo)?;
+        d.set_item("hi", f.hi)?;
+        d.set_item("integer", f.integer)?;
+        d.set_item("doc", f.doc)?;
+        rows.push(d);
+    }
+    Ok(rows)
+}
+
+/// `$body` with `$m` the vehicle's model (a [`SimModel`]) and `$parts` its shared sections
+/// (`None`: no MR damper), for each model as `shimmy-sim stability` dispatches on it.
+macro_rules! on_model {
+    ($v:expr, |$m:ident, $parts:ident| $body:expr) => {
+        match $v {
+            ModelVehicle::Car(v) => {
+                let ($m, $parts) = (&v.plant, Some(v));
+                $body
+            }
+            ModelVehicle::Truck(t) => {
+                let ($m, $parts) = (&t.model, Some(&t.parts));
+                $body
+            }
+            ModelVehicle::DualAxle(t) => {
+                let ($m, $parts) = (&t.model, Some(&t.parts));
+                $body
+            }
+            ModelVehicle::Trailer(t) => {
+                let ($m, $parts) = (t, None);
+                $body
+            }
+        }
+    };
 }
 
 /// Equivalent viscous damper coefficient in N s/m: 0 without a current, else the MR damper's
-/// describing-function value at `current_a` (as `shimmy-sim stability --damper-current-a`).
-fn damper_c(
-    v: &core_vehicle::Vehicle,
+/// describing-function value at `current_a` on the model `m` (as `shimmy-sim stability
+/// --damper-current-a`); a model without an MR damper refuses a current.
+fn damper_c<M: SimModel<N>, const N: usize>(
+    m: &M,
+    parts: Option<&core_vehicle::Vehicle>,
+    model: &str,
     current_a: Option<f64>,
     ref_amplitude_deg: f64,
     v_min_kmh: f64,
@@ -188,10 +459,15 @@ fn damper_c(
 ) -> anyhow::Result<f64> {
     REF_AMPLITUDE_DEG.check("ref_amplitude_deg", ref_amplitude_deg)?;
     let Some(i) = current_a else { return Ok(0.0) };
-    arg_range::check_current("damper_current_a", i, v)?;
+    let Some(parts) = parts else {
+        anyhow::bail!(
+            "damper_current_a: the {model} model has no MR damper configured; leave it out"
+        )
+    };
+    arg_range::check_current("damper_current_a", i, parts)?;
     let d = damper_equivalent(
-        &v.plant,
-        &v.damper.spencer,
+        m,
+        &parts.damper.spencer,
         i,
         ref_amplitude_deg,
         kmh_to_mps(v_min_kmh),
@@ -200,9 +476,41 @@ fn damper_c(
     Ok(d.c_eq_nspm)
 }
 
-/// The Hopf crossings of straight running in [v_min_kmh, v_max_kmh]: a list of dicts
-/// (speed_kmh, kind "onset"/"offset", freq_hz, shape, converged), by increasing speed. With
-/// `damper_current_a` the MR damper enters as its equivalent viscous damper.
+/// The Hopf crossings of the model `m` (`shimmy-sim stability`'s search on its linear model).
+#[allow(clippy::too_many_arguments)]
+fn crossings_on<M: SimModel<N>, const N: usize>(
+    m: &M,
+    parts: Option<&core_vehicle::Vehicle>,
+    model: &str,
+    current_a: Option<f64>,
+    ref_amplitude_deg: f64,
+    v_min_kmh: f64,
+    v_max_kmh: f64,
+    step_kmh: f64,
+) -> anyhow::Result<Crossings> {
+    let c = damper_c(
+        m,
+        parts,
+        model,
+        current_a,
+        ref_amplitude_deg,
+        v_min_kmh,
+        v_max_kmh,
+    )?;
+    Ok(stability::hopf_crossings(
+        &m.linear(),
+        c,
+        kmh_to_mps(v_min_kmh),
+        kmh_to_mps(v_max_kmh),
+        kmh_to_mps(step_kmh),
+        DEFAULT_TOL_MPS,
+    )?)
+}
+
+/// The Hopf crossings of straight running in [v_min_kmh, v_max_kmh], for a vehicle of any
+/// model: a list of dicts (speed_kmh, kind "onset"/"offset", freq_hz, shape, converged), by
+/// increasing speed. With `damper_current_a` the MR damper enters as its equivalent viscous
+/// damper (not for the trailer, which has none).
 #[pyfunction]
 #[pyo3(signature = (vehicle, damper_current_a = None, v_min_kmh = 5.0, v_max_kmh = 150.0, step_kmh = 1.0, ref_amplitude_deg = 0.5))]
 fn hopf_window<'py>(
@@ -214,7 +522,8 @@ fn hopf_window<'py>(
     step_kmh: f64,
     ref_amplitude_deg: f64,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    let v = vehicle.inner;
+    let v = &vehicle.inner;
+    let model = v.model_name();
     let crossings = py
         .detach(|| -> anyhow::Result<_> {
             SPEED_KMH.check("v_min_kmh", v_min_kmh)?;
@@ -224,22 +533,16 @@ fn hopf_window<'py>(
                 v_max_kmh > v_min_kmh,
                 "v_min_kmh {v_min_kmh} must be below v_max_kmh {v_max_kmh}"
             );
-            let c = damper_c(
-                &v,
+            on_model!(v, |m, parts| crossings_on(
+                m,
+                parts,
+                model,
                 damper_current_a,
                 ref_amplitude_deg,
                 v_min_kmh,
                 v_max_kmh,
-            )?;
-            let found = stability::hopf_crossings(
-                &v.plant,
-                c,
-                kmh_to_mps(v_min_kmh),
-                kmh_to_mps(v_max_kmh),
-                kmh_to_mps(step_kmh),
-                DEFAULT_TOL_MPS,
-            )?;
-            Ok(found)
+                step_kmh
+            ))
         })
         .map_err(value_error)?;
     crossings
@@ -256,11 +559,54 @@ fn hopf_window<'py>(
         .collect()
 }
 
-/// Modes of the linearised plant at each speed of `speeds_kmh` (a sequence or array): a dict
-/// of arrays `speed_kmh`, `max_re` (1/s, over all eigenvalues), `critical_re`,
-/// `critical_freq_hz`, `critical_zeta` (the oscillatory mode with the largest real part),
-/// `least_damped_zeta`, `least_damped_freq_hz`, `shimmy_zeta`, `shimmy_freq_hz` (the
-/// least-damped in-phase wheel-yaw mode, NaN where there is none).
+/// The columns of [`eigen_sweep`] on the model `m`.
+fn sweep_on<M: SimModel<N>, const N: usize>(
+    m: &M,
+    parts: Option<&core_vehicle::Vehicle>,
+    model: &str,
+    speeds_kmh: &[f64],
+    current_a: Option<f64>,
+    ref_amplitude_deg: f64,
+) -> anyhow::Result<BTreeMap<&'static str, Vec<f64>>> {
+    let lo = speeds_kmh.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = speeds_kmh.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let c = damper_c(
+        m,
+        parts,
+        model,
+        current_a,
+        ref_amplitude_deg,
+        lo,
+        hi.max(lo + 1.0),
+    )?;
+    let p = &m.linear();
+    let mut cols: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
+    for &s in speeds_kmh {
+        let v_mps = kmh_to_mps(s);
+        let m = stability::mode_summary(p, v_mps, c)?;
+        let shimmy = stability::mode_at(p, v_mps, c, ModeSelect::Shimmy).ok();
+        for (name, x) in [
+            ("speed_kmh", s),
+            ("max_re", m.max_re),
+            ("critical_re", m.critical.re),
+            ("critical_freq_hz", m.critical.freq_hz),
+            ("critical_zeta", m.critical.zeta),
+            ("least_damped_zeta", m.least_damped.zeta),
+            ("least_damped_freq_hz", m.least_damped.freq_hz),
+            ("shimmy_zeta", shimmy.map_or(f64::NAN, |m| m.zeta)),
+            ("shimmy_freq_hz", shimmy.map_or(f64::NAN, |m| m.freq_hz)),
+        ] {
+            cols.entry(name).or_default().push(x);
+        }
+    }
+    Ok(cols)
+}
+
+/// Modes of the linearised plant of a vehicle of any model at each speed of `speeds_kmh` (a
+/// sequence or array): a dict of arrays `speed_kmh`, `max_re` (1/s, over all eigenvalues),
+/// `critical_re`, `critical_freq_hz`, `critical_zeta` (the oscillatory mode with the largest
+/// real part), `least_damped_zeta`, `least_damped_freq_hz`, `shimmy_zeta`, `shimmy_freq_hz`
+/// (the least-damped in-phase wheel-yaw mode, NaN where there is none).
 #[pyfunction]
 #[pyo3(signature = (vehicle, speeds_kmh, damper_current_a = None, ref_amplitude_deg = 0.5))]
 fn eigen_sweep<'py>(
@@ -270,7 +616,8 @@ fn eigen_sweep<'py>(
     damper_current_a: Option<f64>,
     ref_amplitude_deg: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let v = vehicle.inner;
+    let v = &vehicle.inner;
+    let model = v.model_name();
     let columns = py
         .detach(|| -> anyhow::Result<BTreeMap<&'static str, Vec<f64>>> {
             anyhow::ensure!(
@@ -280,35 +627,14 @@ fn eigen_sweep<'py>(
             for &s in &speeds_kmh {
                 SPEED_KMH.check("speeds_kmh", s)?;
             }
-            let lo = speeds_kmh.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = speeds_kmh.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let c = damper_c(
-                &v,
+            on_model!(v, |m, parts| sweep_on(
+                m,
+                parts,
+                model,
+                &speeds_kmh,
                 damper_current_a,
-                ref_amplitude_deg,
-                lo,
-                hi.max(lo + 1.0),
-            )?;
-            let mut cols: BTreeMap<&'static str, Vec<f64>> = BTreeMap::new();
-            for &s in &speeds_kmh {
-                let v_mps = kmh_to_mps(s);
-                let m = stability::mode_summary(&v.plant, v_mps, c)?;
-                let shimmy = stability::mode_at(&v.plant, v_mps, c, ModeSelect::Shimmy).ok();
-                for (name, x) in [
-                    ("speed_kmh", s),
-                    ("max_re", m.max_re),
-                    ("critical_re", m.critical.re),
-                    ("critical_freq_hz", m.critical.freq_hz),
-                    ("critical_zeta", m.critical.zeta),
-                    ("least_damped_zeta", m.least_damped.zeta),
-                    ("least_damped_freq_hz", m.least_damped.freq_hz),
-                    ("shimmy_zeta", shimmy.map_or(f64::NAN, |m| m.zeta)),
-                    ("shimmy_freq_hz", shimmy.map_or(f64::NAN, |m| m.freq_hz)),
-                ] {
-                    cols.entry(name).or_default().push(x);
-                }
-            }
-            Ok(cols)
+                ref_amplitude_deg
+            ))
         })
         .map_err(value_error)?;
     let out = PyDict::new(py);
@@ -477,7 +803,11 @@ fn analyze<'py>(
     speed_column: Option<String>,
     speed_unit: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let vehicle = vehicle.map_or_else(core_vehicle::Vehicle::nominal, |v| v.inner);
+    // any model the analysis takes (the car, the truck); it names the others it refuses
+    let vehicle = vehicle.map_or_else(
+        || ModelVehicle::Car(core_vehicle::Vehicle::nominal()),
+        |v| v.inner.clone(),
+    );
     let changes = MappingChanges {
         delimiter,
         time_column,
@@ -500,7 +830,7 @@ fn analyze<'py>(
             let map = file.then(&changes).mapping()?;
             let samples = log_file::load(&log, &map)?;
             let opts = AnalyzeOptions {
-                vehicle: vehicle_file::ModelVehicle::Car(vehicle),
+                vehicle,
                 model,
                 max_gap_s: max_gap_ms * 1e-3,
             };

@@ -75,3 +75,17 @@ def test_bad_logs_name_the_column(tmp_path, limit_cycle):
         shimmy_sim.analyze(log, yaw_column="wheel_yaw")
     with pytest.raises(ValueError, match="no-such.csv"):
         shimmy_sim.analyze(tmp_path / "no-such.csv")
+
+
+def test_analyze_takes_the_models_the_command_takes(tmp_path, limit_cycle):
+    """The vehicle of any model goes through: the truck's is analysed (its model tracker), the
+    trailer's refused naming its model."""
+    log = tmp_path / "cycle.csv"
+    write_si(log, limit_cycle)
+    truck = shimmy_sim.analyze(log, vehicle=shimmy_sim.Vehicle("truck-full"))
+    car = shimmy_sim.analyze(log)
+    assert len(truck["rows"]["t_s"]) > 0
+    # the truck's pipeline (its meter slowed to the truck's mode), not the car's
+    assert not np.array_equal(truck["rows"]["t_s"], car["rows"]["t_s"])
+    with pytest.raises(ValueError, match=r"trailer-2dof"):
+        shimmy_sim.analyze(log, vehicle=shimmy_sim.Vehicle("trailer"))
