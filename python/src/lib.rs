@@ -26,7 +26,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::model::LinearModel;
-use shimmy_core::stability::{self, Crossings, ModeSelect, DEFAULT_TOL_MPS};
+use shimmy_core::stability::{self, HopfCrossing, ModeSelect, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
 use shimmy_core::vehicles::car::{Param, PlantParams};
@@ -38,6 +38,8 @@ use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
 use shimmy_sim::model::family::SimModel;
+use shimmy_sim::model::hopf_type::{hopf_type_at, HopfType, HopfTypeError};
+use shimmy_sim::model::plant::Damper;
 use shimmy_sim::sim::analyze::{self as sim_analyze, Analysis, AnalysisRow, AnalyzeOptions};
 use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
 use shimmy_sim::sim::closed_loop::{LoopResult, RunMetrics};
@@ -487,7 +489,7 @@ fn crossings_on<M: SimModel<N>, const N: usize>(
     v_min_kmh: f64,
     v_max_kmh: f64,
     step_kmh: f64,
-) -> anyhow::Result<Crossings> {
+) -> anyhow::Result<Vec<(HopfCrossing, Result<HopfType, HopfTypeError>)>> {
     let c = damper_c(
         m,
         parts,
@@ -497,18 +499,29 @@ fn crossings_on<M: SimModel<N>, const N: usize>(
         v_min_kmh,
         v_max_kmh,
     )?;
-    Ok(stability::hopf_crossings(
+    let crossings = stability::hopf_crossings(
         &m.linear(),
         c,
         kmh_to_mps(v_min_kmh),
         kmh_to_mps(v_max_kmh),
         kmh_to_mps(step_kmh),
         DEFAULT_TOL_MPS,
-    )?)
+    )?;
+    // The nonlinear plant behind the crossing: with a coil current the MR damper is in it.
+    let damper = match (current_a, parts) {
+        (Some(_), Some(p)) => Damper::Mr(p.damper.spencer),
+        _ => Damper::None,
+    };
+    Ok(crossings
+        .iter()
+        .map(|x| (*x, hopf_type_at(m, damper, x.speed_mps, x.freq_hz)))
+        .collect())
 }
 
 /// The Hopf crossings of straight running in [v_min_kmh, v_max_kmh], for a vehicle of any
-/// model: a list of dicts (speed_kmh, kind "onset"/"offset", freq_hz, shape, converged), by
+/// model: a list of dicts (speed_kmh, kind "onset"/"offset", freq_hz, shape, converged; the
+/// Hopf type of `shimmy-sim stability`: hopf_type "supercritical", "subcritical", "degenerate",
+/// "non-smooth" or "failed" with the reason in hopf_note, l1, cycle_amp_deg_1kmh), by
 /// increasing speed. With `damper_current_a` the MR damper enters as its equivalent viscous
 /// damper (not for the trailer, which has none).
 #[pyfunction]
@@ -547,13 +560,27 @@ fn hopf_window<'py>(
         .map_err(value_error)?;
     crossings
         .iter()
-        .map(|x| {
+        .map(|(x, h)| {
             let d = PyDict::new(py);
             d.set_item("speed_kmh", mps_to_kmh(x.speed_mps))?;
             d.set_item("kind", x.kind.name())?;
             d.set_item("freq_hz", x.freq_hz)?;
             d.set_item("shape", x.shape.name())?;
             d.set_item("converged", x.converged)?;
+            // The Hopf type as `shimmy-sim stability` gives it (NaN where there is none).
+            let (kind, l1, amp_deg) = match h {
+                Ok(h) => {
+                    let at = h.speed_mps + h.cycle_side() * kmh_to_mps(1.0);
+                    let amp = h.cycle_amplitude_rad(at).map_or(f64::NAN, f64::to_degrees);
+                    (h.criticality().name(), h.lyapunov.l1, amp)
+                }
+                Err(HopfTypeError::NonSmooth(_)) => ("non-smooth", f64::NAN, f64::NAN),
+                Err(_) => ("failed", f64::NAN, f64::NAN),
+            };
+            d.set_item("hopf_type", kind)?;
+            d.set_item("hopf_note", h.as_ref().err().map(ToString::to_string))?;
+            d.set_item("l1", l1)?;
+            d.set_item("cycle_amp_deg_1kmh", amp_deg)?;
             Ok(d)
         })
         .collect()

@@ -4,6 +4,7 @@ written from docs/mining-truck.md), the trailer's and the dual-axle truck's cros
 the same file and against `shimmy-sim stability`, and the car-only functions refusing the
 others by name."""
 import csv
+import math
 import subprocess
 
 import numpy as np
@@ -146,7 +147,7 @@ def test_trailer_and_dual_axle_crossings_match_scipy(reference, name, model, own
     assert_crossings_match(ours, theirs)
 
 
-@pytest.mark.parametrize("name", ["trailer", "dual-axle", "truck-full"])
+@pytest.mark.parametrize("name", ["trailer", "dual-axle", "truck-full", "nominal"])
 def test_crossings_are_those_of_the_stability_command(root, tmp_path, name):
     """`shimmy-sim stability --vehicle NAME` of the host build: its crossings.csv."""
     exe = root / "target" / "debug" / "shimmy-sim"
@@ -163,6 +164,14 @@ def test_crossings_are_those_of_the_stability_command(root, tmp_path, name):
         # the file has 6 decimals of km/h and Hz
         assert c["speed_kmh"] == pytest.approx(float(r["speed_kmh"]), abs=1e-6)
         assert c["freq_hz"] == pytest.approx(float(r["freq_hz"]), abs=1e-6)
+        # the Hopf type: l1 with 10 digits, the cycle with 6 decimals of deg
+        assert c["hopf_type"] == r["hopf_type"]
+        if r["l1"]:
+            assert c["l1"] == pytest.approx(float(r["l1"]), rel=1e-8)
+        else:
+            assert math.isnan(c["l1"]) and c["hopf_note"]
+        if r["cycle_amp_deg_1kmh"]:
+            assert c["cycle_amp_deg_1kmh"] == pytest.approx(float(r["cycle_amp_deg_1kmh"]), abs=1e-5)
 
 
 def test_car_only_functions_name_the_model():

@@ -111,3 +111,16 @@ def test_parallel_threads_give_the_serial_answer():
         parallel = list(pool.map(row, k_d))
     for a, b in zip(serial, parallel):
         np.testing.assert_array_equal(a, b)
+
+
+def test_the_car_onset_is_supercritical_and_the_mr_damper_non_smooth():
+    """The Hopf type of the nominal car: supercritical (a stable cycle grows past the onset,
+    larger 1 km/h further in than at the crossing); with the MR damper in the plant there is no
+    classical l1, and the reason says so."""
+    onset = shimmy_sim.hopf_window(shimmy_sim.Vehicle())[0]
+    assert onset["hopf_type"] == "supercritical" and onset["l1"] < 0
+    assert onset["cycle_amp_deg_1kmh"] > 0 and onset["hopf_note"] is None
+    damped = shimmy_sim.hopf_window(shimmy_sim.Vehicle(), damper_current_a=0.0)
+    assert damped, "the car at 0 A has a Hopf window"
+    assert all(c["hopf_type"] == "non-smooth" for c in damped)
+    assert "damper" in damped[0]["hopf_note"]
