@@ -570,12 +570,10 @@ fn hopf_window<'py>(
             // The Hopf type as `shimmy-sim stability` gives it (NaN where there is none).
             let (kind, l1, amp_deg) = match h {
                 Ok(h) => {
-                    let at = h.speed_mps + h.cycle_side() * kmh_to_mps(1.0);
-                    let amp = h.cycle_amplitude_rad(at).map_or(f64::NAN, f64::to_degrees);
+                    let amp = h.cycle_1kmh().1.map_or(f64::NAN, f64::to_degrees);
                     (h.criticality().name(), h.lyapunov.l1, amp)
                 }
-                Err(HopfTypeError::NonSmooth(_)) => ("non-smooth", f64::NAN, f64::NAN),
-                Err(_) => ("failed", f64::NAN, f64::NAN),
+                Err(e) => (e.label(), f64::NAN, f64::NAN),
             };
             d.set_item("hopf_type", kind)?;
             d.set_item("hopf_note", h.as_ref().err().map(ToString::to_string))?;

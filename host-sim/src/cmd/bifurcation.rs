@@ -499,21 +499,24 @@ pub fn dual_axle(
         hits.first().zip(hits.last()).map(|(a, b)| (*a, *b))
     };
     let (lo, hi) = (a.v_min_kmh, a.v_max_kmh);
-    let lin = study::linear_onset_kmh(t, lo, hi)?;
+    let onset = study::linear_onset(t, lo, hi)?;
+    let lin = onset.map(|c| shimmy_core::units::mps_to_kmh(c.speed_mps));
     let on_small = study::friction_onset_kmh(t, &runs, a.small_deg, lo, hi, 0.25)?;
     let on_large = study::friction_onset_kmh(t, &runs, a.large_deg, lo, hi, 0.25)?;
     let text =
         |x: Option<f64>| x.map_or("none in the range".to_string(), |v| format!("{v:.2} km/h"));
     println!("linear (friction-free) Hopf onset: {}", text(lin));
-    if let Some(h) = study::friction_free_hopf_type(t, lo, hi)? {
-        let at = h.speed_mps + h.cycle_side() * kmh_to_mps(1.0);
+    if let Some(h) = onset
+        .map(|c| study::friction_free_hopf_type(t, &c))
+        .transpose()?
+    {
+        let (at, amp) = h.cycle_1kmh();
         println!(
             "friction-free Hopf type: {} (l1 = {:.4e}; normal-form cycle {} at {:.2} km/h; \
              with friction the plant is not smooth: the runs above)",
             h.criticality().name(),
             h.lyapunov.l1,
-            h.cycle_amplitude_rad(at)
-                .map_or("-".into(), |a| format!("{:.2} deg", a.to_degrees())),
+            amp.map_or("-".into(), |a| format!("{:.2} deg", a.to_degrees())),
             shimmy_core::units::mps_to_kmh(at)
         );
     }

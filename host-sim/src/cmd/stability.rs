@@ -301,9 +301,8 @@ fn print_hopf_types(crossings: &Crossings, types: &[Result<HopfType, HopfTypeErr
         match t {
             Err(e) => println!("{head} {e}"),
             Ok(h) => {
-                let side = h.cycle_side();
-                let at = h.speed_mps + side * kmh_to_mps(1.0);
-                let amp = h.cycle_amplitude_rad(at).map_or("-".into(), |a| {
+                let (at, amp) = h.cycle_1kmh();
+                let amp = amp.map_or("-".into(), |a| {
                     format!("{:.4} deg at {:.2} km/h", a.to_degrees(), mps_to_kmh(at))
                 });
                 let what = match h.criticality() {
@@ -380,7 +379,8 @@ fn write_crossings_csv(
             Ok(h) => {
                 let side = h.cycle_side();
                 let amp = h
-                    .cycle_amplitude_rad(h.speed_mps + side * kmh_to_mps(1.0))
+                    .cycle_1kmh()
+                    .1
                     .map_or(String::new(), |a| format!("{:.6}", a.to_degrees()));
                 format!(
                     "{},{:.9e},{:.3e},{:.9e},{side},{amp}",
@@ -390,8 +390,7 @@ fn write_crossings_csv(
                     h.dmu_dv
                 )
             }
-            Err(HopfTypeError::NonSmooth(_)) => "non-smooth,,,,,".into(),
-            Err(_) => "failed,,,,,".into(),
+            Err(e) => format!("{},,,,,", e.label()),
         };
         writeln!(
             f,

@@ -51,6 +51,16 @@ pub enum HopfTypeError {
     NonFinite,
 }
 
+impl HopfTypeError {
+    /// Short label for tables: `non-smooth` (the model has no classical l1) or `failed`.
+    pub const fn label(&self) -> &'static str {
+        match self {
+            Self::NonSmooth(_) => "non-smooth",
+            _ => "failed",
+        }
+    }
+}
+
 impl std::fmt::Display for HopfTypeError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -350,6 +360,13 @@ impl HopfType {
     /// of `-dmu_dv l1`.
     pub fn cycle_side(&self) -> f64 {
         -(self.dmu_dv * self.lyapunov.l1).signum()
+    }
+
+    /// The speed 1 km/h into the cycle's side (m/s) and the cycle's amplitude there (rad):
+    /// the point the tables give.
+    pub fn cycle_1kmh(&self) -> (f64, Option<f64>) {
+        let at = self.speed_mps + self.cycle_side() * shimmy_core::units::kmh_to_mps(1.0);
+        (at, self.cycle_amplitude_rad(at))
     }
 }
 

@@ -12,7 +12,7 @@
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
+use shimmy_core::stability::{self, CrossingKind, HopfCrossing, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicles::dual_axle::DualAxleParams;
 use shimmy_core::vehicles::FieldTable;
@@ -108,7 +108,7 @@ pub fn sweep(
 }
 
 /// The first Hopf onset of the friction-free linear model in `lo..hi` km/h.
-pub fn linear_onset_kmh(t: &DualAxleParams, lo_kmh: f64, hi_kmh: f64) -> Result<Option<f64>> {
+pub fn linear_onset(t: &DualAxleParams, lo_kmh: f64, hi_kmh: f64) -> Result<Option<HopfCrossing>> {
     let cs = stability::hopf_crossings(
         t,
         0.0,
@@ -118,40 +118,27 @@ pub fn linear_onset_kmh(t: &DualAxleParams, lo_kmh: f64, hi_kmh: f64) -> Result<
         DEFAULT_TOL_MPS,
     )
     .context("Hopf search")?;
-    Ok(cs
-        .iter()
-        .find(|c| c.kind == CrossingKind::Onset)
-        .map(|c| mps_to_kmh(c.speed_mps)))
+    Ok(cs.iter().find(|c| c.kind == CrossingKind::Onset).copied())
 }
 
-/// The Hopf type of the friction-free truck (`m_f` = 0) at its linear onset in `lo..hi` km/h
-/// (`model::hopf_type`; with friction the plant is not smooth and has no l1); `None` without
-/// an onset there.
+/// [`linear_onset`]'s speed, km/h.
+pub fn linear_onset_kmh(t: &DualAxleParams, lo_kmh: f64, hi_kmh: f64) -> Result<Option<f64>> {
+    Ok(linear_onset(t, lo_kmh, hi_kmh)?.map(|c| mps_to_kmh(c.speed_mps)))
+}
+
+/// The Hopf type of the friction-free truck (`m_f` = 0) at its linear `onset`
+/// (`model::hopf_type`; with friction the plant is not smooth and has no l1).
 pub fn friction_free_hopf_type(
     t: &DualAxleParams,
-    lo_kmh: f64,
-    hi_kmh: f64,
-) -> Result<Option<crate::model::hopf_type::HopfType>> {
-    let cs = stability::hopf_crossings(
-        t,
-        0.0,
-        kmh_to_mps(lo_kmh),
-        kmh_to_mps(hi_kmh),
-        kmh_to_mps(1.0),
-        DEFAULT_TOL_MPS,
-    )
-    .context("Hopf search")?;
-    let Some(c) = cs.iter().find(|c| c.kind == CrossingKind::Onset) else {
-        return Ok(None);
-    };
+    onset: &HopfCrossing,
+) -> Result<crate::model::hopf_type::HopfType> {
     let free = DualAxleParams { m_f: 0.0, ..*t };
-    let ty = crate::model::hopf_type::hopf_type_at(
+    Ok(crate::model::hopf_type::hopf_type_at(
         &free,
         crate::model::plant::Damper::None,
-        c.speed_mps,
-        c.freq_hz,
-    )?;
-    Ok(Some(ty))
+        onset.speed_mps,
+        onset.freq_hz,
+    )?)
 }
 
 /// The lowest speed in `lo..hi` km/h at which a start of `deg` ends in shimmy with friction
