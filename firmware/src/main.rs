@@ -22,7 +22,7 @@
 mod app {
     use heapless::spsc::{Consumer, Producer, Queue};
     use shimmy_core::control::actuator::FAILSAFE_CURRENT_A;
-    use shimmy_core::estimator::model_margin::ModelMargin;
+    use shimmy_core::estimator::model_update::Measurement;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
     use shimmy_core::supervisor::safe_controller::SafeController;
@@ -33,7 +33,8 @@ mod app {
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::{may_restart, save_vehicle, Batch, BoardLink, LinkState, Saved};
     use shimmy_firmware::monitoring::{
-        safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
+        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
+        MeterSample, ModelTask, Published,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -54,8 +55,11 @@ mod app {
     #[shared]
     struct Shared {
         health: Health,
-        /// Newest model margin (written by the background loop, read by `meter`).
-        model: Option<ModelMargin>,
+        /// Newest model cycle (written by the background loop, read by `meter`).
+        model: Option<Published>,
+        /// Newest due measurement of the online model update (written by `meter`, taken by
+        /// the background loop).
+        measurement: Option<Measurement>,
         /// Time (s) and trusted speed (m/s) of the newest meter sample (for the model loop).
         now: (f64, f32),
         /// Validity of the newest margin report (for the supervisor's margin check).
@@ -147,7 +151,7 @@ mod app {
         let (tx, rx) = cx.local.queue.split();
         let (log_tx, log_rx) = cx.local.log_queue.split();
         let Ok(data) =
-            DataMargin::with_params(&vehicle.margin_pipeline(), vehicle.wheel_order_radius_m())
+            DataMargin::with_params(&board_pipeline(&vehicle), vehicle.wheel_order_radius_m())
         else {
             // The core's default configuration is checked by a host test; if it were rejected
             // the damper still gets the fail-safe current out of reset.
@@ -162,6 +166,7 @@ mod app {
             Shared {
                 health: Health::default(),
                 model: None,
+                measurement: None,
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
                 motion: Motion::UNKNOWN,
@@ -180,7 +185,10 @@ mod app {
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelTask::new(vehicle.model()),
+                model_task: ModelTask::new(
+                    vehicle.model(),
+                    board_pipeline(&vehicle).matched_update(),
+                ),
                 log_tx,
                 log_rx,
                 // The run that latched the restored faults logged them.
@@ -196,7 +204,7 @@ mod app {
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
     /// (`PassGate`); other wakes go back to sleep.
-    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false], shared = [model, now, health, motion, link, store_task])]
+    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false], shared = [model, measurement, now, health, motion, link, store_task])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
@@ -226,15 +234,17 @@ mod app {
             });
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
+            task.offer(cx.shared.measurement.lock(Option::take));
             #[cfg(feature = "pil")]
             let call = board::pil::ModelCall::start();
             let done = task.step(t_s, speed_mps);
             #[cfg(feature = "pil")]
             call.end(done.as_ref());
             if let Some(pt) = done {
-                let m = pt.margin();
+                let published = task.publish(&pt);
+                let m = published.margin;
                 cx.shared.model.lock(|x| {
-                    *x = Some(m);
+                    *x = Some(published);
                     #[cfg(feature = "pil")]
                     board::pil::model_published();
                 });
@@ -335,15 +345,19 @@ mod app {
         }
     }
 
-    #[task(priority = 2, local = [rx, data, meter_runs, recorder, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, now, margin, motion, link, latched])]
+    #[task(priority = 2, local = [rx, data, meter_runs, recorder, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, measurement, now, margin, motion, link, latched])]
     async fn meter(mut cx: meter::Context) {
         #[cfg(feature = "pil")]
         let entry_instructions = board::pil::instructions();
-        let model = cx.shared.model.lock(|m| {
+        let published = cx.shared.model.lock(|m| {
             #[cfg(feature = "pil")]
             board::pil::meter_took_model();
             *m
         });
+        if let Some(p) = &published {
+            cx.local.data.set_margin_sigma(p.onset_sigma_mps);
+        }
+        let model = published.map(|p| p.margin);
         #[cfg(feature = "pil")]
         let mut spawned_by = None;
         while let Some(s) = cx.local.rx.dequeue() {
@@ -388,6 +402,9 @@ mod app {
             cx.shared.motion.lock(|m| *m = motion);
             let now = (u.report.t_s, cx.local.data.speed_mps());
             cx.shared.now.lock(|n| *n = now);
+            if let Some(m) = cx.local.data.take_measurement() {
+                cx.shared.measurement.lock(|x| *x = Some(m));
+            }
             let status = cx.local.data.margin_status();
             cx.shared.margin.lock(|m| *m = status);
             *cx.local.meter_runs += 1;

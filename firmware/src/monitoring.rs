@@ -26,11 +26,16 @@
 
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::estimator::meter::mode_meter::{ConfigError, Sample, WheelOrder};
-use shimmy_core::estimator::model_margin::{ModelMarginConfig, ModelMarginTracker, ModelPoint};
+use shimmy_core::estimator::model_margin::{
+    ModelMargin, ModelMarginConfig, ModelMarginTracker, ModelPoint,
+};
+use shimmy_core::estimator::model_update::{
+    Measurement, ModelUpdateConfig, ModelUpdater, UpdateClock, UpdateOutcome,
+};
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
@@ -113,6 +118,23 @@ pub fn safe_controller_for<V: BoardVehicle<N>, const N: usize>(vehicle: &V) -> S
     )
 }
 
+/// The margin pipeline the board runs with the pipeline parameters `params` (a vehicle's):
+/// the online model update on ([`ModelUpdateConfig::ON`]: the model follows the measured
+/// shimmy frequency and damping; `docs/margin-estimator.md`, "Model updating"). The update's
+/// expensive step runs in the background loop ([`ModelTask`]); the meter task only decides
+/// when one is due.
+pub fn on_board(params: PipelineParams) -> PipelineParams {
+    PipelineParams {
+        update: ModelUpdateConfig::ON,
+        ..params
+    }
+}
+
+/// The margin pipeline the board runs for `vehicle` ([`on_board`] of its pipeline).
+pub fn board_pipeline<V: BoardVehicle<N>, const N: usize>(vehicle: &V) -> PipelineParams {
+    on_board(vehicle.margin_pipeline())
+}
+
 /// When the control task spawns the meter task: on the step whose sample completes a block
 /// of [`METER_DECIMATION`] (the 10th, 20th, ... since boot), the sample on which the data
 /// path answers. The meter run then reports before the next control step, which takes the
@@ -184,6 +206,12 @@ pub struct DataMargin {
     last_status: MarginStatus,
     /// The wheel order's rolling radius, m ([`BoardCalibration`]).
     radius_m: f32,
+    /// The online model update's configuration (matched to the meter's memory).
+    update: ModelUpdateConfig,
+    /// When the next measurement update is due (the update itself runs in the model task).
+    clock: UpdateClock,
+    /// The newest due measurement not yet taken by the model task.
+    measurement: Option<Measurement>,
 }
 
 impl DataMargin {
@@ -198,7 +226,10 @@ impl DataMargin {
     pub fn with_params(params: &PipelineParams, radius_m: f32) -> Result<Self, ConfigError> {
         Ok(DataMargin {
             radius_m,
-            pipe: DataPipeline::new(params)?,
+            pipe: DataPipeline::new(&params.data_path())?,
+            update: params.matched_update(),
+            clock: UpdateClock::new(),
+            measurement: None,
             last_speed_mps: f32::NAN,
             accel: AccelEstimator::new(),
             steps: 0,
@@ -258,10 +289,29 @@ impl DataMargin {
         let out = self
             .pipe
             .push_timed(&sample, v, accel_mps2, || step_time_s(steps), model)?;
+        // the model task's damper-free model (c = 0), as its tracker
+        if let Some(m) = self
+            .clock
+            .observe(&self.update, out.report.t_s, v, 0.0, &out.meter.slow)
+        {
+            self.measurement = Some(m);
+        }
         let changed = out.level != self.last_level;
         self.last_level = out.level;
         self.last_status = MarginStatus::of_report(&out.report);
         Some((out, changed))
+    }
+
+    /// The newest due measurement of the online model update, for the model task
+    /// ([`ModelTask::apply`]); None when none came since the last call.
+    pub fn take_measurement(&mut self) -> Option<Measurement> {
+        self.measurement.take()
+    }
+
+    /// The onset speed's one-sigma uncertainty the model task published with its margin
+    /// ([`Published::onset_sigma_mps`]): `MarginLow` waits for confidence by it.
+    pub fn set_margin_sigma(&mut self, sigma_mps: f32) {
+        self.pipe.set_margin_sigma(sigma_mps);
     }
 
     /// The core's `AccelEstimator` with its time step from the step count, in f32: no f64 on
@@ -311,30 +361,99 @@ pub type ImageModel = <ImageVehicle as BoardVehicle<IMAGE_MODEL_STATES>>::Model;
 pub type ModelTracker<M = ImageModel, const N: usize = IMAGE_MODEL_STATES> =
     ModelMarginTracker<ModelFloat, M, N>;
 
-/// The background model task: the core's incremental [`ModelMarginTracker`] on the linearised
-/// plant *without* the MR damper (c = 0: the conservative envelope, the damper only adds
-/// damping), for the image's [`ImageModel`].
-pub struct ModelTask<M: LinearModel<N> = ImageModel, const N: usize = IMAGE_MODEL_STATES> {
-    tracker: ModelTracker<M, N>,
+/// The updater type of the model task on `M`: the core's online model update with its
+/// eigen-solves in [`ModelFloat`].
+pub type BoardUpdater<M = ImageModel, const N: usize = IMAGE_MODEL_STATES> =
+    ModelUpdater<M, N, ModelFloat>;
+
+/// A completed model cycle as the model task publishes it to the meter task.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Published {
+    /// The model margin of the cycle.
+    pub margin: ModelMargin,
+    /// The onset speed's one-sigma uncertainty after the latest model update, m/s (0 with the
+    /// update off: the model is taken as known).
+    pub onset_sigma_mps: f32,
 }
 
-impl<M: LinearModel<N>, const N: usize> ModelTask<M, N> {
-    /// The tracker for the model `model` with [`model_config`].
-    pub fn new(model: M) -> Self {
+/// The background model task: the core's incremental [`ModelMarginTracker`] on the linearised
+/// plant *without* the MR damper (c = 0: the conservative envelope, the damper only adds
+/// damping), for the image's [`ImageModel`], and the online model update
+/// ([`shimmy_core::estimator::model_update`]) that moves the tracker's model to the vehicle
+/// the meter measures.
+pub struct ModelTask<M: UpdatableModel<N> = ImageModel, const N: usize = IMAGE_MODEL_STATES> {
+    tracker: ModelTracker<M, N>,
+    updater: BoardUpdater<M, N>,
+    /// A measurement waiting for the tracker to finish its cycle.
+    pending: Option<Measurement>,
+    onset_sigma_mps: f32,
+}
+
+impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
+    /// The tracker for the model `model` with [`model_config`] and the model update `update`
+    /// (a pipeline's [`PipelineParams::matched_update`]).
+    pub fn new(model: M, update: ModelUpdateConfig) -> Self {
         ModelTask {
             tracker: ModelTracker::in_precision(model, model_config()),
+            updater: BoardUpdater::in_precision(model, update),
+            pending: None,
+            onset_sigma_mps: 0.0,
         }
     }
 
-    /// One unit of work (at most one eigen-solve) at time `t_s` and speed `speed_mps`; the
-    /// point when a cycle completes.
+    /// Takes a due measurement of the meter task ([`DataMargin::take_measurement`]). It is
+    /// applied between two tracker cycles, so a cycle runs on one model from start to end
+    /// (on the target and in the host's application alike).
+    pub fn offer(&mut self, m: Option<Measurement>) {
+        if m.is_some() {
+            self.pending = m;
+        }
+    }
+
+    /// One unit of work (at most one eigen-solve, or the pending model update when the
+    /// tracker is between cycles) at time `t_s` and speed `speed_mps`; the point when a cycle
+    /// completes.
     pub fn step(&mut self, t_s: f64, speed_mps: f32) -> Option<ModelPoint> {
+        if !self.tracker.busy() {
+            if let Some(m) = self.pending.take() {
+                self.apply(&m);
+            }
+        }
         self.tracker.step(t_s, speed_mps, 0.0)
+    }
+
+    /// What the meter task gets of the completed cycle `pt`.
+    pub fn publish(&self, pt: &ModelPoint) -> Published {
+        Published {
+            margin: pt.margin(),
+            onset_sigma_mps: self.onset_sigma_mps,
+        }
+    }
+
+    /// One measurement update: the tracker's model becomes the updated one, and the onset's
+    /// sigma is re-evaluated at the latest cycle's onset.
+    fn apply(&mut self, m: &Measurement) -> UpdateOutcome {
+        let outcome = self.updater.apply(m);
+        if outcome == UpdateOutcome::Updated {
+            self.tracker.set_plant(self.updater.model());
+            let sigma = self
+                .tracker
+                .latest()
+                .and_then(|pt| pt.margin().v_crit_onset_mps)
+                .and_then(|v| self.updater.onset_sigma_mps(v, 0.0));
+            self.onset_sigma_mps = sigma.map_or(0.0, |s| s as f32);
+        }
+        outcome
     }
 
     /// The tracker (counters, latest point).
     pub fn tracker(&self) -> &ModelTracker<M, N> {
         &self.tracker
+    }
+
+    /// The online model update (parameters, uncertainty, diagnosis).
+    pub fn updater(&self) -> &BoardUpdater<M, N> {
+        &self.updater
     }
 }
 
@@ -461,7 +580,7 @@ mod tests {
     fn model_margin_inside_and_below_the_window() {
         use shimmy_core::units::kmh_to_mps;
         use shimmy_core::vehicles::car::PlantParams;
-        let mut m = ModelTask::new(PlantParams::nominal());
+        let mut m = ModelTask::new(PlantParams::nominal(), ModelUpdateConfig::OFF);
         let mut run = |t: f64, v: f64| {
             for _ in 0..200 {
                 if let Some(p) = m.step(t, v as f32) {

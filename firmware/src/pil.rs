@@ -56,13 +56,13 @@ mod host {
     use super::sample_set;
     use crate::control::{supervised_step, Health};
     use crate::monitoring::{
-        safe_controller_for, BoardCalibration, DataMargin, MeterCadence, MeterSample, ModelTask,
+        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
+        MeterSample, ModelTask, Published,
     };
     use heapless::Deque;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
-    use shimmy_core::estimator::model_margin::ModelMargin;
     use shimmy_core::estimator::pipeline::PipelineParams;
-    use shimmy_core::model::LinearModel;
+    use shimmy_core::model::UpdatableModel;
     use shimmy_core::supervisor::checks::Supervisor;
     use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
     use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
@@ -73,7 +73,7 @@ mod host {
     /// state the RTIC app shares between them (`main.rs`: `Shared`, `Local`), for a vehicle
     /// whose linear model is `M` (`N` states): the image is built for one model (cargo feature
     /// `model-truck`), the host build runs any.
-    pub struct HostApp<M: LinearModel<N>, const N: usize> {
+    pub struct HostApp<M: UpdatableModel<N>, const N: usize> {
         ctrl: SafeController,
         health: Health,
         step: u32,
@@ -82,13 +82,13 @@ mod host {
         queue: Deque<MeterSample, 31>,
         data: DataMargin,
         model_task: ModelTask<M, N>,
-        /// Every model margin published so far, in order (cycle n at index n - 1).
-        published: Vec<ModelMargin>,
+        /// Every model cycle published so far, in order (cycle n at index n - 1).
+        published: Vec<Published>,
         now: (f64, f32),
         margin: MarginStatus,
     }
 
-    impl<M: LinearModel<N>, const N: usize> HostApp<M, N> {
+    impl<M: UpdatableModel<N>, const N: usize> HostApp<M, N> {
         /// The application as `init` leaves it after a power-on (no latched fault) with
         /// `vehicle` loaded (the image under PIL boots with an empty RAM flash: its compiled-in
         /// vehicle, [`BoardVehicle::compiled_in`]).
@@ -97,7 +97,7 @@ mod host {
         ) -> Result<Self, ConfigError> {
             Self::with_parts(
                 safe_controller_for(vehicle),
-                &vehicle.margin_pipeline(),
+                &board_pipeline(vehicle),
                 vehicle.wheel_order_radius_m(),
                 vehicle.model(),
             )
@@ -120,11 +120,16 @@ mod host {
                 cadence: MeterCadence::default(),
                 queue: Deque::new(),
                 data: DataMargin::with_params(pipeline, radius_m)?,
-                model_task: ModelTask::new(model),
+                model_task: ModelTask::new(model, pipeline.matched_update()),
                 published: Vec::new(),
                 now: (0.0, f32::NAN),
                 margin: MarginStatus::Invalid,
             })
+        }
+
+        /// The background model task (tracker, online model update).
+        pub fn model_task(&self) -> &ModelTask<M, N> {
+            &self.model_task
         }
 
         /// The health counters.
@@ -172,8 +177,12 @@ mod host {
                     .checked_sub(1)
                     .and_then(|i| self.published.get(i))
                     .copied();
+                if let Some(p) = &model {
+                    self.data.set_margin_sigma(p.onset_sigma_mps);
+                }
+                let margin = model.map(|p| p.margin);
                 while let Some(s) = self.queue.pop_front() {
-                    let Some((u, _)) = self.data.push(&s, model.as_ref()) else {
+                    let Some((u, _)) = self.data.push(&s, margin.as_ref()) else {
                         continue;
                     };
                     self.now = (u.report.t_s, self.data.speed_mps());
@@ -191,11 +200,13 @@ mod host {
                 });
             }
             // background loop: runs until nothing is due
+            self.model_task.offer(self.data.take_measurement());
             loop {
                 let (t_s, speed_mps) = self.now;
                 if let Some(pt) = self.model_task.step(t_s, speed_mps) {
-                    let margin = pt.margin();
-                    self.published.push(margin);
+                    let published = self.model_task.publish(&pt);
+                    let margin = published.margin;
+                    self.published.push(published);
                     self.health.model_cycles += 1;
                     self.health.model_late = self.model_task.tracker().overruns();
                     emit(TargetFrame::Model(ModelFrame {
@@ -243,6 +254,91 @@ mod tests {
         assert!(back.coil_current_a.is_some_and(f32::is_nan));
         // The ADC error is counted as a bus error, as `coil_current::Error::Adc` is on the board.
         assert_eq!((h.enc_parity, h.enc_bus), (1, 1));
+    }
+
+    /// The board's application updates its model from the wheel yaw it measures. The yaw is
+    /// an AR(2) process with the shimmy pole of the `hard` car (half the drag-link stiffness,
+    /// onset 7.6 km/h) at each speed of a 4 -> 6.5 km/h drive; the app's vehicle file is the
+    /// nominal car (onset 29.35 km/h). After 90 s the update has found the drag link (factor
+    /// within 2 sigma of 0.5, the diagnosis names it) and the tracker's onset is within
+    /// 1 km/h of the plant's. The negative arm, the same drive with the update off: the
+    /// onset stays the file's.
+    #[test]
+    fn the_board_app_updates_its_model_from_the_measured_yaw() {
+        use shimmy_core::eigen;
+        use shimmy_core::estimator::model_update::ModelUpdateConfig;
+        use shimmy_core::model::LinearModel;
+        use shimmy_core::stability::{self, ModeSelect};
+        use shimmy_core::units::kmh_to_mps;
+        use shimmy_core::vehicle::{BoardVehicle, Vehicle};
+        use shimmy_core::vehicles::car::{ParamSet, PlantParams, N_STATES};
+        let plant = ParamSet::Hard.params();
+        let pole = |v: f64| {
+            let a = plant.linearise(v, 0.0);
+            let vals = eigen::eigenvalues_of::<f64, N_STATES>(&a).expect("eigenvalues");
+            stability::select_mode_of::<f64, PlantParams, N_STATES>(
+                &plant,
+                &a,
+                &vals,
+                ModeSelect::Shimmy,
+            )
+            .expect("shimmy mode")
+            .eigenvalue()
+        };
+        let drive = |update: ModelUpdateConfig| {
+            let vehicle = Vehicle::nominal();
+            let pipeline = shimmy_core::estimator::pipeline::PipelineParams {
+                update,
+                ..vehicle.margin_pipeline()
+            };
+            let mut app = HostApp::with_parts(
+                crate::monitoring::safe_controller_for(&vehicle),
+                &pipeline,
+                crate::monitoring::ROLLING_RADIUS_M,
+                vehicle.model(),
+            )
+            .expect("configuration");
+            let (mut x1, mut x2, mut seed, mut cmd) = (0.0f64, 0.0f64, 7u32, 0.0f32);
+            let steps = 90_000u32;
+            for k in 0..steps {
+                let v = kmh_to_mps(4.0 + 2.5 * f64::from(k) / f64::from(steps));
+                let (l, dt) = (pole(v), 1e-3);
+                let (r, w) = (libm::exp(l.re * dt), l.im * dt);
+                // a sum of 4 uniforms: about Gaussian road excitation
+                let mut e = 0.0;
+                for _ in 0..4 {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    e += f64::from(seed >> 8) / 16_777_216.0 - 0.5;
+                }
+                let x = 2.0 * r * libm::cos(w) * x1 - r * r * x2 + 2e-5 * e;
+                (x2, x1) = (x1, x);
+                let mut f = RawFrame::ok(k * 1000, x as f32, x as f32, v as f32);
+                f.coil_current_a = Some(cmd);
+                cmd = app.period(&f, None, &mut |_| {}).current_cmd_a;
+            }
+            let onset = app
+                .model_task()
+                .tracker()
+                .latest()
+                .and_then(|p| p.margin().v_crit_onset_mps)
+                .expect("an onset");
+            (app.model_task().updater().clone(), onset)
+        };
+        let truth = 7.633; // km/h, `shimmy-sim stability --vehicle hard`
+        let (up, onset) = drive(ModelUpdateConfig::ON);
+        let onset_kmh = shimmy_core::units::mps_to_kmh(onset);
+        assert!(up.counts().0 > 40, "{:?}", up.counts());
+        let d = up.diagnosis().expect("a diagnosis");
+        assert_eq!(d.field, "k_d", "{d:?}");
+        assert!(
+            (libm::log(d.factor) - libm::log(0.5)).abs() <= 2.0 * d.sigma_ln,
+            "{d:?}"
+        );
+        assert!((onset_kmh - truth).abs() < 1.0, "onset {onset_kmh} km/h");
+        let (off, onset) = drive(ModelUpdateConfig::OFF);
+        assert_eq!(off.counts(), (0, 0, 0));
+        let onset_kmh = shimmy_core::units::mps_to_kmh(onset);
+        assert!((onset_kmh - 29.35).abs() < 0.1, "onset {onset_kmh} km/h");
     }
 
     /// The host app answers like the image: one step report per period, a meter run after

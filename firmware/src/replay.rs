@@ -14,9 +14,12 @@
 //! are 0 at raw count [`ZERO_COUNTS`].
 
 use crate::drivers::as5047p::AngleTracker;
-use crate::monitoring::{safe_controller, step_time_s, DataMargin, MeterSample, ModelTask};
+use crate::monitoring::{
+    safe_controller, step_time_s, DataMargin, MeterSample, ModelTask, ROLLING_RADIUS_M,
+};
 use shimmy_core::estimator::model_margin::ModelMargin;
 use shimmy_core::estimator::monitor::Level;
+use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
 use shimmy_core::supervisor::policy::Mode;
 
@@ -165,8 +168,10 @@ pub fn replay(
     }
     let n = trace.len() / SAMPLE_BYTES;
     let mut ctrl = safe_controller();
-    let mut data = DataMargin::new().map_err(|_| ReplayError::Config)?;
-    let mut model_task = ModelTask::new(*params);
+    let pipeline = PipelineParams::default();
+    let mut data =
+        DataMargin::with_params(&pipeline, ROLLING_RADIUS_M).map_err(|_| ReplayError::Config)?;
+    let mut model_task = ModelTask::new(*params, pipeline.matched_update());
     let mut model: Option<ModelMargin> = None;
     let mut trk = [AngleTracker::new(ZERO_COUNTS, 8191); 2];
     let mut d = Digest::default();
@@ -258,8 +263,11 @@ pub fn replay(
         // The background model loop: one tracker call per sample here (on the board as many as
         // the CPU leaves; the results are the same per completed cycle, only their timing
         // differs).
+        model_task.offer(data.take_measurement());
         if let Some(pt) = model_task.step(step_time_s(u64::from(step)), data.speed_mps()) {
-            let m = pt.margin();
+            let published = model_task.publish(&pt);
+            data.set_margin_sigma(published.onset_sigma_mps);
+            let m = published.margin;
             d.channels[6].record(
                 |h| {
                     h.f64(m.zeta);

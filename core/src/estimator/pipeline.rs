@@ -110,6 +110,28 @@ impl PipelineParams {
     }
 }
 
+impl PipelineParams {
+    /// The online model update's configuration with the slow meter's memory
+    /// ([`ModelUpdateConfig::matched_to`]).
+    pub fn matched_update(&self) -> ModelUpdateConfig {
+        let est = &self.estimator;
+        self.update.matched_to(
+            est.lambda_slow,
+            est.input_rate_hz / f32::from(est.decimation.max(1)),
+        )
+    }
+
+    /// The parameters of the data path ([`DataPipeline`]): with the model update on, the
+    /// updated model is the data's correction, so the fusion does not correct it again.
+    pub fn data_path(&self) -> Self {
+        let mut p = *self;
+        if self.update.enabled {
+            p.fusion.data_margin = DataMarginUse::Never;
+        }
+        p
+    }
+}
+
 impl Default for PipelineParams {
     fn default() -> Self {
         Self {
@@ -334,20 +356,10 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
     /// A pipeline whose model side tracks the vehicle model `plant` (updated from the data
     /// when `params.update.enabled`).
     pub fn for_model(plant: M, params: PipelineParams) -> Result<Self, ConfigError> {
-        let est = &params.estimator;
-        let update = params.update.matched_to(
-            est.lambda_slow,
-            est.input_rate_hz / f32::from(est.decimation.max(1)),
-        );
-        // The updated model is the data's correction: the fusion does not correct it again.
-        let mut data_params = params;
-        if update.enabled {
-            data_params.fusion.data_margin = DataMarginUse::Never;
-        }
         Ok(Self {
-            data: DataPipeline::new(&data_params)?,
+            data: DataPipeline::new(&params.data_path())?,
             model: ModelMarginTracker::new(plant, params.model),
-            updater: ModelUpdater::new(plant, update),
+            updater: ModelUpdater::new(plant, params.matched_update()),
             model_margin: None,
             c_damper_nspm: 0.0,
             params,

@@ -176,7 +176,7 @@ mod bench {
             run: newton_f32,
         },
         Entry {
-            name: "model update: one measurement update (f64, the car's 5 parameters)",
+            name: "model update: one measurement update (f32 solves, the car's 5 parameters)",
             budget: Budget::None,
             run: model_update_step,
         },
@@ -336,6 +336,7 @@ mod bench {
     static BOOKKEEPING_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static TELEMETRY_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static IDLE_PASS_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static MODEL_UPDATE_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static IDLE_WAKE_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
 
     /// A valid margin report inside the Hopf window (the margin schedule fully armed).
@@ -717,7 +718,7 @@ mod bench {
         use shimmy_firmware::store::{Motion, StoreTask};
         let mut task = StoreTask::new(bench_store(0));
         let mut link = LinkState::new(&ResetRecord::fresh().sealed(), image_vehicle());
-        let mut model = ModelTask::new(image_vehicle().model());
+        let mut model = ModelTask::new(image_vehicle().model(), board_update());
         let v = 15.0;
         // the cold first cycle completes; the calls measured come before the next one is due
         let mut t = 0.0;
@@ -751,7 +752,7 @@ mod bench {
     fn idle_wake() -> u32 {
         use shimmy_firmware::background::PassGate;
         use shimmy_firmware::monitoring::ModelTask;
-        let model = ModelTask::new(image_vehicle().model());
+        let model = ModelTask::new(image_vehicle().model(), board_update());
         let mut gate = PassGate::new();
         let t = 1.25;
         gate.due(t, false);
@@ -853,28 +854,43 @@ mod bench {
         (a, l, v)
     }
 
-    /// One measurement update of the online model update (`estimator::model_update`): the
-    /// shimmy eigenpair of the updated model, five linearisations for the Jacobian and the
-    /// 5 x 5 filter step, all in f64 (soft-float here), at 1 Hz when it runs.
+    /// The board's model update configuration ([`shimmy_firmware::monitoring::board_pipeline`]).
+    fn board_update() -> shimmy_core::estimator::model_update::ModelUpdateConfig {
+        shimmy_firmware::monitoring::board_pipeline(&image_vehicle()).matched_update()
+    }
+
+    /// One measurement update of the online model update as the model task applies it
+    /// (`estimator::model_update`, eigen-solves in [`shimmy_firmware::monitoring::ModelFloat`]):
+    /// the shimmy eigenpair of the updated model, five linearisations for the Jacobian and the
+    /// 5 x 5 filter step in f64, once per `period_s` (1 s) when the meter's estimate is valid.
     fn model_update_step() -> u32 {
         use shimmy_core::estimator::meter::mode_meter::ModeEstimate;
-        use shimmy_core::estimator::model_update::{ModelUpdateConfig, ModelUpdater};
-        use shimmy_core::vehicles::car::PlantParams;
-        let mut up = ModelUpdater::new(PlantParams::nominal(), ModelUpdateConfig::ON);
+        use shimmy_core::estimator::model_update::{Measurement, ModelUpdater};
+        use shimmy_core::vehicles::car::{PlantParams, N_STATES};
+        use shimmy_firmware::monitoring::ModelFloat;
+        let mut up = ModelUpdater::<PlantParams, N_STATES, ModelFloat>::in_precision(
+            PlantParams::nominal(),
+            board_update(),
+        );
         // near the nominal car's shimmy mode at 18 km/h, so the update is applied, not gated
-        let est = ModeEstimate {
-            zeta: 0.055,
-            sigma_zeta: 0.01,
-            freq_hz: 5.75,
-            wn_hz: 5.76,
-            valid: true,
-            ..ModeEstimate::default()
+        let m = Measurement {
+            t_s: 1.0,
+            speed_mps: 5.0,
+            c_damper_nspm: 0.0,
+            slow: ModeEstimate {
+                zeta: 0.055,
+                sigma_zeta: 0.01,
+                freq_hz: 5.75,
+                wn_hz: 5.76,
+                valid: true,
+                ..ModeEstimate::default()
+            },
         };
-        let mut t = 0.0;
-        measure(|| {
-            t += 1.0;
-            let _ = black_box(up.update(t, black_box(5.0), 0.0, &est));
-        })
+        let worst = measure(|| {
+            let _ = black_box(up.apply(black_box(&m)));
+        });
+        MODEL_UPDATE_MAX.store(worst, Ordering::Relaxed);
+        worst
     }
 
     fn eigenvector_f32() -> u32 {
@@ -940,7 +956,7 @@ mod bench {
         static COLD: AtomicU32 = AtomicU32::new(0);
         static CYCLE: AtomicU32 = AtomicU32::new(0);
         if DONE.load(Ordering::Relaxed) == 0 {
-            let mut m = ModelTask::new(image_vehicle().model());
+            let mut m = ModelTask::new(image_vehicle().model(), board_update());
             let (mut call, mut cold, mut cycle) = (0u32, 0u32, 0u32);
             for c in 0..13u32 {
                 let t = c as f64 * f64::from(MODEL_REFRESH_S);
@@ -1030,7 +1046,8 @@ mod bench {
     }
 
     /// The whole firmware's CPU load at its rates [per mille]: control step x 1 kHz + meter run
-    /// with its link and store bookkeeping x 100 Hz + worst warm model cycle x 10 Hz + the
+    /// with its link and store bookkeeping x 100 Hz + worst warm model cycle x 10 Hz + one
+    /// model update x 1 Hz + the
     /// background loop's passes between cycles x 100 Hz and its wakes x 1 kHz + the link's
     /// telemetry frames x 10 Hz
     /// (a host watching; host requests are not counted), in cycles at [`LOAD_CPI`] cycles per
@@ -1040,15 +1057,18 @@ mod bench {
         let meter =
             (u64::from(meter_run_max()) + u64::from(BOOKKEEPING_MAX.load(Ordering::Relaxed))) * 100;
         let model = u64::from(tracker_counts().2) * 10;
+        // one measurement update per second (`ModelUpdateConfig::period_s`)
+        let update = u64::from(MODEL_UPDATE_MAX.load(Ordering::Relaxed));
         let idle = u64::from(IDLE_PASS_MAX.load(Ordering::Relaxed)) * 100
             + u64::from(IDLE_WAKE_MAX.load(Ordering::Relaxed)) * 1000;
         let link = u64::from(TELEMETRY_MAX.load(Ordering::Relaxed)) * 10;
-        let per_s = control + meter + model + idle + link;
+        let per_s = control + meter + model + update + idle + link;
         defmt::info!(
-            "cpu load: control {=u64} + meter with bookkeeping {=u64} + model {=u64} + background passes {=u64} + telemetry {=u64} = {=u64} instructions/s, {=u64} cycles/s at {=u64} CPI of 168 MHz",
+            "cpu load: control {=u64} + meter with bookkeeping {=u64} + model {=u64} + model update {=u64} + background passes {=u64} + telemetry {=u64} = {=u64} instructions/s, {=u64} cycles/s at {=u64} CPI of 168 MHz",
             control,
             meter,
             model,
+            update,
             idle,
             link,
             per_s,

@@ -36,7 +36,7 @@ use shimmy_core::estimator::meter::mode_meter::{
     EstimatorConfig, MarginEstimator, MeterOutput, Sample, WheelOrder,
 };
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::mr_damper::SpencerParams;
 use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
 use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
@@ -46,6 +46,7 @@ use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
+use shimmy_firmware::monitoring::on_board;
 use shimmy_firmware::pil::HostApp;
 
 /// The closed loop's plant integrator: adaptive Dopri5 at rtol 1e-7. The fixed-step IMEX
@@ -586,9 +587,9 @@ impl FirmwareStep for InProcess {
 /// The firmware's application tasks in this process (`HostApp`: the control step, the meter
 /// task after every 10th sample, the model loop with each cycle done at once): the
 /// margin-scheduled controller reads the meter task's report as on the board.
-struct InApp<L: LinearModel<N>, const N: usize>(Box<HostApp<L, N>>);
+struct InApp<L: UpdatableModel<N>, const N: usize>(Box<HostApp<L, N>>);
 
-impl<L: LinearModel<N>, const N: usize> FirmwareStep for InApp<L, N> {
+impl<L: UpdatableModel<N>, const N: usize> FirmwareStep for InApp<L, N> {
     type Error = std::convert::Infallible;
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
         Ok(self.0.period(frame, None, &mut |_| {}))
@@ -637,7 +638,9 @@ pub fn run<M: SimModel<N>, const N: usize>(
     let app = model
         .host_app_model()
         .filter(|_| cfg.margin_in_loop())
-        .map(|(model, radius_m)| HostApp::with_parts(safe.clone(), &pipeline, radius_m, model));
+        .map(|(model, radius_m)| {
+            HostApp::with_parts(safe.clone(), &on_board(pipeline), radius_m, model)
+        });
     let r = match app {
         Some(app) => match app {
             Ok(app) => run_loop(cfg, scenario, observer, &mut InApp(Box::new(app))),

@@ -16,7 +16,7 @@
 use crate::model::family::FamilyVehicle;
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
 use crate::sim::vehicle_file::FileModel;
-use shimmy_core::model::LinearModel;
+use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
@@ -614,13 +614,13 @@ impl FirmwareStep for PilFirmware {
 /// margin each meter run fuses is taken from the PIL run's frames when given (when a cycle of
 /// the background loop completes depends on its instruction count, known only on the target;
 /// the values are computed here).
-pub struct SilFirmware<'a, L: LinearModel<N>, const N: usize> {
+pub struct SilFirmware<'a, L: UpdatableModel<N>, const N: usize> {
     app: HostApp<L, N>,
     pil: Option<&'a [Period]>,
     periods: Vec<Period>,
 }
 
-impl<'a, L: LinearModel<N>, const N: usize> SilFirmware<'a, L, N> {
+impl<'a, L: UpdatableModel<N>, const N: usize> SilFirmware<'a, L, N> {
     /// The application after a power-on with the compiled-in vehicle of `V` (the image boots
     /// with an empty RAM flash); `pil`: the PIL run to take the model timing from.
     pub fn new<V: BoardVehicle<N, Model = L> + BoardCalibration>(
@@ -640,7 +640,7 @@ impl<'a, L: LinearModel<N>, const N: usize> SilFirmware<'a, L, N> {
     }
 }
 
-impl<L: LinearModel<N>, const N: usize> FirmwareStep for SilFirmware<'_, L, N> {
+impl<L: UpdatableModel<N>, const N: usize> FirmwareStep for SilFirmware<'_, L, N> {
     type Error = String;
 
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, String> {
