@@ -18,12 +18,16 @@
 //!   meter and model tasks is the boot.
 
 use embedded_storage_async::nor_flash::NorFlash;
+use shimmy_core::eigen::SolveFloat;
+use shimmy_core::estimator::model_update::ModelUpdater;
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::supervisor::faults::FaultKind;
 use shimmy_core::vehicle::record_schema_of;
 use shimmy_link::device::Backend;
 use shimmy_link::log::{EventSink, Pager};
 use shimmy_link::wire::{
-    level_code, ErrorReply, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry,
+    level_code, ErrorReply, FaultReport, Identity, LogEntry, ModelReport, ParamReport, ShimmyEvent,
+    Telemetry,
 };
 use shimmy_link::PROTOCOL_VERSION;
 
@@ -45,6 +49,8 @@ pub struct LinkState {
     open: Option<LogEntry>,
     /// Margin-path time of the newest update, s: the clock of the store's standstill watch.
     t_s: f64,
+    /// The online model update after its newest measurement.
+    model: ModelReport<'static>,
 }
 
 impl LinkState {
@@ -68,7 +74,23 @@ impl LinkState {
             telemetry: None,
             open: None,
             t_s: 0.0,
+            model: ModelReport {
+                enabled: false,
+                updates: 0,
+                gated: 0,
+                failures: 0,
+                params: heapless::Vec::new(),
+            },
         }
+    }
+
+    /// After a measurement of the online model update (the background loop): its parameters
+    /// and counters for [`Backend::model_report`].
+    pub fn on_model_update<M: UpdatableModel<N>, const N: usize, T: SolveFloat>(
+        &mut self,
+        up: &ModelUpdater<M, N, T>,
+    ) {
+        self.model = model_report(up);
     }
 
     /// The vehicle a host wrote that is not in flash yet, for the background loop to save with
@@ -234,6 +256,36 @@ impl<F: NorFlash<Error = FlashError>> Backend for BoardLink<'_, F> {
 
     fn take_telemetry(&mut self) -> Option<Telemetry> {
         self.state.telemetry.take()
+    }
+
+    fn model_report(&self) -> ModelReport<'_> {
+        self.state.model.clone()
+    }
+}
+
+/// The online model update as the link reports it.
+pub fn model_report<M: UpdatableModel<N>, const N: usize, T: SolveFloat>(
+    up: &ModelUpdater<M, N, T>,
+) -> ModelReport<'static> {
+    let (updates, gated, failures) = up.counts();
+    ModelReport {
+        enabled: up.config().enabled,
+        updates,
+        gated,
+        failures,
+        params: up
+            .estimates()
+            .iter()
+            .map(|e| ParamReport {
+                field: e.field,
+                what: e.what,
+                factor: e.factor as f32,
+                sigma_ln: e.sigma_ln as f32,
+                band_low: e.band.0 as f32,
+                band_high: e.band.1 as f32,
+                out_of_band: e.out_of_band,
+            })
+            .collect(),
     }
 }
 

@@ -157,7 +157,9 @@ mod app {
             // the damper still gets the fail-safe current out of reset.
             panic!("estimator configuration rejected");
         };
-        let link = LinkState::new(&record, vehicle);
+        let model_task = ModelTask::new(vehicle.model(), board_pipeline(&vehicle).matched_update());
+        let mut link = LinkState::new(&record, vehicle);
+        link.on_model_update(model_task.updater());
         // The link task's first run sends the ready frame (the port listens from now on).
         rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
         // The watchdog runs since the board's first line; init ends here.
@@ -185,10 +187,7 @@ mod app {
                 rx,
                 data,
                 meter_runs: 0,
-                model_task: ModelTask::new(
-                    vehicle.model(),
-                    board_pipeline(&vehicle).matched_update(),
-                ),
+                model_task,
                 log_tx,
                 log_rx,
                 // The run that latched the restored faults logged them.
@@ -204,7 +203,7 @@ mod app {
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
     /// (`PassGate`); other wakes go back to sleep.
-    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false], shared = [model, measurement, now, health, motion, link, store_task])]
+    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false, diagnosed: Option<&'static str> = None], shared = [model, measurement, now, health, motion, link, store_task])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
@@ -240,6 +239,28 @@ mod app {
             let done = task.step(t_s, speed_mps);
             #[cfg(feature = "pil")]
             call.end(done.as_ref());
+            if task.take_applied().is_some() {
+                let up = task.updater();
+                cx.shared.link.lock(|l| l.on_model_update(up));
+                // the diagnosis in the log when it names another part (or none any more)
+                let d = up.diagnosis();
+                if d.map(|d| d.field) != *cx.local.diagnosed {
+                    *cx.local.diagnosed = d.map(|d| d.field);
+                    match d {
+                        Some(d) => defmt::warn!(
+                            "model update: {=str} ({=str}) x{=f64}, 2 sigma x{=f64}-x{=f64}, plausible x{=f64}-x{=f64}",
+                            d.what,
+                            d.field,
+                            d.factor,
+                            d.two_sigma().0,
+                            d.two_sigma().1,
+                            d.band.0,
+                            d.band.1
+                        ),
+                        None => defmt::info!("model update: every part within its band"),
+                    }
+                }
+            }
             if let Some(pt) = done {
                 let published = task.publish(&pt);
                 let m = published.margin;

@@ -33,7 +33,7 @@ use shimmy_core::estimator::model_update::{
     Measurement, ModelUpdateConfig, ModelUpdater, UpdateClock, UpdateOutcome,
 };
 use shimmy_core::estimator::monitor::Level;
-use shimmy_core::estimator::pipeline::{AccelEstimator, PipelineParams};
+use shimmy_core::estimator::pipeline::{peak_command, AccelEstimator, PipelineParams};
 use shimmy_core::estimator::pipeline::{DataPipeline, PipelineOutput};
 use shimmy_core::model::UpdatableModel;
 use shimmy_core::supervisor::frame::{MarginStatus, NOMINAL_PERIOD_US};
@@ -212,6 +212,8 @@ pub struct DataMargin {
     clock: UpdateClock,
     /// The newest due measurement not yet taken by the model task.
     measurement: Option<Measurement>,
+    /// The largest damper command since the last report (the update's damper watch).
+    cmd_peak_a: f32,
 }
 
 impl DataMargin {
@@ -230,6 +232,7 @@ impl DataMargin {
             update: params.matched_update(),
             clock: UpdateClock::new(),
             measurement: None,
+            cmd_peak_a: 0.0,
             last_speed_mps: f32::NAN,
             accel: AccelEstimator::new(),
             steps: 0,
@@ -284,16 +287,22 @@ impl DataMargin {
             damper_cmd: s.cmd_a,
         };
         let accel_mps2 = self.update_accel(since_last, v);
+        self.cmd_peak_a = peak_command(self.cmd_peak_a, s.cmd_a);
         // the f64 time (soft-float here) only for the tenth sample that reports
         let steps = self.steps;
         let out = self
             .pipe
             .push_timed(&sample, v, accel_mps2, || step_time_s(steps), model)?;
         // the model task's damper-free model (c = 0), as its tracker
-        if let Some(m) = self
-            .clock
-            .observe(&self.update, out.report.t_s, v, 0.0, &out.meter.slow)
-        {
+        let cmd_peak_a = core::mem::take(&mut self.cmd_peak_a);
+        if let Some(m) = self.clock.observe(
+            &self.update,
+            out.report.t_s,
+            v,
+            0.0,
+            cmd_peak_a,
+            &out.meter.slow,
+        ) {
             self.measurement = Some(m);
         }
         let changed = out.level != self.last_level;
@@ -386,6 +395,8 @@ pub struct ModelTask<M: UpdatableModel<N> = ImageModel, const N: usize = IMAGE_M
     updater: BoardUpdater<M, N>,
     /// A measurement waiting for the tracker to finish its cycle.
     pending: Option<Measurement>,
+    /// What the newest measurement did, until [`ModelTask::take_applied`].
+    applied: Option<UpdateOutcome>,
     onset_sigma_mps: f32,
 }
 
@@ -397,6 +408,7 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
             tracker: ModelTracker::in_precision(model, model_config()),
             updater: BoardUpdater::in_precision(model, update),
             pending: None,
+            applied: None,
             onset_sigma_mps: 0.0,
         }
     }
@@ -416,7 +428,7 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
     pub fn step(&mut self, t_s: f64, speed_mps: f32) -> Option<ModelPoint> {
         if !self.tracker.busy() {
             if let Some(m) = self.pending.take() {
-                self.apply(&m);
+                self.applied = Some(self.apply(&m));
             }
         }
         self.tracker.step(t_s, speed_mps, 0.0)
@@ -444,6 +456,12 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
             self.onset_sigma_mps = sigma.map_or(0.0, |s| s as f32);
         }
         outcome
+    }
+
+    /// What the measurement applied since the last call did (the link reports the update
+    /// after each).
+    pub fn take_applied(&mut self) -> Option<UpdateOutcome> {
+        self.applied.take()
     }
 
     /// The tracker (counters, latest point).

@@ -18,7 +18,8 @@ use shimmy_link::frame::{self, Fed, FrameReader, MAX_FRAME, MAX_PAYLOAD};
 use shimmy_link::host::decode_reply;
 use shimmy_link::log::{EventSink, Pager, RamLog};
 use shimmy_link::wire::{
-    ErrorReply, FaultEvent, FaultReport, Header, Identity, LogEntry, Response, Telemetry,
+    ErrorReply, FaultEvent, FaultReport, Header, Identity, LogEntry, ModelReport, Response,
+    Telemetry,
 };
 use shimmy_link::PROTOCOL_VERSION;
 
@@ -72,6 +73,15 @@ impl Backend for Ram {
     }
     fn take_telemetry(&mut self) -> Option<Telemetry> {
         None
+    }
+    fn model_report(&self) -> ModelReport<'_> {
+        ModelReport {
+            enabled: true,
+            updates: 3,
+            gated: 0,
+            failures: 0,
+            params: Default::default(),
+        }
     }
 }
 

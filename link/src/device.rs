@@ -13,8 +13,8 @@ use shimmy_core::vehicle::{decode_record, encode_record, RecordVehicle, RECORD_M
 use crate::frame::{self, Fed, FrameError, FrameReader, MAX_FRAME};
 use crate::log::Pager;
 use crate::wire::{
-    ConfigProblem, ErrorReply, EventPage, FaultReport, Header, Identity, Request, Response,
-    Telemetry, PROTOCOL_HEADER,
+    ConfigProblem, ErrorReply, EventPage, FaultReport, Header, Identity, ModelReport, Request,
+    Response, Telemetry, PROTOCOL_HEADER,
 };
 use crate::PROTOCOL_VERSION;
 
@@ -40,6 +40,8 @@ pub trait Backend {
     fn faults(&self) -> FaultReport;
     /// The newest margin report not handed out before, if any.
     fn take_telemetry(&mut self) -> Option<Telemetry>;
+    /// The online model update's state.
+    fn model_report(&self) -> ModelReport<'_>;
 }
 
 /// Largest reply of one request, bytes (one frame and its delimiter).
@@ -191,6 +193,7 @@ impl Device {
                     *streaming = on;
                     Response::Streaming { on }
                 }
+                Request::ReadModel => Response::Model(backend.model_report()),
             },
         };
         frame::encode(h, &reply, out).unwrap_or_else(|_| {
@@ -281,6 +284,35 @@ mod tests {
         }
         fn take_telemetry(&mut self) -> Option<Telemetry> {
             None
+        }
+        fn model_report(&self) -> ModelReport<'_> {
+            test_model_report()
+        }
+    }
+
+    /// A full model report with the longest names a model has (the car's, every one out of
+    /// its band).
+    fn test_model_report() -> ModelReport<'static> {
+        use shimmy_core::model::UpdatableModel;
+        use shimmy_core::vehicles::car::PlantParams;
+        let params = PlantParams::UPDATE_PARAMS
+            .iter()
+            .map(|u| crate::wire::ParamReport {
+                field: u.field,
+                what: u.what,
+                factor: 0.5,
+                sigma_ln: 0.02,
+                band_low: u.band.0 as f32,
+                band_high: u.band.1 as f32,
+                out_of_band: true,
+            })
+            .collect();
+        ModelReport {
+            enabled: true,
+            updates: 600,
+            gated: 3,
+            failures: 0,
+            params,
         }
     }
 
@@ -387,6 +419,19 @@ mod tests {
     fn assert_intact(b: &TestBackend) {
         assert_eq!(b.vehicle, Vehicle::nominal(), "configuration unchanged");
         assert_eq!(b.log.len(), (12, 0), "log unchanged");
+    }
+
+    /// The model report of a full update set fits a frame and arrives whole.
+    #[test]
+    fn the_model_report_arrives_whole() {
+        let (mut dev, mut b) = (Device::new(), TestBackend::new());
+        let (seq, r) = one_reply(&mut dev, &mut b, &request_bytes(9, &Request::ReadModel));
+        assert_eq!(seq, 9);
+        let Response::Model(m) = r else {
+            panic!("{r:?}")
+        };
+        assert_eq!(m, test_model_report());
+        assert_eq!(m.params.len(), 5);
     }
 
     #[test]

@@ -51,6 +51,8 @@ pub enum Request<'a> {
         /// Stream on or off.
         on: bool,
     },
+    /// The online model update's parameters and diagnosis: [`Response::Model`].
+    ReadModel,
 }
 
 /// Entries per [`Response::Events`] page. A frame would hold 16 of the longest (`frame::tests`
@@ -98,6 +100,8 @@ pub enum Response<'a> {
     },
     /// One margin report of the stream.
     Telemetry(Telemetry),
+    /// The online model update's state.
+    Model(ModelReport<'a>),
     /// The request was not carried out; the device's state is unchanged.
     Error(ErrorReply<'a>),
 }
@@ -207,6 +211,47 @@ pub struct FaultReport {
     pub active: u32,
     /// Fault activations since boot.
     pub raised: u32,
+}
+
+/// Most parameters a model update reports (`shimmy_core::estimator::model_update::
+/// MAX_UPDATE_PARAMS`).
+pub const MODEL_PARAMS: usize = 5;
+
+/// The online model update (`shimmy_core::estimator::model_update`) as the device runs it: how
+/// many measurements it used, and each parameter's factor on the vehicle file with its
+/// uncertainty; `params` is empty while the update is off or the model has none.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelReport<'a> {
+    /// The update runs.
+    pub enabled: bool,
+    /// Measurement updates applied.
+    pub updates: u32,
+    /// Measurements dropped by the innovation gate.
+    pub gated: u32,
+    /// Model solves that failed.
+    pub failures: u32,
+    /// The parameters, in the model's order.
+    #[serde(borrow)]
+    pub params: heapless::Vec<ParamReport<'a>, MODEL_PARAMS>,
+}
+
+/// One updated parameter (`shimmy_core::estimator::model_update::ParamEstimate`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParamReport<'a> {
+    /// The vehicle file's field name.
+    pub field: &'a str,
+    /// What it is, in words.
+    pub what: &'a str,
+    /// The factor on the file's value.
+    pub factor: f32,
+    /// One-sigma uncertainty of ln(factor).
+    pub sigma_ln: f32,
+    /// The factor's plausible band, low end.
+    pub band_low: f32,
+    /// The factor's plausible band, high end.
+    pub band_high: f32,
+    /// Outside its band by more than two sigmas: a diagnosis.
+    pub out_of_band: bool,
 }
 
 /// One margin report of the telemetry stream.

@@ -88,6 +88,15 @@ pub struct ModelUpdateConfig {
     /// steering (the meter's own validity flag decides above it; a stiff-tyred or soft-linked
     /// vehicle's onset can be below 10 km/h, and its lead-in is its best evidence).
     pub min_speed_mps: f32,
+    /// A damper command above this counts as damping the model does not know, A: the model is
+    /// the vehicle without its damper's control (c = 0 on the board), so the meter's estimate
+    /// is used only when no command above it fell in the meter's window
+    /// (`looks_every_memories` x `memory_s`). Otherwise the damper's damping would be read as
+    /// a vehicle change (a car driven under the ASMC, plant = model, came out with c_a x0.56,
+    /// `shimmy-sim device --sim --vehicle hard model`). 0.45 A: just above the supervisor's
+    /// coil test pulse (0.4 A for 80 ms once a second while the coil is idle,
+    /// `SupervisorParams::coil_test_current_a`), a check, not damping control.
+    pub damper_idle_a: f32,
 }
 
 impl ModelUpdateConfig {
@@ -103,6 +112,7 @@ impl ModelUpdateConfig {
         reopen_after_gated: 5,
         max_factor: 2.0,
         min_speed_mps: 0.8,
+        damper_idle_a: 0.45,
     };
 
     /// The defaults with the update on.
@@ -168,31 +178,50 @@ impl ParamEstimate {
 
     /// The plain statement of a diagnosis, e.g. "steering linkage stiffness 40 % below the
     /// vehicle file (x0.60, 2 sigma x0.57-x0.63; plausible x0.70-x1.30)".
-    pub fn statement(&self) -> Statement<'_> {
-        Statement(self)
+    pub fn statement(&self) -> Statement<'static> {
+        Statement {
+            what: self.what,
+            field: self.field,
+            factor: self.factor,
+            sigma_ln: self.sigma_ln,
+            band: self.band,
+        }
     }
 }
 
-/// One estimate as a line of the diagnosis ([`ParamEstimate::statement`]).
-pub struct Statement<'a>(&'a ParamEstimate);
+/// One estimate as a line of the diagnosis ([`ParamEstimate::statement`]; a host builds it
+/// from what a device reports).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Statement<'a> {
+    /// What the parameter is, in words.
+    pub what: &'a str,
+    /// The vehicle file's field name.
+    pub field: &'a str,
+    /// The factor on the file's value.
+    pub factor: f64,
+    /// One-sigma uncertainty of ln(factor).
+    pub sigma_ln: f64,
+    /// The plausible band of the factor.
+    pub band: (f64, f64),
+}
 
 impl core::fmt::Display for Statement<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        let e = self.0;
-        let pct = e.change_pct();
-        let (lo, hi) = e.two_sigma();
+        let pct = (self.factor - 1.0) * 100.0;
+        let lo = self.factor * libm::exp(-2.0 * self.sigma_ln);
+        let hi = self.factor * libm::exp(2.0 * self.sigma_ln);
         write!(
             f,
             "{} ({}) {:.0} % {} the vehicle file (x{:.2}, 2 sigma x{:.2}-x{:.2}; plausible x{:.2}-x{:.2})",
-            e.what,
-            e.field,
+            self.what,
+            self.field,
             libm::fabs(pct),
             if pct < 0.0 { "below" } else { "above" },
-            e.factor,
+            self.factor,
             lo,
             hi,
-            e.band.0,
-            e.band.1
+            self.band.0,
+            self.band.1
         )
     }
 }
@@ -231,6 +260,8 @@ pub struct UpdateClock {
     speed_filt_mps: Option<f32>,
     last_t_s: Option<f64>,
     next_due_s: Option<f64>,
+    /// When the damper was last commanded above `damper_idle_a`.
+    damper_active_t_s: Option<f64>,
 }
 
 /// One due measurement update: the slow meter's estimate and the speed it belongs to.
@@ -253,25 +284,35 @@ impl UpdateClock {
             speed_filt_mps: None,
             last_t_s: None,
             next_due_s: None,
+            damper_active_t_s: None,
         }
     }
 
     /// One call per meter report: `t_s` time, `speed_mps` the current speed, `c_damper_nspm`
-    /// the damper coefficient the model uses, `slow` the slow meter estimate. Keeps the speed
-    /// the meter's estimate belongs to (the meter's exponential memory weights past speeds as
-    /// a first-order low-pass with its time constant does) and returns the measurement when
-    /// one is due (every `period_s`, valid estimates above `min_speed_mps`).
+    /// the damper coefficient the model uses, `damper_cmd_peak_a` the largest damper command
+    /// since the previous call, `slow` the slow meter estimate. Keeps the speed the meter's
+    /// estimate belongs to (the meter's exponential memory weights past speeds as a
+    /// first-order low-pass with its time constant does) and returns the measurement when one
+    /// is due (every `period_s`, valid estimates above `min_speed_mps`, no damper command above
+    /// `damper_idle_a` within the meter's window).
     pub fn observe(
         &mut self,
         cfg: &ModelUpdateConfig,
         t_s: f64,
         speed_mps: f32,
         c_damper_nspm: f32,
+        damper_cmd_peak_a: f32,
         slow: &ModeEstimate,
     ) -> Option<Measurement> {
         if !cfg.enabled || !speed_mps.is_finite() || !t_s.is_finite() {
             return None;
         }
+        // NaN (no command known) counts as active: the safe side is no update
+        if damper_cmd_peak_a.is_nan() || damper_cmd_peak_a > cfg.damper_idle_a {
+            self.damper_active_t_s = Some(t_s);
+        }
+        let window_s = f64::from(cfg.looks_every_memories * cfg.memory_s);
+        let damper_idle = self.damper_active_t_s.is_none_or(|t0| t_s - t0 > window_s);
         let dt = self.last_t_s.map_or(0.0, |t0| (t_s - t0).max(0.0) as f32);
         self.last_t_s = Some(t_s);
         let a = dt / (cfg.memory_s + dt);
@@ -282,6 +323,7 @@ impl UpdateClock {
         self.speed_filt_mps = Some(v_meter);
         let due = self.next_due_s.is_none_or(|t1| t_s >= t1);
         if !due
+            || !damper_idle
             || !slow.valid
             || v_meter < cfg.min_speed_mps
             || !(slow.freq_hz.is_finite() && slow.zeta.is_finite())
@@ -545,13 +587,14 @@ impl<M: UpdatableModel<N>, const N: usize, T: SolveFloat> ModelUpdater<M, N, T> 
         t_s: f64,
         speed_mps: f32,
         c_damper_nspm: f32,
+        damper_cmd_peak_a: f32,
         slow: &ModeEstimate,
     ) -> UpdateOutcome {
         let cfg = self.cfg;
-        match self
+        let due = self
             .clock
-            .observe(&cfg, t_s, speed_mps, c_damper_nspm, slow)
-        {
+            .observe(&cfg, t_s, speed_mps, c_damper_nspm, damper_cmd_peak_a, slow);
+        match due {
             Some(m) => self.apply(&m),
             None => UpdateOutcome::Idle,
         }
@@ -670,7 +713,7 @@ mod tests {
         for v in [3.0f32, 3.5, 4.0, 4.5] {
             for _ in 0..30 {
                 t += 1.0;
-                up.update(t, v, 0.0, &measured(&plant, f64::from(v), 0.003));
+                up.update(t, v, 0.0, 0.0, &measured(&plant, f64::from(v), 0.003));
             }
         }
         let (updates, gated, failures) = up.counts();
@@ -753,7 +796,7 @@ mod tests {
             for v in [3.0f32, 3.5, 4.0] {
                 for _ in 0..60 {
                     t += 1.0;
-                    up.update(t, v, 0.0, &measured(&plant, f64::from(v), 0.003));
+                    up.update(t, v, 0.0, 0.0, &measured(&plant, f64::from(v), 0.003));
                 }
             }
             up
@@ -803,7 +846,10 @@ mod tests {
             for _ in 0..30 {
                 t += 1.0;
                 let m = measured(&plant, f64::from(v), 0.003);
-                assert_eq!(wide.update(t, v, 0.0, &m), narrow.update(t, v, 0.0, &m));
+                assert_eq!(
+                    wide.update(t, v, 0.0, 0.0, &m),
+                    narrow.update(t, v, 0.0, 0.0, &m)
+                );
             }
         }
         assert_eq!(wide.counts(), narrow.counts());
@@ -818,6 +864,52 @@ mod tests {
         }
     }
 
+    /// The damper's controlled damping is not in the model: while the damper is commanded
+    /// (and for the meter's window after) the estimates are not used. Plant = model, but the
+    /// damper adds 0.03 to the measured damping: without the watch (`damper_idle_a` infinite)
+    /// the update reads it as a vehicle change and moves a part by more than two sigmas; with
+    /// it nothing moves, and 10 s after the damper went idle the updates resume.
+    #[test]
+    fn a_commanded_damper_is_not_read_as_a_vehicle_change() {
+        let file = PlantParams::nominal();
+        let drive = |cfg: ModelUpdateConfig| {
+            let mut up = ModelUpdater::new(file, cfg);
+            let mut t = 0.0;
+            for v in [3.0f32, 3.5, 4.0, 4.5] {
+                for _ in 0..3000 {
+                    t += 0.01;
+                    let mut m = measured(&file, f64::from(v), 0.003);
+                    m.zeta += 0.03;
+                    up.update(t, v, 0.0, 1.0, &m);
+                }
+            }
+            up
+        };
+        let blind = drive(ModelUpdateConfig {
+            damper_idle_a: f32::INFINITY,
+            ..ModelUpdateConfig::ON
+        });
+        assert!(blind.counts().0 > 100, "{:?}", blind.counts());
+        assert!(
+            blind
+                .estimates()
+                .iter()
+                .any(|e| libm::log(e.factor).abs() > 2.0 * e.sigma_ln),
+            "{:?}",
+            blind.estimates()
+        );
+        let mut up = drive(ModelUpdateConfig::ON);
+        assert_eq!(up.counts(), (0, 0, 0));
+        assert_eq!(up.model(), file);
+        // idle from t = 120 s: nothing until the window (2 x 5 s) has passed
+        let m = measured(&file, 4.5, 0.003);
+        let first = (1..=1500)
+            .map(|k| 120.0 + f64::from(k) * 0.01)
+            .find(|&t| up.update(t, 4.5, 0.0, 0.0, &m) == UpdateOutcome::Updated)
+            .expect("updates resume");
+        assert!((130.0..130.1).contains(&first), "{first}");
+    }
+
     /// A measurement far from every plausible model is dropped by the gate, not followed.
     #[test]
     fn a_glitch_is_gated() {
@@ -825,7 +917,7 @@ mod tests {
         let mut up = ModelUpdater::new(file, ModelUpdateConfig::ON);
         let mut glitch = measured(&file, 4.0, 0.003);
         glitch.freq_hz *= 2.0;
-        assert_eq!(up.update(1.0, 4.0, 0.0, &glitch), UpdateOutcome::Gated);
+        assert_eq!(up.update(1.0, 4.0, 0.0, 0.0, &glitch), UpdateOutcome::Gated);
         assert_eq!(up.model(), file);
     }
 }

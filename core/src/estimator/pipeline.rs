@@ -343,6 +343,18 @@ pub struct ShimmyPipeline<
     updater: ModelUpdater<M, S>,
     model_margin: Option<ModelMargin>,
     c_damper_nspm: f32,
+    /// The largest damper command since the last report (the model update's damper watch).
+    cmd_peak_a: f32,
+}
+
+/// The larger of two damper commands, A; a NaN (a command not known) sticks: the model
+/// update counts it as active.
+pub fn peak_command(peak_a: f32, cmd_a: f32) -> f32 {
+    if peak_a.is_nan() || cmd_a.is_nan() {
+        f32::NAN
+    } else {
+        peak_a.max(cmd_a)
+    }
 }
 
 impl<const N: usize> ShimmyPipeline<N> {
@@ -362,6 +374,7 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
             updater: ModelUpdater::new(plant, params.matched_update()),
             model_margin: None,
             c_damper_nspm: 0.0,
+            cmd_peak_a: 0.0,
             params,
         })
     }
@@ -394,6 +407,7 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
         if let Some(pt) = self.model.step(t_s, speed_mps, self.c_damper_nspm) {
             self.model_margin = Some(pt.margin());
         }
+        self.cmd_peak_a = peak_command(self.cmd_peak_a, sample.damper_cmd);
         let out = self.data.push(
             sample,
             speed_mps,
@@ -401,9 +415,13 @@ impl<const N: usize, M: UpdatableModel<S>, const S: usize> ShimmyPipeline<N, M, 
             t_s,
             self.model_margin.as_ref(),
         )?;
-        let outcome = self
-            .updater
-            .update(t_s, speed_mps, self.c_damper_nspm, &out.meter.slow);
+        let outcome = self.updater.update(
+            t_s,
+            speed_mps,
+            self.c_damper_nspm,
+            core::mem::take(&mut self.cmd_peak_a),
+            &out.meter.slow,
+        );
         if outcome == UpdateOutcome::Updated {
             self.model.set_plant(self.updater.model());
             let sigma = self

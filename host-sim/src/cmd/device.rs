@@ -4,7 +4,8 @@
 //! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
 
 use crate::sim::device_link::{
-    read_record, schema_mismatch, Client, DeviceInfo, EventLog, Port, SerialPort, TcpPort,
+    read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, ParamState, Port,
+    SerialPort, TcpPort,
 };
 use crate::sim::sim_device::SimDevice;
 use crate::sim::vehicle_file::{self, ModelVehicle};
@@ -69,6 +70,9 @@ pub enum DeviceAction {
     },
     /// The fault record: resets, reset cause, latched and active faults.
     Faults,
+    /// The online model update: each parameter's factor on the vehicle file with its 2-sigma
+    /// interval and plausible band, and the diagnosis of a part outside its band.
+    Model,
     /// The live margin report (the device's telemetry stream) in the terminal.
     Watch {
         /// Stop after this many seconds.
@@ -195,6 +199,7 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
             }
         }
         DeviceAction::Faults => print!("{}", faults_text(&c.faults()?)),
+        DeviceAction::Model => print!("{}", model_text(&c.model()?)),
         DeviceAction::Watch { seconds } => {
             if !(seconds.is_finite() && (0.0..=86_400.0).contains(seconds)) {
                 bail!("--seconds {seconds}: allowed 0 ..= 86400");
@@ -286,6 +291,52 @@ fn names(bits: u32) -> String {
     } else {
         v.join(", ")
     }
+}
+
+fn model_text(m: &ModelState) -> String {
+    if !m.enabled {
+        return "online model update: off\n".into();
+    }
+    let mut s = format!(
+        "online model update: {} measurements applied, {} gated, {} failed solves\n",
+        m.updates, m.gated, m.failures
+    );
+    if m.params.is_empty() {
+        s += "the vehicle's model has no updated parameters\n";
+        return s;
+    }
+    s += "parameter                     field      factor  2 sigma          plausible\n";
+    for p in &m.params {
+        let (lo, hi) = (
+            p.factor * (-2.0 * p.sigma_ln).exp(),
+            p.factor * (2.0 * p.sigma_ln).exp(),
+        );
+        let _ = writeln!(
+            s,
+            "{:<29} {:<10} x{:<6.3} x{:.3}-x{:.3}  x{:.2}-x{:.2}{}",
+            p.what,
+            p.field,
+            p.factor,
+            lo,
+            hi,
+            p.band.0,
+            p.band.1,
+            if p.out_of_band { "  OUT OF BAND" } else { "" }
+        );
+    }
+    let out: Vec<String> = m
+        .params
+        .iter()
+        .filter(|p| p.out_of_band)
+        .map(ParamState::statement)
+        .collect();
+    if out.is_empty() {
+        s += "diagnosis: every part within its plausible band\n";
+    }
+    for line in out {
+        let _ = writeln!(s, "diagnosis: {line}");
+    }
+    s
 }
 
 fn faults_text(f: &FaultReport) -> String {

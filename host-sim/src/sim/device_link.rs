@@ -123,6 +123,52 @@ pub struct DeviceInfo {
     pub log_capacity: u16,
 }
 
+/// The device's online model update, owned (its text through [`printable`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelState {
+    /// The update runs.
+    pub enabled: bool,
+    /// Measurement updates applied.
+    pub updates: u32,
+    /// Measurements dropped by the innovation gate.
+    pub gated: u32,
+    /// Model solves that failed.
+    pub failures: u32,
+    /// The parameters, in the model's order.
+    pub params: Vec<ParamState>,
+}
+
+/// One updated parameter as a device reports it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamState {
+    /// The vehicle file's field name.
+    pub field: String,
+    /// What it is, in words.
+    pub what: String,
+    /// The factor on the file's value.
+    pub factor: f64,
+    /// One-sigma uncertainty of ln(factor).
+    pub sigma_ln: f64,
+    /// The plausible band of the factor.
+    pub band: (f64, f64),
+    /// Outside its band by more than two sigmas.
+    pub out_of_band: bool,
+}
+
+impl ParamState {
+    /// The parameter as a line of the diagnosis (the core's words).
+    pub fn statement(&self) -> String {
+        shimmy_core::estimator::model_update::Statement {
+            what: &self.what,
+            field: &self.field,
+            factor: self.factor,
+            sigma_ln: self.sigma_ln,
+            band: self.band,
+        }
+        .to_string()
+    }
+}
+
 /// The event log as read.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct EventLog {
@@ -143,6 +189,7 @@ enum Reply {
     Streaming(bool),
     Telemetry(Telemetry),
     Ready(DeviceInfo),
+    Model(ModelState),
 }
 
 fn owned(r: Response<'_>) -> std::result::Result<Reply, anyhow::Error> {
@@ -163,6 +210,24 @@ fn owned(r: Response<'_>) -> std::result::Result<Reply, anyhow::Error> {
         Response::Faults(f) => Reply::Faults(f),
         Response::Streaming { on } => Reply::Streaming(on),
         Response::Telemetry(t) => Reply::Telemetry(t),
+        Response::Model(m) => Reply::Model(ModelState {
+            enabled: m.enabled,
+            updates: m.updates,
+            gated: m.gated,
+            failures: m.failures,
+            params: m
+                .params
+                .iter()
+                .map(|p| ParamState {
+                    field: printable(p.field),
+                    what: printable(p.what),
+                    factor: f64::from(p.factor),
+                    sigma_ln: f64::from(p.sigma_ln),
+                    band: (f64::from(p.band_low), f64::from(p.band_high)),
+                    out_of_band: p.out_of_band,
+                })
+                .collect(),
+        }),
         Response::Error(e) => return Err(device_error(&e)),
     })
 }
@@ -482,6 +547,14 @@ impl<P: Port> Client<P> {
         match self.call(&Request::ReadFaults)? {
             Reply::Faults(f) => Ok(f),
             _ => bail!("the device answered the fault request with something else"),
+        }
+    }
+
+    /// The online model update: parameters, uncertainty, diagnosis.
+    pub fn model(&mut self) -> Result<ModelState> {
+        match self.call(&Request::ReadModel)? {
+            Reply::Model(m) => Ok(m),
+            _ => bail!("the device answered the model request with something else"),
         }
     }
 

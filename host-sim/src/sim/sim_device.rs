@@ -30,7 +30,8 @@ use shimmy_core::vehicles::truck::TruckParams;
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
 use shimmy_link::log::{EventSink, Pager, RamLog, Recorder};
 use shimmy_link::wire::{
-    level_code, BootEvent, ErrorReply, FaultReport, Identity, LogEntry, ShimmyEvent, Telemetry,
+    level_code, BootEvent, ErrorReply, FaultReport, Identity, LogEntry, ModelReport, ShimmyEvent,
+    Telemetry,
 };
 use shimmy_link::PROTOCOL_VERSION;
 use std::collections::VecDeque;
@@ -56,6 +57,7 @@ pub struct SimBackend<V: RecordVehicle = Vehicle> {
     open: Option<ShimmyEvent>,
     faults: FaultReport,
     telemetry: VecDeque<Telemetry>,
+    model: ModelReport<'static>,
 }
 
 impl<V: RecordVehicle> Backend for SimBackend<V> {
@@ -92,6 +94,9 @@ impl<V: RecordVehicle> Backend for SimBackend<V> {
     }
     fn take_telemetry(&mut self) -> Option<Telemetry> {
         self.telemetry.pop_front()
+    }
+    fn model_report(&self) -> ModelReport<'_> {
+        self.model.clone()
     }
 }
 
@@ -150,6 +155,7 @@ impl<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> LoopObserver
         let Some(u) = self.pipe.push(&sample, v, accel, r.t_s) else {
             return;
         };
+        b.model = shimmy_firmware::link::model_report(self.pipe.updater());
         self.recorder.on_update(self.pipe.monitor(), &mut b.log);
         b.open = self.recorder.open_event(self.pipe.monitor());
         self.updates += 1;
@@ -252,6 +258,8 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
         start_s: PARITY_FAULT_S.0,
         end_s: Some(PARITY_FAULT_S.1),
     }];
+    // the board's pipeline: the online model update on
+    let params = shimmy_firmware::monitoring::on_board(params);
     let pipe = ShimmyPipeline::<16, M::Linear, N>::for_model(vehicle.model.linear(), params)
         .context("pipeline configuration")?;
     // The log starts as a board's does: with its first boot after a power-on.
@@ -261,6 +269,7 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
         resets_since_power_on: 0,
         boot_count: 1,
     }));
+    let model = shimmy_firmware::link::model_report(pipe.updater());
     let mut obs = DriveObserver {
         pipe: Box::new(pipe),
         recorder: Recorder::new(),
@@ -280,6 +289,7 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
                 raised: 0,
             },
             telemetry: VecDeque::new(),
+            model,
         },
         radius_m: vehicle.model.rolling_radius_m() as f32,
         last_v: None,
