@@ -16,9 +16,11 @@ use nalgebra::SVector;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
 use shimmy_core::vehicles::truck::{
-    TruckOperatingPoint, TruckParams, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI, PSI_L,
-    PSI_R, THETA_C, Y,
+    TruckOperatingPoint, TruckParams, TruckSet, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI,
+    PSI_L, PSI_R, THETA_C, Y,
 };
+
+use shimmy_core::vehicles::FieldTable;
 
 use super::family::SimPlant;
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
@@ -373,6 +375,67 @@ pub fn yaw_start(psi_rad: f64) -> [f64; N_STATES] {
     x[0] = psi_rad;
     x[1] = psi_rad;
     x
+}
+
+/// The mining truck in the registry (`super::registry`): its files have the `[truck]` section
+/// and the shared ones; its shared sections default to [`truck_parts`](super::members::truck_parts).
+impl super::registry::ModelEntry<N_STATES> for TruckParams {
+    type File = super::family::FamilyVehicle<TruckParams>;
+    const SECTION: Option<&'static str> = Some("truck");
+    const SHARED_SECTIONS: bool = true;
+    const DEFAULT_SET: &'static str = TruckSet::Full.name();
+    const NO_DRIVER: Option<&'static str> =
+        Some("steers hydrostatically, no driver torque reaches its linkage");
+
+    fn set_names() -> Vec<&'static str> {
+        TruckSet::ALL.iter().map(|s| s.name()).collect()
+    }
+    fn set(name: &str) -> Option<Self> {
+        TruckSet::from_name(name).map(TruckSet::params)
+    }
+    fn assemble(
+        model: Self,
+        parts: Option<shimmy_core::vehicle::Vehicle>,
+    ) -> anyhow::Result<Self::File> {
+        Ok(super::family::FamilyVehicle {
+            model,
+            parts: parts.unwrap_or_else(super::members::truck_parts),
+        })
+    }
+    fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
+        <Self as FieldTable>::FIELDS
+    }
+    fn field(&self, name: &str) -> Option<f64> {
+        FieldTable::get(self, name)
+    }
+    fn set_field(
+        &mut self,
+        name: &str,
+        value: f64,
+    ) -> Result<(), shimmy_core::vehicles::FieldError> {
+        FieldTable::set(self, name, value)
+    }
+    fn check(&self) -> Result<(), String> {
+        self.validate().map_err(|e| e.to_string())
+    }
+    fn check_in_file(&self) -> anyhow::Result<()> {
+        self.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))
+    }
+    fn model_of(f: &Self::File) -> Self {
+        f.model
+    }
+    fn model_mut(f: &mut Self::File) -> &mut Self {
+        &mut f.model
+    }
+    fn parts_of(f: &Self::File) -> Option<&shimmy_core::vehicle::Vehicle> {
+        Some(&f.parts)
+    }
+    fn parts_of_mut(f: &mut Self::File) -> Option<&mut shimmy_core::vehicle::Vehicle> {
+        Some(&mut f.parts)
+    }
+    fn vehicle(f: Self::File) -> anyhow::Result<Self::File> {
+        Ok(f)
+    }
 }
 
 #[cfg(test)]
