@@ -337,7 +337,7 @@ fn field_table<'py>(
     py: Python<'py>,
     vehicle: Option<&Vehicle>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    let car = ModelVehicle::Car(core_vehicle::Vehicle::nominal());
+    let car = ModelVehicle::from(core_vehicle::Vehicle::nominal());
     let v = vehicle.map_or(&car, |v| &v.inner);
     let own: &[ModelField] = v.model_fields();
     let mut rows = Vec::new();
@@ -800,7 +800,7 @@ fn analyze<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     // any model the analysis takes (the car, the truck); it names the others it refuses
     let vehicle = vehicle.map_or_else(
-        || ModelVehicle::Car(core_vehicle::Vehicle::nominal()),
+        || ModelVehicle::from(core_vehicle::Vehicle::nominal()),
         |v| v.inner.clone(),
     );
     let changes = MappingChanges {

@@ -380,7 +380,7 @@ pub fn command(a: &MeterAccuracyArgs) -> Result<()> {
         Ok(r) => r,
         Err(other) => bail!(
             "`meter-accuracy` runs the {} models, not the {} (vehicle `{}`)",
-            crate::model::family::image_models(),
+            crate::model::registry::image_models(),
             other.model_name(),
             a.vehicle
         ),

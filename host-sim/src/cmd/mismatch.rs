@@ -33,8 +33,8 @@ use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::UpdatableModel;
 use shimmy_core::vehicles::car::PlantParams;
 
-use crate::model::family::image_models;
 use crate::model::family::FamilyVehicle;
+use crate::model::registry::image_models;
 use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
 use crate::out::progress;

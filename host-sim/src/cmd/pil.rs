@@ -5,7 +5,7 @@
 //! share at 168 MHz. `--check-sil` runs the scenario again with the firmware's application
 //! natively and fails unless both runs agree bit for bit.
 
-use crate::model::family::image_models;
+use crate::model::registry::image_models;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop;

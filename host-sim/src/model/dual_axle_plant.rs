@@ -277,6 +277,10 @@ impl super::registry::ModelEntry<N_STATES> for DualAxleParams {
     const SHARED_SECTIONS: bool = false;
     const DEFAULT_SET: &'static str = DualAxleSet::Rated.name();
     const SCENARIOS: bool = false;
+    /// The kingpin friction and the simulator tyre's friction and shape are not in the linear
+    /// model, the damper lever has no effect without a damper (the friction's effect is
+    /// `bifurcation`'s, nonlinear).
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["m_f", "mu", "c_s", "l_t"];
 
     fn set_names() -> Vec<&'static str> {
         DualAxleSet::ALL.iter().map(|s| s.name()).collect()
@@ -331,6 +335,12 @@ impl super::registry::ModelEntry<N_STATES> for DualAxleParams {
     }
     fn vehicle(f: Self::File) -> anyhow::Result<Self::File> {
         Ok(f)
+    }
+    fn file_of(v: &Self::File) -> Self::File {
+        *v
+    }
+    fn with_params(v: &Self::File, model: Self) -> Self::File {
+        super::family::FamilyVehicle { model, ..*v }
     }
 }
 

@@ -400,6 +400,12 @@ impl super::registry::ModelEntry<{ shimmy_core::vehicles::car::N_STATES }> for P
     fn vehicle(f: Vehicle) -> Result<Vehicle> {
         Ok(f)
     }
+    fn file_of(v: &Vehicle) -> Vehicle {
+        *v
+    }
+    fn with_params(v: &Vehicle, model: Self) -> Vehicle {
+        Vehicle { plant: model, ..*v }
+    }
 }
 
 #[cfg(test)]

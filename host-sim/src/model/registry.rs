@@ -54,6 +54,9 @@ pub trait ModelEntry<const N: usize>: SimModel<N> {
     /// Why a scenario's `[driver]` section is refused for the model, after its name (`None`:
     /// a driver's torque reaches its steering).
     const NO_DRIVER: Option<&'static str> = None;
+    /// The fields of [`Self::fields`] the sensitivity study leaves out (those that do not enter
+    /// the linear model without a damper).
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &[];
 
     /// The named sets, in their documentation's order.
     fn set_names() -> Vec<&'static str>;
@@ -92,6 +95,10 @@ pub trait ModelEntry<const N: usize>: SimModel<N> {
     /// The vehicle as the simulator runs it (with the shared sections the model's own when its
     /// files have none).
     fn vehicle(f: Self::File) -> Result<Self::Vehicle>;
+    /// The vehicle `v` as its files give it (the inverse of [`Self::vehicle`]).
+    fn file_of(v: &Self::Vehicle) -> Self::File;
+    /// `v` with the model's parameters replaced by `model` (the shared sections stay).
+    fn with_params(v: &Self::Vehicle, model: Self) -> Self::Vehicle;
 }
 
 /// A model of the [`registry!`] list: its [`ModelEntry`] and its variant of [`ModelVehicle`]
@@ -182,6 +189,18 @@ macro_rules! registry {
 
         $( maybe_study!($model, $n, $($cap)?); )*
 
+        /// The names of the models with a firmware image (the study models), in the list's
+        /// order.
+        pub fn image_model_names() -> Vec<&'static str> {
+            let mut names = Vec::new();
+            $(
+                if <$model as MaybeStudy<{ $n }>>::STUDY {
+                    names.push(name_of::<$model, { $n }>());
+                }
+            )*
+            names
+        }
+
         /// Calls `visitor` for every model, in the list's order.
         pub fn for_each_model<V: ModelTypeVisitor>(visitor: &mut V) {
             $( visitor.visit::<$model, { $n }>(); )*
@@ -207,6 +226,8 @@ macro_rules! registry {
 
 /// A model's [`StudyVisitor`] call if it is a study model (`study` in the list).
 trait MaybeStudy<const N: usize>: ModelEntry<N> {
+    /// Whether the model is a study model.
+    const STUDY: bool;
     #[allow(clippy::result_large_err)]
     fn study<V: StudyVisitor>(
         f: Self::File,
@@ -218,6 +239,7 @@ trait MaybeStudy<const N: usize>: ModelEntry<N> {
 macro_rules! maybe_study {
     ($model:ty, $n:expr, study) => {
         impl MaybeStudy<{ $n }> for $model {
+            const STUDY: bool = true;
             #[allow(clippy::result_large_err)]
             fn study<V: StudyVisitor>(
                 f: Self::File,
@@ -229,6 +251,7 @@ macro_rules! maybe_study {
     };
     ($model:ty, $n:expr,) => {
         impl MaybeStudy<{ $n }> for $model {
+            const STUDY: bool = false;
             #[allow(clippy::result_large_err)]
             fn study<V: StudyVisitor>(
                 f: Self::File,
@@ -459,4 +482,10 @@ pub fn and_list(names: &[&str]) -> String {
         [one] => (*one).to_string(),
         [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
     }
+}
+
+/// The models a firmware image is built for (the study models: `car-4dof and
+/// mining-truck-5dof`), for messages.
+pub fn image_models() -> String {
+    and_list(&image_model_names())
 }

@@ -15,6 +15,10 @@ pub trait StudyModel<const N: usize>: SimModel<N> {
     /// hydrostatic steering: no): the standard set's slalom needs one.
     const DRIVER_TORQUE: bool;
 
+    /// The folder of the model's shipped scenarios below `host-sim/scenarios/` (`""`: that
+    /// folder itself).
+    const SCENARIO_DIR: &'static str;
+
     /// The single-parameter uncertainties of `mismatch`: a label and the plant with that
     /// parameter (or group, e.g. the load) scaled by `factor`.
     fn single_variants(&self, factor: f64) -> Result<Vec<(&'static str, Self)>>;
@@ -33,6 +37,7 @@ pub trait StudyModel<const N: usize>: SimModel<N> {
 
 impl StudyModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     const DRIVER_TORQUE: bool = true;
+    const SCENARIO_DIR: &'static str = "";
 
     fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
         let groups: [(&str, &[Param]); 6] = [
@@ -87,6 +92,7 @@ fn scaled<M: SimModel<N>, const N: usize>(p: &M, name: &str, f: f64) -> Result<M
 
 impl StudyModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     const DRIVER_TORQUE: bool = false;
+    const SCENARIO_DIR: &'static str = "truck";
 
     /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
     /// truck-full`: I_k, C_a/F_z, c_h, k_h, t_p) and the car's tyre fields sigma and e; the

@@ -509,6 +509,8 @@ impl super::registry::ModelEntry<N_STATES> for TrailerParams {
     const DEFAULT_SET: &'static str = TrailerSet::Caravan.name();
     const MR_DAMPER: bool = false;
     const NO_DRIVER: Option<&'static str> = Some("has no steering for a driver torque");
+    /// The simulator tyre's friction and shape and the damper lever.
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["mu", "c_s", "l_d"];
 
     fn set_names() -> Vec<&'static str> {
         TrailerSet::ALL.iter().map(|s| s.name()).collect()
@@ -557,6 +559,12 @@ impl super::registry::ModelEntry<N_STATES> for TrailerParams {
     }
     fn vehicle(f: Self) -> Result<FamilyVehicle<TrailerParams>> {
         trailer_vehicle(f)
+    }
+    fn file_of(v: &FamilyVehicle<TrailerParams>) -> Self {
+        v.model
+    }
+    fn with_params(v: &FamilyVehicle<TrailerParams>, model: Self) -> FamilyVehicle<TrailerParams> {
+        FamilyVehicle { model, ..*v }
     }
 }
 

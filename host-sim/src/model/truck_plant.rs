@@ -386,6 +386,8 @@ impl super::registry::ModelEntry<N_STATES> for TruckParams {
     const DEFAULT_SET: &'static str = TruckSet::Full.name();
     const NO_DRIVER: Option<&'static str> =
         Some("steers hydrostatically, no driver torque reaches its linkage");
+    /// The simulator tyre's friction and shape and the damper lever.
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["mu", "c_s", "l_t"];
 
     fn set_names() -> Vec<&'static str> {
         TruckSet::ALL.iter().map(|s| s.name()).collect()
@@ -435,6 +437,12 @@ impl super::registry::ModelEntry<N_STATES> for TruckParams {
     }
     fn vehicle(f: Self::File) -> anyhow::Result<Self::File> {
         Ok(f)
+    }
+    fn file_of(v: &Self::File) -> Self::File {
+        *v
+    }
+    fn with_params(v: &Self::File, model: Self) -> Self::File {
+        super::family::FamilyVehicle { model, ..*v }
     }
 }
 

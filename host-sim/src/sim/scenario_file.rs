@@ -70,10 +70,11 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
-use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::registry::{self, for_each_model, ModelTypeVisitor, ModelVisitor, Registered};
 use crate::model::sensors::SensorConfig;
+use crate::model::study::StudyModel;
 use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use crate::sim::vehicle_file::{self, ModelVehicle};
@@ -83,7 +84,6 @@ use shimmy_core::model::LinearModel;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -861,12 +861,11 @@ fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
 }
 
 /// A model whose scenarios scenario files give: how its scenario is taken out of an
-/// [`AnyScenario`] and where its shipped scenarios are (`shimmy-sim report` on a vehicle of the
-/// model).
-pub trait ScenarioModel<const N: usize>: crate::sim::vehicle_file::FileModel<N> {
-    /// The folder of the model's shipped scenarios below `host-sim/scenarios/` (`""`: that
-    /// folder itself).
-    const SCENARIO_DIR: &'static str;
+/// [`AnyScenario`] (and, from [`StudyModel`], where its shipped scenarios are: `shimmy-sim
+/// report` on a vehicle of the model). Every study model of the registry is one.
+pub trait ScenarioModel<const N: usize>:
+    crate::sim::vehicle_file::FileModel<N> + StudyModel<N>
+{
     /// The scenario `s` if it is on this model, else an error naming both models.
     fn scenario(s: AnyScenario) -> Result<ScenarioSpec<Self, N>> {
         s.into_spec().map_err(|other| {
@@ -878,10 +877,16 @@ pub trait ScenarioModel<const N: usize>: crate::sim::vehicle_file::FileModel<N> 
         })
     }
     /// `v` as a vehicle of any model (provenance).
-    fn any_vehicle(v: &Self::Vehicle) -> ModelVehicle;
+    fn any_vehicle(v: &Self::Vehicle) -> ModelVehicle {
+        Self::into_any(Self::file_of(v))
+    }
     /// `v` with its model's parameters replaced by `model` (the shared sections stay).
-    fn with_model(v: &Self::Vehicle, model: Self) -> Self::Vehicle;
+    fn with_model(v: &Self::Vehicle, model: Self) -> Self::Vehicle {
+        Self::with_params(v, model)
+    }
 }
+
+impl<M: Registered<N> + StudyModel<N>, const N: usize> ScenarioModel<N> for M {}
 
 /// The error of a scenario on another model than the run's.
 fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
@@ -891,29 +896,10 @@ fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
     )
 }
 
-impl ScenarioModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
-    const SCENARIO_DIR: &'static str = "";
-    fn any_vehicle(v: &Vehicle) -> ModelVehicle {
-        ModelVehicle::Car(*v)
-    }
-    fn with_model(v: &Vehicle, model: Self) -> Vehicle {
-        Vehicle { plant: model, ..*v }
-    }
-}
-
-impl ScenarioModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
-    const SCENARIO_DIR: &'static str = "truck";
-    fn any_vehicle(v: &FamilyVehicle<TruckParams>) -> ModelVehicle {
-        ModelVehicle::Truck(*v)
-    }
-    fn with_model(v: &FamilyVehicle<TruckParams>, model: Self) -> FamilyVehicle<TruckParams> {
-        FamilyVehicle { model, ..*v }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::truck::TruckParams;
 
     const GOOD: &str = r#"
 name = "ramp"

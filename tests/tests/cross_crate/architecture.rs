@@ -504,7 +504,9 @@ const MAX_FILES: [(&str, usize); 4] = [
 ];
 
 /// Every identifier of `ts` and every `a::b` pair of consecutive path segments (macro
-/// arguments included; comments and strings are not tokens that count).
+/// arguments included; comments and strings are not tokens that count), leaving out
+/// `#[cfg(test)]` modules (a model's tests name it) and the names of `mod` declarations (the
+/// plant file's `mod` line is part of adding it).
 fn names(
     ts: proc_macro2::TokenStream,
     idents: &mut BTreeSet<String>,
@@ -512,9 +514,36 @@ fn names(
 ) {
     use proc_macro2::TokenTree;
     let toks: Vec<TokenTree> = ts.into_iter().collect();
+    let mut skip_to_brace = false;
+    let mut skip_ident = false;
     for (i, t) in toks.iter().enumerate() {
+        // `#[cfg(test)] mod tests { ... }`: a model's tests name it, they dispatch nothing
+        if let (TokenTree::Punct(p), Some(TokenTree::Group(g))) = (t, toks.get(i + 1)) {
+            if p.as_char() == '#' && g.stream().to_string().replace(' ', "") == "cfg(test)" {
+                skip_to_brace = true;
+            }
+        }
+        if skip_to_brace {
+            // the item ends at its body or at `;` (`#[cfg(test)] use ...;`)
+            match t {
+                TokenTree::Group(g) => {
+                    skip_to_brace = g.delimiter() != proc_macro2::Delimiter::Brace
+                }
+                TokenTree::Punct(p) => skip_to_brace = p.as_char() != ';',
+                _ => {}
+            }
+            continue;
+        }
+        // `mod truck_plant;`: declaring the plant file is adding it
+        if skip_ident {
+            skip_ident = false;
+            if matches!(t, TokenTree::Ident(_)) {
+                continue;
+            }
+        }
         match t {
             TokenTree::Group(g) => names(g.stream(), idents, pairs),
+            TokenTree::Ident(a) if a == "mod" => skip_ident = true,
             TokenTree::Ident(a) => {
                 idents.insert(a.to_string());
                 if let [TokenTree::Punct(p), TokenTree::Punct(q), TokenTree::Ident(b), ..] =
@@ -555,8 +584,10 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
 }
 
 /// For each model, the counted files outside its own and the registry that name it.
+/// The sources are the workspace's, or those under `SHIMMY_MODEL_COUNT_ROOT` (another checkout,
+/// to compare counts).
 fn files_naming_each_model() -> BTreeMap<&'static str, Vec<String>> {
-    let root = root();
+    let root = std::env::var_os("SHIMMY_MODEL_COUNT_ROOT").map_or_else(root, PathBuf::from);
     let mut files = Vec::new();
     for d in COUNTED {
         rust_files(&root.join(d), &mut files);
@@ -635,4 +666,13 @@ fn the_model_count_sees_names_in_code_not_in_comments() {
     assert!(count("use shimmy_core::vehicles::{car, truck};"));
     assert!(count("fn f(v: V) { if let ModelVehicle::Truck(t) = v {} }"));
     assert!(!count("// TruckParams\n/// `ModelVehicle::Truck`\nfn f() { let s = \"TruckSet\"; let truck = 1; }"));
+    assert!(!count(
+        "pub mod truck_plant;\n#[cfg(test)]\nmod tests { use super::TruckSet; }"
+    ));
+    assert!(count(
+        "#[cfg(test)]\nmod tests {}\nfn f() -> TruckParams { todo!() }"
+    ));
+    assert!(count(
+        "#[cfg(test)]\nuse a::b;\nfn f() -> TruckParams { todo!() }"
+    ));
 }

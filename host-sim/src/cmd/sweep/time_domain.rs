@@ -174,7 +174,7 @@ fn compute_on<M: SimModel<N>, const N: usize>(
         bail!(
             "--controllers margin-asmc: the firmware's margin report exists for the {} models \
              only",
-            crate::model::family::image_models()
+            crate::model::registry::image_models()
         );
     }
     super::args::check(a)?;
