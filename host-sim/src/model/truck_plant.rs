@@ -378,7 +378,7 @@ pub fn yaw_start(psi_rad: f64) -> [f64; N_STATES] {
 }
 
 /// The mining truck in the registry (`super::registry`): its files have the `[truck]` section
-/// and the shared ones; its shared sections default to [`truck_parts`](super::members::truck_parts).
+/// and the shared ones; its shared sections default to the truck's (`members::truck_parts`).
 impl super::registry::ModelEntry<N_STATES> for TruckParams {
     type File = super::family::FamilyVehicle<TruckParams>;
     const SECTION: Option<&'static str> = Some("truck");
@@ -401,7 +401,8 @@ impl super::registry::ModelEntry<N_STATES> for TruckParams {
     ) -> anyhow::Result<Self::File> {
         Ok(super::family::FamilyVehicle {
             model,
-            parts: parts.unwrap_or_else(super::members::truck_parts),
+            parts: parts
+                .unwrap_or_else(shimmy_core::vehicles::truck::board::TruckVehicle::default_parts),
         })
     }
     fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
