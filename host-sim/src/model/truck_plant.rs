@@ -377,6 +377,58 @@ pub fn yaw_start(psi_rad: f64) -> [f64; N_STATES] {
     x
 }
 
+/// The truck in the studies (`super::study`).
+impl super::study::StudyModel<N_STATES> for TruckParams {
+    const DRIVER_TORQUE: bool = false;
+    const SCENARIO_DIR: &'static str = "truck";
+
+    /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
+    /// truck-full`: I_k, C_a/F_z, c_h, k_h, t_p) and the car's tyre fields sigma and e; the
+    /// load is the payload (the cornering coefficient C_a/F_z stays, as for the car's load).
+    fn single_variants(&self, f: f64) -> anyhow::Result<Vec<(&'static str, Self)>> {
+        [
+            ("C_a/F_z", "c_a_per_fz"),
+            ("sigma", "sigma"),
+            ("I_k", "i_k"),
+            ("c_h", "c_h"),
+            ("k_h", "k_h"),
+            ("e", "e"),
+            ("t_p", "t_p"),
+            ("payload", "payload_kg"),
+        ]
+        .iter()
+        .map(|&(label, name)| Ok((label, super::study::scaled(self, name, f)?)))
+        .collect()
+    }
+
+    fn other_plants() -> Vec<(String, Self)> {
+        Vec::new()
+    }
+
+    /// The analogue of the car's `hard` set (half the restoring stiffness K_d): half the
+    /// linkage's damping c_h, the truck's least-damped path; and +-20 % on C_a/F_z, sigma, e.
+    fn robustness_variants(&self) -> anyhow::Result<Vec<(String, Self)>> {
+        let mut v = vec![(
+            "c_h-50%".to_string(),
+            super::study::scaled(self, "c_h", 0.5)?,
+        )];
+        for name in ["c_a_per_fz", "sigma", "e"] {
+            for f in [0.8, 1.2] {
+                v.push((
+                    format!("{name}{:+.0}%", (f - 1.0) * 100.0),
+                    super::study::scaled(self, name, f)?,
+                ));
+            }
+        }
+        Ok(v)
+    }
+
+    /// Off: below the loaded truck's onset (23.51 km/h); on: through its window.
+    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]) {
+        (&[8.0, 12.0, 16.0, 20.0], &[10.0, 30.0, 50.0])
+    }
+}
+
 /// The mining truck in the registry (`super::registry`): its files have the `[truck]` section
 /// and the shared ones; its shared sections default to the truck's (`members::truck_parts`).
 impl super::registry::ModelEntry<N_STATES> for TruckParams {
