@@ -30,16 +30,14 @@ use shimmy_core::stability::{self, HopfCrossing, ModeSelect, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::{self as core_vehicle, FIELDS};
 use shimmy_core::vehicles::car::{Param, PlantParams};
-use shimmy_core::vehicles::dual_axle::DualAxleParams;
-use shimmy_core::vehicles::trailer::TrailerParams;
-use shimmy_core::vehicles::truck::TruckParams;
-use shimmy_core::vehicles::{FieldError, FieldTable, ModelField};
+use shimmy_core::vehicles::{FieldError, ModelField};
 use shimmy_sim::cmd::reference_bench::spencer_fields;
 use shimmy_sim::cmd::stability::{REF_AMPLITUDE_DEG, STEP_KMH};
 use shimmy_sim::model::damper_equiv::damper_equivalent;
 use shimmy_sim::model::family::SimModel;
 use shimmy_sim::model::hopf_type::{hopf_type_at, HopfType, HopfTypeError};
 use shimmy_sim::model::plant::Damper;
+use shimmy_sim::model::registry::{self, ModelVisitor, Registered};
 use shimmy_sim::sim::analyze::{self as sim_analyze, Analysis, AnalysisRow, AnalyzeOptions};
 use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
 use shimmy_sim::sim::closed_loop::{LoopResult, RunMetrics};
@@ -91,18 +89,22 @@ impl Vehicle {
     /// The value of `field` (`"plant.k_d"`, `"truck.k_d"`), in the unit of the field table.
     fn get(&self, field: &str) -> PyResult<f64> {
         let (section, name) = split_field(&self.inner, field)?;
-        match (&self.inner, model_section(&self.inner)) {
-            (ModelVehicle::Truck(t), Some(s)) if section == s => model_get(&t.model, s, name),
-            (ModelVehicle::DualAxle(t), Some(s)) if section == s => model_get(&t.model, s, name),
-            (ModelVehicle::Trailer(t), Some(s)) if section == s => model_get(t, s, name),
-            (v, _) if shared_sections(v).contains(&section) => {
-                let parts = parts(v).ok_or_else(|| no_section(v, section))?;
-                core_vehicle::find_field(section, name)
-                    .map(|f| parts.get(f))
-                    .ok_or_else(|| unknown_field(section, name))
-            }
-            (v, _) => Err(no_section(v, section)),
+        let v = &self.inner;
+        if model_section(v) == Some(section) {
+            return v.model_field(name).ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "field `{section}.{name}`: no such field, allowed in `{section}`: {}",
+                    field_list(v)
+                ))
+            });
         }
+        if shared_sections(v).contains(&section) {
+            let parts = parts(v).ok_or_else(|| no_section(v, section))?;
+            return core_vehicle::find_field(section, name)
+                .map(|f| parts.get(f))
+                .ok_or_else(|| unknown_field(section, name));
+        }
+        Err(no_section(v, section))
     }
 
     /// Sets `field` (`"plant.k_d"`, `"truck.k_d"`) to `value`; the field's range and the whole
@@ -112,23 +114,17 @@ impl Vehicle {
         let shared = shared_sections(&self.inner).contains(&section);
         let own = model_section(&self.inner) == Some(section);
         // the messages of the vehicle file's reader (`vehicle_file::parse_model`)
-        let r = match &mut self.inner {
-            ModelVehicle::Truck(t) if own => model_set(&mut t.model, section, name, value, |t| {
-                t.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))
-            }),
-            ModelVehicle::DualAxle(t) if own => {
-                model_set(&mut t.model, section, name, value, |t| {
-                    t.validate().map_err(|e| prefixed(e, section))
-                })
-            }
-            ModelVehicle::Trailer(t) if own => model_set(t, section, name, value, |t| {
-                t.validate().map_err(|e| prefixed(e, section))
-            }),
-            ModelVehicle::Car(v) if shared => set_shared(v, section, name, value),
-            ModelVehicle::Truck(t) if shared => set_shared(&mut t.parts, section, name, value),
-            v => return Err(no_section(v, section)),
+        let v = &self.inner;
+        let r = if own {
+            model_set(v, section, name, value)
+        } else if let (true, Some(mut parts)) = (shared, parts(v)) {
+            set_shared(&mut parts, section, name, value)
+                .map(|()| v.with_parts(parts).expect("a vehicle with shared sections"))
+        } else {
+            return Err(no_section(v, section));
         };
-        r.map_err(value_error)
+        self.inner = r.map_err(value_error)?;
+        Ok(())
     }
 
     /// A copy with the fields of `changes` (`{"plant.k_d": 5000.0, ...}`) set.
@@ -143,12 +139,7 @@ impl Vehicle {
     /// Every field of the vehicle's model as `{"section.name": value}` (the model's own
     /// section, then the shared sections its vehicle files take).
     fn fields(&self) -> BTreeMap<String, f64> {
-        let mut out = match &self.inner {
-            ModelVehicle::Truck(t) => model_fields("truck", &t.model),
-            ModelVehicle::DualAxle(t) => model_fields("dual_axle", &t.model),
-            ModelVehicle::Trailer(t) => model_fields("trailer", t),
-            ModelVehicle::Car(_) => BTreeMap::new(),
-        };
+        let mut out = model_fields(&self.inner);
         if let Some(parts) = parts(&self.inner) {
             let sections = shared_sections(&self.inner);
             out.extend(
@@ -201,13 +192,7 @@ impl Vehicle {
     }
 
     fn __eq__(&self, other: &Self) -> bool {
-        match (&self.inner, &other.inner) {
-            (ModelVehicle::Car(a), ModelVehicle::Car(b)) => a == b,
-            (ModelVehicle::Truck(a), ModelVehicle::Truck(b)) => a == b,
-            (ModelVehicle::DualAxle(a), ModelVehicle::DualAxle(b)) => a == b,
-            (ModelVehicle::Trailer(a), ModelVehicle::Trailer(b)) => a == b,
-            _ => false,
-        }
+        self.inner == other.inner
     }
 }
 
@@ -226,14 +211,12 @@ impl Vehicle {
     }
 
     /// The shared sections of a model with an MR damper, or a `ValueError` for `what`.
-    fn damped(&self, what: &str) -> PyResult<&core_vehicle::Vehicle> {
+    fn damped(&self, what: &str) -> PyResult<core_vehicle::Vehicle> {
         parts(&self.inner).ok_or_else(|| {
             PyValueError::new_err(format!(
-                "{what}: the {} model has no MR damper; supported for {}, {} and {}",
+                "{what}: the {} model has no MR damper; supported for {}",
                 self.inner.model_name(),
-                PlantParams::NAME,
-                TruckParams::NAME,
-                DualAxleParams::NAME
+                registry::and_list(&registry::damped_models())
             ))
         })
     }
@@ -241,35 +224,19 @@ impl Vehicle {
 
 /// The model's own section of the field table (the car has none: its plant is `[plant]`).
 fn model_section(v: &ModelVehicle) -> Option<&'static str> {
-    match v {
-        ModelVehicle::Car(_) => None,
-        ModelVehicle::Truck(_) => Some("truck"),
-        ModelVehicle::DualAxle(_) => Some("dual_axle"),
-        ModelVehicle::Trailer(_) => Some("trailer"),
-    }
+    v.section()
 }
 
 /// The shared sections a vehicle file of the model sets (the car: all; the truck: all but
 /// `plant`, which is its `[truck]`; the dual-axle truck and the trailer: none, their files
 /// take their own section only).
 fn shared_sections(v: &ModelVehicle) -> &'static [&'static str] {
-    // a static: a slice of the const table would borrow a temporary
-    static SECTIONS: [&str; core_vehicle::SECTIONS.len()] = core_vehicle::SECTIONS;
-    match v {
-        ModelVehicle::Car(_) => &SECTIONS,
-        ModelVehicle::Truck(_) => &SECTIONS[1..],
-        ModelVehicle::DualAxle(_) | ModelVehicle::Trailer(_) => &[],
-    }
+    v.shared_sections()
 }
 
 /// The shared sections (damper, sensors, gains, thresholds) of a model with an MR damper.
-fn parts(v: &ModelVehicle) -> Option<&core_vehicle::Vehicle> {
-    match v {
-        ModelVehicle::Car(v) => Some(v),
-        ModelVehicle::Truck(t) => Some(&t.parts),
-        ModelVehicle::DualAxle(t) => Some(&t.parts),
-        ModelVehicle::Trailer(_) => None,
-    }
+fn parts(v: &ModelVehicle) -> Option<core_vehicle::Vehicle> {
+    v.parts()
 }
 
 /// Every section a field of the model's vehicle may name.
@@ -288,37 +255,17 @@ fn no_section(v: &ModelVehicle, section: &str) -> PyErr {
     ))
 }
 
-/// The field `name` of a model's own section.
-fn model_get<T: FieldTable>(t: &T, section: &str, name: &str) -> PyResult<f64> {
-    t.get(name).ok_or_else(|| {
-        PyValueError::new_err(format!(
-            "field `{section}.{name}`: no such field, allowed in `{section}`: {}",
-            field_list::<T>()
-        ))
-    })
-}
-
-/// Sets the field `name` of a model's own section, then `validate`s the whole; on an error
-/// `t` is unchanged.
-fn model_set<T: FieldTable>(
-    t: &mut T,
-    section: &str,
-    name: &str,
-    x: f64,
-    validate: impl Fn(&T) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    let mut u = *t;
-    match u.set(name, x) {
-        Ok(()) => {}
+/// `v` with the field `name` of its model's own section set, then the whole checked as a
+/// vehicle file checks it.
+fn model_set(v: &ModelVehicle, section: &str, name: &str, x: f64) -> anyhow::Result<ModelVehicle> {
+    match v.with_model_field(name, x) {
+        Ok(r) => r,
         Err(FieldError::Unknown) => anyhow::bail!(
             "field `{section}.{name}`: no such field, allowed in `{section}`: {}",
-            field_list::<T>()
+            field_list(v)
         ),
-        Err(e) => return Err(prefixed(e, section)),
+        Err(e) => Err(prefixed(e, section)),
     }
-    validate(&u)?;
-    *t = u;
-    Ok(())
 }
 
 /// Sets a field of the shared sections through the core's validation; on an error `v` is
@@ -345,8 +292,8 @@ fn prefixed(e: impl std::fmt::Display, section: &str) -> anyhow::Error {
     )
 }
 
-fn field_list<T: FieldTable>() -> String {
-    T::FIELDS
+fn field_list(v: &ModelVehicle) -> String {
+    v.model_fields()
         .iter()
         .map(|f| f.name)
         .collect::<Vec<_>>()
@@ -354,10 +301,13 @@ fn field_list<T: FieldTable>() -> String {
 }
 
 /// A model's own section as `{"section.name": value}`.
-fn model_fields<T: FieldTable>(section: &str, t: &T) -> BTreeMap<String, f64> {
-    T::FIELDS
+fn model_fields(v: &ModelVehicle) -> BTreeMap<String, f64> {
+    let Some(section) = v.section() else {
+        return BTreeMap::new();
+    };
+    v.model_fields()
         .iter()
-        .filter_map(|f| Some((format!("{section}.{}", f.name), t.get(f.name)?)))
+        .filter_map(|f| Some((format!("{section}.{}", f.name), v.model_field(f.name)?)))
         .collect()
 }
 
@@ -387,14 +337,9 @@ fn field_table<'py>(
     py: Python<'py>,
     vehicle: Option<&Vehicle>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    let car = ModelVehicle::Car(core_vehicle::Vehicle::nominal());
+    let car = ModelVehicle::from(core_vehicle::Vehicle::nominal());
     let v = vehicle.map_or(&car, |v| &v.inner);
-    let own: &[ModelField] = match v {
-        ModelVehicle::Car(_) => &[],
-        ModelVehicle::Truck(_) => TruckParams::FIELDS,
-        ModelVehicle::DualAxle(_) => DualAxleParams::FIELDS,
-        ModelVehicle::Trailer(_) => TrailerParams::FIELDS,
-    };
+    let own: &[ModelField] = v.model_fields();
     let mut rows = Vec::new();
     for f in own {
         let d = PyDict::new(py);
@@ -422,29 +367,52 @@ fn field_table<'py>(
     Ok(rows)
 }
 
-/// `$body` with `$m` the vehicle's model (a [`SimModel`]) and `$parts` its shared sections
-/// (`None`: no MR damper), for each model as `shimmy-sim stability` dispatches on it.
-macro_rules! on_model {
-    ($v:expr, |$m:ident, $parts:ident| $body:expr) => {
-        match $v {
-            ModelVehicle::Car(v) => {
-                let ($m, $parts) = (&v.plant, Some(v));
-                $body
-            }
-            ModelVehicle::Truck(t) => {
-                let ($m, $parts) = (&t.model, Some(&t.parts));
-                $body
-            }
-            ModelVehicle::DualAxle(t) => {
-                let ($m, $parts) = (&t.model, Some(&t.parts));
-                $body
-            }
-            ModelVehicle::Trailer(t) => {
-                let ($m, $parts) = (t, None);
-                $body
-            }
-        }
-    };
+/// [`crossings_on`] on the vehicle's model (`shimmy-sim stability`'s dispatch: the registry).
+struct Crossings {
+    model: &'static str,
+    current_a: Option<f64>,
+    ref_amplitude_deg: f64,
+    v_min_kmh: f64,
+    v_max_kmh: f64,
+    step_kmh: f64,
+}
+
+impl ModelVisitor for Crossings {
+    type Output = anyhow::Result<Vec<(HopfCrossing, Result<HopfType, HopfTypeError>)>>;
+    fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+        crossings_on(
+            &M::model_of(&f),
+            M::parts_of(&f),
+            self.model,
+            self.current_a,
+            self.ref_amplitude_deg,
+            self.v_min_kmh,
+            self.v_max_kmh,
+            self.step_kmh,
+        )
+    }
+}
+
+/// [`sweep_on`] on the vehicle's model.
+struct Sweep<'a> {
+    model: &'static str,
+    speeds_kmh: &'a [f64],
+    current_a: Option<f64>,
+    ref_amplitude_deg: f64,
+}
+
+impl ModelVisitor for Sweep<'_> {
+    type Output = anyhow::Result<BTreeMap<&'static str, Vec<f64>>>;
+    fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+        sweep_on(
+            &M::model_of(&f),
+            M::parts_of(&f),
+            self.model,
+            self.speeds_kmh,
+            self.current_a,
+            self.ref_amplitude_deg,
+        )
+    }
 }
 
 /// Equivalent viscous damper coefficient in N s/m: 0 without a current, else the MR damper's
@@ -546,16 +514,17 @@ fn hopf_window<'py>(
                 v_max_kmh > v_min_kmh,
                 "v_min_kmh {v_min_kmh} must be below v_max_kmh {v_max_kmh}"
             );
-            on_model!(v, |m, parts| crossings_on(
-                m,
-                parts,
-                model,
-                damper_current_a,
-                ref_amplitude_deg,
-                v_min_kmh,
-                v_max_kmh,
-                step_kmh
-            ))
+            registry::with_model(
+                v.clone(),
+                Crossings {
+                    model,
+                    current_a: damper_current_a,
+                    ref_amplitude_deg,
+                    v_min_kmh,
+                    v_max_kmh,
+                    step_kmh,
+                },
+            )
         })
         .map_err(value_error)?;
     crossings
@@ -652,14 +621,15 @@ fn eigen_sweep<'py>(
             for &s in &speeds_kmh {
                 SPEED_KMH.check("speeds_kmh", s)?;
             }
-            on_model!(v, |m, parts| sweep_on(
-                m,
-                parts,
-                model,
-                &speeds_kmh,
-                damper_current_a,
-                ref_amplitude_deg
-            ))
+            registry::with_model(
+                v.clone(),
+                Sweep {
+                    model,
+                    speeds_kmh: &speeds_kmh,
+                    current_a: damper_current_a,
+                    ref_amplitude_deg,
+                },
+            )
         })
         .map_err(value_error)?;
     let out = PyDict::new(py);
@@ -830,7 +800,7 @@ fn analyze<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     // any model the analysis takes (the car, the truck); it names the others it refuses
     let vehicle = vehicle.map_or_else(
-        || ModelVehicle::Car(core_vehicle::Vehicle::nominal()),
+        || ModelVehicle::from(core_vehicle::Vehicle::nominal()),
         |v| v.inner.clone(),
     );
     let changes = MappingChanges {

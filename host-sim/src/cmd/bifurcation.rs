@@ -4,10 +4,10 @@
 //! still grows or decays; table, CSV and PNG.
 
 use crate::model::family::SimModel;
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
 use crate::sim::reference::shimmy_mode_with_damper;
-use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -393,24 +393,27 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         a.window_s
     );
     EPS_RADPS.check("--friction-eps-radps", a.friction_eps_radps)?;
-    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => command_on(a, &v.plant, &v),
-        ModelVehicle::Truck(t) => command_on(a, &t.model, &t.parts),
-        ModelVehicle::Trailer(t) => {
-            let t = crate::model::trailer_plant::trailer_vehicle(t)?;
-            command_on(a, &t.model, &t.parts)
-        }
-        ModelVehicle::DualAxle(t) => {
+    struct On<'a>(&'a BifurcationArgs);
+    impl ModelVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Result<()> {
+            let a = self.0;
+            let v = registry::family::<M, N>(f)?;
+            // The dual-axle truck has a bifurcation of its own (its kingpins' dry friction).
+            let any: &dyn std::any::Any = &v.model;
+            let Some(t) = any.downcast_ref::<shimmy_core::vehicles::dual_axle::DualAxleParams>()
+            else {
+                return command_on(a, &v.model, &v.parts);
+            };
             anyhow::ensure!(
                 a.damper_current_a.is_none(),
                 "--damper-current-a: the {} model has no MR damper configured; leave it out",
-                <shimmy_core::vehicles::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
-                    { shimmy_core::vehicles::dual_axle::N_STATES },
-                >>::NAME
+                registry::name_of::<M, N>()
             );
-            dual_axle(&t.model, a)
+            dual_axle(t, a)
         }
     }
+    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
 }
 
 /// The command on the vehicle model `model` with the damper of `parts`.

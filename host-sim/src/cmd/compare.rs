@@ -2,6 +2,8 @@
 //! PNG plots of wheel yaw, coil current and adaptive gain vs time per scenario).
 
 use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::registry::image_models;
+use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::sensors::SensorConfig;
 use crate::model::study::StudyModel;
 use crate::out::file_name::sanitize;
@@ -13,15 +15,13 @@ use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
 use crate::sim::scenario::{self, ScenarioSpec};
 use crate::sim::scenario_file::ScenarioModel;
 use crate::sim::standard::standard_scenarios_on;
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::schedule::SpeedSchedule;
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_core::model::LinearModel;
 use shimmy_core::units::mps_to_kmh;
-use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -538,17 +538,18 @@ pub fn run_all<M: SimModel<N>, const N: usize>(
 
 /// The `compare` command.
 pub fn command(a: &CompareArgs) -> Result<()> {
-    match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => {
-            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+    struct On<'a>(&'a CompareArgs);
+    impl StudyVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            command_on::<M, N>(self.0, M::vehicle(v)?)
         }
-        ModelVehicle::Truck(v) => {
-            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, v)
-        }
-        other => bail!(
-            "`compare` runs the {} and {} models, not the {} (vehicle `{}`)",
-            PlantParams::NAME,
-            TruckParams::NAME,
+    }
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+        Ok(r) => r,
+        Err(other) => bail!(
+            "`compare` runs the {} models, not the {} (vehicle `{}`)",
+            image_models(),
             other.model_name(),
             a.vehicle
         ),
@@ -578,7 +579,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
             if !keep {
                 println!(
                     "margin-asmc left out: its margin report comes from the firmware, which is built for the {} models, not the {}",
-                    crate::model::family::image_models(),
+                    crate::model::registry::image_models(),
                     <M::Linear as LinearModel<N>>::NAME
                 );
             }

@@ -5,6 +5,9 @@
 
 use crate::model::family::SimModel;
 use crate::model::plant::Method;
+use crate::model::registry::image_models;
+use crate::model::registry::{self, Registered, StudyVisitor};
+use crate::model::study::StudyModel;
 use crate::out::plot_util;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
@@ -20,7 +23,6 @@ use shimmy_core::model::LinearModel;
 use shimmy_core::units::mps_to_kmh;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -270,19 +272,20 @@ pub fn run_demo<M: ScenarioModel<N>, const N: usize>(o: &DemoOptions<M, N>) -> R
 pub fn command(a: &DemoArgs) -> Result<()> {
     let vehicle = match &a.vehicle {
         Some(v) => vehicle_file::load_model(v).context("--vehicle")?,
-        None => ModelVehicle::Car(Vehicle::nominal()),
+        None => ModelVehicle::from(Vehicle::nominal()),
     };
-    match vehicle {
-        ModelVehicle::Car(v) => {
-            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+    struct On<'a>(&'a DemoArgs);
+    impl StudyVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            command_on::<M, N>(self.0, M::vehicle(v)?)
         }
-        ModelVehicle::Truck(v) => {
-            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, v)
-        }
-        other => bail!(
-            "the demo runs the {} and {} models, not the {}",
-            PlantParams::NAME,
-            TruckParams::NAME,
+    }
+    match registry::with_image_model(vehicle, On(a)) {
+        Ok(r) => r,
+        Err(other) => bail!(
+            "the demo runs the {} models, not the {}",
+            image_models(),
             other.model_name()
         ),
     }

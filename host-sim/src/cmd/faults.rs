@@ -12,11 +12,12 @@ use crate::model::coil_drive::CoilDrive;
 use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side};
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::sim::vehicle_file::{self, FileModel, ModelVehicle};
+use crate::sim::vehicle_file::{self, FileModel};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -28,7 +29,6 @@ use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -841,22 +841,14 @@ pub fn verdict(bad: &[String]) -> Result<()> {
 /// The command. Every option is checked before anything runs; the table and files are
 /// written either way, then the command fails if any check failed.
 pub fn command(a: &FaultsArgs) -> Result<()> {
-    match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => {
-            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a, v)
+    struct On<'a>(&'a FaultsArgs);
+    impl ModelVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Result<()> {
+            command_on::<M, N>(self.0, M::vehicle(f)?)
         }
-        ModelVehicle::Truck(t) => {
-            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a, t)
-        }
-        ModelVehicle::Trailer(t) => command_on::<
-            shimmy_core::vehicles::trailer::TrailerParams,
-            { shimmy_core::vehicles::trailer::N_STATES },
-        >(a, crate::model::trailer_plant::trailer_vehicle(t)?),
-        ModelVehicle::DualAxle(t) => command_on::<
-            shimmy_core::vehicles::dual_axle::DualAxleParams,
-            { shimmy_core::vehicles::dual_axle::N_STATES },
-        >(a, t),
     }
+    registry::with_model(vehicle_file::load_model(&a.vehicle)?, On(a))
 }
 
 /// The command on the vehicle `plant` of the model `M`.

@@ -11,10 +11,11 @@ use shimmy_core::stability;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicles::truck::TruckParams;
 
+use crate::model::registry::Registered;
 use crate::out::plot_util::{self, diverging};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::truck_study::{self, WindowPoint};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim gas-charge`.
 #[derive(clap::Args, Debug, Clone)]
@@ -58,9 +59,9 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
         args.v0_min_l,
         args.v0_max_l
     );
-    let t = match vehicle_file::load_model(&args.vehicle)? {
-        ModelVehicle::Truck(t) => t.model,
-        ModelVehicle::Car(_) | ModelVehicle::Trailer(_) | ModelVehicle::DualAxle(_) => bail!(
+    let t = match TruckParams::from_any(vehicle_file::load_model(&args.vehicle)?) {
+        Ok(t) => t.model,
+        Err(_) => bail!(
             "--vehicle `{}`: gas-charge needs a {} vehicle (truck-empty, truck-full or a file with that model)",
             args.vehicle,
             TruckParams::NAME

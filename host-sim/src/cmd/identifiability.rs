@@ -22,8 +22,10 @@ use shimmy_core::model::UpdatableModel;
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 
 use crate::model::family::onset_kmh;
+use crate::model::registry::{self, Registered, StudyVisitor};
+use crate::model::study::StudyModel;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim identifiability`.
 #[derive(clap::Args, Debug, Clone)]
@@ -238,10 +240,16 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
 /// `shimmy-sim identifiability`.
 pub fn command(a: &IdentifiabilityArgs) -> Result<()> {
     arg_range::ensure_count("--sigma-zeta", a.sigma_zeta.len(), 8)?;
-    match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => command_on(a, &v.plant),
-        ModelVehicle::Truck(v) => command_on(a, &v.model),
-        other => bail!(
+    struct On<'a>(&'a IdentifiabilityArgs);
+    impl StudyVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            command_on(self.0, &M::model_of(&v).linear())
+        }
+    }
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+        Ok(r) => r,
+        Err(other) => bail!(
             "`identifiability` runs the models with updatable parameters (car, truck), not the {} (vehicle `{}`)",
             other.model_name(),
             a.vehicle

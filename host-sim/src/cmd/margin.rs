@@ -15,6 +15,7 @@ use shimmy_core::estimator::monitor::Level;
 
 use crate::model::disturbance::SpeedProfile;
 use crate::model::family::SimModel;
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::sim::arg_range::{self, Range};
@@ -291,29 +292,27 @@ pub fn command(a: &MarginArgs) -> Result<()> {
     if let Some(m) = &a.model_vehicle {
         provenance = provenance.model_vehicle("model vehicle", m, &model)?;
     }
-    match (&vehicle, &model) {
-        (ModelVehicle::Car(v), ModelVehicle::Car(m)) => {
-            run_on(a, v.plant, m.plant, m.pipeline_params(), provenance)
+    /// The run on the vehicle's model, the firmware's model of the same.
+    struct On<'a>(&'a MarginArgs, ModelVehicle, Provenance);
+    impl ModelVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            let On(a, model, provenance) = self;
+            let m = match M::from_any(model) {
+                Ok(m) => registry::family::<M, N>(m)?,
+                Err(model) => bail!(
+                    "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's \
+                     model is of the vehicle's model",
+                    a.model_vehicle.as_deref().unwrap_or_default(),
+                    model.model_name(),
+                    a.vehicle,
+                    registry::name_of::<M, N>()
+                ),
+            };
+            run_on(a, M::model_of(&v), m.model, m.pipeline_params(), provenance)
         }
-        (ModelVehicle::Truck(v), ModelVehicle::Truck(m)) => {
-            run_on(a, v.model, m.model, m.pipeline_params(), provenance)
-        }
-        (ModelVehicle::DualAxle(v), ModelVehicle::DualAxle(m)) => {
-            run_on(a, v.model, m.model, m.pipeline_params(), provenance)
-        }
-        (ModelVehicle::Trailer(v), ModelVehicle::Trailer(m)) => {
-            let m = crate::model::trailer_plant::trailer_vehicle(*m)?;
-            run_on(a, *v, m.model, m.pipeline_params(), provenance)
-        }
-        _ => bail!(
-            "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's model is \
-             of the vehicle's model",
-            a.model_vehicle.as_deref().unwrap_or_default(),
-            model.model_name(),
-            a.vehicle,
-            vehicle.model_name()
-        ),
     }
+    registry::with_model(vehicle, On(a, model, provenance))
 }
 
 /// The run on the plant `p` with the pipeline's model `model` (of the same vehicle model).

@@ -36,10 +36,11 @@ use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::{FamilyVehicle, SimModel, SimPlant};
 use crate::model::plant::{Damper, Method};
+use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Control period, s.
 const DT_S: f64 = 1e-3;
@@ -368,13 +369,18 @@ pub fn markdown(rows: &[CellStats]) -> String {
 pub fn command(a: &MeterAccuracyArgs) -> Result<()> {
     SEEDS.check("--seeds", f64::from(a.seeds))?;
     RECORD_S.check("--record-s", a.record_s)?;
-    match vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => command_on(a, &FamilyVehicle::car(v)),
-        ModelVehicle::Truck(v) => command_on(a, &v),
-        other => bail!(
-            "`meter-accuracy` runs the {} and {} models, not the {} (vehicle `{}`)",
-            shimmy_core::vehicles::car::PlantParams::NAME,
-            shimmy_core::vehicles::truck::TruckParams::NAME,
+    struct On<'a>(&'a MeterAccuracyArgs);
+    impl StudyVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            command_on(self.0, &registry::family::<M, N>(v)?)
+        }
+    }
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+        Ok(r) => r,
+        Err(other) => bail!(
+            "`meter-accuracy` runs the {} models, not the {} (vehicle `{}`)",
+            crate::model::registry::image_models(),
             other.model_name(),
             a.vehicle
         ),

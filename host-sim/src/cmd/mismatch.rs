@@ -30,18 +30,19 @@ use rayon::prelude::*;
 use shimmy_core::estimator::model_update::ModelUpdateConfig;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
-use shimmy_core::model::{LinearModel, UpdatableModel};
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 
 use crate::model::family::FamilyVehicle;
+use crate::model::registry::image_models;
+use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Required warning lead at 1 km/h/s in the single-parameter cases, km/h.
 pub const MIN_LEAD_KMH: f64 = 3.0;
@@ -718,13 +719,18 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
     for &seed in &seeds {
         provenance = provenance.seed("road noise", seed);
     }
-    match vehicle {
-        ModelVehicle::Car(v) => command_on(a, &seeds, &FamilyVehicle::car(v), provenance),
-        ModelVehicle::Truck(v) => command_on(a, &seeds, &v, provenance),
-        other => bail!(
-            "`mismatch` runs the {} and {} models, not the {} (vehicle `{}`)",
-            PlantParams::NAME,
-            TruckParams::NAME,
+    struct On<'a>(&'a MismatchArgs, &'a [u64], Provenance);
+    impl StudyVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Result<()> {
+            command_on(self.0, self.1, &registry::family::<M, N>(v)?, self.2)
+        }
+    }
+    match registry::with_image_model(vehicle, On(a, &seeds, provenance)) {
+        Ok(r) => r,
+        Err(other) => bail!(
+            "`mismatch` runs the {} models, not the {} (vehicle `{}`)",
+            image_models(),
             other.model_name(),
             a.vehicle
         ),

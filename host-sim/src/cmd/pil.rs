@@ -5,7 +5,7 @@
 //! share at 168 MHz. `--check-sil` runs the scenario again with the firmware's application
 //! natively and fails unless both runs agree bit for bit.
 
-use crate::model::family::image_models;
+use crate::model::registry::image_models;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop;
@@ -13,11 +13,12 @@ use crate::sim::pil::{
     check_firmware_matches, compare, costs, PilFirmware, PilModel, SilFirmware, TaskCost,
 };
 use crate::sim::scenario::{self, ScenarioSpec};
-use crate::sim::scenario_file::{self, AnyScenario};
+use crate::sim::scenario_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use shimmy_core::model::LinearModel;
 use shimmy_core::vehicle::record_schema_of;
+use shimmy_core::vehicles::car::PlantParams;
+use shimmy_core::vehicles::truck::TruckParams;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -58,13 +59,17 @@ fn cost_table(name: &str, t: &TaskCost, sim_s: f64) -> String {
 
 /// The command.
 pub fn command(a: &PilArgs) -> Result<()> {
-    match scenario_file::load_any(&a.scenario)? {
-        AnyScenario::Car(spec) => run_spec(a, spec),
-        AnyScenario::Truck(spec) => run_spec(a, spec),
-        AnyScenario::Trailer(_) => bail!(
+    let s = scenario_file::load_any(&a.scenario)?;
+    let s = match s.into_spec::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>() {
+        Ok(spec) => return run_spec(a, spec),
+        Err(s) => s,
+    };
+    match s.into_spec::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>() {
+        Ok(spec) => run_spec(a, spec),
+        Err(s) => bail!(
             "scenario file {}: its vehicle is a {}; the firmware is built for the {} models",
             a.scenario.display(),
-            shimmy_core::vehicles::trailer::TrailerParams::NAME,
+            s.model_name(),
             image_models()
         ),
     }

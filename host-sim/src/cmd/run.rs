@@ -4,11 +4,12 @@
 //! the true eigenvalue of the plant's shimmy mode at the same speed).
 
 use crate::model::family::SimModel;
+use crate::model::registry::Registered;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::sim::closed_loop::LoopResult;
 use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file::{self, AnyScenario};
+use crate::sim::scenario_file::{self, ScenarioVisitor};
 use crate::sim::vehicle_file::FileModel;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -54,11 +55,14 @@ pub fn out_dir<M: SimModel<N>, const N: usize>(a: &RunArgs, spec: &ScenarioSpec<
 
 /// The command.
 pub fn command(a: &RunArgs) -> Result<()> {
-    match scenario_file::load_any(&a.scenario)? {
-        AnyScenario::Car(spec) => run_spec(a, spec),
-        AnyScenario::Truck(spec) => run_spec(a, spec),
-        AnyScenario::Trailer(spec) => run_spec(a, spec),
+    struct On<'a>(&'a RunArgs);
+    impl ScenarioVisitor for On<'_> {
+        type Output = Result<()>;
+        fn visit<M: Registered<N>, const N: usize>(self, s: ScenarioSpec<M, N>) -> Result<()> {
+            run_spec(self.0, s)
+        }
     }
+    scenario_file::load_any(&a.scenario)?.visit(On(a))
 }
 
 /// The command on the scenario `spec` of any vehicle model.

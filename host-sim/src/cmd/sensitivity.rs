@@ -1,7 +1,6 @@
 //! `shimmy-sim sensitivity`: how the Hopf onset/offset speeds and the onset frequency move with
 //! a relative change of each parameter the linear model depends on (table and CSV).
 
-use shimmy_core::vehicles::FieldTable;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -10,13 +9,11 @@ use shimmy_core::eigen::ModeShape;
 use shimmy_core::model::LinearModel;
 use shimmy_core::stability::{self, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
-use shimmy_core::vehicles::car::Param;
-use shimmy_core::vehicles::dual_axle::{DualAxleParams, DUAL_AXLE_FIELDS};
-use shimmy_core::vehicles::trailer::{TrailerParams, TRAILER_FIELDS};
-use shimmy_core::vehicles::truck::{TruckParams, TRUCK_FIELDS};
+use shimmy_core::vehicles::car::{Param, PlantParams};
 
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::table::opt;
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
@@ -58,18 +55,6 @@ pub const SENSITIVITY_PARAMS: [Param; 15] = [
     Param::KPhi,
     Param::IPhi,
 ];
-
-/// The truck's fields left out of its sensitivity study: the simulator tyre's friction and
-/// shape and the damper lever do not enter the linear model without a damper.
-pub const TRUCK_FIELDS_WITHOUT_EFFECT: [&str; 3] = ["mu", "c_s", "l_t"];
-
-/// The trailer's fields left out of its sensitivity study: the simulator tyre's friction and
-/// shape and the damper lever do not enter the linear model without a damper.
-pub const TRAILER_FIELDS_WITHOUT_EFFECT: [&str; 3] = ["mu", "c_s", "l_d"];
-/// The dual-axle truck's fields left out of its sensitivity study: the kingpin friction and the
-/// simulator tyre's friction and shape are not in the linear model, the damper lever has no
-/// effect without a damper (the friction's effect is `bifurcation`'s, nonlinear).
-pub const DUAL_AXLE_FIELDS_WITHOUT_EFFECT: [&str; 4] = ["m_f", "mu", "c_s", "l_t"];
 
 /// A crossing as the sensitivity table shows it: speed km/h, kind, frequency Hz, mode shape.
 pub type CrossingRow = (f64, stability::CrossingKind, f64, ModeShape);
@@ -138,85 +123,56 @@ pub fn window_of<M: LinearModel<N>, const N: usize>(p: &M) -> Result<Window> {
     })
 }
 
+/// One varied parameter: its window at a factor, or `None` when the varied vehicle is not
+/// valid (e.g. a truck whose struts cannot carry the load).
+type Variant = Box<dyn Fn(f64) -> Result<Option<Window>>>;
+
+/// The base window and one variant per parameter (name, unit, base value, variant) of the
+/// vehicle's model: the car's [`SENSITIVITY_PARAMS`], another model's fields but those without
+/// a linear effect ([`registry::ModelEntry::NO_LINEAR_EFFECT`]).
+struct Variants;
+
+impl ModelVisitor for Variants {
+    type Output = Result<(Window, Vec<(&'static str, &'static str, f64, Variant)>)>;
+    fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+        let t = M::model_of(&f);
+        let any: &dyn std::any::Any = &t;
+        if let Some(&p) = any.downcast_ref::<PlantParams>() {
+            let vs = SENSITIVITY_PARAMS
+                .iter()
+                .map(|&q| {
+                    let f: Variant = Box::new(move |k| window_of(&p.scaled(q, k)).map(Some));
+                    (q.name(), q.unit(), p.get(q), f)
+                })
+                .collect();
+            return Ok((window_of(&p)?, vs));
+        }
+        let vs = M::fields()
+            .iter()
+            .filter(|f| !M::NO_LINEAR_EFFECT.contains(&f.name))
+            .map(|f| {
+                let base = t.field(f.name).unwrap_or(f64::NAN);
+                let name = f.name;
+                let w: Variant = Box::new(move |k| {
+                    let mut v = t;
+                    if v.set_field(name, base * k).is_err() || v.check().is_err() {
+                        return Ok(None);
+                    }
+                    window_of(&v.linear()).map(Some)
+                });
+                (f.name, f.unit, base, w)
+            })
+            .collect();
+        Ok((window_of(&t.linear())?, vs))
+    }
+}
+
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
     // one variant per parameter: (name, unit, base value, the window at a factor, or None
     // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
-    type Variant = Box<dyn Fn(f64) -> Result<Option<Window>>>;
-    let (w0, variants): (Window, Vec<(&str, &str, f64, Variant)>) =
-        match vehicle_file::load_model(&args.vehicle)? {
-            ModelVehicle::Car(v) => {
-                let p = v.plant;
-                let vs = SENSITIVITY_PARAMS
-                    .iter()
-                    .map(|&q| {
-                        let f: Variant = Box::new(move |k| window_of(&p.scaled(q, k)).map(Some));
-                        (q.name(), q.unit(), p.get(q), f)
-                    })
-                    .collect();
-                (window_of(&p)?, vs)
-            }
-            ModelVehicle::Truck(tv) => {
-                let t = tv.model;
-                let vs = TRUCK_FIELDS
-                    .iter()
-                    .filter(|f| !TRUCK_FIELDS_WITHOUT_EFFECT.contains(&f.name))
-                    .map(|f| {
-                        let base = t.get(f.name).unwrap_or(f64::NAN);
-                        let name = f.name;
-                        let w: Variant = Box::new(move |k| {
-                            let mut v: TruckParams = t;
-                            if v.set(name, base * k).is_err() || v.validate().is_err() {
-                                return Ok(None);
-                            }
-                            window_of(&v).map(Some)
-                        });
-                        (f.name, f.unit, base, w)
-                    })
-                    .collect();
-                (window_of(&t)?, vs)
-            }
-            ModelVehicle::DualAxle(tv) => {
-                let t = tv.model;
-                let vs = DUAL_AXLE_FIELDS
-                    .iter()
-                    .filter(|f| !DUAL_AXLE_FIELDS_WITHOUT_EFFECT.contains(&f.name))
-                    .map(|f| {
-                        let base = t.get(f.name).unwrap_or(f64::NAN);
-                        let name = f.name;
-                        let w: Variant = Box::new(move |k| {
-                            let mut v: DualAxleParams = t;
-                            if v.set(name, base * k).is_err() || v.validate().is_err() {
-                                return Ok(None);
-                            }
-                            window_of(&v).map(Some)
-                        });
-                        (f.name, f.unit, base, w)
-                    })
-                    .collect();
-                (window_of(&t)?, vs)
-            }
-            ModelVehicle::Trailer(t) => {
-                let vs = TRAILER_FIELDS
-                    .iter()
-                    .filter(|f| !TRAILER_FIELDS_WITHOUT_EFFECT.contains(&f.name))
-                    .map(|f| {
-                        let base = t.get(f.name).unwrap_or(f64::NAN);
-                        let name = f.name;
-                        let w: Variant = Box::new(move |k| {
-                            let mut v: TrailerParams = t;
-                            if v.set(name, base * k).is_err() || v.validate().is_err() {
-                                return Ok(None);
-                            }
-                            window_of(&v).map(Some)
-                        });
-                        (f.name, f.unit, base, w)
-                    })
-                    .collect();
-                (window_of(&t)?, vs)
-            }
-        };
+    let (w0, variants) = registry::with_model(vehicle_file::load_model(&args.vehicle)?, Variants)?;
     let (on0, off0, f0) = (w0.onset_kmh, w0.offset_kmh, w0.onset_freq_hz);
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",

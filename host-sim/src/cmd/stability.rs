@@ -14,6 +14,7 @@ use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use crate::model::damper_equiv::damper_equivalent;
 use crate::model::hopf_type::{hopf_type_at, Criticality, HopfType, HopfTypeError};
 use crate::model::plant::Damper;
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::vehicle_file;
 
@@ -82,21 +83,29 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    match vehicle_file::load_model(&args.vehicle)? {
-        vehicle_file::ModelVehicle::Car(v) => with_damper(&v.plant, &v, args),
-        vehicle_file::ModelVehicle::Truck(t) => with_damper(&t.model, &t.parts, args),
-        vehicle_file::ModelVehicle::DualAxle(t) => with_damper(&t.model, &t.parts, args),
-        vehicle_file::ModelVehicle::Trailer(t) => {
-            anyhow::ensure!(
-                args.damper_current_a.is_none(),
-                "--damper-current-a: the {} model has no MR damper configured; leave it out \
-                 (`sway-damping` gives the sway damper it needs)",
-                shimmy_core::vehicles::trailer::TrailerParams::NAME
-            );
-            println!("stability of straight running: vehicle `{}`", args.vehicle);
-            println!("damper: none (F_d = 0)");
-            report(&t, Damper::None, 0.0, args)
+    registry::with_model(vehicle_file::load_model(&args.vehicle)?, Stability(args))
+}
+
+/// The command on a vehicle of the model `M`: with its damper, or none when the model's files
+/// configure none (the trailer: `sway-damping` sizes its damper).
+struct Stability<'a>(&'a StabilityArgs);
+
+impl ModelVisitor for Stability<'_> {
+    type Output = Result<()>;
+    fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Result<()> {
+        let args = self.0;
+        if let Some(parts) = M::parts_of(&f) {
+            return with_damper(&M::model_of(&f), parts, args);
         }
+        anyhow::ensure!(
+            args.damper_current_a.is_none(),
+            "--damper-current-a: the {} model has no MR damper configured; leave it out \
+             (`sway-damping` gives the sway damper it needs)",
+            registry::name_of::<M, N>()
+        );
+        println!("stability of straight running: vehicle `{}`", args.vehicle);
+        println!("damper: none (F_d = 0)");
+        report(&M::model_of(&f), Damper::None, 0.0, args)
     }
 }
 

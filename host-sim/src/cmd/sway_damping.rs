@@ -12,10 +12,11 @@ use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicles::trailer::TrailerParams;
 
+use crate::model::registry::Registered;
 use crate::out::plot_util;
 use crate::sim::arg_range::{self, Range};
 use crate::sim::trailer_study::{self, DhPoint, ZETA_DAMPER_MAX};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 
 /// Options of `shimmy-sim sway-damping`.
 #[derive(clap::Args, Debug, Clone)]
@@ -72,9 +73,9 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    let t = match vehicle_file::load_model(&args.vehicle)? {
-        ModelVehicle::Trailer(t) => t,
-        ModelVehicle::Car(_) | ModelVehicle::Truck(_) | ModelVehicle::DualAxle(_) => bail!(
+    let t = match TrailerParams::from_any(vehicle_file::load_model(&args.vehicle)?) {
+        Ok(t) => t,
+        Err(_) => bail!(
             "--vehicle `{}`: sway-damping needs a {} vehicle (`trailer` or a file with that model)",
             args.vehicle,
             TrailerParams::NAME

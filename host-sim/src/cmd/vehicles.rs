@@ -20,7 +20,7 @@ use shimmy_core::vehicle::Vehicle;
 use std::path::PathBuf;
 
 use crate::model::family::{FamilyVehicle, SimModel};
-use crate::model::trailer_plant::trailer_parts;
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::arg_range;
 use crate::sim::margin_run::{run, MarginScenario};
 use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
@@ -120,12 +120,15 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
 
 /// The row of one vehicle of any model.
 pub fn row(name: &str, v: &ModelVehicle, a: &VehiclesArgs) -> Result<VehicleRow> {
-    match v {
-        ModelVehicle::Car(v) => row_on(name, &v.plant, v, a),
-        ModelVehicle::Truck(t) => row_on(name, &t.model, &t.parts, a),
-        ModelVehicle::DualAxle(t) => row_on(name, &t.model, &t.parts, a),
-        ModelVehicle::Trailer(t) => row_on(name, t, &trailer_parts()?, a),
+    struct Row<'a>(&'a str, &'a VehiclesArgs);
+    impl ModelVisitor for Row<'_> {
+        type Output = Result<VehicleRow>;
+        fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+            let v = registry::family::<M, N>(f)?;
+            row_on(self.0, &v.model, &v.parts, self.1)
+        }
     }
+    registry::with_model(v.clone(), Row(name, a))
 }
 
 /// Duration and measuring window of a limit-cycle run for a mode at `f` Hz, s.

@@ -18,8 +18,8 @@
 use shimmy_core::eigen::eigenvalues;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::vehicles::dual_axle::{
-    DualAxleOperatingPoint, DualAxleParams, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L, PSI_1R, PSI_2L,
-    PSI_2R, WHEELS,
+    DualAxleOperatingPoint, DualAxleParams, DualAxleSet, A_1L as A_1L_, N_DOF, N_STATES, PSI_1L,
+    PSI_1R, PSI_2L, PSI_2R, WHEELS,
 };
 use shimmy_core::vehicles::FieldTable;
 
@@ -267,6 +267,81 @@ pub fn envelope_growth_1ps(
         }
     }
     Ok((last / first).ln() / (w1 - settle_s))
+}
+
+/// The dual-axle truck in the registry (`super::registry`): its files have the `[dual_axle]`
+/// section only; its shared sections are [`dual_axle_parts`].
+impl super::registry::ModelEntry<N_STATES> for DualAxleParams {
+    type File = super::family::FamilyVehicle<DualAxleParams>;
+    const SECTION: Option<&'static str> = Some("dual_axle");
+    const SHARED_SECTIONS: bool = false;
+    const DEFAULT_SET: &'static str = DualAxleSet::Rated.name();
+    const SCENARIOS: bool = false;
+    /// The kingpin friction and the simulator tyre's friction and shape are not in the linear
+    /// model, the damper lever has no effect without a damper (the friction's effect is
+    /// `bifurcation`'s, nonlinear).
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["m_f", "mu", "c_s", "l_t"];
+
+    fn set_names() -> Vec<&'static str> {
+        DualAxleSet::ALL.iter().map(|s| s.name()).collect()
+    }
+    fn set(name: &str) -> Option<Self> {
+        DualAxleSet::from_name(name).map(DualAxleSet::params)
+    }
+    fn assemble(
+        model: Self,
+        parts: Option<shimmy_core::vehicle::Vehicle>,
+    ) -> anyhow::Result<Self::File> {
+        Ok(super::family::FamilyVehicle {
+            model,
+            parts: match parts {
+                Some(p) => p,
+                None => dual_axle_parts()?,
+            },
+        })
+    }
+    fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
+        <Self as FieldTable>::FIELDS
+    }
+    fn field(&self, name: &str) -> Option<f64> {
+        FieldTable::get(self, name)
+    }
+    fn set_field(
+        &mut self,
+        name: &str,
+        value: f64,
+    ) -> Result<(), shimmy_core::vehicles::FieldError> {
+        FieldTable::set(self, name, value)
+    }
+    fn check(&self) -> Result<(), String> {
+        self.validate().map_err(|e| e.to_string())
+    }
+    fn check_in_file(&self) -> anyhow::Result<()> {
+        self.validate().map_err(|e| {
+            anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
+        })
+    }
+    fn model_of(f: &Self::File) -> Self {
+        f.model
+    }
+    fn model_mut(f: &mut Self::File) -> &mut Self {
+        &mut f.model
+    }
+    fn parts_of(f: &Self::File) -> Option<&shimmy_core::vehicle::Vehicle> {
+        Some(&f.parts)
+    }
+    fn parts_of_mut(f: &mut Self::File) -> Option<&mut shimmy_core::vehicle::Vehicle> {
+        Some(&mut f.parts)
+    }
+    fn vehicle(f: Self::File) -> anyhow::Result<Self::File> {
+        Ok(f)
+    }
+    fn file_of(v: &Self::File) -> Self::File {
+        *v
+    }
+    fn with_params(v: &Self::File, model: Self) -> Self::File {
+        super::family::FamilyVehicle { model, ..*v }
+    }
 }
 
 #[cfg(test)]

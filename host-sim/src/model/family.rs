@@ -114,18 +114,6 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     }
 }
 
-/// The models a firmware image is built for (those with a [`SimModel::host_app_model`]), for
-/// messages.
-pub fn image_models() -> String {
-    format!(
-        "{} and {}",
-        <PlantParams as LinearModel<{ shimmy_core::vehicles::car::N_STATES }>>::NAME,
-        <shimmy_core::vehicles::truck::TruckParams as LinearModel<
-            { shimmy_core::vehicles::truck::N_STATES },
-        >>::NAME
-    )
-}
-
 /// A parameter of a model by name, for axes and tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ParamInfo {

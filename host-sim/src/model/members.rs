@@ -345,6 +345,69 @@ pub fn car_parts_with_damper_scaled(s: f64) -> Vehicle {
     Vehicle::from_set(ParamSet::Nominal).with_damper_scaled(s)
 }
 
+/// The car in the registry (`super::registry`): its vehicle is the core's whole [`Vehicle`],
+/// its files the core's vehicle files (the `[plant]` section and the shared ones).
+impl super::registry::ModelEntry<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
+    type File = Vehicle;
+    const SECTION: Option<&'static str> = None;
+    const SHARED_SECTIONS: bool = true;
+    const DEFAULT_SET: &'static str = ParamSet::Nominal.name();
+
+    fn set_names() -> Vec<&'static str> {
+        ParamSet::ALL.iter().map(|s| s.name()).collect()
+    }
+    fn set(name: &str) -> Option<Self> {
+        ParamSet::from_name(name).map(ParamSet::params)
+    }
+    fn named(name: &str) -> Option<Result<Vehicle>> {
+        ParamSet::from_name(name).map(|s| Ok(Vehicle::from_set(s)))
+    }
+    fn assemble(model: Self, parts: Option<Vehicle>) -> Result<Vehicle> {
+        Ok(Vehicle {
+            plant: model,
+            ..parts.unwrap_or_else(Vehicle::nominal)
+        })
+    }
+    fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
+        &[]
+    }
+    fn field(&self, _name: &str) -> Option<f64> {
+        None
+    }
+    fn set_field(
+        &mut self,
+        _name: &str,
+        _value: f64,
+    ) -> std::result::Result<(), shimmy_core::vehicles::FieldError> {
+        Err(shimmy_core::vehicles::FieldError::Unknown)
+    }
+    fn check(&self) -> std::result::Result<(), String> {
+        self.validate()
+            .map_err(|(p, x)| format!("field `{}`: {x} is out of range", p.name()))
+    }
+    fn model_of(f: &Vehicle) -> Self {
+        f.plant
+    }
+    fn model_mut(f: &mut Vehicle) -> &mut Self {
+        &mut f.plant
+    }
+    fn parts_of(f: &Vehicle) -> Option<&Vehicle> {
+        Some(f)
+    }
+    fn parts_of_mut(f: &mut Vehicle) -> Option<&mut Vehicle> {
+        Some(f)
+    }
+    fn vehicle(f: Vehicle) -> Result<Vehicle> {
+        Ok(f)
+    }
+    fn file_of(v: &Vehicle) -> Vehicle {
+        *v
+    }
+    fn with_params(v: &Vehicle, model: Self) -> Vehicle {
+        Vehicle { plant: model, ..*v }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

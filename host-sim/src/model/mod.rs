@@ -14,6 +14,7 @@ pub mod hopf_type;
 pub mod integrator;
 pub mod members;
 pub mod plant;
+pub mod registry;
 pub mod sensors;
 pub mod study;
 pub mod trailer_plant;

@@ -1,11 +1,11 @@
 //! What the studies vary on a vehicle model and where they run it (`mismatch`, `compare`'s
 //! robustness variants, `meter-accuracy`'s speeds, the standard set's slalom): one trait,
 //! [`StudyModel`], on top of [`SimModel`], so that each study is written once for every model
-//! and only these model facts differ.
+//! and only these model facts differ. The car's impl is here; the mining truck's is in its plant
+//! file (`super::truck_plant`).
 
 use anyhow::Result;
 use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
-use shimmy_core::vehicles::truck::TruckParams;
 
 use super::family::SimModel;
 
@@ -14,6 +14,10 @@ pub trait StudyModel<const N: usize>: SimModel<N> {
     /// Whether a driver torque reaches the steering (the car's steering wheel; the truck's
     /// hydrostatic steering: no): the standard set's slalom needs one.
     const DRIVER_TORQUE: bool;
+
+    /// The folder of the model's shipped scenarios below `host-sim/scenarios/` (`""`: that
+    /// folder itself).
+    const SCENARIO_DIR: &'static str;
 
     /// The single-parameter uncertainties of `mismatch`: a label and the plant with that
     /// parameter (or group, e.g. the load) scaled by `factor`.
@@ -33,6 +37,7 @@ pub trait StudyModel<const N: usize>: SimModel<N> {
 
 impl StudyModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
     const DRIVER_TORQUE: bool = true;
+    const SCENARIO_DIR: &'static str = "";
 
     fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
         let groups: [(&str, &[Param]); 6] = [
@@ -78,58 +83,11 @@ impl StudyModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
 }
 
 /// `p` with the field `name` times `f`.
-fn scaled<M: SimModel<N>, const N: usize>(p: &M, name: &str, f: f64) -> Result<M> {
+pub fn scaled<M: SimModel<N>, const N: usize>(p: &M, name: &str, f: f64) -> Result<M> {
     let x = p
         .param(name)
         .ok_or_else(|| anyhow::anyhow!("no parameter `{name}`"))?;
     p.with_param(name, x * f)
-}
-
-impl StudyModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
-    const DRIVER_TORQUE: bool = false;
-
-    /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
-    /// truck-full`: I_k, C_a/F_z, c_h, k_h, t_p) and the car's tyre fields sigma and e; the
-    /// load is the payload (the cornering coefficient C_a/F_z stays, as for the car's load).
-    fn single_variants(&self, f: f64) -> Result<Vec<(&'static str, Self)>> {
-        [
-            ("C_a/F_z", "c_a_per_fz"),
-            ("sigma", "sigma"),
-            ("I_k", "i_k"),
-            ("c_h", "c_h"),
-            ("k_h", "k_h"),
-            ("e", "e"),
-            ("t_p", "t_p"),
-            ("payload", "payload_kg"),
-        ]
-        .iter()
-        .map(|&(label, name)| Ok((label, scaled(self, name, f)?)))
-        .collect()
-    }
-
-    fn other_plants() -> Vec<(String, Self)> {
-        Vec::new()
-    }
-
-    /// The analogue of the car's `hard` set (half the restoring stiffness K_d): half the
-    /// linkage's damping c_h, the truck's least-damped path; and +-20 % on C_a/F_z, sigma, e.
-    fn robustness_variants(&self) -> Result<Vec<(String, Self)>> {
-        let mut v = vec![("c_h-50%".to_string(), scaled(self, "c_h", 0.5)?)];
-        for name in ["c_a_per_fz", "sigma", "e"] {
-            for f in [0.8, 1.2] {
-                v.push((
-                    format!("{name}{:+.0}%", (f - 1.0) * 100.0),
-                    scaled(self, name, f)?,
-                ));
-            }
-        }
-        Ok(v)
-    }
-
-    /// Off: below the loaded truck's onset (23.51 km/h); on: through its window.
-    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]) {
-        (&[8.0, 12.0, 16.0, 20.0], &[10.0, 30.0, 50.0])
-    }
 }
 
 #[cfg(test)]

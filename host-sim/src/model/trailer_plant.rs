@@ -500,6 +500,74 @@ pub fn trailer_vehicle(t: TrailerParams) -> Result<FamilyVehicle<TrailerParams>>
     })
 }
 
+/// The trailer in the registry (`super::registry`): its files and sets give its parameters only
+/// (no MR damper configured); it runs with [`trailer_parts`] ([`trailer_vehicle`]).
+impl super::registry::ModelEntry<N_STATES> for TrailerParams {
+    type File = TrailerParams;
+    const SECTION: Option<&'static str> = Some("trailer");
+    const SHARED_SECTIONS: bool = false;
+    const DEFAULT_SET: &'static str = TrailerSet::Caravan.name();
+    const MR_DAMPER: bool = false;
+    const NO_DRIVER: Option<&'static str> = Some("has no steering for a driver torque");
+    /// The simulator tyre's friction and shape and the damper lever.
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["mu", "c_s", "l_d"];
+
+    fn set_names() -> Vec<&'static str> {
+        TrailerSet::ALL.iter().map(|s| s.name()).collect()
+    }
+    fn set(name: &str) -> Option<Self> {
+        TrailerSet::from_name(name).map(TrailerSet::params)
+    }
+    fn assemble(model: Self, _parts: Option<Vehicle>) -> Result<Self> {
+        Ok(model)
+    }
+    fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
+        <Self as FieldTable>::FIELDS
+    }
+    fn field(&self, name: &str) -> Option<f64> {
+        FieldTable::get(self, name)
+    }
+    fn set_field(
+        &mut self,
+        name: &str,
+        value: f64,
+    ) -> std::result::Result<(), shimmy_core::vehicles::FieldError> {
+        FieldTable::set(self, name, value)
+    }
+    fn check(&self) -> std::result::Result<(), String> {
+        self.validate().map_err(|e| e.to_string())
+    }
+    fn check_in_file(&self) -> Result<()> {
+        self.validate().map_err(|e| {
+            anyhow::anyhow!(
+                "{}",
+                e.to_string().replacen("field `", "field `trailer.", 1)
+            )
+        })
+    }
+    fn model_of(f: &Self) -> Self {
+        *f
+    }
+    fn model_mut(f: &mut Self) -> &mut Self {
+        f
+    }
+    fn parts_of(_f: &Self) -> Option<&Vehicle> {
+        None
+    }
+    fn parts_of_mut(_f: &mut Self) -> Option<&mut Vehicle> {
+        None
+    }
+    fn vehicle(f: Self) -> Result<FamilyVehicle<TrailerParams>> {
+        trailer_vehicle(f)
+    }
+    fn file_of(v: &FamilyVehicle<TrailerParams>) -> Self {
+        v.model
+    }
+    fn with_params(v: &FamilyVehicle<TrailerParams>, model: Self) -> FamilyVehicle<TrailerParams> {
+        FamilyVehicle { model, ..*v }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

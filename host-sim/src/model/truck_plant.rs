@@ -16,9 +16,11 @@ use nalgebra::SVector;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
 use shimmy_core::vehicles::truck::{
-    TruckOperatingPoint, TruckParams, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI, PSI_L,
-    PSI_R, THETA_C, Y,
+    TruckOperatingPoint, TruckParams, TruckSet, A_L, A_R, DPHI, DPSI_L, DPSI_R, DY, N_STATES, PHI,
+    PSI_L, PSI_R, THETA_C, Y,
 };
+
+use shimmy_core::vehicles::FieldTable;
 
 use super::family::SimPlant;
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
@@ -373,6 +375,128 @@ pub fn yaw_start(psi_rad: f64) -> [f64; N_STATES] {
     x[0] = psi_rad;
     x[1] = psi_rad;
     x
+}
+
+/// The truck in the studies (`super::study`).
+impl super::study::StudyModel<N_STATES> for TruckParams {
+    const DRIVER_TORQUE: bool = false;
+    const SCENARIO_DIR: &'static str = "truck";
+
+    /// The fields the loaded truck's onset moves most with (`shimmy-sim sensitivity --vehicle
+    /// truck-full`: I_k, C_a/F_z, c_h, k_h, t_p) and the car's tyre fields sigma and e; the
+    /// load is the payload (the cornering coefficient C_a/F_z stays, as for the car's load).
+    fn single_variants(&self, f: f64) -> anyhow::Result<Vec<(&'static str, Self)>> {
+        [
+            ("C_a/F_z", "c_a_per_fz"),
+            ("sigma", "sigma"),
+            ("I_k", "i_k"),
+            ("c_h", "c_h"),
+            ("k_h", "k_h"),
+            ("e", "e"),
+            ("t_p", "t_p"),
+            ("payload", "payload_kg"),
+        ]
+        .iter()
+        .map(|&(label, name)| Ok((label, super::study::scaled(self, name, f)?)))
+        .collect()
+    }
+
+    fn other_plants() -> Vec<(String, Self)> {
+        Vec::new()
+    }
+
+    /// The analogue of the car's `hard` set (half the restoring stiffness K_d): half the
+    /// linkage's damping c_h, the truck's least-damped path; and +-20 % on C_a/F_z, sigma, e.
+    fn robustness_variants(&self) -> anyhow::Result<Vec<(String, Self)>> {
+        let mut v = vec![(
+            "c_h-50%".to_string(),
+            super::study::scaled(self, "c_h", 0.5)?,
+        )];
+        for name in ["c_a_per_fz", "sigma", "e"] {
+            for f in [0.8, 1.2] {
+                v.push((
+                    format!("{name}{:+.0}%", (f - 1.0) * 100.0),
+                    super::study::scaled(self, name, f)?,
+                ));
+            }
+        }
+        Ok(v)
+    }
+
+    /// Off: below the loaded truck's onset (23.51 km/h); on: through its window.
+    fn meter_speeds_kmh() -> (&'static [f64], &'static [f64]) {
+        (&[8.0, 12.0, 16.0, 20.0], &[10.0, 30.0, 50.0])
+    }
+}
+
+/// The mining truck in the registry (`super::registry`): its files have the `[truck]` section
+/// and the shared ones; its shared sections default to the truck's (`members::truck_parts`).
+impl super::registry::ModelEntry<N_STATES> for TruckParams {
+    type File = super::family::FamilyVehicle<TruckParams>;
+    const SECTION: Option<&'static str> = Some("truck");
+    const SHARED_SECTIONS: bool = true;
+    const DEFAULT_SET: &'static str = TruckSet::Full.name();
+    const NO_DRIVER: Option<&'static str> =
+        Some("steers hydrostatically, no driver torque reaches its linkage");
+    /// The simulator tyre's friction and shape and the damper lever.
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["mu", "c_s", "l_t"];
+
+    fn set_names() -> Vec<&'static str> {
+        TruckSet::ALL.iter().map(|s| s.name()).collect()
+    }
+    fn set(name: &str) -> Option<Self> {
+        TruckSet::from_name(name).map(TruckSet::params)
+    }
+    fn assemble(
+        model: Self,
+        parts: Option<shimmy_core::vehicle::Vehicle>,
+    ) -> anyhow::Result<Self::File> {
+        Ok(super::family::FamilyVehicle {
+            model,
+            parts: parts
+                .unwrap_or_else(shimmy_core::vehicles::truck::board::TruckVehicle::default_parts),
+        })
+    }
+    fn fields() -> &'static [shimmy_core::vehicles::ModelField] {
+        <Self as FieldTable>::FIELDS
+    }
+    fn field(&self, name: &str) -> Option<f64> {
+        FieldTable::get(self, name)
+    }
+    fn set_field(
+        &mut self,
+        name: &str,
+        value: f64,
+    ) -> Result<(), shimmy_core::vehicles::FieldError> {
+        FieldTable::set(self, name, value)
+    }
+    fn check(&self) -> Result<(), String> {
+        self.validate().map_err(|e| e.to_string())
+    }
+    fn check_in_file(&self) -> anyhow::Result<()> {
+        self.validate().map_err(|e| anyhow::anyhow!("truck: {e}"))
+    }
+    fn model_of(f: &Self::File) -> Self {
+        f.model
+    }
+    fn model_mut(f: &mut Self::File) -> &mut Self {
+        &mut f.model
+    }
+    fn parts_of(f: &Self::File) -> Option<&shimmy_core::vehicle::Vehicle> {
+        Some(&f.parts)
+    }
+    fn parts_of_mut(f: &mut Self::File) -> Option<&mut shimmy_core::vehicle::Vehicle> {
+        Some(&mut f.parts)
+    }
+    fn vehicle(f: Self::File) -> anyhow::Result<Self::File> {
+        Ok(f)
+    }
+    fn file_of(v: &Self::File) -> Self::File {
+        *v
+    }
+    fn with_params(v: &Self::File, model: Self) -> Self::File {
+        super::family::FamilyVehicle { model, ..*v }
+    }
 }
 
 #[cfg(test)]

@@ -4,13 +4,13 @@
 //! resolved vehicle's byte record, and the seeds. Written as a Markdown table into every report
 //! and as an object into its JSON summary.
 
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use sha2::{Digest, Sha256};
 use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
 use shimmy_core::vehicles::car::ParamSet;
-use shimmy_core::vehicles::truck::TruckSet;
 use std::path::Path;
 
 /// The build's `git describe --always --dirty --tags` (or why there is none).
@@ -119,17 +119,21 @@ impl Provenance {
     /// [`Self::vehicle`] for a vehicle of any model: another model's record is the SHA-256 of
     /// its parameters (model and shared sections) as the simulator holds them.
     pub fn model_vehicle(mut self, role: &str, spec: &str, v: &ModelVehicle) -> Result<Self> {
-        let (record, named) = match v {
-            ModelVehicle::Car(car) => return self.vehicle(role, spec, car),
-            ModelVehicle::Truck(t) => (format!("{t:?}"), TruckSet::from_name(spec).is_some()),
-            ModelVehicle::DualAxle(t) => (
-                format!("{t:?}"),
-                shimmy_core::vehicles::dual_axle::DualAxleSet::from_name(spec).is_some(),
-            ),
-            ModelVehicle::Trailer(t) => (
-                format!("{t:?}"),
-                shimmy_core::vehicles::trailer::TrailerSet::from_name(spec).is_some(),
-            ),
+        /// A whole core vehicle (its record), or the record text of another model's vehicle
+        /// and whether `spec` is one of its sets.
+        struct Record<'a>(&'a str);
+        impl ModelVisitor for Record<'_> {
+            type Output = std::result::Result<Vehicle, (String, bool)>;
+            fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+                match (M::SECTION, M::parts_of(&f)) {
+                    (None, Some(whole)) => Ok(*whole),
+                    _ => Err((format!("{f:?}"), M::set(self.0).is_some())),
+                }
+            }
+        }
+        let (record, named) = match registry::with_model(v.clone(), Record(spec)) {
+            Ok(car) => return self.vehicle(role, spec, &car),
+            Err(r) => r,
         };
         if !named {
             self = self.file(&format!("{role} file"), Path::new(spec))?;

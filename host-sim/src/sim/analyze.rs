@@ -16,6 +16,8 @@
 //! no value, as a missed sample on the board.
 
 use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::registry::{self, Registered, StudyVisitor};
+use crate::model::study::StudyModel;
 use crate::sim::log_file::LogSample;
 use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
@@ -63,7 +65,7 @@ impl Default for AnalyzeOptions {
     /// The nominal vehicle with its model; gaps above 20 ms (two decimated meter steps).
     fn default() -> Self {
         Self {
-            vehicle: ModelVehicle::Car(Vehicle::nominal()),
+            vehicle: ModelVehicle::from(Vehicle::nominal()),
             model: true,
             max_gap_s: 0.02,
         }
@@ -308,10 +310,23 @@ pub fn analyze_with_progress(
     o: &AnalyzeOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Analysis> {
-    match &o.vehicle {
-        ModelVehicle::Car(v) => analyze_on(log, o, &FamilyVehicle::car(*v), progress),
-        ModelVehicle::Truck(v) => analyze_on(log, o, v, progress),
-        other => bail!(
+    struct On<'a>(
+        &'a [LogSample],
+        &'a AnalyzeOptions,
+        &'a mut dyn FnMut(usize, usize),
+    );
+    impl StudyVisitor for On<'_> {
+        type Output = Result<Analysis>;
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(
+            self,
+            v: M::File,
+        ) -> Result<Analysis> {
+            analyze_on(self.0, self.1, &registry::family::<M, N>(v)?, self.2)
+        }
+    }
+    match registry::with_image_model(o.vehicle.clone(), On(log, o, progress)) {
+        Ok(r) => r,
+        Err(other) => bail!(
             "analyze runs logs of the car ({}) and the mining truck ({}), not of the {} (its \
              meter reads other signals than a log's two wheel yaw angles)",
             PlantParams::NAME,

@@ -164,7 +164,7 @@ impl<M: SimModel<N>, const N: usize> ScenarioSpec<M, N> {
             bail!(
                 "controller `margin-asmc` reads the firmware's margin report; the firmware is \
                  built for the {} models, this vehicle is a {}: choose another controller",
-                crate::model::family::image_models(),
+                crate::model::registry::image_models(),
                 <M::Linear as LinearModel<N>>::NAME
             );
         }

@@ -70,10 +70,11 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
-use crate::model::family::{FamilyVehicle, SimModel};
+use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
+use crate::model::registry::{self, for_each_model, ModelTypeVisitor, ModelVisitor, Registered};
 use crate::model::sensors::SensorConfig;
-use crate::model::trailer_plant::trailer_vehicle;
+use crate::model::study::StudyModel;
 use crate::sim::arg_range::Range;
 use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use crate::sim::vehicle_file::{self, ModelVehicle};
@@ -83,8 +84,6 @@ use shimmy_core::model::LinearModel;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::trailer::TrailerParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -265,101 +264,172 @@ pub fn parse(text: &str, default_name: &str) -> Result<ScenarioSpec> {
 }
 
 /// A scenario on a vehicle of any model of the family (the `[plant]` vehicle's model; the
-/// `[model]` vehicle must be of the same).
-#[derive(Clone, Debug)]
-#[allow(clippy::large_enum_variant)]
-pub enum AnyScenario {
-    /// On the car.
-    Car(ScenarioSpec),
-    /// On the mining truck.
-    Truck(ScenarioSpec<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>),
-    /// On the trailer.
-    Trailer(ScenarioSpec<TrailerParams, { shimmy_core::vehicles::trailer::N_STATES }>),
+/// `[model]` vehicle must be of the same): its [`ScenarioSpec`] of that model, behind a type
+/// check instead of an enum of the models (the model registry, `crate::model::registry`).
+#[derive(Debug)]
+pub struct AnyScenario {
+    spec: Box<dyn AnySpec>,
+    model: &'static str,
+}
+
+/// A [`ScenarioSpec`] of some model, cloned and taken back by its type.
+trait AnySpec: std::any::Any + std::fmt::Debug + Send + Sync {
+    fn clone_box(&self) -> Box<dyn AnySpec>;
+    fn name(&self) -> &str;
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any>;
+}
+
+impl<M: SimModel<N>, const N: usize> AnySpec for ScenarioSpec<M, N> {
+    fn clone_box(&self) -> Box<dyn AnySpec> {
+        Box::new(self.clone())
+    }
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any> {
+        self
+    }
+}
+
+impl Clone for AnyScenario {
+    fn clone(&self) -> Self {
+        Self {
+            spec: self.spec.clone_box(),
+            model: self.model,
+        }
+    }
+}
+
+/// A generic call on a scenario of some model: [`AnyScenario::visit`] calls [`Self::visit`]
+/// with the scenario's model as `M`.
+pub trait ScenarioVisitor {
+    /// What the call gives.
+    type Output;
+    /// The call on the scenario `s` of the model `M`.
+    fn visit<M: Registered<N>, const N: usize>(self, s: ScenarioSpec<M, N>) -> Self::Output;
 }
 
 impl AnyScenario {
+    /// The scenario `s` of the model `M`.
+    pub fn new<M: Registered<N>, const N: usize>(s: ScenarioSpec<M, N>) -> Self {
+        Self {
+            spec: Box::new(s),
+            model: registry::name_of::<M, N>(),
+        }
+    }
+
     /// The scenario's name.
     pub fn name(&self) -> &str {
-        match self {
-            AnyScenario::Car(s) => &s.name,
-            AnyScenario::Truck(s) => &s.name,
-            AnyScenario::Trailer(s) => &s.name,
-        }
+        self.spec.name()
     }
 
     /// The name of the scenario's vehicle model.
     pub fn model_name(&self) -> &'static str {
-        match self {
-            AnyScenario::Car(_) => PlantParams::NAME,
-            AnyScenario::Truck(_) => TruckParams::NAME,
-            AnyScenario::Trailer(_) => TrailerParams::NAME,
+        self.model
+    }
+
+    /// The scenario if it is on the model `M`, else itself.
+    pub fn into_spec<M: SimModel<N>, const N: usize>(
+        self,
+    ) -> std::result::Result<ScenarioSpec<M, N>, Self> {
+        if !(self.spec.as_ref() as &dyn std::any::Any).is::<ScenarioSpec<M, N>>() {
+            return Err(self);
         }
+        Ok(*self
+            .spec
+            .into_any()
+            .downcast::<ScenarioSpec<M, N>>()
+            .expect("checked above"))
+    }
+
+    /// Calls `visitor` on the scenario with its model as `M`.
+    pub fn visit<V: ScenarioVisitor>(self, visitor: V) -> V::Output {
+        struct Find<V: ScenarioVisitor> {
+            s: Option<AnyScenario>,
+            visitor: Option<V>,
+            out: Option<V::Output>,
+        }
+        impl<V: ScenarioVisitor> ModelTypeVisitor for Find<V> {
+            fn visit<M: Registered<N>, const N: usize>(&mut self) {
+                let Some(s) = self.s.take() else { return };
+                match s.into_spec::<M, N>() {
+                    Ok(spec) => {
+                        let v = self.visitor.take().expect("called once");
+                        self.out = Some(v.visit(spec));
+                    }
+                    Err(s) => self.s = Some(s),
+                }
+            }
+        }
+        let mut f = Find {
+            s: Some(self),
+            visitor: Some(visitor),
+            out: None,
+        };
+        for_each_model(&mut f);
+        f.out.expect("a scenario is of a registered model")
     }
 }
 
 /// The car's scenario, or an error naming the model of another.
 fn car(s: AnyScenario) -> Result<ScenarioSpec> {
-    match s {
-        AnyScenario::Car(s) => Ok(s),
-        AnyScenario::Truck(s) => bail!(
+    s.into_spec().map_err(|s| {
+        anyhow::anyhow!(
             "scenario `{}` is on a {} vehicle; this command runs the {} only",
-            s.name,
-            TruckParams::NAME,
+            s.name(),
+            s.model_name(),
             PlantParams::NAME
-        ),
-        AnyScenario::Trailer(s) => bail!(
-            "scenario `{}` is on a {} vehicle; this command runs the {} only",
-            s.name,
-            TrailerParams::NAME,
-            PlantParams::NAME
-        ),
-    }
+        )
+    })
 }
 
 /// The vehicle of a `[plant]` or `[model]` section (`key`): the named set or file, then the
 /// plant overrides (the model's parameters by name), validated as a whole.
 fn vehicle_of(key: &str, section: &VehicleSection, dir: &Path) -> Result<ModelVehicle> {
     let spec = section.vehicle.as_deref().unwrap_or("nominal");
-    let mut v = vehicle_file::load_model_relative(spec, dir)
+    let v = vehicle_file::load_model_relative(spec, dir)
         .with_context(|| format!("field `{key}.vehicle`"))?;
-    match &mut v {
-        ModelVehicle::Car(v) => {
-            for (name, value) in &section.overrides {
-                vehicle_file::set_field(v, "plant", &format!("{key}.overrides"), name, *value)?;
-            }
-            v.validate()
-                .with_context(|| format!("field `{key}.overrides`"))?;
-        }
-        ModelVehicle::Truck(t) => {
-            for (name, value) in &section.overrides {
-                t.model = t
-                    .model
-                    .with_param(name, *value)
-                    .with_context(|| format!("field `{key}.overrides.{name}`"))?;
-            }
-            t.model
-                .validate()
-                .map_err(|e| anyhow::anyhow!("truck: {e}"))
-                .with_context(|| format!("field `{key}.overrides`"))?;
-        }
-        ModelVehicle::Trailer(t) => {
-            for (name, value) in &section.overrides {
-                *t = t
-                    .with_param(name, *value)
-                    .with_context(|| format!("field `{key}.overrides.{name}`"))?;
-            }
-            t.validate()
-                .map_err(|e| anyhow::anyhow!("trailer: {e}"))
-                .with_context(|| format!("field `{key}.overrides`"))?;
-        }
-        ModelVehicle::DualAxle(_) => bail!(
+    registry::with_model(v, Overrides { key, section })
+}
+
+/// A `[plant]` or `[model]` section's overrides on its vehicle: the car's `[plant]` fields
+/// (through the vehicle file's checks), another model's parameters by name.
+struct Overrides<'a> {
+    key: &'a str,
+    section: &'a VehicleSection,
+}
+
+impl ModelVisitor for Overrides<'_> {
+    type Output = Result<ModelVehicle>;
+    fn visit<M: Registered<N>, const N: usize>(self, mut f: M::File) -> Result<ModelVehicle> {
+        let Overrides { key, section } = self;
+        anyhow::ensure!(
+            M::SCENARIOS,
             "field `{key}.vehicle`: a {} vehicle; scenario files take the car, the mining truck or the trailer",
-            <shimmy_core::vehicles::dual_axle::DualAxleParams as shimmy_core::model::LinearModel<
-                { shimmy_core::vehicles::dual_axle::N_STATES },
-            >>::NAME
-        ),
+            registry::name_of::<M, N>()
+        );
+        match (M::SECTION, M::parts_of_mut(&mut f)) {
+            (None, Some(v)) => {
+                for (name, value) in &section.overrides {
+                    vehicle_file::set_field(v, "plant", &format!("{key}.overrides"), name, *value)?;
+                }
+                v.validate()
+                    .with_context(|| format!("field `{key}.overrides`"))?;
+            }
+            (own, _) => {
+                let t = M::model_mut(&mut f);
+                for (name, value) in &section.overrides {
+                    *t = t
+                        .with_param(name, *value)
+                        .with_context(|| format!("field `{key}.overrides.{name}`"))?;
+                }
+                t.check()
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", own.unwrap_or("plant")))
+                    .with_context(|| format!("field `{key}.overrides`"))?;
+            }
+        }
+        Ok(M::into_any(f))
     }
-    Ok(v)
 }
 
 /// [`parse`] with vehicle files looked up relative to `dir` (the scenario file's folder).
@@ -380,59 +450,48 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
         Some(m) => Some(vehicle_of("model", m, dir)?),
         None => None,
     };
-    match (plant, model_vehicle) {
-        (ModelVehicle::Car(p), None) => {
-            build(&f, p, None, default_name, duration_s).map(AnyScenario::Car)
+    registry::with_model(
+        plant,
+        Build {
+            f: &f,
+            model_vehicle,
+            default_name,
+            duration_s,
+        },
+    )
+}
+
+/// The rest of the file on its plant vehicle of the model `M`, the believed vehicle of the same.
+struct Build<'a> {
+    f: &'a File,
+    model_vehicle: Option<ModelVehicle>,
+    default_name: &'a str,
+    duration_s: f64,
+}
+
+impl ModelVisitor for Build<'_> {
+    type Output = Result<AnyScenario>;
+    fn visit<M: Registered<N>, const N: usize>(self, p: M::File) -> Result<AnyScenario> {
+        let Build {
+            f,
+            model_vehicle,
+            default_name,
+            duration_s,
+        } = self;
+        let name = registry::name_of::<M, N>();
+        let m = match model_vehicle.map(M::from_any) {
+            None => None,
+            Some(Ok(m)) => Some(M::vehicle(m)?),
+            Some(Err(other)) => bail!(
+                "field `model.vehicle`: a {} vehicle, the plant a {name}: the firmware's model is \
+                 of the plant's model",
+                other.model_name(),
+            ),
+        };
+        if let (Some(why), Some(_)) = (M::NO_DRIVER, &f.driver) {
+            bail!("field `driver`: the {name} {why}; leave the section out");
         }
-        (ModelVehicle::Car(p), Some(ModelVehicle::Car(m))) => {
-            build(&f, p, Some(m), default_name, duration_s).map(AnyScenario::Car)
-        }
-        (ModelVehicle::Truck(p), m) => {
-            let m = match m {
-                None => None,
-                Some(ModelVehicle::Truck(m)) => Some(m),
-                Some(other) => bail!(
-                    "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
-                     of the plant's model",
-                    other.model_name(),
-                    TruckParams::NAME
-                ),
-            };
-            if f.driver.is_some() {
-                bail!(
-                    "field `driver`: the {} steers hydrostatically, no driver torque reaches \
-                     its linkage; leave the section out",
-                    TruckParams::NAME
-                );
-            }
-            build(&f, p, m, default_name, duration_s).map(AnyScenario::Truck)
-        }
-        (ModelVehicle::Trailer(p), m) => {
-            let m = match m {
-                None => None,
-                Some(ModelVehicle::Trailer(m)) => Some(trailer_vehicle(m)?),
-                Some(other) => bail!(
-                    "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is \
-                     of the plant's model",
-                    other.model_name(),
-                    TrailerParams::NAME
-                ),
-            };
-            if f.driver.is_some() {
-                bail!(
-                    "field `driver`: the {} has no steering for a driver torque; leave the \
-                     section out",
-                    TrailerParams::NAME
-                );
-            }
-            build(&f, trailer_vehicle(p)?, m, default_name, duration_s).map(AnyScenario::Trailer)
-        }
-        (p, m) => bail!(
-            "field `model.vehicle`: a {} vehicle, the plant a {}: the firmware's model is of the \
-             plant's model",
-            m.map_or("missing", |m| m.model_name()),
-            p.model_name()
-        ),
+        build::<M, N>(f, M::vehicle(p)?, m, default_name, duration_s).map(AnyScenario::new)
     }
 }
 
@@ -802,19 +861,32 @@ fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
 }
 
 /// A model whose scenarios scenario files give: how its scenario is taken out of an
-/// [`AnyScenario`] and where its shipped scenarios are (`shimmy-sim report` on a vehicle of the
-/// model).
-pub trait ScenarioModel<const N: usize>: crate::sim::vehicle_file::FileModel<N> {
-    /// The folder of the model's shipped scenarios below `host-sim/scenarios/` (`""`: that
-    /// folder itself).
-    const SCENARIO_DIR: &'static str;
+/// [`AnyScenario`] (and, from [`StudyModel`], where its shipped scenarios are: `shimmy-sim
+/// report` on a vehicle of the model). Every study model of the registry is one.
+pub trait ScenarioModel<const N: usize>:
+    crate::sim::vehicle_file::FileModel<N> + StudyModel<N>
+{
     /// The scenario `s` if it is on this model, else an error naming both models.
-    fn scenario(s: AnyScenario) -> Result<ScenarioSpec<Self, N>>;
+    fn scenario(s: AnyScenario) -> Result<ScenarioSpec<Self, N>> {
+        s.into_spec().map_err(|other| {
+            other_model(
+                other.name(),
+                other.model_name(),
+                registry::name_of::<Self, N>(),
+            )
+        })
+    }
     /// `v` as a vehicle of any model (provenance).
-    fn any_vehicle(v: &Self::Vehicle) -> ModelVehicle;
+    fn any_vehicle(v: &Self::Vehicle) -> ModelVehicle {
+        Self::into_any(Self::file_of(v))
+    }
     /// `v` with its model's parameters replaced by `model` (the shared sections stay).
-    fn with_model(v: &Self::Vehicle, model: Self) -> Self::Vehicle;
+    fn with_model(v: &Self::Vehicle, model: Self) -> Self::Vehicle {
+        Self::with_params(v, model)
+    }
 }
+
+impl<M: Registered<N> + StudyModel<N>, const N: usize> ScenarioModel<N> for M {}
 
 /// The error of a scenario on another model than the run's.
 fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
@@ -824,51 +896,10 @@ fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
     )
 }
 
-impl ScenarioModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
-    const SCENARIO_DIR: &'static str = "";
-    fn scenario(s: AnyScenario) -> Result<ScenarioSpec> {
-        match s {
-            AnyScenario::Car(s) => Ok(s),
-            other => Err(other_model(
-                other.name(),
-                other.model_name(),
-                PlantParams::NAME,
-            )),
-        }
-    }
-    fn any_vehicle(v: &Vehicle) -> ModelVehicle {
-        ModelVehicle::Car(*v)
-    }
-    fn with_model(v: &Vehicle, model: Self) -> Vehicle {
-        Vehicle { plant: model, ..*v }
-    }
-}
-
-impl ScenarioModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
-    const SCENARIO_DIR: &'static str = "truck";
-    fn scenario(
-        s: AnyScenario,
-    ) -> Result<ScenarioSpec<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>> {
-        match s {
-            AnyScenario::Truck(s) => Ok(s),
-            other => Err(other_model(
-                other.name(),
-                other.model_name(),
-                TruckParams::NAME,
-            )),
-        }
-    }
-    fn any_vehicle(v: &FamilyVehicle<TruckParams>) -> ModelVehicle {
-        ModelVehicle::Truck(*v)
-    }
-    fn with_model(v: &FamilyVehicle<TruckParams>, model: Self) -> FamilyVehicle<TruckParams> {
-        FamilyVehicle { model, ..*v }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::truck::TruckParams;
 
     const GOOD: &str = r#"
 name = "ramp"
@@ -1128,7 +1159,7 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             let path = entry.unwrap().path();
             if path.extension().is_some_and(|e| e == "toml") {
                 let s = load_any(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
-                assert!(matches!(s, AnyScenario::Truck(_)), "{}", path.display());
+                assert_eq!(s.model_name(), TruckParams::NAME, "{}", path.display());
                 let e = format!("{:#}", load(&path).unwrap_err());
                 assert!(e.contains("mining-truck-5dof"), "{e}");
                 n += 1;
@@ -1144,10 +1175,12 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
         ));
         assert!(msg.contains("field `driver`"), "{msg}");
         let margin_asmc = "[controller]\nkind = \"margin-asmc\"\n";
-        assert!(matches!(
-            parse_any_in(&format!("{truck}{margin_asmc}"), "t", Path::new("")),
-            Ok(AnyScenario::Truck(_))
-        ));
+        assert_eq!(
+            parse_any_in(&format!("{truck}{margin_asmc}"), "t", Path::new(""))
+                .unwrap()
+                .model_name(),
+            TruckParams::NAME
+        );
         let trailer = truck.replace("\"truck-full\"", "\"trailer\"");
         let msg = e(format!("{trailer}{margin_asmc}"));
         assert!(
@@ -1157,7 +1190,7 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
         let msg = e(format!("{truck}[model]\nvehicle = \"nominal\"\n"));
         assert!(msg.contains("field `model.vehicle`"), "{msg}");
         // overrides of a truck plant are its [truck] fields by name
-        let AnyScenario::Truck(s) = parse_any_in(
+        let Ok(s) = parse_any_in(
             &truck.replace(
                 "\"truck-full\"",
                 "\"truck-full\"\noverrides = { hps_v0_m3 = 0.02 }",
@@ -1165,7 +1198,8 @@ slalom = { amplitude_nm = 3.0, freq_hz = 0.5, start_s = 1.0 }
             "t",
             Path::new(""),
         )
-        .unwrap() else {
+        .unwrap()
+        .into_spec::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>() else {
             panic!("a truck scenario")
         };
         assert_eq!(s.plant.model.hps.v0_m3, 0.02);

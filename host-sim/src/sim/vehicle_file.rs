@@ -28,111 +28,56 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
-use crate::model::dual_axle_plant::dual_axle_parts;
-use crate::model::family::{FamilyVehicle, SimModel};
-use crate::model::members::truck_parts;
+use crate::model::family::FamilyVehicle;
+use crate::model::registry::{
+    self, all_set_names, for_each_model, name_of, set_names_of, ModelEntry, ModelTypeVisitor,
+    Registered,
+};
 use anyhow::{bail, Context, Result};
 use shimmy_core::model::LinearModel;
-use shimmy_core::vehicle::{SetError, Vehicle, FIELDS, SECTIONS};
-use shimmy_core::vehicles::car::{ParamSet, PlantParams};
-use shimmy_core::vehicles::dual_axle::{DualAxleParams, DualAxleSet, DUAL_AXLE_FIELDS};
-use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet, TRAILER_FIELDS};
+use shimmy_core::vehicle::{RecordVehicle, SetError, Vehicle, FIELDS, SECTIONS};
+use shimmy_core::vehicles::car::ParamSet;
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
 use shimmy_core::vehicles::{FieldError, FieldTable};
 use std::path::{Path, PathBuf};
 
-/// A vehicle of any model of the family, as a vehicle file or a set name gives it (read once
-/// per command: the size difference of the variants does not matter).
-#[derive(Clone, Debug)]
-#[allow(clippy::large_enum_variant)]
-pub enum ModelVehicle {
-    /// The 4-DOF car (`car-4dof`): the whole vehicle (plant, damper, sensors, gains).
-    Car(Vehicle),
-    /// The mining dump truck (`mining-truck-5dof`): its model's parameters, damper, sensors,
-    /// gains and thresholds.
-    Truck(FamilyVehicle<TruckParams>),
-    /// The trailer on a compliant hitch (`trailer-2dof`): its linear model's parameters.
-    Trailer(TrailerParams),
-    /// The dual-front-axle heavy truck (`dual-axle-truck-8dof`): its model's parameters and the
-    /// shared sections (the car's reference damper, sensors and gains, unsized for it).
-    DualAxle(FamilyVehicle<DualAxleParams>),
-}
+pub use crate::model::registry::ModelVehicle;
 
-impl ModelVehicle {
-    /// The model's name (`car-4dof`, `mining-truck-5dof`, `trailer-2dof`).
-    pub fn model_name(&self) -> &'static str {
-        match self {
-            ModelVehicle::Car(_) => PlantParams::NAME,
-            ModelVehicle::Truck(_) => TruckParams::NAME,
-            ModelVehicle::Trailer(_) => TrailerParams::NAME,
-            ModelVehicle::DualAxle(_) => DualAxleParams::NAME,
-        }
-    }
-}
+/// The model of the core's whole vehicle files (the default of the `model` key).
+const CAR: &str = <Vehicle as RecordVehicle>::MODEL;
 
 /// A model of the family whose vehicle a vehicle file (or a set name) gives: what a command
-/// generic over the model loads `--vehicle` with.
-pub trait FileModel<const N: usize>: SimModel<N> {
+/// generic over the model loads `--vehicle` with. Every model of the registry is one.
+pub trait FileModel<const N: usize>: Registered<N> {
     /// The vehicle `spec` (a set name or a file, relative to `dir`), or an error naming the
     /// model it has when that is another.
     fn load_vehicle(spec: &str, dir: &Path) -> Result<Self::Vehicle>;
 }
 
-impl FileModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
-    fn load_vehicle(spec: &str, dir: &Path) -> Result<Vehicle> {
-        load_relative(spec, dir)
-    }
-}
-
-impl FileModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
-    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TruckParams>> {
-        match load_model_relative(spec, dir)? {
-            ModelVehicle::Truck(t) => Ok(t),
-            other => bail!(
-                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
-                 the believed vehicle are of one model)",
-                other.model_name(),
-                TruckParams::NAME
-            ),
+impl<M: Registered<N>, const N: usize> FileModel<N> for M {
+    fn load_vehicle(spec: &str, dir: &Path) -> Result<M::Vehicle> {
+        if M::SECTION.is_none() {
+            // The whole-vehicle files' model reads through the core vehicle's own loader.
+            let f = M::from_any(load_relative(spec, dir)?.into())
+                .map_err(|_| anyhow::anyhow!("a core vehicle file is a {}", CAR))?;
+            return M::vehicle(f);
         }
-    }
-}
-
-impl FileModel<{ shimmy_core::vehicles::dual_axle::N_STATES }> for DualAxleParams {
-    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<DualAxleParams>> {
-        match load_model_relative(spec, dir)? {
-            ModelVehicle::DualAxle(t) => Ok(t),
-            other => bail!(
+        match M::from_any(load_model_relative(spec, dir)?) {
+            Ok(f) => M::vehicle(f),
+            Err(other) => bail!(
                 "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
                  the believed vehicle are of one model)",
                 other.model_name(),
-                DualAxleParams::NAME
-            ),
-        }
-    }
-}
-
-impl FileModel<{ shimmy_core::vehicles::trailer::N_STATES }> for TrailerParams {
-    fn load_vehicle(spec: &str, dir: &Path) -> Result<FamilyVehicle<TrailerParams>> {
-        match load_model_relative(spec, dir)? {
-            ModelVehicle::Trailer(t) => crate::model::trailer_plant::trailer_vehicle(t),
-            other => bail!(
-                "vehicle `{spec}` is a {} model; this run's vehicle is a {} (the simulated and \
-                 the believed vehicle are of one model)",
-                other.model_name(),
-                TrailerParams::NAME
+                name_of::<M, N>()
             ),
         }
     }
 }
 
 /// The model names a vehicle file's `model` key takes.
-pub const MODEL_NAMES: [&str; 4] = [
-    PlantParams::NAME,
-    TruckParams::NAME,
-    DualAxleParams::NAME,
-    TrailerParams::NAME,
-];
+pub fn model_names() -> Vec<&'static str> {
+    registry::model_names()
+}
 
 /// Resolves `spec` (a set name of any model or a vehicle file) to a validated vehicle.
 pub fn load_model(spec: &str) -> Result<ModelVehicle> {
@@ -142,23 +87,8 @@ pub fn load_model(spec: &str) -> Result<ModelVehicle> {
 /// [`load_model`] with a relative path taken relative to `dir`. Set names win over files of the
 /// same name.
 pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
-    if let Some(set) = TruckSet::from_name(spec) {
-        return Ok(ModelVehicle::Truck(FamilyVehicle {
-            model: set.params(),
-            parts: truck_parts(),
-        }));
-    }
-    if let Some(set) = DualAxleSet::from_name(spec) {
-        return Ok(ModelVehicle::DualAxle(FamilyVehicle {
-            model: set.params(),
-            parts: dual_axle_parts()?,
-        }));
-    }
-    if let Some(set) = TrailerSet::from_name(spec) {
-        return Ok(ModelVehicle::Trailer(set.params()));
-    }
-    if ParamSet::from_name(spec).is_some() {
-        return load(spec).map(ModelVehicle::Car);
+    if let Some(v) = registry::named_vehicle(spec) {
+        return v;
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
         PathBuf::from(spec)
@@ -168,12 +98,9 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
     let path = path.as_path();
     if !path.is_file() {
         bail!(
-            "vehicle `{spec}`: no such file ({}) and not a named set ({}, {}, {}, {})",
+            "vehicle `{spec}`: no such file ({}) and not a named set ({})",
             path.display(),
-            set_names(),
-            truck_set_names(),
-            dual_axle_set_names(),
-            trailer_set_names()
+            all_set_names(", ")
         );
     }
     let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)
@@ -184,84 +111,82 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
 /// Parses a vehicle file of any model (its `model` key, default `car-4dof`).
 pub fn parse_model(text: &str) -> Result<ModelVehicle> {
     let table: toml::Table = toml::from_str(text)?;
-    match model_of(&table)? {
-        m if m == TruckParams::NAME => parse_truck(&table).map(ModelVehicle::Truck),
-        m if m == DualAxleParams::NAME => parse_dual_axle(&table).and_then(|model| {
-            Ok(ModelVehicle::DualAxle(FamilyVehicle {
-                model,
-                parts: dual_axle_parts()?,
-            }))
-        }),
-        m if m == TrailerParams::NAME => parse_trailer(&table).map(ModelVehicle::Trailer),
-        _ => parse(text).map(ModelVehicle::Car),
+    struct Parse<'a> {
+        model: &'a str,
+        table: &'a toml::Table,
+        text: &'a str,
+        out: Option<Result<ModelVehicle>>,
     }
+    impl ModelTypeVisitor for Parse<'_> {
+        fn visit<M: Registered<N>, const N: usize>(&mut self) {
+            if self.out.is_some() || name_of::<M, N>() != self.model {
+                return;
+            }
+            self.out = Some(if M::SECTION.is_none() {
+                parse(self.text).map(ModelVehicle::from)
+            } else {
+                parse_member::<M, N>(self.table).map(M::into_any)
+            });
+        }
+    }
+    let mut p = Parse {
+        model: model_of(&table)?,
+        table: &table,
+        text,
+        out: None,
+    };
+    for_each_model(&mut p);
+    p.out.unwrap_or_else(|| parse(text).map(ModelVehicle::from))
 }
 
 /// The `model` key of a vehicle file, checked (absent: the car).
 fn model_of(table: &toml::Table) -> Result<&str> {
+    let names = model_names();
     match table.get("model") {
-        None => Ok(PlantParams::NAME),
-        Some(toml::Value::String(s)) if MODEL_NAMES.contains(&s.as_str()) => Ok(s.as_str()),
+        None => Ok(CAR),
+        Some(toml::Value::String(s)) if names.contains(&s.as_str()) => Ok(s.as_str()),
         Some(toml::Value::String(s)) => bail!(
             "field `model`: unknown model `{s}`, allowed: {}",
-            MODEL_NAMES.join(", ")
+            names.join(", ")
         ),
         Some(other) => bail!(
             "field `model`: expected a model name ({}), found {}",
-            MODEL_NAMES.join(", "),
+            names.join(", "),
             other.type_str()
         ),
     }
 }
 
-/// What a vehicle file of a model other than the car's is read with: its model name, its own
-/// section, its named sets and its fields.
-struct MemberFile<T> {
-    /// The model's name.
-    model: &'static str,
-    /// Its section (`[truck]`, ...).
-    section: &'static str,
-    /// The set `base` defaults to.
-    default_base: &'static str,
-    /// The set of a name.
-    set: fn(&str) -> Option<T>,
-    /// The set names, for messages.
-    set_names: fn() -> String,
-    /// The field names, for messages.
-    fields: fn() -> Vec<&'static str>,
-    /// Sets a field: `Err(None)` for an unknown name, `Err(Some(message))` for a bad value.
-    set_field: fn(&mut T, &str, f64) -> std::result::Result<(), Option<String>>,
-    /// Validates the whole, the message naming the field.
-    validate: fn(&T) -> Result<()>,
-}
-
-/// A file of the model `m`: `base` (one of its sets), its section and, when `parts` is given,
-/// the shared sections of every model (`[damper]`, `[damper_model]`, `[sensors]`,
-/// `[controller]`, `[thresholds]`) into `parts`.
-fn parse_member<T>(
-    table: &toml::Table,
-    m: &MemberFile<T>,
-    mut parts: Option<&mut Vehicle>,
-) -> Result<T> {
+/// A file of the model `M` whose files have a section of their own: `base` (one of its sets),
+/// its section and, when its files take them ([`ModelEntry::SHARED_SECTIONS`]), the shared
+/// sections of every model (`[damper]`, `[damper_model]`, `[sensors]`, `[controller]`,
+/// `[thresholds]`) over the model's own.
+fn parse_member<M: ModelEntry<N>, const N: usize>(table: &toml::Table) -> Result<M::File> {
+    let model = name_of::<M, N>();
+    let section = M::SECTION.unwrap_or("plant");
     let base = match table.get("base") {
-        None => m.default_base,
+        None => M::DEFAULT_SET,
         Some(toml::Value::String(s)) => s.as_str(),
         Some(other) => bail!(
             "field `base`: expected a set name, found {}",
             other.type_str()
         ),
     };
-    let Some(mut t) = (m.set)(base) else {
+    let Some(mut t) = M::set(base) else {
         bail!(
-            "field `base`: unknown set `{base}` for model {}, allowed: {}",
-            m.model,
-            (m.set_names)()
+            "field `base`: unknown set `{base}` for model {model}, allowed: {}",
+            set_names_of::<M, N>()
         );
     };
+    let mut parts = if M::SHARED_SECTIONS {
+        M::parts_of(&M::assemble(t, None)?).copied()
+    } else {
+        None
+    };
     for (key, value) in table {
-        match (key.as_str(), parts.as_deref_mut()) {
+        match (key.as_str(), parts.as_mut()) {
             ("model" | "base", _) => continue,
-            (k, _) if k == m.section => {}
+            (k, _) if k == section => {}
             (k, Some(parts)) if k != "plant" && SECTIONS.contains(&k) => {
                 for (name, x) in section_numbers(key, value)? {
                     set_field(parts, k, k, name, x)?;
@@ -269,9 +194,7 @@ fn parse_member<T>(
                 continue;
             }
             (_, shared) => bail!(
-                "field `{key}`: no such section for model {}, allowed: model, base, {}{}",
-                m.model,
-                m.section,
+                "field `{key}`: no such section for model {model}, allowed: model, base, {section}{}",
                 if shared.is_some() {
                     format!(", {}", SECTIONS[1..].join(", "))
                 } else {
@@ -280,123 +203,29 @@ fn parse_member<T>(
             ),
         }
         for (name, x) in section_numbers(key, value)? {
-            match (m.set_field)(&mut t, name, x) {
+            match M::set_field(&mut t, name, x) {
                 Ok(()) => {}
-                Err(None) => bail!(
-                    "field `{}.{name}`: no such field, allowed: {}",
-                    m.section,
-                    (m.fields)().join(", ")
+                Err(FieldError::Unknown) => bail!(
+                    "field `{section}.{name}`: no such field, allowed: {}",
+                    M::fields()
+                        .iter()
+                        .map(|f| f.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
-                Err(Some(e)) => bail!(
+                Err(e) => bail!(
                     "{}",
-                    e.replacen("field `", &format!("field `{}.", m.section), 1)
+                    e.to_string()
+                        .replacen("field `", &format!("field `{section}."), 1)
                 ),
             }
         }
     }
-    (m.validate)(&t)?;
-    if let Some(parts) = parts {
+    M::check_in_file(&t)?;
+    if let Some(parts) = &parts {
         parts.validate()?;
     }
-    Ok(t)
-}
-
-/// A `mining-truck-5dof` file: `base` (a truck set), the `[truck]` section and the shared
-/// sections (from [`truck_parts`]).
-fn parse_truck(table: &toml::Table) -> Result<FamilyVehicle<TruckParams>> {
-    let mut parts = truck_parts();
-    let model = parse_member(
-        table,
-        &MemberFile {
-            model: TruckParams::NAME,
-            section: "truck",
-            default_base: TruckSet::Full.name(),
-            set: |n| TruckSet::from_name(n).map(TruckSet::params),
-            set_names: truck_set_names,
-            fields: || TRUCK_FIELDS.iter().map(|f| f.name).collect(),
-            set_field: |t, n, x| match t.set(n, x) {
-                Ok(()) => Ok(()),
-                Err(FieldError::Unknown) => Err(None),
-                Err(e) => Err(Some(e.to_string())),
-            },
-            validate: |t| t.validate().map_err(|e| anyhow::anyhow!("truck: {e}")),
-        },
-        Some(&mut parts),
-    )?;
-    Ok(FamilyVehicle { model, parts })
-}
-
-/// A `dual-axle-truck-8dof` file: `base` (a dual-axle set) and the `[dual_axle]` section.
-fn parse_dual_axle(table: &toml::Table) -> Result<DualAxleParams> {
-    parse_member(
-        table,
-        &MemberFile {
-            model: DualAxleParams::NAME,
-            section: "dual_axle",
-            default_base: DualAxleSet::Rated.name(),
-            set: |n| DualAxleSet::from_name(n).map(DualAxleSet::params),
-            set_names: dual_axle_set_names,
-            fields: || DUAL_AXLE_FIELDS.iter().map(|f| f.name).collect(),
-            set_field: |t, n, x| match t.set(n, x) {
-                Ok(()) => Ok(()),
-                Err(FieldError::Unknown) => Err(None),
-                Err(e) => Err(Some(e.to_string())),
-            },
-            validate: |t| {
-                t.validate().map_err(|e| {
-                    anyhow::anyhow!("{}", e.to_string().replace("field `", "field `dual_axle."))
-                })
-            },
-        },
-        None,
-    )
-}
-
-/// A `trailer-2dof` file: `base` (a trailer set) and the `[trailer]` section.
-fn parse_trailer(table: &toml::Table) -> Result<TrailerParams> {
-    parse_member(
-        table,
-        &MemberFile {
-            model: TrailerParams::NAME,
-            section: "trailer",
-            default_base: TrailerSet::Caravan.name(),
-            set: |n| TrailerSet::from_name(n).map(TrailerSet::params),
-            set_names: trailer_set_names,
-            fields: || TRAILER_FIELDS.iter().map(|f| f.name).collect(),
-            set_field: |t, n, x| match t.set(n, x) {
-                Ok(()) => Ok(()),
-                Err(FieldError::Unknown) => Err(None),
-                Err(e) => Err(Some(e.to_string())),
-            },
-            validate: |t| {
-                t.validate().map_err(|e| {
-                    anyhow::anyhow!(
-                        "{}",
-                        e.to_string().replacen("field `", "field `trailer.", 1)
-                    )
-                })
-            },
-        },
-        None,
-    )
-}
-
-/// The dual-axle truck's named sets, for messages.
-pub fn dual_axle_set_names() -> String {
-    DualAxleSet::ALL
-        .iter()
-        .map(|s| s.name())
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
-/// The trailer's named sets, for messages.
-pub fn trailer_set_names() -> String {
-    TrailerSet::ALL
-        .iter()
-        .map(|s| s.name())
-        .collect::<Vec<_>>()
-        .join(", ")
+    M::assemble(t, parts)
 }
 
 /// The entries of section `key` as numbers (integers read as f64), or an error naming the
@@ -421,15 +250,6 @@ fn section_numbers<'a>(key: &str, value: &'a toml::Value) -> Result<Vec<(&'a str
         .collect()
 }
 
-/// The truck's named sets, for messages.
-pub fn truck_set_names() -> String {
-    TruckSet::ALL
-        .iter()
-        .map(|s| s.name())
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
 /// The older name of the `[plant]` section (parameter files).
 const PLANT_ALIAS: &str = "overrides";
 
@@ -444,23 +264,8 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
     if let Some(set) = ParamSet::from_name(spec) {
         return Ok(Vehicle::from_set(set));
     }
-    if TruckSet::from_name(spec).is_some() {
-        bail!(
-            "{}",
-            car_only(&format!("vehicle `{spec}`"), TruckParams::NAME)
-        );
-    }
-    if DualAxleSet::from_name(spec).is_some() {
-        bail!(
-            "{}",
-            car_only(&format!("vehicle `{spec}`"), DualAxleParams::NAME)
-        );
-    }
-    if TrailerSet::from_name(spec).is_some() {
-        bail!(
-            "{}",
-            car_only(&format!("vehicle `{spec}`"), TrailerParams::NAME)
-        );
+    if let Some(model) = registry::model_of_set(spec) {
+        bail!("{}", car_only(&format!("vehicle `{spec}`"), model));
     }
     let path: PathBuf = if Path::new(spec).is_absolute() {
         PathBuf::from(spec)
@@ -483,7 +288,7 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
 pub fn parse(text: &str) -> Result<Vehicle> {
     let mut table: toml::Table = toml::from_str(text)?;
     let model = model_of(&table)?;
-    if model != PlantParams::NAME {
+    if model != CAR {
         bail!("{}", car_only("this vehicle file", model));
     }
     table.remove("model");
@@ -546,7 +351,7 @@ fn car_only(what: &str, model: &str) -> String {
         "{what} is a {model} model; this command runs the {} only so far (the truck runs \
          through {TRUCK_COMMANDS}; the trailer through `stability`, `sensitivity`, \
          `sway-damping`, `bifurcation`, `sweep`, `margin`, `faults` and `run`)",
-        PlantParams::NAME
+        CAR
     )
 }
 
@@ -668,6 +473,8 @@ fn format_default(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::dual_axle::DualAxleSet;
+    use shimmy_core::vehicles::trailer::TrailerSet;
 
     /// `model` picks the model (the car by default), a truck file sets `[truck]` fields by
     /// name, and bad models, sections, fields, values and charges are rejected naming them.

@@ -453,12 +453,12 @@ fn a_truck_log_is_read_with_the_trucks_meter() {
     use shimmy_core::vehicle::Vehicle;
     use shimmy_core::vehicles::truck::TruckSet;
     use shimmy_sim::model::family::SimModel;
-    use shimmy_sim::sim::scenario_file::AnyScenario;
     use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
 
     let dir = temp_dir("analyze-truck");
-    let AnyScenario::Truck(spec) =
-        scenario_file::parse_any_in(TRUCK_SCENARIO, "analyze-truck-log", &dir).unwrap()
+    let Ok(spec) = scenario_file::parse_any_in(TRUCK_SCENARIO, "analyze-truck-log", &dir)
+        .unwrap()
+        .into_spec::<shimmy_core::vehicles::truck::TruckParams, { shimmy_core::vehicles::truck::N_STATES }>()
     else {
         panic!("not a truck scenario");
     };

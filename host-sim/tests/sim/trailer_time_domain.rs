@@ -158,17 +158,19 @@ fn no_warning_at_70_percent_of_the_trailers_onset() {
 fn the_trailers_gust_scenario_runs_and_the_damper_holds_the_sway() {
     use shimmy_sim::sim::closed_loop::Arm;
     use shimmy_sim::sim::scenario::{self, ScenarioSpec};
-    use shimmy_sim::sim::scenario_file::{self, AnyScenario};
+    use shimmy_sim::sim::scenario_file;
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenarios")
         .join("trailer");
     for f in ["gust-130.toml", "highway-ramp.toml"] {
-        assert!(matches!(
-            scenario_file::load_any(&dir.join(f)).unwrap(),
-            AnyScenario::Trailer(_)
-        ));
+        assert_eq!(
+            scenario_file::load_any(&dir.join(f)).unwrap().model_name(),
+            "trailer-2dof"
+        );
     }
-    let AnyScenario::Trailer(spec) = scenario_file::load_any(&dir.join("gust-130.toml")).unwrap()
+    let Ok(spec) = scenario_file::load_any(&dir.join("gust-130.toml"))
+        .unwrap()
+        .into_spec::<TrailerParams, { shimmy_core::vehicles::trailer::N_STATES }>()
     else {
         panic!("a trailer scenario")
     };
@@ -275,8 +277,9 @@ fn a_bad_trailer_scenario_is_rejected_naming_the_field() {
     assert!(e.contains("model.vehicle") && e.contains("car-4dof"), "{e}");
     // and a good override reaches the plant
     let text = format!("{base}overrides = {{ k_y = 4250.0 }}\n");
-    let scenario_file::AnyScenario::Trailer(s) =
-        scenario_file::parse_any_in(&text, "t", std::path::Path::new("")).unwrap()
+    let Ok(s) = scenario_file::parse_any_in(&text, "t", std::path::Path::new(""))
+        .unwrap()
+        .into_spec::<TrailerParams, { shimmy_core::vehicles::trailer::N_STATES }>()
     else {
         panic!("a trailer scenario")
     };

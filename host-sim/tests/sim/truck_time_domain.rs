@@ -69,12 +69,15 @@ fn the_least_gas_charge_separates_growth_from_decay_in_the_time_domain() {
 fn truck_closed_loop_asmc_suppresses_the_shimmy_that_the_damper_at_0_a_leaves() {
     use shimmy_sim::sim::closed_loop::Arm;
     use shimmy_sim::sim::scenario::{self, ScenarioSpec};
-    use shimmy_sim::sim::scenario_file::{self, AnyScenario};
+    use shimmy_sim::sim::scenario_file;
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenarios")
         .join("truck")
         .join("pothole-loaded.toml");
-    let AnyScenario::Truck(mut spec) = scenario_file::load_any(&path).unwrap() else {
+    let Ok(mut spec) = scenario_file::load_any(&path)
+        .unwrap()
+        .into_spec::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>()
+    else {
         panic!("a car scenario")
     };
     spec.duration_s = 7.0;

@@ -7,8 +7,8 @@
 use super::args::{axes_of, SweepArgs};
 use crate::model::damper_equiv::damper_equivalent;
 use crate::model::family::{ParamInfo, SimModel};
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::plot_util;
-use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -46,15 +46,15 @@ pub struct SweepMap {
 
 /// Computes the maps on the vehicle of `--vehicle`, of any model of the family.
 pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
-    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => compute_on(a, &v.plant, &v),
-        ModelVehicle::Truck(t) => compute_on(a, &t.model, &t.parts),
-        ModelVehicle::Trailer(t) => {
-            let t = crate::model::trailer_plant::trailer_vehicle(t)?;
-            compute_on(a, &t.model, &t.parts)
+    struct On<'a>(&'a SweepArgs);
+    impl ModelVisitor for On<'_> {
+        type Output = Result<(ParamInfo, Vec<SweepMap>)>;
+        fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+            let v = registry::family::<M, N>(f)?;
+            compute_on(self.0, &v.model, &v.parts)
         }
-        ModelVehicle::DualAxle(t) => compute_on(a, &t.model, &t.parts),
     }
+    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
 }
 
 /// The maps of the vehicle model `base` with the damper of `vehicle`.

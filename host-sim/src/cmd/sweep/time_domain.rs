@@ -13,9 +13,9 @@
 use super::args::{axes_of, SweepArgs, MAX_RUNS};
 use crate::model::disturbance::Scenario;
 use crate::model::family::{yaw_state, FamilyVehicle, ParamInfo, SimModel};
+use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::plot_util;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
-use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -153,14 +153,14 @@ fn point<M: SimModel<N>, const N: usize>(
 
 /// Computes every controller's map (all points in parallel, collected in grid order).
 pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
-    match crate::sim::vehicle_file::load_model(&a.vehicle)? {
-        ModelVehicle::Car(v) => compute_on(a, &FamilyVehicle::car(v)),
-        ModelVehicle::Truck(t) => compute_on(a, &t),
-        ModelVehicle::DualAxle(t) => compute_on(a, &t),
-        ModelVehicle::Trailer(t) => {
-            compute_on(a, &crate::model::trailer_plant::trailer_vehicle(t)?)
+    struct On<'a>(&'a SweepArgs);
+    impl ModelVisitor for On<'_> {
+        type Output = Result<(TdGrid, Vec<TdMap>)>;
+        fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
+            compute_on(self.0, &registry::family::<M, N>(f)?)
         }
     }
+    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
 }
 
 /// [`compute`] on the vehicle `base` of any model of the family.
@@ -174,7 +174,7 @@ fn compute_on<M: SimModel<N>, const N: usize>(
         bail!(
             "--controllers margin-asmc: the firmware's margin report exists for the {} models \
              only",
-            crate::model::family::image_models()
+            crate::model::registry::image_models()
         );
     }
     super::args::check(a)?;
