@@ -6,17 +6,18 @@
 //!
 //! `closed_loop_demo_asmc_30s`: the demo's whole ASMC run (30 s ramp; sensors, the core's
 //! supervised controller and mode meter at 1 kHz) per iteration, once per plant integrator;
-//! `closed_loop_demo_damper_off_30s`: its other arm (the damper passive at 0 A) at the default
-//! integrator. Simulated s per wall s = 30 s / (time per iteration).
+//! `closed_loop_demo_damper_off_30s`: its other arm (the damper passive at 0 A) at the closed
+//! loop's integrator and at Dopri5. Simulated s per wall s = 30 s / (time per iteration).
 use criterion::{criterion_group, criterion_main, Criterion};
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicles::car::PlantParams;
 use shimmy_sim::model::disturbance::initial_yaw;
 use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator};
+use shimmy_sim::sim::closed_loop::CLOSED_LOOP_METHOD;
 use shimmy_sim::sim::demo_case::{self, ARMS};
 use std::hint::black_box;
 
-/// The explicit baseline (the previous default).
+/// The explicit 5(4) pair (the closed loop's integrator before Vern65).
 const DOPRI5: Method = Method::Dopri5 { rtol: 1e-7 };
 /// The IMEX method under test at the tolerance the accuracy tests use.
 const IMEX: Method = Method::Imex { rtol: 3e-6 };
@@ -69,6 +70,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("closed_loop_demo_asmc_30s");
     g.sample_size(10);
     for method in [
+        CLOSED_LOOP_METHOD,
         DOPRI5,
         Method::ImexFixed { substeps: 2 },
         Method::ImexFixed { substeps: 1 },
@@ -85,15 +87,21 @@ fn bench(c: &mut Criterion) {
         });
     }
     g.finish();
-    // The demo's other arm, at the default integrator: its run-time line sums both.
+    // The demo's other arm: its run-time line sums both.
     let mut g = c.benchmark_group("closed_loop_demo_damper_off_30s");
     g.sample_size(10);
-    g.bench_function(DOPRI5.name(), |b| {
-        b.iter(|| {
-            let (_, r) = demo_case::run_arm(&case, ARMS[0].1, 30.0, 5).expect("run");
-            black_box(r.sim_s)
-        })
-    });
+    for method in [CLOSED_LOOP_METHOD, DOPRI5] {
+        let case = demo_case::DemoCase {
+            method,
+            ..case.clone()
+        };
+        g.bench_function(method.name(), |b| {
+            b.iter(|| {
+                let (_, r) = demo_case::run_arm(&case, ARMS[0].1, 30.0, 5).expect("run");
+                black_box(r.sim_s)
+            })
+        });
+    }
     g.finish();
 }
 

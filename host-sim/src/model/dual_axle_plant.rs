@@ -669,7 +669,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     fn plant(&self, damper: super::plant::Damper, method: super::plant::Method) -> DualAxlePlant {
         use super::plant::Method;
         let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
             Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
         };
         DualAxlePlant::new(self, damper, rtol)

@@ -183,7 +183,7 @@ impl SimModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
     /// for the fixed-step methods).
     fn plant(&self, damper: Damper, method: Method) -> TruckPlant {
         let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
             Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
         };
         TruckPlant::new(self, damper, rtol)

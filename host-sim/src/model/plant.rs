@@ -12,7 +12,7 @@
 //! scenario live one layer up, in `sim::open_loop`.
 
 use crate::model::integrator::{
-    rk4_step, Ark436, ArkFixed, Dopri5, ImexSystem, IntegrateError, StepStats,
+    rk4_step, Ark436, ArkFixed, Dopri5, ImexSystem, IntegrateError, StepStats, Vern65,
 };
 use nalgebra::{DMatrix, SMatrix};
 use shimmy_core::mr_damper::{self, SpencerParams, SpencerState};
@@ -286,6 +286,13 @@ pub enum Method {
         /// Relative tolerance.
         rtol: f64,
     },
+    /// Adaptive Verner 6(5) ([`Vern65`]) with relative tolerance `rtol` (the same absolute
+    /// tolerances as Dopri5): one order higher than Dopri5, so longer steps at the same
+    /// tolerance.
+    Vern65 {
+        /// Relative tolerance.
+        rtol: f64,
+    },
     /// Classical RK4 with `substeps` equal steps per `advance` call.
     Rk4 {
         /// Steps per call.
@@ -313,9 +320,9 @@ pub enum Method {
 impl Method {
     /// The names [`Method::from_name`] accepts, for help texts and errors.
     pub const NAMES: &'static str =
-        "dopri5, dopri5:RTOL, imex:RTOL, imex-fixed, imex-fixed:SUBSTEPS";
+        "dopri5, dopri5:RTOL, vern65, vern65:RTOL, imex:RTOL, imex-fixed, imex-fixed:SUBSTEPS";
 
-    /// Parses `dopri5[:rtol]` (default rtol 1e-7), `imex:rtol` (the adaptive IMEX) or
+    /// Parses `dopri5[:rtol]` or `vern65[:rtol]` (default rtol 1e-7), `imex:rtol` (the adaptive IMEX) or
     /// `imex-fixed[:substeps]` (default 1 step per call); rtol in (0, 1e-2], substeps 1 to 64.
     pub fn from_name(name: &str) -> Result<Self, String> {
         let (kind, arg) = match name.split_once(':') {
@@ -335,6 +342,7 @@ impl Method {
         };
         match kind {
             "dopri5" => Ok(Method::Dopri5 { rtol: rtol(arg)? }),
+            "vern65" => Ok(Method::Vern65 { rtol: rtol(arg)? }),
             "imex" => Ok(Method::Imex { rtol: rtol(arg)? }),
             "imex-fixed" => {
                 let substeps = match arg {
@@ -361,6 +369,7 @@ impl Method {
     pub fn name(&self) -> String {
         match self {
             Method::Dopri5 { rtol } => format!("dopri5:{rtol:e}"),
+            Method::Vern65 { rtol } => format!("vern65:{rtol:e}"),
             Method::Imex { rtol } => format!("imex:{rtol:e}"),
             Method::ImexFixed { substeps } => format!("imex-fixed:{substeps}"),
             Method::Rk4 { substeps } => format!("rk4:{substeps}"),
@@ -476,6 +485,7 @@ pub struct Simulator {
     t_s: f64,
     method: Method,
     dopri: Dopri5<N_STATE>,
+    vern: Vern65<N_STATE>,
     ark: Ark436<N_STATE>,
     ark_fixed: ArkFixed<N_STATE>,
     rk4_evals: u64,
@@ -514,7 +524,7 @@ impl Simulator {
     /// A simulator with a chosen integrator.
     pub fn with_method(plant: Plant, x0: State, method: Method) -> Self {
         let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
             Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
         };
         Simulator {
@@ -523,6 +533,7 @@ impl Simulator {
             t_s: 0.0,
             method,
             dopri: Dopri5::new(rtol, default_atol(rtol)),
+            vern: Vern65::new(rtol, default_atol(rtol)),
             ark: Ark436::new(rtol, default_atol(rtol)),
             ark_fixed: ArkFixed::new(match method {
                 Method::ImexFixed { substeps } => substeps,
@@ -557,6 +568,10 @@ impl Simulator {
                 self.dopri
                     .integrate_fsal(&mut f, self.t_s, &mut self.x, dt_s, reuse)?;
                 self.last_inputs = Some(*inputs);
+            }
+            Method::Vern65 { .. } => {
+                self.vern
+                    .integrate(&mut f, self.t_s, &mut self.x, dt_s, start)?;
             }
             Method::Imex { .. } => {
                 let sys = HeldInputs {
@@ -625,7 +640,7 @@ impl Simulator {
     /// Integrator statistics (right-hand-side evaluations so far, steps).
     pub fn stats(&self) -> StepStats {
         let mut s = self.dopri.stats;
-        for o in [self.ark.stats, self.ark_fixed.stats] {
+        for o in [self.vern.stats, self.ark.stats, self.ark_fixed.stats] {
             s.accepted += o.accepted;
             s.rejected += o.rejected;
             s.evaluations += o.evaluations;
@@ -771,6 +786,7 @@ mod tests {
     fn integrator_names_parse_and_bad_ones_are_refused() {
         for m in [
             Method::Dopri5 { rtol: 1e-7 },
+            Method::Vern65 { rtol: 3e-7 },
             Method::Imex { rtol: 3e-6 },
             Method::ImexFixed { substeps: 2 },
         ] {
@@ -833,6 +849,7 @@ mod tests {
         };
         for m in [
             Method::Dopri5 { rtol: 1e-7 },
+            Method::Vern65 { rtol: 1e-7 },
             Method::ImexFixed { substeps: 2 },
         ] {
             let mut plain = Simulator::with_method(plant, x0, m);

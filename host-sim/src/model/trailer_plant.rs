@@ -406,7 +406,7 @@ impl SimModel<N_STATES> for TrailerParams {
     /// methods).
     fn plant(&self, damper: Damper, method: Method) -> TrailerPlant {
         let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } => rtol,
+            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
             Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
         };
         TrailerPlant::new(self, damper, rtol)
