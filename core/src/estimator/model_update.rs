@@ -27,11 +27,13 @@
 //!   the model is taken to be wrong instead and the prior's covariance is added back;
 //! - theta is kept inside ln of [`ModelUpdateConfig::max_factor`] either way.
 //!
-//! Cost per update: one eigen-solve of the model's A, one complex LU, K + 1 model
-//! linearisations and K x K arithmetic (K <= [`MAX_UPDATE_PARAMS`]), all in f64: about 5.2 M
-//! instructions on the M4 with soft-float f64 (`cargo xtask bench`, "model update"), 30 times
-//! a model-tracker cycle. The host runs it at 1 Hz; the firmware does not run it yet (at 1 Hz
-//! it would exceed the CPU budget, at one update per 10 s it would fit).
+//! A meter estimate is used only while the damper has been idle over the meter's window
+//! ([`ModelUpdateConfig::damper_idle_a`]): the model has no controlled damper in it.
+//!
+//! Cost per update: one eigen-solve of the model's A and one complex LU in the solve
+//! precision `T`, K + 1 model linearisations and the K x K filter in f64 (K <=
+//! [`MAX_UPDATE_PARAMS`]). The host solves in f64; the firmware in f32 on the FPU, once a
+//! second in its background loop (`docs/measurements.md`, "model update").
 
 use nalgebra::{Complex, SMatrix, SVector};
 

@@ -32,8 +32,9 @@ pub struct PipelineParams {
     pub monitor: MonitorParams,
     /// Incremental model margin.
     pub model: ModelMarginConfig,
-    /// Online model update from the meter's frequency and damping (off by default: on the
-    /// host with `--model-update`; not yet on the board).
+    /// Online model update from the meter's frequency and damping (off by default; on the
+    /// host with `--model-update`; the board turns it on, `shimmy_firmware::monitoring::
+    /// on_board`).
     pub update: ModelUpdateConfig,
 }
 
