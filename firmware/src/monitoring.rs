@@ -312,7 +312,7 @@ impl DataMargin {
     }
 
     /// The newest due measurement of the online model update, for the model task
-    /// ([`ModelTask::apply`]); None when none came since the last call.
+    /// ([`ModelTask::offer`]); None when none came since the last call.
     pub fn take_measurement(&mut self) -> Option<Measurement> {
         self.measurement.take()
     }
@@ -369,6 +369,12 @@ pub type ImageModel = <ImageVehicle as BoardVehicle<IMAGE_MODEL_STATES>>::Model;
 /// The tracker type of the model task on `M` (the image's: [`ImageModel`]).
 pub type ModelTracker<M = ImageModel, const N: usize = IMAGE_MODEL_STATES> =
     ModelMarginTracker<ModelFloat, M, N>;
+
+/// The model task re-evaluates the onset's sigma after every this many model updates (and
+/// after the first): it costs as much as an update, and the sigma narrows over tens of
+/// seconds, so 5 s of lag is harmless; every second the truck image would be over its CPU
+/// budget (`cargo xtask bench`).
+pub const SIGMA_EVERY: u32 = 5;
 
 /// The updater type of the model task on `M`: the core's online model update with its
 /// eigen-solves in [`ModelFloat`].
@@ -442,20 +448,29 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
         }
     }
 
-    /// One measurement update: the tracker's model becomes the updated one, and the onset's
-    /// sigma is re-evaluated at the latest cycle's onset.
-    fn apply(&mut self, m: &Measurement) -> UpdateOutcome {
+    /// One measurement update (what [`Self::step`] does with an offered measurement between
+    /// two cycles): the tracker's model becomes the updated one; after the first update and
+    /// every [`SIGMA_EVERY`]th the onset's sigma is re-evaluated ([`Self::refresh_sigma`]).
+    pub fn apply(&mut self, m: &Measurement) -> UpdateOutcome {
         let outcome = self.updater.apply(m);
         if outcome == UpdateOutcome::Updated {
             self.tracker.set_plant(self.updater.model());
-            let sigma = self
-                .tracker
-                .latest()
-                .and_then(|pt| pt.margin().v_crit_onset_mps)
-                .and_then(|v| self.updater.onset_sigma_mps(v, 0.0));
-            self.onset_sigma_mps = sigma.map_or(0.0, |s| s as f32);
+            if self.updater.counts().0 % SIGMA_EVERY == 1 {
+                self.refresh_sigma();
+            }
         }
         outcome
+    }
+
+    /// The onset's sigma of the updated model at the latest cycle's onset (a second
+    /// eigen-solve and the onset's gradient).
+    pub fn refresh_sigma(&mut self) {
+        let sigma = self
+            .tracker
+            .latest()
+            .and_then(|pt| pt.margin().v_crit_onset_mps)
+            .and_then(|v| self.updater.onset_sigma_mps(v, 0.0));
+        self.onset_sigma_mps = sigma.map_or(0.0, |s| s as f32);
     }
 
     /// What the measurement applied since the last call did (the link reports the update

@@ -181,6 +181,11 @@ mod bench {
             run: model_update_step,
         },
         Entry {
+            name: "model update: the onset's sigma (ModelTask::refresh_sigma)",
+            budget: Budget::None,
+            run: onset_sigma_step,
+        },
+        Entry {
             name: "model cycle wall time at measured load [ms]",
             budget: Budget::Hard(MODEL_REFRESH_BUDGET_MS),
             run: model_refresh_ms,
@@ -337,6 +342,7 @@ mod bench {
     static TELEMETRY_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static IDLE_PASS_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static MODEL_UPDATE_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
+    static ONSET_SIGMA_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
     static IDLE_WAKE_MAX: AtomicU32 = AtomicU32::new(u32::MAX);
 
     /// A valid margin report inside the Hopf window (the margin schedule fully armed).
@@ -859,23 +865,28 @@ mod bench {
         shimmy_firmware::monitoring::board_pipeline(&image_vehicle()).matched_update()
     }
 
-    /// One measurement update of the online model update as the model task applies it
-    /// (`estimator::model_update`, eigen-solves in [`shimmy_firmware::monitoring::ModelFloat`])
-    /// on the image's model: the shimmy eigenpair of the updated model, a linearisation per
-    /// parameter for the Jacobian and the filter step in f64, once per `period_s` (1 s) when
-    /// the meter's estimate is valid. The measurement is the model's own mode at 18 km/h with
-    /// its damping 0.005 higher, so every call is applied, not gated.
-    fn model_update_step() -> u32 {
+    /// A model task after its first tracker cycle at 18 km/h, and a measurement there: the
+    /// model's own mode with its damping 0.005 higher, so every update is applied, not gated.
+    fn update_case() -> Option<(
+        shimmy_firmware::monitoring::ModelTask,
+        shimmy_core::estimator::model_update::Measurement,
+    )> {
         use shimmy_core::estimator::meter::mode_meter::ModeEstimate;
         use shimmy_core::estimator::model_update::Measurement;
-        use shimmy_firmware::monitoring::BoardUpdater;
-        let mut up = BoardUpdater::in_precision(image_vehicle().model(), board_update());
-        let Some(p) = up.predict(5.0, 0.0) else {
-            return u32::MAX;
-        };
+        use shimmy_firmware::monitoring::ModelTask;
+        let v = 5.0;
+        let mut task = ModelTask::new(image_vehicle().model(), board_update());
+        let mut t = 0.0;
+        while task.step(t, v).is_none() {
+            t += 1e-3;
+            if t > 2.0 {
+                return None;
+            }
+        }
+        let p = task.updater().predict(f64::from(v), 0.0)?;
         let m = Measurement {
-            t_s: 1.0,
-            speed_mps: 5.0,
+            t_s: t,
+            speed_mps: v,
             c_damper_nspm: 0.0,
             slow: ModeEstimate {
                 zeta: p.zeta as f32 + 0.005,
@@ -886,10 +897,37 @@ mod bench {
                 ..ModeEstimate::default()
             },
         };
+        Some((task, m))
+    }
+
+    /// One measurement update of the online model update (`estimator::model_update`) on the
+    /// image's model: the eigen-solves in [`shimmy_firmware::monitoring::ModelFloat`], a
+    /// linearisation per parameter for the Jacobian and the filter step in f64; once per
+    /// `period_s` (1 s) when the meter's estimate is valid.
+    fn model_update_step() -> u32 {
+        let Some((task, m)) = update_case() else {
+            return u32::MAX;
+        };
+        let mut up = task.updater().clone();
         let worst = measure(|| {
             let _ = black_box(up.apply(black_box(&m)));
         });
         MODEL_UPDATE_MAX.store(worst, Ordering::Relaxed);
+        worst
+    }
+
+    /// The onset's sigma the model task re-evaluates after every
+    /// [`shimmy_firmware::monitoring::SIGMA_EVERY`]th update (`ModelTask::refresh_sigma`).
+    fn onset_sigma_step() -> u32 {
+        let Some((mut task, m)) = update_case() else {
+            return u32::MAX;
+        };
+        let _ = task.apply(&m);
+        let worst = measure(|| {
+            task.refresh_sigma();
+            black_box(&task);
+        });
+        ONSET_SIGMA_MAX.store(worst, Ordering::Relaxed);
         worst
     }
 
@@ -1047,7 +1085,7 @@ mod bench {
 
     /// The whole firmware's CPU load at its rates [per mille]: control step x 1 kHz + meter run
     /// with its link and store bookkeeping x 100 Hz + worst warm model cycle x 10 Hz + one
-    /// model update x 1 Hz + the
+    /// model update x 1 Hz and the onset's sigma x 1/5 Hz + the
     /// background loop's passes between cycles x 100 Hz and its wakes x 1 kHz + the link's
     /// telemetry frames x 10 Hz
     /// (a host watching; host requests are not counted), in cycles at [`LOAD_CPI`] cycles per
@@ -1057,8 +1095,11 @@ mod bench {
         let meter =
             (u64::from(meter_run_max()) + u64::from(BOOKKEEPING_MAX.load(Ordering::Relaxed))) * 100;
         let model = u64::from(tracker_counts().2) * 10;
-        // one measurement update per second (`ModelUpdateConfig::period_s`)
-        let update = u64::from(MODEL_UPDATE_MAX.load(Ordering::Relaxed));
+        // one measurement update per second (`ModelUpdateConfig::period_s`), the onset's
+        // sigma after every `SIGMA_EVERY`th
+        let update = u64::from(MODEL_UPDATE_MAX.load(Ordering::Relaxed))
+            + u64::from(ONSET_SIGMA_MAX.load(Ordering::Relaxed))
+                / u64::from(shimmy_firmware::monitoring::SIGMA_EVERY);
         let idle = u64::from(IDLE_PASS_MAX.load(Ordering::Relaxed)) * 100
             + u64::from(IDLE_WAKE_MAX.load(Ordering::Relaxed)) * 1000;
         let link = u64::from(TELEMETRY_MAX.load(Ordering::Relaxed)) * 10;
