@@ -3,7 +3,7 @@
 //!
 //! Each model of the family implements [`ModelEntry`] (what a vehicle file, a set name and a
 //! command need of it: its named sets, its file section, its fields, how its vehicle is
-//! assembled) in its plant file, next to its [`SimModel`]; the [`registry!`] list below names
+//! assembled) in its plant file, next to its [`SimModel`]; the `registry!` list below names
 //! it once and makes from that list
 //! - the enum [`ModelVehicle`] (a vehicle of any model, as a vehicle file or a set name gives
 //!   it),
@@ -101,7 +101,7 @@ pub trait ModelEntry<const N: usize>: SimModel<N> {
     fn with_params(v: &Self::Vehicle, model: Self) -> Self::Vehicle;
 }
 
-/// A model of the [`registry!`] list: its [`ModelEntry`] and its variant of [`ModelVehicle`]
+/// A model of the `registry!` list: its [`ModelEntry`] and its variant of [`ModelVehicle`]
 /// (implemented by the list).
 pub trait Registered<const N: usize>: ModelEntry<N> {
     /// `f` as a vehicle of any model.
