@@ -213,9 +213,8 @@ pub struct FaultReport {
     pub raised: u32,
 }
 
-/// Most parameters a model update reports (`shimmy_core::estimator::model_update::
-/// MAX_UPDATE_PARAMS`).
-pub const MODEL_PARAMS: usize = 5;
+/// Most parameters a model update reports.
+pub const MODEL_PARAMS: usize = shimmy_core::estimator::model_update::MAX_UPDATE_PARAMS;
 
 /// The online model update (`shimmy_core::estimator::model_update`) as the device runs it: how
 /// many measurements it used, and each parameter's factor on the vehicle file with its

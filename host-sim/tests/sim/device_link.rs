@@ -560,3 +560,63 @@ fn device_strings_reach_the_terminal_with_control_characters_escaped() {
     assert!(!e.chars().any(char::is_control), "{e:?}");
     assert!(e.contains("x\\u{1b}]0;pwned"), "{e}");
 }
+
+/// A device's model report reaches the user whole: the factors, the diagnosis in the core's
+/// words, and its text with control characters escaped.
+#[test]
+fn the_model_report_reaches_the_user_with_its_diagnosis() {
+    use shimmy_link::wire::{ModelReport, ParamReport};
+    let port = Scripted::new(|seq| {
+        let h = Header {
+            seq,
+            ..PROTOCOL_HEADER
+        };
+        if seq == 1 {
+            return reply_frame(h, &Response::Identity(identity("fw")));
+        }
+        let p = |field, what, factor: f32, out_of_band| ParamReport {
+            field,
+            what,
+            factor,
+            sigma_ln: 0.02,
+            band_low: 0.7,
+            band_high: 1.3,
+            out_of_band,
+        };
+        let params = [
+            p("c_a", "tyre\x1b[2J", 1.02, false),
+            p("k_d", "steering linkage stiffness", 0.5, true),
+        ]
+        .into_iter()
+        .collect();
+        reply_frame(
+            h,
+            &Response::Model(ModelReport {
+                enabled: true,
+                updates: 90,
+                gated: 1,
+                failures: 0,
+                params,
+            }),
+        )
+    });
+    let (mut c, _) = Client::connect(port, Duration::ZERO).expect("identity");
+    let m = c.model().expect("model report");
+    assert_eq!(
+        (m.enabled, m.updates, m.gated, m.params.len()),
+        (true, 90, 1, 2)
+    );
+    assert_eq!(m.params[0].what, "tyre\\u{1b}[2J");
+    let out: Vec<String> = m
+        .params
+        .iter()
+        .filter(|p| p.out_of_band)
+        .map(|p| p.statement())
+        .collect();
+    assert_eq!(out.len(), 1);
+    assert!(
+        out[0].starts_with("steering linkage stiffness (k_d) 50 % below the vehicle file (x0.50"),
+        "{}",
+        out[0]
+    );
+}

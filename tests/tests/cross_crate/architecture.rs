@@ -494,7 +494,7 @@ const COUNTED: [&str; 2] = ["host-sim/src", "python/src"];
 /// The most files outside its own (and the registry) that may name a model: the goal of issue
 /// 48 is 3. The dual-axle truck and the trailer meet it (their own command and study:
 /// `bifurcation` and `dual_axle_study`, `sway-damping` and `trailer_study`).
-/// TODO(issue 48): the car's and the mining truck's bounds down to 3. What still names them
+/// TODO: the car's and the mining truck's bounds down to 3. What still names them
 /// is what a firmware image has (the stored vehicle record, the link, `device`, `pil`, the
 /// truck's `gas-charge` study, `report`'s model choice, the car's `StudyModel` impl in
 /// `study.rs`, the truck's `SimModel` in `members.rs`) and, for the car, the default type parameters
@@ -628,7 +628,7 @@ fn files_naming_each_model() -> BTreeMap<&'static str, Vec<String>> {
     out
 }
 
-/// Done-when of issue 48: each model is named (its types, its core module, its enum variants)
+/// Each model is named (its types, its core module, its enum variants)
 /// in at most [`MAX_FILES`] files of the simulator and the Python bindings outside its own
 /// plant file, its core folder and the registry. Prints the counts and the files
 /// (`cargo test -p shimmy-tests --test cross_crate each_model -- --nocapture`).
