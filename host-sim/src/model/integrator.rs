@@ -92,6 +92,120 @@ fn pi_factor(safety: f64, alpha: f64, beta: f64, ln_err: f64, ln_err_old: f64) -
     safety * (beta * ln_err_old - alpha * ln_err).exp()
 }
 
+/// The PI step-size controller the adaptive steppers share, with its constants.
+#[derive(Clone, Copy, Debug)]
+struct Pi {
+    alpha: f64,
+    beta: f64,
+    fac_min: f64,
+    fac_max: f64,
+    safety: f64,
+}
+
+impl Pi {
+    /// Hairer's DOPRI5 constants for an error estimate of order `q` in h.
+    fn hairer(q: f64) -> Self {
+        let beta = 0.04;
+        Pi {
+            alpha: 1.0 / q - beta * 0.75,
+            beta,
+            fac_min: 0.2,
+            fac_max: 10.0,
+            safety: 0.9,
+        }
+    }
+
+    /// After a step of size `h` (`last`: the one landing on the interval's end) with error
+    /// norm `err` (NaN or infinite: the step failed): whether it is accepted, with the step to
+    /// carry (`h_carried`), the controller's memory (`ln_err_old`) and `last_rejected`
+    /// updated.
+    fn judge(
+        &self,
+        err: f64,
+        h: f64,
+        last: bool,
+        h_carried: &mut f64,
+        ln_err_old: &mut f64,
+        last_rejected: &mut bool,
+    ) -> bool {
+        if !err.is_finite() {
+            // a failed step: shrink hard and retry
+            *h_carried = h * self.fac_min;
+            *last_rejected = true;
+            return false;
+        }
+        if err > 1.0 {
+            let fac =
+                pi_factor(self.safety, self.alpha, 0.0, err.ln(), 0.0).clamp(self.fac_min, 1.0);
+            *h_carried = h * fac;
+            *last_rejected = true;
+            return false;
+        }
+        let ln_err = err.ln();
+        let fac = if err == 0.0 {
+            self.fac_max
+        } else {
+            pi_factor(self.safety, self.alpha, self.beta, ln_err, *ln_err_old)
+                .clamp(self.fac_min, self.fac_max)
+        };
+        let fac = if *last_rejected { fac.min(1.0) } else { fac };
+        *ln_err_old = ln_err.max(ERR_FLOOR.ln());
+        // Do not let the sliver at the end of an interval shrink the carried step.
+        if !last || h >= *h_carried {
+            *h_carried = h * fac;
+        }
+        *last_rejected = false;
+        true
+    }
+}
+
+/// The next step from `t` towards `t_end` with the carried step `h_carried`: landing exactly
+/// on the end of the interval and avoiding a sliver step; `true` for the landing step.
+fn next_step(
+    h_carried: f64,
+    h_max: f64,
+    h_min: f64,
+    t: f64,
+    t_end: f64,
+) -> Result<(f64, bool), IntegrateError> {
+    let remaining = t_end - t;
+    let mut h = h_carried.min(h_max);
+    let last = h >= remaining * (1.0 - 1e-9);
+    if last {
+        h = remaining;
+    } else if h > 0.5 * remaining {
+        h = 0.5 * remaining;
+    }
+    if h < h_min {
+        return Err(IntegrateError::StepTooSmall { t });
+    }
+    Ok((h, last))
+}
+
+/// Hairer's first step guess, h ~ 0.01 |y| / |f| in the tolerances' norm, capped by the
+/// interval `dt` and `h_max`.
+fn first_step<const N: usize>(
+    rtol: f64,
+    atol: &[f64; N],
+    h_max: f64,
+    y: &[f64; N],
+    f0: &[f64; N],
+    dt: f64,
+) -> f64 {
+    let (mut d0, mut d1) = (0.0, 0.0);
+    for i in 0..N {
+        let sc = atol[i] + rtol * y[i].abs();
+        d0 += (y[i] / sc) * (y[i] / sc);
+        d1 += (f0[i] / sc) * (f0[i] / sc);
+    }
+    let h = if d0 < 1e-10 || d1 < 1e-10 {
+        1e-6
+    } else {
+        0.01 * (d0 / d1).sqrt()
+    };
+    h.min(dt).min(h_max).max(1e-9)
+}
+
 /// Adaptive Dormand-Prince 5(4) stepper for an `N`-dimensional state.
 #[derive(Clone, Debug)]
 pub struct Dopri5<const N: usize> {
@@ -178,30 +292,16 @@ impl<const N: usize> Dopri5<N> {
             self.stats.evaluations += 1;
         }
         if self.h <= 0.0 {
-            self.h = self.initial_step(y, &k1, dt);
+            self.h = first_step(self.rtol, &self.atol, self.h_max, y, &k1, dt);
         }
         let (mut k2, mut k3, mut k4, mut k5, mut k6, mut k7) =
             ([0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N], [0.0; N]);
         let mut yt = [0.0; N];
         let mut y_new = [0.0; N];
-        // PI controller constants (Hairer's DOPRI5 defaults).
-        let (beta, fac_min, fac_max, safety) = (0.04, 0.2, 10.0, 0.9);
-        let alpha = 0.2 - beta * 0.75;
+        let pi = Pi::hairer(5.0);
         let mut last_rejected = false;
-        let ln_floor = ERR_FLOOR.ln();
         while t < t_end {
-            let remaining = t_end - t;
-            // Land exactly on the end of the interval; avoid a sliver step.
-            let mut h = self.h.min(self.h_max);
-            let last = h >= remaining * (1.0 - 1e-9);
-            if last {
-                h = remaining;
-            } else if h > 0.5 * remaining {
-                h = 0.5 * remaining;
-            }
-            if h < self.h_min {
-                return Err(IntegrateError::StepTooSmall { t });
-            }
+            let (h, last) = next_step(self.h, self.h_max, self.h_min, t, t_end)?;
             for i in 0..N {
                 yt[i] = y[i] + h * A21 * k1[i];
             }
@@ -238,36 +338,21 @@ impl<const N: usize> Dopri5<N> {
                 err2 += (e / sc) * (e / sc);
             }
             let err = (err2 / N as f64).sqrt();
-            if !err.is_finite() {
-                // Treat as a failed step: shrink hard and retry.
-                self.stats.rejected += 1;
-                self.h = h * fac_min;
-                last_rejected = true;
-                continue;
-            }
-            if err <= 1.0 {
-                let ln_err = err.ln();
-                let fac = if err == 0.0 {
-                    fac_max
-                } else {
-                    pi_factor(safety, alpha, beta, ln_err, self.ln_err_old).clamp(fac_min, fac_max)
-                };
-                let fac = if last_rejected { fac.min(1.0) } else { fac };
-                self.ln_err_old = ln_err.max(ln_floor);
+            let accepted = pi.judge(
+                err,
+                h,
+                last,
+                &mut self.h,
+                &mut self.ln_err_old,
+                &mut last_rejected,
+            );
+            if accepted {
                 *y = y_new;
                 k1 = k7; // FSAL
                 t = t_new;
                 self.stats.accepted += 1;
-                // Do not let the sliver at the end of an interval shrink the carried step.
-                if !last || h >= self.h {
-                    self.h = h * fac;
-                }
-                last_rejected = false;
             } else {
-                let fac = pi_factor(safety, alpha, 0.0, err.ln(), 0.0).clamp(fac_min, 1.0);
-                self.h = h * fac;
                 self.stats.rejected += 1;
-                last_rejected = true;
             }
         }
         self.k_last = k1;
@@ -276,22 +361,6 @@ impl<const N: usize> Dopri5<N> {
         } else {
             Err(IntegrateError::NonFinite { t })
         }
-    }
-
-    fn initial_step(&self, y: &[f64; N], f0: &[f64; N], dt: f64) -> f64 {
-        // Hairer's heuristic, first part: h ~ 0.01 |y| / |f|, capped by the interval.
-        let (mut d0, mut d1) = (0.0, 0.0);
-        for i in 0..N {
-            let sc = self.atol[i] + self.rtol * y[i].abs();
-            d0 += (y[i] / sc) * (y[i] / sc);
-            d1 += (f0[i] / sc) * (f0[i] / sc);
-        }
-        let h = if d0 < 1e-10 || d1 < 1e-10 {
-            1e-6
-        } else {
-            0.01 * (d0 / d1).sqrt()
-        };
-        h.min(dt).min(self.h_max).max(1e-9)
     }
 }
 
@@ -440,39 +509,14 @@ impl<const N: usize> Vern65<N> {
             }
         };
         if self.h <= 0.0 {
-            // Hairer's first guess, as Dopri5's.
-            let (mut d0, mut d1) = (0.0, 0.0);
-            for i in 0..N {
-                let sc = self.atol[i] + self.rtol * y[i].abs();
-                d0 += (y[i] / sc) * (y[i] / sc);
-                d1 += (k1[i] / sc) * (k1[i] / sc);
-            }
-            let h = if d0 < 1e-10 || d1 < 1e-10 {
-                1e-6
-            } else {
-                0.01 * (d0 / d1).sqrt()
-            };
-            self.h = h.min(dt).min(self.h_max).max(1e-9);
+            self.h = first_step(self.rtol, &self.atol, self.h_max, y, &k1, dt);
         }
         let (mut y_new, mut k9, mut e) = ([0.0; N], [0.0; N], [0.0; N]);
-        // PI controller (Hairer's constants) for an error estimate of order 6 in h.
-        let (beta, fac_min, fac_max, safety) = (0.04, 0.2, 10.0, 0.9);
-        let alpha = 1.0 / 6.0 - beta * 0.75;
+        // an error estimate of order 6 in h
+        let pi = Pi::hairer(6.0);
         let mut last_rejected = false;
-        let ln_floor = ERR_FLOOR.ln();
         while t < t_end {
-            let remaining = t_end - t;
-            // Land exactly on the end of the interval; avoid a sliver step.
-            let mut h = self.h.min(self.h_max);
-            let last = h >= remaining * (1.0 - 1e-9);
-            if last {
-                h = remaining;
-            } else if h > 0.5 * remaining {
-                h = 0.5 * remaining;
-            }
-            if h < self.h_min {
-                return Err(IntegrateError::StepTooSmall { t });
-            }
+            let (h, last) = next_step(self.h, self.h_max, self.h_min, t, t_end)?;
             let t_new = if last { t_end } else { t + h };
             vern65_step(f, t, y, h, &k1, &mut y_new, &mut k9, &mut e);
             self.stats.evaluations += 8;
@@ -482,36 +526,21 @@ impl<const N: usize> Vern65<N> {
                 err2 += (e[i] / sc) * (e[i] / sc);
             }
             let err = (err2 / N as f64).sqrt();
-            if !err.is_finite() {
-                // Treat as a failed step: shrink hard and retry.
-                self.stats.rejected += 1;
-                self.h = h * fac_min;
-                last_rejected = true;
-                continue;
-            }
-            if err <= 1.0 {
-                let ln_err = err.ln();
-                let fac = if err == 0.0 {
-                    fac_max
-                } else {
-                    pi_factor(safety, alpha, beta, ln_err, self.ln_err_old).clamp(fac_min, fac_max)
-                };
-                let fac = if last_rejected { fac.min(1.0) } else { fac };
-                self.ln_err_old = ln_err.max(ln_floor);
+            let accepted = pi.judge(
+                err,
+                h,
+                last,
+                &mut self.h,
+                &mut self.ln_err_old,
+                &mut last_rejected,
+            );
+            if accepted {
                 *y = y_new;
                 k1 = k9; // FSAL
                 t = t_new;
                 self.stats.accepted += 1;
-                // Do not let the sliver at the end of an interval shrink the carried step.
-                if !last || h >= self.h {
-                    self.h = h * fac;
-                }
-                last_rejected = false;
             } else {
-                let fac = pi_factor(safety, alpha, 0.0, err.ln(), 0.0).clamp(fac_min, 1.0);
-                self.h = h * fac;
                 self.stats.rejected += 1;
-                last_rejected = true;
             }
         }
         if y.iter().all(|v| v.is_finite()) {
@@ -745,10 +774,15 @@ impl<const N: usize> Ark436<N> {
             self.h = h.min(dt).min(self.h_max).max(1e-9);
         }
         // PI controller on the embedded (3rd-order) error: exponents 0.7/4 and 0.4/4.
-        let (alpha, beta, fac_min, fac_max, safety) = (0.7 / 4.0, 0.4 / 4.0, 0.2, 5.0, 0.9);
+        let pi = Pi {
+            alpha: 0.7 / 4.0,
+            beta: 0.4 / 4.0,
+            fac_min: 0.2,
+            fac_max: 5.0,
+            safety: 0.9,
+        };
         let mut y_new = [0.0; N];
         let mut last_rejected = false;
-        let ln_floor = ERR_FLOOR.ln();
         let mut need_k0 = false;
         let mut diag = [1.0; N];
         while t < t_end {
@@ -757,17 +791,7 @@ impl<const N: usize> Ark436<N> {
                 self.stats.evaluations += 1;
                 need_k0 = false;
             }
-            let remaining = t_end - t;
-            let mut h = self.h.min(self.h_max);
-            let last = h >= remaining * (1.0 - 1e-9);
-            if last {
-                h = remaining;
-            } else if h > 0.5 * remaining {
-                h = 0.5 * remaining;
-            }
-            if h < self.h_min {
-                return Err(IntegrateError::StepTooSmall { t });
-            }
+            let (h, last) = next_step(self.h, self.h_max, self.h_min, t, t_end)?;
             let solved = ark_step(
                 sys,
                 &mut self.stats,
@@ -799,35 +823,27 @@ impl<const N: usize> Ark436<N> {
                     err2 += r * r;
                 }
             }
-            let err = (err2 / N as f64).sqrt();
-            if !solved || !err.is_finite() {
-                self.stats.rejected += 1;
-                self.h = h * fac_min;
-                last_rejected = true;
-                continue;
-            }
-            if err <= 1.0 {
-                let ln_err = err.ln();
-                let fac = if err == 0.0 {
-                    fac_max
-                } else {
-                    pi_factor(safety, alpha, beta, ln_err, self.ln_err_old).clamp(fac_min, fac_max)
-                };
-                let fac = if last_rejected { fac.min(1.0) } else { fac };
-                self.ln_err_old = ln_err.max(ln_floor);
+            // an unsolved implicit stage fails the step as a non-finite error does
+            let err = if solved {
+                (err2 / N as f64).sqrt()
+            } else {
+                f64::NAN
+            };
+            let accepted = pi.judge(
+                err,
+                h,
+                last,
+                &mut self.h,
+                &mut self.ln_err_old,
+                &mut last_rejected,
+            );
+            if accepted {
                 *y = y_new;
                 t = if last { t_end } else { t + h };
                 self.stats.accepted += 1;
-                if !last || h >= self.h {
-                    self.h = h * fac;
-                }
-                last_rejected = false;
                 need_k0 = true;
             } else {
-                let fac = pi_factor(safety, alpha, 0.0, err.ln(), 0.0).clamp(fac_min, 1.0);
-                self.h = h * fac;
                 self.stats.rejected += 1;
-                last_rejected = true;
             }
         }
         if y.iter().all(|v| v.is_finite()) {
