@@ -239,7 +239,7 @@ mod app {
             let done = task.step(t_s, speed_mps);
             #[cfg(feature = "pil")]
             call.end(done.as_ref());
-            if task.take_applied().is_some() {
+            if task.take_applied() {
                 let up = task.updater();
                 cx.shared.link.lock(|l| l.on_model_update(up));
                 // the diagnosis in the log when it names another part (or none any more)
@@ -247,16 +247,19 @@ mod app {
                 if d.map(|d| d.field) != *cx.local.diagnosed {
                     *cx.local.diagnosed = d.map(|d| d.field);
                     match d {
-                        Some(d) => defmt::warn!(
-                            "model update: {=str} ({=str}) x{=f64}, 2 sigma x{=f64}-x{=f64}, plausible x{=f64}-x{=f64}",
-                            d.what,
-                            d.field,
-                            d.factor,
-                            d.two_sigma().0,
-                            d.two_sigma().1,
-                            d.band.0,
-                            d.band.1
-                        ),
+                        Some(d) => {
+                            let (lo, hi) = d.two_sigma();
+                            defmt::warn!(
+                                "model update: {=str} ({=str}) x{=f64}, 2 sigma x{=f64}-x{=f64}, plausible x{=f64}-x{=f64}",
+                                d.what,
+                                d.field,
+                                d.factor,
+                                lo,
+                                hi,
+                                d.band.0,
+                                d.band.1
+                            )
+                        }
                         None => defmt::info!("model update: every part within its band"),
                     }
                 }

@@ -401,8 +401,8 @@ pub struct ModelTask<M: UpdatableModel<N> = ImageModel, const N: usize = IMAGE_M
     updater: BoardUpdater<M, N>,
     /// A measurement waiting for the tracker to finish its cycle.
     pending: Option<Measurement>,
-    /// What the newest measurement did, until [`ModelTask::take_applied`].
-    applied: Option<UpdateOutcome>,
+    /// A measurement was applied since the last [`ModelTask::take_applied`].
+    applied: bool,
     onset_sigma_mps: f32,
 }
 
@@ -414,7 +414,7 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
             tracker: ModelTracker::in_precision(model, model_config()),
             updater: BoardUpdater::in_precision(model, update),
             pending: None,
-            applied: None,
+            applied: false,
             onset_sigma_mps: 0.0,
         }
     }
@@ -434,7 +434,8 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
     pub fn step(&mut self, t_s: f64, speed_mps: f32) -> Option<ModelPoint> {
         if !self.tracker.busy() {
             if let Some(m) = self.pending.take() {
-                self.applied = Some(self.apply(&m));
+                self.apply(&m);
+                self.applied = true;
             }
         }
         self.tracker.step(t_s, speed_mps, 0.0)
@@ -473,10 +474,10 @@ impl<M: UpdatableModel<N>, const N: usize> ModelTask<M, N> {
         self.onset_sigma_mps = sigma.map_or(0.0, |s| s as f32);
     }
 
-    /// What the measurement applied since the last call did (the link reports the update
+    /// Whether a measurement was applied since the last call (the link reports the update
     /// after each).
-    pub fn take_applied(&mut self) -> Option<UpdateOutcome> {
-        self.applied.take()
+    pub fn take_applied(&mut self) -> bool {
+        core::mem::take(&mut self.applied)
     }
 
     /// The tracker (counters, latest point).

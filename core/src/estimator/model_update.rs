@@ -172,10 +172,7 @@ impl ParamEstimate {
 
     /// The factor's two-sigma interval.
     pub fn two_sigma(&self) -> (f64, f64) {
-        (
-            self.factor * libm::exp(-2.0 * self.sigma_ln),
-            self.factor * libm::exp(2.0 * self.sigma_ln),
-        )
+        self.statement().two_sigma()
     }
 
     /// The plain statement of a diagnosis, e.g. "steering linkage stiffness 40 % below the
@@ -207,11 +204,20 @@ pub struct Statement<'a> {
     pub band: (f64, f64),
 }
 
+impl Statement<'_> {
+    /// The factor's two-sigma interval.
+    pub fn two_sigma(&self) -> (f64, f64) {
+        (
+            self.factor * libm::exp(-2.0 * self.sigma_ln),
+            self.factor * libm::exp(2.0 * self.sigma_ln),
+        )
+    }
+}
+
 impl core::fmt::Display for Statement<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let pct = (self.factor - 1.0) * 100.0;
-        let lo = self.factor * libm::exp(-2.0 * self.sigma_ln);
-        let hi = self.factor * libm::exp(2.0 * self.sigma_ln);
+        let (lo, hi) = self.two_sigma();
         write!(
             f,
             "{} ({}) {:.0} % {} the vehicle file (x{:.2}, 2 sigma x{:.2}-x{:.2}; plausible x{:.2}-x{:.2})",

@@ -4,8 +4,8 @@
 //! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
 
 use crate::sim::device_link::{
-    read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, ParamState, Port,
-    SerialPort, TcpPort,
+    read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, Port, SerialPort,
+    TcpPort,
 };
 use crate::sim::sim_device::SimDevice;
 use crate::sim::vehicle_file::{self, ModelVehicle};
@@ -307,10 +307,7 @@ fn model_text(m: &ModelState) -> String {
     }
     s += "parameter                     field      factor  2 sigma          plausible\n";
     for p in &m.params {
-        let (lo, hi) = (
-            p.factor * (-2.0 * p.sigma_ln).exp(),
-            p.factor * (2.0 * p.sigma_ln).exp(),
-        );
+        let (lo, hi) = p.statement().two_sigma();
         let _ = writeln!(
             s,
             "{:<29} {:<10} x{:<6.3} x{:.3}-x{:.3}  x{:.2}-x{:.2}{}",
@@ -328,7 +325,7 @@ fn model_text(m: &ModelState) -> String {
         .params
         .iter()
         .filter(|p| p.out_of_band)
-        .map(ParamState::statement)
+        .map(|p| p.statement().to_string())
         .collect();
     if out.is_empty() {
         s += "diagnosis: every part within its plausible band\n";

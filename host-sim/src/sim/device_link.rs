@@ -9,6 +9,7 @@
 //! with a delimiter, which ends whatever partial frame a cut link left in the device's reader.
 
 use anyhow::{anyhow, bail, Context, Result};
+use shimmy_core::estimator::model_update::Statement;
 use shimmy_core::vehicle::{
     check_record_value, decode_record, encode_record, RecordError, RecordVehicle, Vehicle,
     RECORD_MAX_BYTES,
@@ -156,16 +157,15 @@ pub struct ParamState {
 }
 
 impl ParamState {
-    /// The parameter as a line of the diagnosis (the core's words).
-    pub fn statement(&self) -> String {
-        shimmy_core::estimator::model_update::Statement {
+    /// The parameter as a line of the diagnosis (the core's words, its two-sigma interval).
+    pub fn statement(&self) -> Statement<'_> {
+        Statement {
             what: &self.what,
             field: &self.field,
             factor: self.factor,
             sigma_ln: self.sigma_ln,
             band: self.band,
         }
-        .to_string()
     }
 }
 

@@ -155,7 +155,6 @@ impl<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> LoopObserver
         let Some(u) = self.pipe.push(&sample, v, accel, r.t_s) else {
             return;
         };
-        b.model = shimmy_firmware::link::model_report(self.pipe.updater());
         self.recorder.on_update(self.pipe.monitor(), &mut b.log);
         b.open = self.recorder.open_event(self.pipe.monitor());
         self.updates += 1;
@@ -296,6 +295,8 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
         updates: 0,
     };
     closed_loop::run(&cfg, &mut scenario, Some(&mut obs)).context("the simulated drive")?;
+    // the device serves what the drive left: the update as it ended
+    obs.backend.model = shimmy_firmware::link::model_report(obs.pipe.updater());
     Ok(obs.backend)
 }
 

@@ -611,7 +611,7 @@ fn the_model_report_reaches_the_user_with_its_diagnosis() {
         .params
         .iter()
         .filter(|p| p.out_of_band)
-        .map(|p| p.statement())
+        .map(|p| p.statement().to_string())
         .collect();
     assert_eq!(out.len(), 1);
     assert!(
