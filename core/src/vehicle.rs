@@ -231,16 +231,29 @@ impl Vehicle {
     /// The supervisor's thresholds with this vehicle's coil and speed gate: the fail-safe
     /// current is the coil rating, the expected coil current lags the command by the coil's
     /// time constant 1/eta (`damper.eta`), a coil-current reading at the measurement's full
-    /// scale counts as saturated, and a low speed must have been reached plausibly below the
-    /// controller's speed gate (`controller.min_speed_mps`).
+    /// scale counts as saturated, a low speed must have been reached plausibly below the
+    /// controller's speed gate (`controller.min_speed_mps`), and the encoders' noise
+    /// (`sensors.encoder_noise_lsb`) says whether a healthy encoder dithers.
     pub fn supervisor_params(&self) -> SupervisorParams {
         SupervisorParams {
             failsafe_current_a: self.rated_current_a(),
             coil_tau_s: (1.0 / self.damper.spencer.eta) as f32,
             coil_full_scale_a: self.sensors.current_full_scale_a,
             speed_low_mps: self.controller.min_speed_mps,
+            encoder_noise_lsb: self.sensors.encoder_noise_lsb,
             ..SupervisorParams::default()
         }
+    }
+
+    /// The supervisor's thresholds ([`Self::supervisor_params`]) on the model `model`: the
+    /// shimmy band of the motion evidence scaled to the model's mode
+    /// ([`LinearModel::meter_time_scale`], as the mode meter is; 1 for the car).
+    pub fn supervisor_params_for<M: LinearModel<N>, const N: usize>(
+        &self,
+        model: &M,
+    ) -> SupervisorParams {
+        self.supervisor_params()
+            .time_scaled(model.meter_time_scale())
     }
 
     /// The margin pipeline's parameters with this vehicle's warning thresholds (its model is
@@ -1543,6 +1556,11 @@ pub trait BoardVehicle<const N: usize>: RecordVehicle + PartialEq {
     /// ([`Vehicle::control_params_with`]).
     fn controller_params(&self) -> ControlParams {
         self.parts().control_params_with(self.nominal_plant())
+    }
+
+    /// The supervisor's thresholds for the model ([`Vehicle::supervisor_params_for`]).
+    fn supervisor_params(&self) -> SupervisorParams {
+        self.parts().supervisor_params_for(&self.model())
     }
 
     /// The margin pipeline's parameters for the model ([`Vehicle::pipeline_params_for`]).

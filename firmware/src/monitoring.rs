@@ -114,7 +114,7 @@ pub fn safe_controller_for<V: BoardVehicle<N>, const N: usize>(vehicle: &V) -> S
     SafeController::new(
         CONTROLLER,
         vehicle.controller_params(),
-        vehicle.parts().supervisor_params(),
+        vehicle.supervisor_params(),
     )
 }
 

@@ -11,20 +11,21 @@
 //! | `*NonFinite` | NaN or Inf angle |
 //! | `*Range` | \|psi\| > `psi_limit_rad` (beyond full lock) |
 //! | `*Rate` | \|psi - psi_last_good\| > `max_rate_radps` x (time since the last good sample) |
-//! | `*Stuck` | bit-identical for `stuck_samples` while the *other* encoder moved > `stuck_motion_rad` |
+//! | `*Stuck` | bit-identical for `stuck_samples` while the *other* encoder moved > `stuck_motion_rad`, or at all when the encoders dither (`encoder_noise_lsb` >= `DITHER_MIN_LSB`) |
 //! | `EncoderDisagree` | both valid but \|psi_L - psi_R\| > `max_disagree_rad` |
-//! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed (advisory) |
+//! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed, or for `pair_freeze_s` when they froze while the wheels oscillated in the shimmy band (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
-//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`; then held while V < `speed_low_mps` |
+//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band (then a held speed below the gate is not used either: the speed is unknown; held until V is back at the gate or the wheels were still for `speed_hold_s`) |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
-//! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) > `coil_min_expected_a` and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
+//! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) and the command both > `coil_min_expected_a`, and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
 //! | `CoilShort` | measured > expected + `coil_over_a` (or at the ADC full scale when that is above it), accumulated the same way |
 //! | `CoilSensor` | measured coil current NaN/Inf |
 //! | `MarginUnavailable` | the margin estimate is invalid for `margin_invalid_s` (advisory) |
 //!
-//! Latent coil faults: after `coil_test_idle_s` without an open check (little current
-//! demanded) the verdict asks for a test pulse of `coil_test_current_a` for `coil_test_pulse_s`.
+//! Latent coil faults: after `coil_test_idle_s` without `coil_fault_s` of open checks in a row
+//! (little current demanded, or only single-sample spikes of a chattering command) the verdict
+//! asks for a test pulse of `coil_test_current_a` for `coil_test_pulse_s`.
 //!
 //! Intermittent faults: the `intermittent_count`-th activation of a fault within
 //! `intermittent_window_s` of the first latches it (`SupervisorEvent::Latched`, until
@@ -47,10 +48,14 @@
 //! stuck at once cannot be told from a smooth road by comparison; a bit-identical pair for
 //! `both_stuck_samples` (2 s) above `zero_current_below_mps` is therefore only *suspected*
 //! (`BothStuckSuspect`): the mode goes to Degraded with the fail-safe current as a floor, which
-//! is safe and costs only a stiffer damper on a mirror-smooth road.
+//! is safe and costs only a stiffer damper on a mirror-smooth road. A pair that freezes in the
+//! middle of a shimmy-band oscillation is suspected much sooner (`pair_freeze_s`, half a period
+//! of the band's lower edge): an oscillating wheel cannot come to rest that fast, and waiting
+//! 2 s lets shimmy grow on an unstable vehicle.
 
 use super::faults::{FaultKind, FaultRecord, FaultSet, N_FAULTS};
 use super::frame::{EncoderReading, MarginStatus, RawFrame, NOMINAL_PERIOD_US};
+use super::motion::YawOscillation;
 use super::params::SupervisorParams;
 use super::policy::{decide, Mode, SpeedUse, SupervisorVerdict};
 
@@ -109,13 +114,24 @@ pub struct Supervisor {
     last_t_us: Option<u32>,
     enc: [EncoderTrack; 2],
     both_unchanged: u16,
+    motion: YawOscillation,
+    /// Both encoders froze while the wheels oscillated (captured when the freeze began).
+    pair_froze_moving: bool,
     speed_last_good: Option<(f32, u32)>,
     speed_floor: (f32, u32),
     speed_suspect: bool,
+    /// The low speed reading is contradicted by the wheels' oscillation: no speed below the
+    /// gate is trusted (not even a held one) until the reading is back above the gate or the
+    /// wheels have been still for `speed_hold_s` (a standstill after braking out of shimmy).
+    speed_contradicted: bool,
+    /// Time since the wheels last oscillated while the speed was contradicted, s.
+    speed_still_s: f32,
     speed_trusted: Option<(f32, u32)>,
     coil_expected_a: f32,
     coil_mismatch_s: [f32; 2],
     coil_idle_s: f32,
+    /// Time the coil checks have run without a break, s.
+    coil_checked_s: f32,
     coil_pulse_left_s: f32,
     margin_invalid_s: f32,
     absent_s: [f32; N_FAULTS],
@@ -168,13 +184,18 @@ impl Supervisor {
             last_t_us: None,
             enc: [EncoderTrack::default(); 2],
             both_unchanged: 0,
+            motion: YawOscillation::default(),
+            pair_froze_moving: false,
             speed_last_good: None,
             speed_floor: (0.0, 0),
             speed_suspect: false,
+            speed_contradicted: false,
+            speed_still_s: 0.0,
             speed_trusted: None,
             coil_expected_a: 0.0,
             coil_mismatch_s: [0.0; 2],
             coil_idle_s: 0.0,
+            coil_checked_s: 0.0,
             coil_pulse_left_s: 0.0,
             margin_invalid_s: 0.0,
             absent_s: [0.0; N_FAULTS],
@@ -350,7 +371,7 @@ impl Supervisor {
                 tr.other_hi_rad = tr.other_hi_rad.max(other_x);
             }
             if tr.unchanged >= p.stuck_samples
-                && tr.other_hi_rad - tr.other_lo_rad > p.stuck_motion_rad
+                && (p.encoders_dither() || tr.other_hi_rad - tr.other_lo_rad > p.stuck_motion_rad)
             {
                 bad.0 |= 1 << (base + 5);
             }
@@ -372,7 +393,15 @@ impl Supervisor {
         }
     }
 
-    fn check_speed(&mut self, f: &RawFrame, det: &mut FaultSet) -> Option<f32> {
+    /// `moving`: the wheels oscillate in the shimmy band (the vehicle rolls); `dt_s`: the time
+    /// since the previous frame.
+    fn check_speed(
+        &mut self,
+        f: &RawFrame,
+        moving: bool,
+        dt_s: f32,
+        det: &mut FaultSet,
+    ) -> Option<f32> {
         let v = f.speed_mps;
         let p = self.p;
         if !f.speed_valid || !v.is_finite() || v < -p.speed_neg_tol_mps || v > p.max_speed_mps {
@@ -383,12 +412,25 @@ impl Supervisor {
             // below the controller's gate and below the envelope came faster than braking allows
             // (lost pulse train, frozen value); once seen, it stays suspect (time alone does not
             // make it plausible) until the reading is back at or above `speed_low_mps`.
+            // A low reading while the wheels oscillate in the shimmy band is contradicted
+            // whatever the history (a sensor lost or frozen before the vehicle set off).
+            if v < p.speed_low_mps && moving {
+                self.speed_contradicted = true;
+                self.speed_still_s = 0.0;
+            } else if v >= p.speed_low_mps {
+                self.speed_contradicted = false;
+            } else if self.speed_contradicted {
+                self.speed_still_s += dt_s;
+                if self.speed_still_s >= p.speed_hold_s {
+                    self.speed_contradicted = false;
+                }
+            }
             if v < p.speed_low_mps && v < self.speed_floor_at(f.t_us) - p.speed_noise_tol_mps {
                 self.speed_suspect = true;
             } else if v >= p.speed_low_mps {
                 self.speed_suspect = false;
             }
-            if self.speed_suspect {
+            if self.speed_suspect || self.speed_contradicted {
                 det.insert(FaultKind::SpeedLowImplausible);
             }
             if let Some((last, t_last)) = self.speed_last_good {
@@ -466,7 +508,10 @@ impl Supervisor {
         let over_a = e + p.coil_over_a;
         let short =
             i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
-        let checkable = e > p.coil_min_expected_a;
+        // Open is judged while the coil should carry current and the command still asks for
+        // it: on a falling command a current that falls faster than the coil's lag is a short's
+        // signature (no inductance in the path), not an open coil's.
+        let checkable = e > p.coil_min_expected_a && last_cmd_a > p.coil_min_expected_a;
         let open = checkable && i_meas < p.coil_open_ratio * e;
         let heal = dt_s * p.coil_heal_ratio;
         // Open: judged only while enough current is expected (held otherwise); short: always.
@@ -494,8 +539,16 @@ impl Supervisor {
         // already found dead).
         let dead =
             self.active.contains(FaultKind::CoilOpen) || self.active.contains(FaultKind::CoilShort);
+        // Only `coil_fault_s` of checks in a row count as a check: single-sample command spikes
+        // (a chattering controller) must not postpone the pulse forever.
         if checkable {
+            self.coil_checked_s += dt_s;
+        } else {
+            self.coil_checked_s = 0.0;
+        }
+        if self.coil_checked_s >= p.coil_fault_s {
             self.coil_idle_s = 0.0;
+            self.coil_checked_s = 0.0;
         } else {
             self.coil_idle_s = (self.coil_idle_s + dt_s).min(1e6);
         }
@@ -504,6 +557,7 @@ impl Supervisor {
         } else if !dead && p.coil_test_current_a > 0.0 && self.coil_idle_s >= p.coil_test_idle_s {
             self.coil_pulse_left_s = p.coil_test_pulse_s;
             self.coil_idle_s = 0.0;
+            self.coil_checked_s = 0.0;
         }
         if dead || !self.coil_pulse_left_s.is_finite() {
             self.coil_pulse_left_s = 0.0;
@@ -563,9 +617,20 @@ impl Supervisor {
         {
             det.insert(FaultKind::EncoderDisagree);
         }
+        // Motion evidence: the in-phase yaw of the encoders that passed their checks.
+        let in_phase = match (
+            l_ok.then_some(f.left.angle_rad),
+            r_ok.then_some(f.right.angle_rad),
+        ) {
+            (Some(l), Some(r)) => Some(0.5 * (l + r)),
+            (one, other) => one.or(other),
+        };
+        self.motion.update(in_phase, dt_s, &p);
+        let moving = self.motion.oscillating(&p);
         // Speed.
-        let speed = self.check_speed(f, &mut det);
-        // Both encoders frozen at speed (advisory).
+        let speed = self.check_speed(f, moving, dt_s, &mut det);
+        // Both encoders frozen at speed (advisory): after `both_stuck_samples`, or after
+        // `pair_freeze_s` when they froze in the middle of an oscillation.
         let both_frozen = self.enc.iter().all(|e| e.unchanged > 0);
         let at_speed = speed.is_none_or(|v| v >= p.zero_current_below_mps);
         self.both_unchanged = if both_frozen && at_speed {
@@ -573,7 +638,13 @@ impl Supervisor {
         } else {
             0
         };
-        if self.both_unchanged >= p.both_stuck_samples {
+        if self.both_unchanged == 1 {
+            self.pair_froze_moving = moving;
+        }
+        let frozen_s = f32::from(self.both_unchanged) * period_s;
+        if self.both_unchanged >= p.both_stuck_samples
+            || (self.pair_froze_moving && frozen_s >= p.pair_freeze_s())
+        {
             det.insert(FaultKind::BothStuckSuspect);
         }
         // Coil.
@@ -591,6 +662,11 @@ impl Supervisor {
         self.update_active(det, f.t_us, dt_s);
         let speed_use = match speed {
             Some(v) if !self.active.speed() => SpeedUse::Trusted(v),
+            // A held speed below the gate is as contradicted as the reading.
+            _ if self.speed_contradicted => self
+                .held_speed(f.t_us)
+                .filter(|&v| v >= p.speed_low_mps)
+                .map_or(SpeedUse::Unknown, SpeedUse::Held),
             _ => self
                 .held_speed(f.t_us)
                 .map_or(SpeedUse::Unknown, SpeedUse::Held),

@@ -15,12 +15,14 @@
 //! - [`params`]: the thresholds ([`params::SupervisorParams`]);
 //! - [`faults`]: fault kinds, sets and records ([`faults::FaultKind`], [`faults::FaultSet`]);
 //! - [`checks`]: the [`checks::Supervisor`]: per-frame checks, hysteresis, latches, event log;
+//!   `motion`: the wheel-yaw oscillation that proves the vehicle rolls, for two of the checks;
 //! - [`policy`]: active faults to mode and safe current ([`policy::SupervisorVerdict`]);
 //! - [`safe_controller`]: supervisor + controller + final limiter, the one call per 1 ms.
 
 pub mod checks;
 pub mod faults;
 pub mod frame;
+mod motion;
 pub mod params;
 pub mod policy;
 pub mod safe_controller;

@@ -1,6 +1,13 @@
 //! The supervisor's thresholds ([`SupervisorParams`]) and the two currents its policy uses.
 
 use crate::control::actuator::FAILSAFE_CURRENT_A;
+use crate::estimator::meter::mode_meter::EstimatorConfig;
+use crate::vehicle::SensorCalibration;
+
+/// Encoder noise from which a healthy encoder never holds one value for `stuck_samples`, LSB
+/// rms: at 0.4 LSB a reading in the middle of a quantum repeats with probability ~0.65 per
+/// sample, so 100 repeats in a row happen with probability ~1e-19.
+pub const DITHER_MIN_LSB: f32 = 0.4;
 
 /// Below this (trusted) speed 0 A is safe: 80 % of the lowest Hopf onset of every analysed
 /// variant without damper (checked by `tests/tests/cross_crate/failsafe_current.rs`), m/s.
@@ -20,6 +27,10 @@ pub struct SupervisorParams {
     pub stuck_samples: u16,
     /// Peak-to-peak motion of the other encoder that must show on a healthy one, rad.
     pub stuck_motion_rad: f32,
+    /// The encoders' noise, LSB rms (the vehicle's `sensors.encoder_noise_lsb`): from
+    /// [`DITHER_MIN_LSB`] on, a healthy encoder dithers and `stuck_samples` bit-identical
+    /// values alone prove a freeze, whatever the other encoder does.
+    pub encoder_noise_lsb: f32,
     /// Samples of a bit-identical pair (at speed) for `BothStuckSuspect`.
     pub both_stuck_samples: u16,
     /// Largest plausible speed, m/s.
@@ -86,6 +97,15 @@ pub struct SupervisorParams {
     pub failsafe_current_a: f32,
     /// Below this trusted speed the safe current is 0 A, m/s.
     pub zero_current_below_mps: f32,
+    /// The shimmy band's lower edge, Hz: the wheel-yaw oscillation that proves the vehicle
+    /// rolls (`super::motion`) has its half-periods inside the band.
+    pub shimmy_band_lo_hz: f32,
+    /// The shimmy band's upper edge, Hz.
+    pub shimmy_band_hi_hz: f32,
+    /// A half-cycle of the high-passed in-phase wheel yaw counts when it exceeds +-this, rad.
+    pub motion_rad: f32,
+    /// Consecutive half-cycles in the band that make an oscillation.
+    pub motion_half_cycles: u8,
 }
 
 impl Default for SupervisorParams {
@@ -102,14 +122,19 @@ impl Default for SupervisorParams {
     /// of the time adds up); a 0.4 A x 80 ms test pulse after 1 s without a check (the
     /// check runs from 3.6 ms into the pulse, so an open coil is flagged 54 ms into it); margin
     /// 10 s; recovery 1 s; latched on the 3rd activation within 10 s of the first (one bad read in
-    /// 1,500 frames: latched at the third, 3 s after the first; one in 15 s never).
+    /// 1,500 frames: latched at the third, 3 s after the first; one in 15 s never). Motion
+    /// evidence: the mode meter's shimmy band (3-20 Hz for the car), half-cycles beyond 2.5 mrad
+    /// (0.14 deg: 6.5 quanta of a 14-bit encoder, far above its noise, well below a shimmy that
+    /// matters), four in a row (two cycles).
     fn default() -> Self {
+        let band = EstimatorConfig::default();
         SupervisorParams {
             psi_limit_rad: 0.8,
             max_rate_radps: 25.0,
             max_disagree_rad: 0.25,
             stuck_samples: 100,
             stuck_motion_rad: 5e-3,
+            encoder_noise_lsb: SensorCalibration::DEFAULT.encoder_noise_lsb,
             both_stuck_samples: 2000,
             max_speed_mps: 70.0,
             speed_neg_tol_mps: 0.5,
@@ -134,6 +159,37 @@ impl Default for SupervisorParams {
             intermittent_window_s: 10.0,
             failsafe_current_a: FAILSAFE_CURRENT_A,
             zero_current_below_mps: ZERO_CURRENT_SAFE_BELOW_MPS,
+            shimmy_band_lo_hz: band.band_lo_hz,
+            shimmy_band_hi_hz: band.band_hi_hz,
+            motion_rad: 2.5e-3,
+            motion_half_cycles: 4,
         }
+    }
+}
+
+impl SupervisorParams {
+    /// The same thresholds for a shimmy mode `k` times slower than the car's (the model's
+    /// [`crate::model::LinearModel::meter_time_scale`], as the mode meter is scaled): the shimmy
+    /// band divided by `k`. `k = 1` is `self`.
+    pub fn time_scaled(self, k: u16) -> Self {
+        let kf = f32::from(k.max(1));
+        SupervisorParams {
+            shimmy_band_lo_hz: self.shimmy_band_lo_hz / kf,
+            shimmy_band_hi_hz: self.shimmy_band_hi_hz / kf,
+            ..self
+        }
+    }
+
+    /// A healthy encoder dithers ([`DITHER_MIN_LSB`]).
+    pub fn encoders_dither(&self) -> bool {
+        self.encoder_noise_lsb >= DITHER_MIN_LSB
+    }
+
+    /// How long both encoders may hold bit-identical values right after an oscillation before
+    /// the pair counts as frozen, s: half a period of the band's lower edge. A rolling wheel's
+    /// yaw dwells within one encoder quantum of a turning point for much less than a quarter
+    /// period once its amplitude is several quanta, so a healthy pair cannot do this.
+    pub fn pair_freeze_s(&self) -> f32 {
+        0.5 / self.shimmy_band_lo_hz
     }
 }

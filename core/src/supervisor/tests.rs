@@ -21,11 +21,20 @@ const VALID_FAR: MarginStatus = MarginStatus::Valid(crate::control::schedule::Ma
 });
 
 fn safe() -> SafeController {
-    SafeController::new(
-        ControllerKind::Asmc,
-        ControlParams::default(),
-        SupervisorParams::default(),
-    )
+    safe_with(SupervisorParams::default())
+}
+
+fn safe_with(p: SupervisorParams) -> SafeController {
+    SafeController::new(ControllerKind::Asmc, ControlParams::default(), p)
+}
+
+/// Encoders without noise: a healthy one may hold a value for long, so only the other
+/// encoder's motion can prove a freeze (the synthetic frames here are noise-free too).
+fn quiet_encoders() -> SupervisorParams {
+    SupervisorParams {
+        encoder_noise_lsb: 0.0,
+        ..SupervisorParams::default()
+    }
 }
 
 /// Shimmy-like in-phase yaw: 7 deg at 7 Hz plus a tiny anti-phase part (track-rod compliance).
@@ -162,7 +171,7 @@ fn range_check() {
 #[test]
 fn stuck_encoder_needs_the_other_to_move() {
     // Left frozen while the right follows shimmy: stuck after 100 samples.
-    let mut s = safe();
+    let mut s = safe_with(quiet_encoders());
     let frozen = yaw(0).0;
     let o = run(&mut s, 0, 99, |_, mut f| {
         f.left.angle_rad = frozen;
@@ -176,7 +185,7 @@ fn stuck_encoder_needs_the_other_to_move() {
     assert!(o.verdict.faults.contains(FaultKind::LeftStuck));
     assert_eq!(o.verdict.mode, Mode::Degraded);
     // Smooth straight road: both constant and identical for 1.5 s at 20 m/s: no fault at all.
-    let mut s = safe();
+    let mut s = safe_with(quiet_encoders());
     let o = run(&mut s, 0, 1500, |_, mut f| {
         f.left.angle_rad = 0.001;
         f.right.angle_rad = 0.001;
@@ -194,7 +203,7 @@ fn stuck_encoder_needs_the_other_to_move() {
     assert_eq!(o.verdict.mode, Mode::Degraded);
     assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
     // Standing still: never suspected.
-    let mut s = safe();
+    let mut s = safe_with(quiet_encoders());
     for k in 0..5000 {
         let o = s.step(
             &RawFrame::ok(k * NOMINAL_PERIOD_US, 0.001, 0.001, 0.0),
@@ -327,9 +336,20 @@ fn lost_speed_is_held_then_floored_and_recovers() {
 #[test]
 fn low_speed_is_trusted_only_within_the_deceleration_bound() {
     let brake = |a: f32| move |k: u32| (12.5 - a * (k.saturating_sub(500)) as f32 * 1e-3).max(0.0);
-    let mut s = safe();
-    run_speed(&mut s, 0, 500, |_| 12.5);
-    let o = run_speed(&mut s, 500, 2000, brake(14.0));
+    // The shimmy lives inside the Hopf window (from 8 m/s on, full at 12.5 m/s); quiet
+    // encoders, so a wheel at rest is not a frozen one.
+    let run_speed = |s: &mut SafeController, k0: u32, n: u32, v: &dyn Fn(u32) -> f32| {
+        run(s, k0, n, |k, mut f| {
+            f.speed_mps = v(k);
+            let shimmy = ((f.speed_mps - 8.0) / 4.5).clamp(0.0, 1.0);
+            f.left.angle_rad *= shimmy;
+            f.right.angle_rad *= shimmy;
+            f
+        })
+    };
+    let mut s = safe_with(quiet_encoders());
+    run_speed(&mut s, 0, 500, &|_| 12.5);
+    let o = run_speed(&mut s, 500, 2000, &brake(14.0));
     assert!(o.verdict.faults.is_empty(), "{:?}", o.verdict);
     assert_eq!(o.validated.speed_mps, Some(0.0));
     assert_eq!(s.supervisor().record(LOW).frames, 0);
@@ -343,13 +363,13 @@ fn low_speed_is_trusted_only_within_the_deceleration_bound() {
     assert_eq!(o.verdict.mode, Mode::FailSafe);
     assert_eq!(o.verdict.safe_current_a, Some(0.0));
 
-    let mut s = safe();
-    run_speed(&mut s, 0, 500, |_| 12.5);
-    let o = run_speed(&mut s, 500, 525, brake(20.0));
+    let mut s = safe_with(quiet_encoders());
+    run_speed(&mut s, 0, 500, &|_| 12.5);
+    let o = run_speed(&mut s, 500, 525, &brake(20.0));
     assert!(!o.verdict.faults.contains(LOW));
-    let o = run_speed(&mut s, 1025, 2, brake(20.0));
+    let o = run_speed(&mut s, 1025, 2, &brake(20.0));
     assert!(o.verdict.detected.contains(LOW));
-    let o = run_speed(&mut s, 1027, 3000, brake(20.0));
+    let o = run_speed(&mut s, 1027, 3000, &brake(20.0));
     assert!(o.verdict.detected.contains(LOW));
     assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
 }
@@ -976,4 +996,219 @@ fn restored_latched_faults_hold_from_the_first_frame() {
     s.supervisor_mut().clear_latched();
     let o = run(&mut s, 3000, 1, |_, f| f);
     assert_eq!(o.verdict.mode, Mode::Normal);
+}
+
+// ---- motion evidence, dithering encoders, coil shorts under a chattering command ----------
+
+/// The 14-bit encoder's quantum, rad.
+const LSB: f32 = 2.0 * core::f32::consts::PI / 16384.0;
+
+/// `x` read by a 14-bit encoder with about 0.5 LSB rms of noise (a deterministic uniform
+/// +-0.87 LSB from `seed`), quantised.
+fn encoder(x: f32, seed: &mut u32) -> f32 {
+    *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+    let u = (*seed >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+    libm::roundf((x + 1.73 * u * LSB) / LSB) * LSB
+}
+
+/// An encoder that holds one value is stuck after 100 samples when the encoders dither, even
+/// on a quiet road where the other one moves only by its noise (a heavy vehicle's wheels move
+/// by a few quanta under control); with quiet encoders that freeze cannot be told from a
+/// still wheel. Healthy dithering encoders are never stuck, moving or still.
+#[test]
+fn a_dithering_encoder_that_holds_one_value_is_stuck() {
+    let quiet_road =
+        |k: u32| 2e-4 * libm::sinf(2.0 * core::f32::consts::PI * 3.0 * k as f32 * 1e-3);
+    for (params, expect) in [
+        (SupervisorParams::default(), true),
+        (quiet_encoders(), false),
+    ] {
+        let mut s = safe_with(params);
+        let mut seed = 7;
+        let mut found = None;
+        for k in 0..3000u32 {
+            let r = encoder(quiet_road(k), &mut seed);
+            let l = if k >= 1000 {
+                0.0
+            } else {
+                encoder(quiet_road(k), &mut seed)
+            };
+            let o = s.step(&RawFrame::ok(k * 1000, l, r, 20.0), MarginStatus::NotUsed);
+            if k < 1000 {
+                assert!(o.verdict.faults.is_empty(), "k={k}: {:?}", o.verdict);
+            }
+            if found.is_none() && o.verdict.faults.contains(FaultKind::LeftStuck) {
+                found = Some(k);
+            }
+        }
+        assert_eq!(found.is_some(), expect, "{params:?}: {found:?}");
+        if let Some(k) = found {
+            assert!((1099..=1101).contains(&k), "found at {k}");
+        }
+    }
+    // Dithering and still (parked), and dithering on a large shimmy: nothing for 10 s.
+    for amplitude in [0.0f32, 0.1] {
+        let mut s = safe();
+        let mut seed = 11;
+        for k in 0..10_000u32 {
+            let y = amplitude * libm::sinf(2.0 * core::f32::consts::PI * 7.0 * k as f32 * 1e-3);
+            let (l, r) = (encoder(y, &mut seed), encoder(y, &mut seed));
+            let speed = if amplitude > 0.0 { 20.0 } else { 0.0 };
+            let o = s.step(&RawFrame::ok(k * 1000, l, r, speed), MarginStatus::NotUsed);
+            assert!(
+                o.verdict.faults.is_empty(),
+                "amplitude {amplitude}, k={k}: {:?}",
+                o.verdict
+            );
+        }
+    }
+}
+
+/// Both (quiet) encoders freeze in the middle of a 3 deg shimmy: suspected within half a
+/// period of the band's lower edge (167 ms), not after 2 s, with the fail-safe floor. The same
+/// pair coming to rest through a damped decay (time constant 0.3 s) raises nothing for 2 s.
+#[test]
+fn a_pair_that_freezes_mid_oscillation_is_suspected_at_once() {
+    let p = quiet_encoders();
+    assert!((p.pair_freeze_s() - 1.0 / 6.0).abs() < 1e-6);
+    let q = |x: f32| libm::roundf(x / LSB) * LSB;
+    let shimmy = |k: u32, decay: bool| {
+        let t = k as f32 * 1e-3;
+        let env = if decay && k > 1000 {
+            libm::expf(-(t - 1.0) / 0.3)
+        } else {
+            1.0
+        };
+        q(3f32.to_radians() * env * libm::sinf(2.0 * core::f32::consts::PI * 7.0 * t))
+    };
+    let mut s = safe_with(p);
+    let mut found = None;
+    for k in 0..3000u32 {
+        let y = if k >= 1000 {
+            shimmy(1000, false)
+        } else {
+            shimmy(k, false)
+        };
+        let o = s.step(&RawFrame::ok(k * 1000, y, y, 20.0), MarginStatus::NotUsed);
+        if found.is_none() && o.verdict.faults.contains(FaultKind::BothStuckSuspect) {
+            found = Some(k);
+            assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+        }
+    }
+    let k = found.expect("suspected");
+    assert!((1100..=1170).contains(&k), "suspected at {k}");
+    let mut s = safe_with(p);
+    for k in 0..3500u32 {
+        let y = shimmy(k, true);
+        let o = s.step(&RawFrame::ok(k * 1000, y, y, 20.0), MarginStatus::NotUsed);
+        assert!(
+            o.verdict.faults.is_empty(),
+            "damped decay, k={k}: {:?}",
+            o.verdict
+        );
+    }
+}
+
+/// The speed reads 0 m/s (valid) from the first frame while the wheels shimmy (a tone wheel
+/// lost before the vehicle set off): no trusted history can show it, the oscillation does.
+/// Within two cycles the speed is unknown: the speed gate off (the controller runs) and the
+/// fail-safe floor. A parked vehicle whose driver steers (0.3 rad at 0.5 Hz, or sawing at 1 Hz)
+/// raises nothing: too slow for the shimmy band.
+#[test]
+fn a_low_speed_reading_while_the_wheels_shimmy_is_contradicted() {
+    let mut s = safe_with(quiet_encoders());
+    let mut found = None;
+    for k in 0..1000u32 {
+        let t = k as f32 * 1e-3;
+        let y = 0.5f32.to_radians() * libm::sinf(2.0 * core::f32::consts::PI * 6.0 * t);
+        let o = s.step(&RawFrame::ok(k * 1000, y, y, 0.0), MarginStatus::NotUsed);
+        if found.is_none() && o.verdict.detected.contains(LOW) {
+            found = Some(k);
+        }
+        if let Some(k0) = found {
+            assert_eq!(o.validated.speed_mps, None, "k={k}");
+            assert_eq!(o.verdict.safe_current_a, Some(FAILSAFE_CURRENT_A));
+            assert!(
+                o.control.is_some_and(|c| !c.flags.below_speed),
+                "k={k0}..{k}"
+            );
+        }
+    }
+    let k = found.expect("contradicted");
+    assert!(k <= 400, "contradicted at {k} ms");
+    // Braking out of shimmy: the wheels still oscillate (1 deg) when the reading passes the
+    // gate, then come to rest. Contradicted while they oscillate; 1 s after they are still the
+    // standstill is trusted again, and with the recovery time Normal.
+    let mut s = safe_with(quiet_encoders());
+    let mut contradicted = 0;
+    let mut last = None;
+    for k in 0..5000u32 {
+        let t = k as f32 * 1e-3;
+        let y = if k < 800 {
+            1f32.to_radians() * libm::sinf(2.0 * core::f32::consts::PI * 6.0 * t)
+        } else {
+            0.0
+        };
+        let v = (2.5 - 2.5 * t).max(0.0);
+        let o = s.step(&RawFrame::ok(k * 1000, y, y, v), MarginStatus::NotUsed);
+        contradicted += u32::from(o.verdict.detected.contains(LOW));
+        last = Some(o);
+    }
+    let o = last.expect("ran");
+    assert!(contradicted > 0);
+    assert!(o.verdict.faults.is_empty(), "{:?}", o.verdict);
+    assert_eq!(o.validated.speed_mps, Some(0.0));
+    for (amplitude, hz) in [(0.3f32, 0.5f32), (0.05, 1.0)] {
+        let mut s = safe_with(quiet_encoders());
+        for k in 0..10_000u32 {
+            let t = k as f32 * 1e-3;
+            let y = amplitude * libm::sinf(2.0 * core::f32::consts::PI * hz * t);
+            let o = s.step(&RawFrame::ok(k * 1000, y, y, 0.0), MarginStatus::NotUsed);
+            assert!(
+                o.verdict.faults.is_empty(),
+                "{hz} Hz, k={k}: {:?}",
+                o.verdict
+            );
+        }
+    }
+}
+
+/// A shorted coil under a chattering command (single-sample 2 A spikes every 300 ms, 0 A
+/// otherwise: ASMC on a heavy vehicle's quantised yaw). The shunt reads 5 x the command with
+/// no lag, so after each spike it drops to 0 while the lagged expected current is still high:
+/// that must not count as an open coil. The spikes must not postpone the test pulse either:
+/// the pulse finds the short within about a second.
+#[test]
+fn a_short_under_a_chattering_command_is_found_as_a_short() {
+    let mut sup = Supervisor::new(SupervisorParams::default());
+    let mut seed = 3;
+    let mut found = None;
+    let mut cmd = 0.0f32;
+    let mut pulses = 0;
+    for k in 0..4000u32 {
+        let mut f = RawFrame::ok(
+            k * 1000,
+            encoder(0.0, &mut seed),
+            encoder(0.0, &mut seed),
+            20.0,
+        );
+        f.coil_current_a = Some((5.0 * cmd).min(2.5));
+        let (v, _) = sup.check(&f, cmd, MarginStatus::NotUsed);
+        assert!(!v.faults.contains(FaultKind::CoilOpen), "k={k}: {v:?}");
+        if found.is_none() && v.faults.contains(FaultKind::CoilShort) {
+            found = Some(k);
+        }
+        let spike = if k % 300 == 150 { 2.0 } else { 0.0 };
+        pulses += u32::from(v.test_current_a.is_some());
+        cmd = if !v.damper_available {
+            0.0
+        } else {
+            v.test_current_a.unwrap_or(0.0).max(spike)
+        };
+    }
+    let k = found.expect("the short is found");
+    assert!(
+        pulses > 0 && k < 1200,
+        "found at {k} ms after {pulses} pulse samples"
+    );
 }

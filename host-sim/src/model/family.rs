@@ -205,9 +205,12 @@ impl<M> FamilyVehicle<M> {
         self.parts.control_params_with(self.model.nominal_plant())
     }
 
-    /// The supervisor's thresholds ([`Vehicle::supervisor_params`]).
-    pub fn supervisor_params(&self) -> SupervisorParams {
-        self.parts.supervisor_params()
+    /// The supervisor's thresholds ([`Vehicle::supervisor_params_for`] on the model).
+    pub fn supervisor_params<const N: usize>(&self) -> SupervisorParams
+    where
+        M: SimModel<N>,
+    {
+        self.parts.supervisor_params_for(&self.model.linear())
     }
 
     /// The margin pipeline's parameters ([`Vehicle::pipeline_params`]; its model is
