@@ -149,8 +149,11 @@ fn row<M: LinearModel<N>, const N: usize>(
 
 /// The command: compute, write CSV + PNG per map, print the boundary table.
 pub fn command(a: &SweepArgs) -> Result<()> {
-    let (param, maps) = compute(a)?;
+    // The options are checked before the folder is claimed (the vehicle after: it needs the
+    // model), and the folder before the sweep.
+    super::args::check(a)?;
     let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let (param, maps) = compute(a)?;
     for (k, map) in maps.iter().enumerate() {
         let tag = if map.c_nspm == 0.0 {
             "no-damper".to_string()

@@ -328,10 +328,14 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
 
 /// The command: compute, write CSV + PNG per controller, print a summary.
 pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
+    // The options are checked before the folder is claimed (the vehicle after: it needs the
+    // model), and the folder before the runs.
+    super::args::check(a)?;
+    arms(a)?;
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let (g, maps) = compute(a)?;
     let wall_s = wall.elapsed().as_secs_f64();
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let name = g.param.name;
     let boundary = a.out.join(format!("td-boundary-{name}.csv"));
     crate::sim::files::write_file(&boundary, boundary_csv(&g))?;
