@@ -295,3 +295,24 @@ fn a_full_disk_names_the_file_and_leaves_no_truncated_one() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The standard output on a full disk (`/dev/full`): the printed table fails with an error
+/// naming where it went and exit status 1 (it was a panic inside the standard library, 101).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_standard_output_is_an_error_naming_it() {
+    let o = Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
+        .arg("params")
+        .env("RUST_BACKTRACE", "0")
+        .stdout(OpenOptions::new().write(true).open("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("writing the standard output (/dev/full)")
+            && err.contains("No space left on device")
+            && !err.contains("panicked"),
+        "{err}"
+    );
+}
