@@ -772,7 +772,8 @@ fn run_result<'py>(py: Python<'py>, run: &Run) -> PyResult<Bound<'py, PyDict>> {
 /// `rows` (dict of arrays at 100 Hz: t_s, speed_mps, zeta_slow, sigma_zeta_slow, freq_slow_hz,
 /// slow_valid, zeta_fast, sigma_zeta_fast, freq_fast_hz, fast_valid, amplitude_rad, zeta_model,
 /// speed_margin_mps, time_to_critical_s, model_consistent, level 0..3), `events` (list of
-/// dicts), `summary` (dict) and `rejected_samples`.
+/// dicts), `summary` (dict; its `not_judged` says why the log cannot be judged when the meter
+/// estimated nothing in it, else None) and `rejected_samples`.
 #[pyfunction]
 #[pyo3(signature = (log, vehicle = None, mapping = None, model = true, max_gap_ms = 20.0,
     delimiter = None, time_column = None, time_unit = None, rate_hz = None, yaw_column = None,
@@ -892,6 +893,7 @@ fn analyze<'py>(
     summary.set_item("freq_slow_median_hz", s.freq_slow_median_hz)?;
     summary.set_item("max_level", level(s.max_level))?;
     summary.set_item("episodes", s.episodes)?;
+    summary.set_item("not_judged", result.not_judged())?;
     let out = PyDict::new(py);
     out.set_item("rows", rows)?;
     out.set_item("events", events)?;

@@ -38,6 +38,7 @@ def test_shimmy_without_a_damper_is_found(tmp_path, limit_cycle):
     write_si(log, limit_cycle)
     a = shimmy_sim.analyze(log)
     assert a["summary"]["max_level"] == 3  # shimmy present
+    assert a["summary"]["not_judged"] is None
     assert len(a["events"]) == 1 and a["events"][0]["open"]
     linear_hz = shimmy_sim.eigen_sweep(shimmy_sim.Vehicle(), [45.0])["shimmy_freq_hz"][0]
     # The limit cycle runs near the linear shimmy mode's frequency.
@@ -66,6 +67,16 @@ def test_a_damped_kick_is_not_shimmy(tmp_path):
     log = tmp_path / "asmc.csv"
     write_si(log, trace("asmc", 0.5, 6.0))
     assert shimmy_sim.analyze(log)["summary"]["max_level"] < 3
+
+
+def test_a_log_without_wheel_motion_is_not_judged(tmp_path):
+    log = tmp_path / "flat.csv"
+    t = np.arange(10000) * 1e-3
+    np.savetxt(log, np.c_[t, 0 * t, 0 * t, 10 + 0 * t], delimiter=",",
+               header="t_s,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps", comments="")
+    s = shimmy_sim.analyze(log, model=False)["summary"]
+    assert s["valid_fraction"] == 0
+    assert "too little wheel yaw in the shimmy band" in s["not_judged"]
 
 
 def test_bad_logs_name_the_column(tmp_path, limit_cycle):

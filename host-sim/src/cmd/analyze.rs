@@ -118,6 +118,8 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         .context("log mapping (options or mapping file)")?;
     let vehicle = vehicle_file::load_model(&a.vehicle).context("--vehicle")?;
     let log = log_file::load(&a.log, &map)?;
+    let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
+    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     let opts = AnalyzeOptions {
         vehicle,
         model: !a.data_only,
@@ -137,8 +139,6 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         provenance = provenance.file("mapping file", p)?;
     }
 
-    let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
-    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
     analysis::write_rows_csv(&out.join("analysis.csv"), &result)?;
     analysis::write_events_csv(&out.join("events.csv"), &result)?;
     let source = a.log.display().to_string();
@@ -176,7 +176,9 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         s.freq_slow_median_hz,
         100.0 * s.valid_fraction
     );
+    let not_judged = result.not_judged();
     match s.first_warning {
+        _ if not_judged.is_some() => println!("  not judged: no valid damping estimate"),
         Some((t, v, l)) => println!(
             "  first warning: {} at {t:.2} s ({:.1} km/h); highest level {}; {} episode(s)",
             level_name(l),
@@ -192,13 +194,11 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     );
     // Without one valid estimate "no warning" says nothing about the vehicle: a failure, so a
     // script that checks the exit code does not take an unusable log for a normal one.
-    if s.valid_fraction == 0.0 {
+    if let Some(why) = not_judged {
         bail!(
-            "{source}: no damping estimate in {:.1} s of log: the mode meter found no stretch it \
-             could estimate (it needs the vehicle moving, above walking pace, with the shimmy \
-             mode excited); check the mapping (yaw and speed columns, units, gain); the report \
-             in {} shows what it saw",
-            s.duration_s,
+            "{source}: the log could not be judged, no damping estimate: {why}; check the \
+             mapping (yaw and speed columns, units, gain); the report in {} shows what the \
+             meter saw",
             out.display()
         );
     }

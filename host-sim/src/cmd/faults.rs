@@ -863,6 +863,7 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         kick_nm: a.kick_nm,
         ..Setup::<M, N>::on(plant)
     };
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
@@ -878,7 +879,6 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         wall.elapsed().as_secs_f64()
     );
     println!("{md}");
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     crate::sim::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
     crate::sim::files::write_file(&a.out.join("faults.md"), &md)?;
     let bad = check(&rows);

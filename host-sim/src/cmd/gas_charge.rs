@@ -67,6 +67,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             TruckParams::NAME
         ),
     };
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let ans = truck_study::gas_charge(
         &t,
         args.speed_kmh,
@@ -102,7 +103,6 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             );
         }
     }
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("gas-charge.csv");
     write_charge_csv(&csv, &ans)?;
 

@@ -203,6 +203,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
     a: &IdentifiabilityArgs,
     model: &M,
 ) -> Result<()> {
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let speeds = usize::from(a.speeds);
     let rows = study(
         model,
@@ -221,7 +222,6 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
         a.from_fraction * 100.0
     );
     print!("{md}");
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     crate::sim::files::write_file(&a.out.join("identifiability.md"), md.trim_start())?;
     let mut csv = String::from("sigma_zeta,speed_kmh,field,sigma_ln,onset_sigma_kmh\n");
     for r in &rows {

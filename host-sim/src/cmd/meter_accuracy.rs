@@ -411,6 +411,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             speed_kmh: v,
         }))
         .collect();
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let scale = a
         .meter_time_scale
@@ -431,7 +432,6 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     crate::sim::files::write_file(&a.out.join("meter_accuracy.md"), &md)?;
     let mut f = Vec::new();
     writeln!(f, "current_a,speed_kmh,zeta_true,freq_true_hz,freq_est_hz,b,bias_b,spread_b,sigma_b,coverage_pct,n,valid_pct,passes")?;

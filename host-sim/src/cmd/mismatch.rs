@@ -757,6 +757,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
         bail!("--only matches no case; cases: {}", names.join(", "));
     }
+    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let mut pp = vehicle.pipeline_params();
     if a.model_update {
@@ -799,7 +800,6 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     crate::sim::files::write_file(
         &a.out.join("mismatch.md"),
         format!("{}\n\n{}", md.trim_end(), provenance.markdown()),

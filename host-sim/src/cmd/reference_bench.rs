@@ -18,7 +18,7 @@
 
 use crate::model::plant::{default_atol, idx, Inputs, Method, Plant, Simulator, N_STATE};
 use crate::sim::arg_range::{self, Range};
-use crate::sim::files;
+use crate::sim::files::{self, OutDir};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -122,8 +122,9 @@ pub struct ReferenceResult {
     pub cl_peak_psi_rad: (f64, f64),
 }
 
-/// Runs both implementations and compares them.
-pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
+/// Runs both implementations and compares them; returns the result and the output folder,
+/// claimed once the options pass their checks and held until the caller has written it.
+pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
     DURATION_S.check("--duration-s", a.duration_s)?;
     arg_range::SPEED_KMH.check("--speed-kmh", a.speed_kmh)?;
     YAW_DEG.check("--initial-yaw-deg", a.initial_yaw_deg)?;
@@ -136,7 +137,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
     arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let out_dir = OutDir::claim(&a.out)?;
 
     let sample_every = 10; // every 10 ms
     let n_periods = (a.duration_s * 1000.0).round() as usize;
@@ -261,28 +262,31 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<ReferenceResult> {
             .map(|(x, y)| (x - y).abs())
             .fold(0.0, f64::max)
     };
-    Ok(ReferenceResult {
-        rust_sim_rate: a.duration_s / rust_sim_wall,
-        scipy_sim_rate: a.duration_s / num("sim_wall_s")?,
-        scipy_methods,
-        scipy_fastest: json["fastest"]
-            .as_str()
-            .context("scipy.json: `fastest`")?
-            .to_string(),
-        rust_sweep_rate: sweep.len() as f64 / (rust_build_wall + rust_eig_wall),
-        rust_eig_rate: sweep.len() as f64 / rust_eig_wall,
-        numpy_sweep_rate: sweep.len() as f64
-            / (num("sweep_build_wall_s")? + num("sweep_eig_wall_s")?),
-        numpy_eig_rate: sweep.len() as f64 / num("sweep_eig_wall_s")?,
-        max_traj_diff_rad: max_abs_diff(&psi_rust, &psi_scipy),
-        max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
-        max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
-        rust_cl_rate: cl.sim_s / cl.wall_s.max(1e-12),
-        rust_cl_imex_rate: cl_imex.sim_s / cl_imex.wall_s.max(1e-12),
-        scipy_cl_rate: ramp_s / num("ramp_wall_s")?,
-        cl_duration_s: ramp_s,
-        cl_peak_psi_rad: (cl_peak, num("ramp_peak_psi_l_rad")?),
-    })
+    Ok((
+        ReferenceResult {
+            rust_sim_rate: a.duration_s / rust_sim_wall,
+            scipy_sim_rate: a.duration_s / num("sim_wall_s")?,
+            scipy_methods,
+            scipy_fastest: json["fastest"]
+                .as_str()
+                .context("scipy.json: `fastest`")?
+                .to_string(),
+            rust_sweep_rate: sweep.len() as f64 / (rust_build_wall + rust_eig_wall),
+            rust_eig_rate: sweep.len() as f64 / rust_eig_wall,
+            numpy_sweep_rate: sweep.len() as f64
+                / (num("sweep_build_wall_s")? + num("sweep_eig_wall_s")?),
+            numpy_eig_rate: sweep.len() as f64 / num("sweep_eig_wall_s")?,
+            max_traj_diff_rad: max_abs_diff(&psi_rust, &psi_scipy),
+            max_psi_rad: psi_rust.iter().fold(0.0, |m: f64, x| m.max(x.abs())),
+            max_eig_diff: max_abs_diff(&max_re_rust, &max_re_numpy),
+            rust_cl_rate: cl.sim_s / cl.wall_s.max(1e-12),
+            rust_cl_imex_rate: cl_imex.sim_s / cl_imex.wall_s.max(1e-12),
+            scipy_cl_rate: ramp_s / num("ramp_wall_s")?,
+            cl_duration_s: ramp_s,
+            cl_peak_psi_rad: (cl_peak, num("ramp_peak_psi_l_rad")?),
+        },
+        out_dir,
+    ))
 }
 
 /// The `[ramp]` section: the demo's drive (nominal plant parameters are the `[plant]` section
@@ -399,7 +403,7 @@ fn case_toml(
 
 /// The command: run, print the table, write it to `summary.txt`.
 pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
-    let r = compare(a)?;
+    let (r, _out_dir) = compare(a)?;
     let mut t = String::new();
     let _ = writeln!(
         t,

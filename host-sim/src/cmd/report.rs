@@ -117,9 +117,11 @@ pub fn plan<M: ScenarioModel<N>, const N: usize>(
         .collect()
 }
 
-/// Runs the plan (all runs in parallel) and builds the report.
-pub fn build<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<Report<M, N>> {
-    let plan = plan::<M, N>(a)?;
+/// Runs `plan` (all runs in parallel) and builds the report.
+pub fn build<M: ScenarioModel<N>, const N: usize>(
+    a: &ReportArgs,
+    plan: Vec<(PathBuf, Vec<ScenarioSpec<M, N>>)>,
+) -> Result<Report<M, N>> {
     let jobs: Vec<(usize, &ScenarioSpec<M, N>)> = plan
         .iter()
         .enumerate()
@@ -222,8 +224,9 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 
 /// The command on scenarios of the model `M`.
 fn command_on<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<()> {
-    let report = build::<M, N>(a)?;
+    let plan = plan::<M, N>(a)?;
     let out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let report = build(a, plan)?;
     let w = report::write(&out_dir, &report)?;
     let rows: Vec<(&str, &ReportRun<M, N>)> = report
         .sections

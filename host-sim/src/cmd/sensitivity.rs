@@ -170,9 +170,11 @@ impl ModelVisitor for Variants {
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
+    let vehicle = vehicle_file::load_model(&args.vehicle)?;
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     // one variant per parameter: (name, unit, base value, the window at a factor, or None
     // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
-    let (w0, variants) = registry::with_model(vehicle_file::load_model(&args.vehicle)?, Variants)?;
+    let (w0, variants) = registry::with_model(vehicle, Variants)?;
     let (on0, off0, f0) = (w0.onset_kmh, w0.offset_kmh, w0.onset_freq_hz);
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
@@ -191,7 +193,6 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
         "param", "on -", "off -", "f -", "on +", "off +", "f +", "d on/d%", "d off/d%"
     );
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let path = args.out.join("sensitivity.csv");
     let mut f = Vec::new();
     writeln!(

@@ -95,6 +95,10 @@ impl ModelVisitor for Stability<'_> {
     fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Result<()> {
         let args = self.0;
         if let Some(parts) = M::parts_of(&f) {
+            if let Some(i) = args.damper_current_a {
+                arg_range::check_current("--damper-current-a", i, parts)?;
+            }
+            let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
             return with_damper(&M::model_of(&f), parts, args);
         }
         anyhow::ensure!(
@@ -103,22 +107,20 @@ impl ModelVisitor for Stability<'_> {
              (`sway-damping` gives the sway damper it needs)",
             registry::name_of::<M, N>()
         );
+        let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
         println!("stability of straight running: vehicle `{}`", args.vehicle);
         println!("damper: none (F_d = 0)");
         report(&M::model_of(&f), Damper::None, 0.0, args)
     }
 }
 
-/// The damper setting of `--damper-current-a` on the vehicle model `p` (the damper of
-/// `parts`), then the report.
+/// The damper setting of `--damper-current-a` (checked) on the vehicle model `p` (the damper
+/// of `parts`), then the report.
 fn with_damper<M: SimModel<N>, const N: usize>(
     p: &M,
     parts: &shimmy_core::vehicle::Vehicle,
     args: &StabilityArgs,
 ) -> Result<()> {
-    if let Some(i) = args.damper_current_a {
-        arg_range::check_current("--damper-current-a", i, parts)?;
-    }
     let (v_min, v_max) = (kmh_to_mps(args.v_min_kmh), kmh_to_mps(args.v_max_kmh));
     let (c, damper) = match args.damper_current_a {
         None => (0.0, None),
@@ -220,7 +222,6 @@ fn report<M: SimModel<N>, const N: usize>(
         .collect();
     print_hopf_types(&crossings, &types);
 
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("stability.csv");
     write_sweep_csv(&csv, p, c, &rows)?;
     let ccsv = args.out.join("crossings.csv");

@@ -81,6 +81,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
             TrailerParams::NAME
         ),
     };
+    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let crossings = stability::hopf_crossings(
         &t,
         0.0,
@@ -190,7 +191,6 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
         );
     }
 
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     let csv = args.out.join("damping.csv");
     write_speed_csv(&csv, &t, &rows, args.zeta)?;
     let dcsv = args.out.join("diboll-hagen.csv");

@@ -201,6 +201,7 @@ pub fn summary_json(a: &Analysis) -> Value {
     let num = |x: f64| if x.is_finite() { json!(x) } else { Value::Null };
     let st = &a.resampling;
     json!({
+        "not_judged": a.not_judged(),
         "duration_s": num(s.duration_s),
         "valid_fraction": num(s.valid_fraction),
         "zeta_slow_min": num(s.zeta_slow_min),
@@ -231,7 +232,12 @@ pub fn summary_json(a: &Analysis) -> Value {
 fn summary_table(s: &AnalysisSummary, a: &Analysis) -> String {
     let mut t = String::from("| quantity | value |\n|---|---|\n");
     let f = |x: f64, p: usize| opt(x.is_finite().then_some(x), p);
-    let rows: [(&str, String); 9] = [
+    let rows: [(&str, String); 10] = [
+        (
+            "verdict",
+            a.not_judged()
+                .map_or("judged".into(), |why| format!("**not judged**: {why}")),
+        ),
         ("analysed length [s]", format!("{:.2}", s.duration_s)),
         (
             "valid slow estimates [%]",

@@ -21,7 +21,7 @@ use crate::model::study::StudyModel;
 use crate::sim::log_file::LogSample;
 use crate::sim::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
-use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
+use shimmy_core::estimator::meter::mode_meter::{EstimateStatus, Sample, WheelOrder};
 use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::estimator::pipeline::{
     AccelEstimator, DataPipeline, PipelineOutput, ShimmyPipeline,
@@ -263,7 +263,21 @@ pub struct Analysis {
     pub rejected_samples: u32,
     /// The model margin ran.
     pub model: bool,
+    /// The meter's 100 Hz steps by the status of the slow estimate (frozen when the meter froze
+    /// its updates on the step), in the order of [`SLOW_STATUSES`].
+    pub slow_status_steps: [usize; SLOW_STATUSES.len()],
 }
+
+/// Every status of the meter's slow estimate with what it means for a log, in the order
+/// [`Analysis::slow_status_steps`] counts them.
+pub const SLOW_STATUSES: [(EstimateStatus, &str); 6] = [
+    (EstimateStatus::NotStarted, "no estimate yet"),
+    (EstimateStatus::WarmingUp, "warming up"),
+    (EstimateStatus::Frozen, "frozen (too little excitation)"),
+    (EstimateStatus::NoModeInBand, "no mode in the shimmy band"),
+    (EstimateStatus::RootFailure, "root finder failed"),
+    (EstimateStatus::Ok, "an estimate without a finite sigma"),
+];
 
 /// Name of a warning level for tables and CSV.
 pub fn level_name(l: Level) -> &'static str {
@@ -359,6 +373,7 @@ fn analyze_on<M: SimModel<S>, const S: usize>(
     let mut accel = AccelEstimator::new();
     let mut speed_mps = f32::NAN;
     let mut rows = Vec::with_capacity(grid.len() / 10 + 1);
+    let mut slow_status_steps = [0; SLOW_STATUSES.len()];
     for (k, g) in grid.iter().enumerate() {
         if k % 10_000 == 0 {
             progress(k, grid.len());
@@ -381,6 +396,16 @@ fn analyze_on<M: SimModel<S>, const S: usize>(
         };
         let a = accel.update(g.t_s, speed_mps);
         if let Some(out) = pipe.push(&sample, speed_mps, a, g.t_s) {
+            // A step with the updates frozen is counted as frozen whatever the estimate says:
+            // without excitation the fit has nothing to solve, and its root solve fails first.
+            let status = if out.meter.frozen {
+                EstimateStatus::Frozen
+            } else {
+                out.meter.slow.status
+            };
+            if let Some(i) = SLOW_STATUSES.iter().position(|(s, _)| *s == status) {
+                slow_status_steps[i] += 1;
+            }
             rows.push(AnalysisRow::new(g.t_s, &out));
         }
     }
@@ -393,6 +418,7 @@ fn analyze_on<M: SimModel<S>, const S: usize>(
         resampling,
         rejected_samples: data.meter().counters().rejected_samples,
         model: o.model,
+        slow_status_steps,
     })
 }
 
@@ -428,6 +454,57 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 impl Analysis {
+    /// Why the log cannot be judged (not one valid slow estimate: "no warning" would say
+    /// nothing about the vehicle), or `None` when it can.
+    pub fn not_judged(&self) -> Option<String> {
+        if self.rows.iter().any(|r| r.slow_valid) {
+            return None;
+        }
+        let st = &self.resampling;
+        if st.missing_yaw >= st.grid_points {
+            return Some(format!(
+                "no usable yaw sample: all {} samples at 1 kHz lack the wheel yaw (empty or \
+                 non-numeric cells, or gaps longer than the limit)",
+                st.grid_points
+            ));
+        }
+        let steps = self.rows.len();
+        if steps == 0 {
+            return Some(format!(
+                "too short: {:.3} s of log gives no meter step (one every 10 ms)",
+                st.grid_points as f64 * GRID_DT_S
+            ));
+        }
+        let mut by_count: Vec<(EstimateStatus, &str, usize)> = SLOW_STATUSES
+            .iter()
+            .zip(self.slow_status_steps)
+            .filter(|(_, n)| *n > 0)
+            .map(|(&(s, words), n)| (s, words, n))
+            .collect();
+        by_count.sort_by_key(|&(.., n)| std::cmp::Reverse(n));
+        let lead = match by_count.first().map(|&(s, ..)| s) {
+            Some(EstimateStatus::NotStarted | EstimateStatus::WarmingUp) => {
+                "too short: the mode meter was still warming up when the log ended"
+            }
+            Some(EstimateStatus::Frozen) => {
+                "no usable samples: too little wheel yaw in the shimmy band"
+            }
+            Some(EstimateStatus::NoModeInBand) => {
+                "no usable samples: the mode meter found no mode in the shimmy band"
+            }
+            _ => "no usable samples: the mode meter's estimate failed",
+        };
+        let shares: Vec<String> = by_count
+            .iter()
+            .map(|&(_, words, n)| format!("{words} {:.0} %", 100.0 * n as f64 / steps as f64))
+            .collect();
+        Some(format!(
+            "{lead} (its {steps} steps at 100 Hz over {:.1} s: {})",
+            st.grid_points as f64 * GRID_DT_S,
+            shares.join(", ")
+        ))
+    }
+
     /// The headline numbers.
     pub fn summary(&self) -> AnalysisSummary {
         let valid: Vec<&AnalysisRow> = self.rows.iter().filter(|r| r.slow_valid).collect();

@@ -6,7 +6,9 @@
 //!   temporary file next to its target and renamed over it when complete, so a full disk leaves
 //!   no truncated file, and every error names the file;
 //! - [`OutDir::claim`]: an output folder created and locked for one run, so two runs writing
-//!   the same folder at once cannot mix their files.
+//!   the same folder at once cannot mix their files;
+//! - [`report_stdout_errors`]: the printed tables and text, when the standard output cannot
+//!   take them (`> file` on a full disk), an error naming where it goes.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs::{File, OpenOptions};
@@ -155,6 +157,34 @@ impl Drop for PendingFile {
         // Renamed already after a commit; otherwise the partial file goes.
         let _ = std::fs::remove_file(&self.tmp);
     }
+}
+
+/// Makes a failed write to the standard output (a full disk under `> file`, a closed pipe) an
+/// error that names where the output goes, with exit status 1, instead of the panic of
+/// `println!`. Installed once at start-up.
+pub fn report_stdout_errors() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let why = info
+            .payload_as_str()
+            .and_then(|m| m.strip_prefix("failed printing to stdout: "));
+        match why {
+            Some(why) => {
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "Error: writing the standard output{}: {why}",
+                    stdout_target()
+                );
+                std::process::exit(1);
+            }
+            None => default(info),
+        }
+    }));
+}
+
+/// " (FILE)" for the file the standard output goes to where the system says (Linux), else "".
+fn stdout_target() -> String {
+    std::fs::read_link("/proc/self/fd/1").map_or(String::new(), |p| format!(" ({})", p.display()))
 }
 
 /// The lock file of an output folder, held while a run writes it.

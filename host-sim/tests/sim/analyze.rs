@@ -305,6 +305,8 @@ fn the_command_writes_its_report_and_rejects_bad_logs() {
     assert_eq!(prov["inputs"][0]["sha256"], log_hash.as_str());
     assert_eq!(json["metrics"]["resampling"]["exact"], 8000);
     assert_eq!(json["metrics"]["model"], false);
+    assert_eq!(json["metrics"]["not_judged"], serde_json::Value::Null);
+    assert!(md.contains("| verdict | judged |"), "{md}");
 
     // A mapping file (one yaw signal for both wheels; the true speed column, said to be in
     // km/h) is read, hashed into the provenance, and overridden by an option (m/s).
@@ -531,39 +533,89 @@ fn analyze_refuses_a_model_its_log_cannot_feed() {
     assert!(format!("{e:#}").contains("dual-axle-truck-8dof"), "{e:#}");
 }
 
-/// A log of a car standing still (speed 0, a little yaw noise): the meter estimates nothing,
-/// and the command must say so and fail, not report "no warning" as if the log were normal.
+/// Logs the meter can estimate nothing in: the command says why (the meter's own status on its
+/// steps, or the missing yaw), in its error, the report and `summary.json`, and fails, instead
+/// of reporting "no warning" as if the log were normal.
 #[test]
-fn a_log_with_no_estimable_stretch_fails_instead_of_reporting_normal() {
+fn a_log_with_no_estimable_stretch_fails_naming_the_reason() {
     let dir = temp_dir("analyze-nothing");
     let mut rng = Lcg(5);
-    let mut s = String::from("time_ms;steer_deg;v_kmh;note\n");
+    // A car standing still (speed 0, a little yaw noise), 10 s at 400 Hz.
+    let mut still = String::from("time_ms;steer_deg;v_kmh;note\n");
     for j in 0..(10.0 * 400.0) as usize {
-        let _ = writeln!(s, "{};{};0;x", j as f64 * 2.5, 0.01 * rng.next());
+        let _ = writeln!(still, "{};{};0;x", j as f64 * 2.5, 0.01 * rng.next());
     }
-    std::fs::write(dir.join("still.csv"), s).unwrap();
+    // Shimmy at 6 Hz and 40 km/h, but 0.3 s of it.
+    let mut short = String::from("time_ms;steer_deg;v_kmh;note\n");
+    for j in 0..(0.3 * 400.0) as usize {
+        let t = j as f64 * 2.5e-3;
+        let y = 0.5 * (std::f64::consts::TAU * 6.0 * t).sin() + 0.01 * rng.next();
+        let _ = writeln!(short, "{};{y};40;x", j as f64 * 2.5);
+    }
+    // 3 s at 40 km/h with every yaw cell empty.
+    let mut no_yaw = String::from("time_ms;steer_deg;v_kmh;note\n");
+    for j in 0..(3.0 * 400.0) as usize {
+        let _ = writeln!(no_yaw, "{};;40;x", j as f64 * 2.5);
+    }
     std::fs::write(dir.join("m.toml"), FOREIGN_MAPPING).unwrap();
-    let o = run_in(
-        &dir,
-        &[
-            "analyze",
-            "still.csv",
-            "--mapping",
-            "m.toml",
-            "--data-only",
-            "--out",
-            "a",
-        ],
-    );
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        !o.status.success(),
-        "exit 0 on a log with nothing estimable: {}{err}",
-        String::from_utf8_lossy(&o.stdout)
-    );
-    assert!(
-        err.contains("still.csv") && err.contains("no damping estimate"),
-        "{err}"
-    );
+    for (name, log, reason, evidence) in [
+        (
+            "still",
+            still,
+            "no usable samples: too little wheel yaw in the shimmy band",
+            "frozen (too little excitation) ",
+        ),
+        (
+            "short",
+            short,
+            "too short: the mode meter was still warming up",
+            "over 0.3 s: warming up",
+        ),
+        (
+            "no-yaw",
+            no_yaw,
+            "no usable yaw sample",
+            "samples at 1 kHz lack the wheel yaw",
+        ),
+    ] {
+        std::fs::write(dir.join(format!("{name}.csv")), log).unwrap();
+        let file = format!("{name}.csv");
+        let o = run_in(
+            &dir,
+            &[
+                "analyze",
+                &file,
+                "--mapping",
+                "m.toml",
+                "--data-only",
+                "--out",
+                name,
+            ],
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success(),
+            "{name}: exit 0 on a log with nothing estimable: {}{err}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+        assert!(
+            err.contains(&file)
+                && err.contains("could not be judged")
+                && err.contains(reason)
+                && err.contains(evidence),
+            "{name}: {err}"
+        );
+        let md = std::fs::read_to_string(dir.join(name).join("report.md")).unwrap();
+        assert!(
+            md.contains("| verdict | **not judged**: ") && md.contains(reason),
+            "{name}: {md}"
+        );
+        let json: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join(name).join("summary.json")).unwrap(),
+        )
+        .unwrap();
+        let why = json["metrics"]["not_judged"].as_str().unwrap_or_default();
+        assert!(why.contains(reason), "{name}: {json}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

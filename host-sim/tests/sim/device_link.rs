@@ -11,7 +11,9 @@ use shimmy_core::vehicle::{
 };
 use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_link::frame::{self, MAX_FRAME};
-use shimmy_link::wire::{ErrorReply, Header, Identity, LogEntry, Response, PROTOCOL_HEADER};
+use shimmy_link::wire::{
+    ErrorReply, FaultReport, Header, Identity, LogEntry, Response, Telemetry, PROTOCOL_HEADER,
+};
 use shimmy_link::PROTOCOL_VERSION;
 use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
@@ -530,6 +532,83 @@ fn a_reply_of_another_protocol_version_is_refused_naming_both_versions() {
         e.contains(&format!("protocol version {other}"))
             && e.contains(&format!("supports version {PROTOCOL_VERSION}")),
         "{e}"
+    );
+}
+
+/// A telemetry sample at `t_s`.
+fn sample(t_s: f64) -> Telemetry {
+    Telemetry {
+        t_s,
+        speed_mps: 20.0,
+        zeta_data: 0.05,
+        sigma_zeta_data: 0.01,
+        zeta_fast: 0.05,
+        freq_hz: 6.0,
+        zeta_model: 0.04,
+        speed_margin_mps: 3.0,
+        level: 0,
+        valid: true,
+    }
+}
+
+/// Past the handshake too, every frame is read through the version check: a later reply of
+/// another version is refused naming both versions, and a telemetry sample of another version
+/// in the stream is skipped (the next one of this version is the first read).
+#[test]
+fn a_later_reply_or_sample_of_another_version_is_refused() {
+    let other = PROTOCOL_VERSION + 1;
+    let port = Scripted::new(move |seq| {
+        let this = Header {
+            seq,
+            ..PROTOCOL_HEADER
+        };
+        let theirs = Header {
+            version: other,
+            seq,
+        };
+        match seq {
+            1 => reply_frame(this, &Response::Identity(identity("fw"))),
+            2 => reply_frame(
+                theirs,
+                &Response::Faults(FaultReport {
+                    resets: 1,
+                    last_cause: 0,
+                    quick_resets: 0,
+                    uptime_ms: 10,
+                    latched: 0,
+                    active: 0,
+                    raised: 0,
+                }),
+            ),
+            _ => [
+                reply_frame(this, &Response::Streaming { on: true }),
+                reply_frame(
+                    Header { seq: 0, ..theirs },
+                    &Response::Telemetry(sample(1.0)),
+                ),
+                reply_frame(Header { seq: 0, ..this }, &Response::Telemetry(sample(2.0))),
+            ]
+            .concat(),
+        }
+    });
+    let (mut c, _) = Client::connect(port, Duration::ZERO).expect("identity");
+    let e = match c.faults() {
+        Ok(f) => panic!("a fault record of protocol version {other} was read: {f:?}"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains(&format!("protocol version {other}"))
+            && e.contains(&format!("supports version {PROTOCOL_VERSION}")),
+        "{e}"
+    );
+    c.stream(true).expect("stream on");
+    let t = c
+        .next_telemetry(Duration::from_millis(200))
+        .unwrap()
+        .expect("the sample of this version");
+    assert_eq!(
+        t.t_s, 2.0,
+        "the sample of protocol version {other} was read"
     );
 }
 

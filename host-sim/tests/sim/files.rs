@@ -3,9 +3,10 @@
 //! refused with an error that names the file, and leaves no half-written file behind.
 
 use crate::common::{run_in, temp_dir};
-use std::fs::OpenOptions;
+use std::fs::{File, OpenOptions};
 use std::path::Path;
-use std::process::Output;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 /// A short scenario whose run writes a trace of about 300 KB.
 const SCENARIO: &str =
@@ -59,6 +60,162 @@ fn a_run_into_a_folder_another_run_holds_is_refused_naming_the_folder() {
     let o = run_in(&dir, &["run", "s.toml", "--out", "o"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(dir.join("o/trace.csv").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Holds `dir/o` as a running shimmy-sim does: its lock file, locked.
+fn hold_folder(dir: &Path) -> File {
+    std::fs::create_dir_all(dir.join("o")).unwrap();
+    let lock = OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(dir.join("o/.shimmy-sim.lock"))
+        .unwrap();
+    lock.lock().unwrap();
+    lock
+}
+
+/// `shimmy-sim args` in `dir`, killed after `limit` (then `None`): a command that does its
+/// work before it looks at its folder would otherwise run for minutes.
+fn run_within(dir: &Path, args: &[&str], limit: Duration) -> Option<(bool, String, String)> {
+    let (so, se) = (dir.join("stdout.txt"), dir.join("stderr.txt"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
+        .args(args)
+        .current_dir(dir)
+        .env("RUST_BACKTRACE", "0")
+        .stdout(File::create(&so).unwrap())
+        .stderr(File::create(&se).unwrap())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > limit {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let read = |p: &Path| std::fs::read_to_string(p).unwrap();
+    Some((status.success(), read(&so), read(&se)))
+}
+
+/// Every command that writes an output folder claims it before its work: with the folder held
+/// by another run, each stops at once, naming the folder, with no result printed and nothing
+/// written (a command that claimed after its work ran it in full and printed its table first;
+/// the campaigns ran for minutes).
+#[test]
+fn every_command_refuses_a_held_folder_before_its_work() {
+    let dir = temp_dir("files-every");
+    std::fs::write(dir.join("s.toml"), SCENARIO).unwrap();
+    std::fs::write(
+        dir.join("pil.toml"),
+        "duration_s = 1.0\n[speed]\nconstant_kmh = 40.0\n[controller]\nkind = \"margin-asmc\"\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("log.csv"),
+        "t_s,psi_l_meas_rad,psi_r_meas_rad,speed_meas_mps\n0,0,0,10\n0.001,0,0,10\n",
+    )
+    .unwrap();
+    let _held = hold_folder(&dir);
+    let mut slow = Vec::new();
+    for cmd in [
+        &["bifurcation"][..],
+        &["stability"],
+        &["gas-charge"],
+        &["sway-damping"],
+        &["sensitivity"],
+        &["vehicles"],
+        &["reference-bench"],
+        &["sweep"],
+        &["sweep", "--controllers", "off,asmc"],
+        &["compare"],
+        &["run", "s.toml"],
+        &["pil", "pil.toml"],
+        &["margin"],
+        &["meter-accuracy"],
+        &["mismatch"],
+        &["identifiability"],
+        &["faults"],
+        &["report"],
+        &["analyze", "log.csv"],
+    ] {
+        let mut args = cmd.to_vec();
+        args.extend(["--out", "o"]);
+        let Some((ok, stdout, stderr)) = run_within(&dir, &args, Duration::from_secs(30)) else {
+            slow.push(cmd[0]);
+            continue;
+        };
+        assert!(!ok, "{cmd:?} wrote into a held folder: {stderr}");
+        assert!(
+            stderr.contains("output folder o") && stderr.contains("in use"),
+            "{cmd:?}: {stderr}"
+        );
+        assert!(
+            stdout.is_empty(),
+            "{cmd:?} did its work before claiming its folder: it printed {:?} ...",
+            stdout.lines().next()
+        );
+        assert_eq!(names(&dir.join("o")), [".shimmy-sim.lock"], "{cmd:?}");
+    }
+    assert!(
+        slow.is_empty(),
+        "still running after 30 s with their folder held: {slow:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two runs into one folder at once, the second started while the first works: the second is
+/// refused naming the folder, and the folder holds the first run's files only (both used to
+/// exit 0, leaving the campaigns' files mixed in one folder).
+#[test]
+fn of_two_runs_into_one_folder_at_once_the_second_is_refused() {
+    let dir = temp_dir("files-two");
+    let first = Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
+        .args(["mismatch", "--only", "C_a -20", "--out", "o"])
+        .current_dir(&dir)
+        .env("RUST_BACKTRACE", "0")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first run's claim creates the lock file and locks it at once; its study then takes
+    // seconds.
+    let start = Instant::now();
+    while !dir.join("o/.shimmy-sim.lock").exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the first run never claimed its folder"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let second = run_in(&dir, &["faults", "--speeds-kmh", "45", "--out", "o"]);
+    let first = first.wait_with_output().unwrap();
+    assert!(first.status.success(), "{}", stderr(&first));
+    let err = stderr(&second);
+    assert!(
+        !second.status.success(),
+        "both runs wrote the folder: {:?}",
+        names(&dir.join("o"))
+    );
+    assert!(
+        err.contains("output folder o") && err.contains("in use"),
+        "{err}"
+    );
+    assert_eq!(
+        names(&dir.join("o")),
+        [
+            ".shimmy-sim.lock",
+            "mismatch.csv",
+            "mismatch.md",
+            "summary.json"
+        ]
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -137,4 +294,25 @@ fn a_full_disk_names_the_file_and_leaves_no_truncated_one() {
         "a truncated or temporary file was left"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The standard output on a full disk (`/dev/full`): the printed table fails with an error
+/// naming where it went and exit status 1 (it was a panic inside the standard library, 101).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_standard_output_is_an_error_naming_it() {
+    let o = Command::new(env!("CARGO_BIN_EXE_shimmy-sim"))
+        .arg("params")
+        .env("RUST_BACKTRACE", "0")
+        .stdout(OpenOptions::new().write(true).open("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("writing the standard output (/dev/full)")
+            && err.contains("No space left on device")
+            && !err.contains("panicked"),
+        "{err}"
+    );
 }

@@ -33,7 +33,8 @@ fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
         cl_ramp_s: 6.0,
         cl_gain_a_per_radps: 4.0,
     };
-    let r = compare(&args).expect("the SciPy reference runs (python3 with numpy and scipy)");
+    let (r, _out) =
+        compare(&args).expect("the SciPy reference runs (python3 with numpy and scipy)");
     let _ = std::fs::remove_dir_all(&out);
     // Rust Dopri5 at rtol 1e-7 against SciPy's LSODA at rtol 1e-10: the trajectories of a
     // 0.05 rad motion must agree to 1e-6 rad.

@@ -44,24 +44,33 @@ pub struct SweepMap {
     pub rows: Vec<SweepRow>,
 }
 
-/// Computes the maps on the vehicle of `--vehicle`, of any model of the family.
-pub fn compute(a: &SweepArgs) -> Result<(ParamInfo, Vec<SweepMap>)> {
-    struct On<'a>(&'a SweepArgs);
-    impl ModelVisitor for On<'_> {
+/// Computes the maps on the vehicle of `--vehicle`, of any model of the family; `ready` is
+/// called once every option has passed its checks, before the sweep (the command claims its
+/// output folder there).
+pub fn compute(
+    a: &SweepArgs,
+    ready: &mut dyn FnMut() -> Result<()>,
+) -> Result<(ParamInfo, Vec<SweepMap>)> {
+    struct On<'a, 'r>(&'a SweepArgs, &'r mut dyn FnMut() -> Result<()>);
+    impl ModelVisitor for On<'_, '_> {
         type Output = Result<(ParamInfo, Vec<SweepMap>)>;
         fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
             let v = registry::family::<M, N>(f)?;
-            compute_on(self.0, &v.model, &v.parts)
+            compute_on(self.0, &v.model, &v.parts, self.1)
         }
     }
-    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
+    registry::with_model(
+        crate::sim::vehicle_file::load_model(&a.vehicle)?,
+        On(a, ready),
+    )
 }
 
-/// The maps of the vehicle model `base` with the damper of `vehicle`.
+/// The maps of the vehicle model `base` with the damper of `vehicle` ([`compute`]'s `ready`).
 pub fn compute_on<M: SimModel<N>, const N: usize>(
     a: &SweepArgs,
     base: &M,
     vehicle: &Vehicle,
+    ready: &mut dyn FnMut() -> Result<()>,
 ) -> Result<(ParamInfo, Vec<SweepMap>)> {
     let (speeds_kmh, values, param) = axes_of(a, base, vehicle, (149, 41))?;
     let mut dampers: Vec<(String, f64)> = Vec::new();
@@ -79,6 +88,7 @@ pub fn compute_on<M: SimModel<N>, const N: usize>(
         )?;
         dampers.push((format!("MR {i:.2} A"), d.c_eq_nspm));
     }
+    ready()?;
 
     let bar = if a.quiet {
         ProgressBar::hidden()
@@ -149,8 +159,11 @@ fn row<M: LinearModel<N>, const N: usize>(
 
 /// The command: compute, write CSV + PNG per map, print the boundary table.
 pub fn command(a: &SweepArgs) -> Result<()> {
-    let (param, maps) = compute(a)?;
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let mut _out_dir = None;
+    let (param, maps) = compute(a, &mut || {
+        _out_dir = Some(crate::sim::files::OutDir::claim(&a.out)?);
+        Ok(())
+    })?;
     for (k, map) in maps.iter().enumerate() {
         let tag = if map.c_nspm == 0.0 {
             "no-damper".to_string()
@@ -328,8 +341,8 @@ mod tests {
     fn map_matches_the_stability_command_and_is_deterministic() {
         let out = std::env::temp_dir().join(format!("shimmy-sweep-{}", std::process::id()));
         let a = args(&out);
-        let (_, maps) = compute(&a).unwrap();
-        let (_, again) = compute(&a).unwrap();
+        let (_, maps) = compute(&a, &mut || Ok(())).unwrap();
+        let (_, again) = compute(&a, &mut || Ok(())).unwrap();
         let last = &maps[0].rows[2]; // factor 1.0: the nominal set
         assert_eq!(last.max_re, again[0].rows[2].max_re, "deterministic");
         // The boundary of the nominal row is the nominal Hopf window found independently by a
@@ -371,9 +384,9 @@ mod tests {
         let out = std::env::temp_dir();
         let mut a = args(&out);
         a.param = "kd".into();
-        assert!(format!("{:#}", compute(&a).unwrap_err()).contains("--param kd"));
+        assert!(format!("{:#}", compute(&a, &mut || Ok(())).unwrap_err()).contains("--param kd"));
         let mut a = args(&out);
         a.v_max_kmh = 1.0;
-        assert!(compute(&a).is_err());
+        assert!(compute(&a, &mut || Ok(())).is_err());
     }
 }

@@ -151,22 +151,31 @@ fn point<M: SimModel<N>, const N: usize>(
     })
 }
 
-/// Computes every controller's map (all points in parallel, collected in grid order).
-pub fn compute(a: &SweepArgs) -> Result<(TdGrid, Vec<TdMap>)> {
-    struct On<'a>(&'a SweepArgs);
-    impl ModelVisitor for On<'_> {
+/// Computes every controller's map (all points in parallel, collected in grid order); `ready`
+/// is called once every option has passed its checks, before the runs (the command claims its
+/// output folder there).
+pub fn compute(
+    a: &SweepArgs,
+    ready: &mut dyn FnMut() -> Result<()>,
+) -> Result<(TdGrid, Vec<TdMap>)> {
+    struct On<'a, 'r>(&'a SweepArgs, &'r mut dyn FnMut() -> Result<()>);
+    impl ModelVisitor for On<'_, '_> {
         type Output = Result<(TdGrid, Vec<TdMap>)>;
         fn visit<M: Registered<N>, const N: usize>(self, f: M::File) -> Self::Output {
-            compute_on(self.0, &registry::family::<M, N>(f)?)
+            compute_on(self.0, &registry::family::<M, N>(f)?, self.1)
         }
     }
-    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
+    registry::with_model(
+        crate::sim::vehicle_file::load_model(&a.vehicle)?,
+        On(a, ready),
+    )
 }
 
 /// [`compute`] on the vehicle `base` of any model of the family.
 fn compute_on<M: SimModel<N>, const N: usize>(
     a: &SweepArgs,
     base: &FamilyVehicle<M>,
+    ready: &mut dyn FnMut() -> Result<()>,
 ) -> Result<(TdGrid, Vec<TdMap>)> {
     let arms = arms(a)?;
     if arms.contains(&Arm::Mr(ControllerKind::MarginAsmc)) && base.model.host_app_model().is_none()
@@ -185,6 +194,7 @@ fn compute_on<M: SimModel<N>, const N: usize>(
         bail!("--v-steps x --factor-steps x --controllers: {runs} closed-loop runs; allowed: at most {MAX_RUNS}");
     }
     let g = grid(a, base)?;
+    ready()?;
     let (nv, np) = (g.speeds_kmh.len(), g.values.len());
     let jobs: Vec<(usize, usize, usize)> = (0..arms.len())
         .flat_map(|c| (0..np).flat_map(move |j| (0..nv).map(move |i| (c, j, i))))
@@ -328,10 +338,13 @@ pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Re
 
 /// The command: compute, write CSV + PNG per controller, print a summary.
 pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
+    let mut _out_dir = None;
     let wall = std::time::Instant::now();
-    let (g, maps) = compute(a)?;
+    let (g, maps) = compute(a, &mut || {
+        _out_dir = Some(crate::sim::files::OutDir::claim(&a.out)?);
+        Ok(())
+    })?;
     let wall_s = wall.elapsed().as_secs_f64();
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
     let name = g.param.name;
     let boundary = a.out.join(format!("td-boundary-{name}.csv"));
     crate::sim::files::write_file(&boundary, boundary_csv(&g))?;
@@ -445,7 +458,7 @@ mod tests {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| compute(a).unwrap())
+            .install(|| compute(a, &mut || Ok(())).unwrap())
     }
 
     /// Same seed, same numbers: a small grid computed on 1 and on 2 threads gives byte-identical
@@ -477,7 +490,7 @@ mod tests {
     fn map_agrees_with_the_linear_window_and_asmc_suppresses() {
         let out = std::env::temp_dir().join(format!("shimmy-sweep-td2-{}", std::process::id()));
         let a = args(&out);
-        let (g, maps) = compute(&a).unwrap();
+        let (g, maps) = compute(&a, &mut || Ok(())).unwrap();
         let (on, off) = (g.hopf[0][0], g.hopf[0][1]);
         assert!(
             on.1 && !off.1 && on.0 < 75.0 && off.0 > 75.0 && off.0 < 130.0,
@@ -507,6 +520,8 @@ mod tests {
     fn unknown_controller_is_named() {
         let mut a = args(Path::new("/nonexistent"));
         a.controllers = vec!["pid".into()];
-        assert!(format!("{:#}", compute(&a).unwrap_err()).contains("--controllers pid"));
+        assert!(
+            format!("{:#}", compute(&a, &mut || Ok(())).unwrap_err()).contains("--controllers pid")
+        );
     }
 }
