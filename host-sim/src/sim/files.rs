@@ -159,9 +159,9 @@ impl Drop for PendingFile {
     }
 }
 
-/// Makes a failed write to the standard output (a full disk under `> file`, a closed pipe) an
-/// error that names where the output goes, with exit status 1, instead of the panic of
-/// `println!`. Installed once at start-up.
+/// Makes a failed write to the standard output (a full disk under `> file`) an error that
+/// names where the output goes, with exit status 1, instead of the panic of `println!`; a
+/// closed pipe ends the run quietly with status 0. Installed once at start-up.
 pub fn report_stdout_errors() {
     let default = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
@@ -169,6 +169,9 @@ pub fn report_stdout_errors() {
             .payload_as_str()
             .and_then(|m| m.strip_prefix("failed printing to stdout: "));
         match why {
+            // The reader stopped reading (`| head`): what it wanted arrived; quiet, as a
+            // Unix tool dying of SIGPIPE.
+            Some(why) if why.contains("Broken pipe") => std::process::exit(0),
             Some(why) => {
                 let _ = writeln!(
                     std::io::stderr(),
