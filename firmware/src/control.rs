@@ -18,6 +18,16 @@ use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 
+/// The independent watchdog's prescaler (LSI / 4) and reload (80 ticks): fed only when a control
+/// step completes, so the coil keeps its last command for at most [`WATCHDOG_TIMEOUT_MAX_S`]
+/// when steps stop completing; then the MCU resets and boots with the fail-safe current.
+pub const WATCHDOG_PRESCALER: u16 = 4;
+/// See [`WATCHDOG_PRESCALER`].
+pub const WATCHDOG_RELOAD_TICKS: u16 = 80;
+/// The watchdog's timeout at the LSI's slowest 17 kHz (its fastest, 47 kHz, gives 6.8 ms), s.
+pub const WATCHDOG_TIMEOUT_MAX_S: f32 =
+    (WATCHDOG_PRESCALER as f32) * (WATCHDOG_RELOAD_TICKS as f32) / 17_000.0;
+
 /// Counters of the control loop. Every fault increments one; nothing is silent. Logged by the
 /// telemetry and at the end of a QEMU run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

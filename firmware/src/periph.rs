@@ -78,8 +78,8 @@ pub struct Watchdog {
 
 /// IWDG prescaler code of the running firmware (/4).
 const IWDG_PR: u16 = 0;
-/// IWDG reload of the running firmware (80 LSI/4 ticks, ~10 ms).
-const IWDG_RLR: u16 = 80;
+/// IWDG reload of the running firmware (LSI/4 ticks, ~10 ms).
+const IWDG_RLR: u16 = crate::control::WATCHDOG_RELOAD_TICKS;
 
 impl Watchdog {
     /// Starts the IWDG. LSI varies 17..47 kHz: the timeout is 6.8..18.8 ms, so the 1 ms loop

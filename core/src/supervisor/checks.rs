@@ -16,7 +16,7 @@
 //! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed, or for `pair_freeze_s` when they froze while the wheels oscillated in the shimmy band (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
-//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band (then a held speed below the gate is not used either: the speed is unknown; held until V is back at the gate or the wheels were still for `speed_hold_s`) |
+//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band (then a held speed below the gate is not used either: the speed is unknown; held while V < `speed_low_mps`) |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
 //! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) and the command both > `coil_min_expected_a`, and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
 //! | `CoilShort` | measured > expected + `coil_over_a` (or at the ADC full scale when that is above it), accumulated the same way |
@@ -121,11 +121,9 @@ pub struct Supervisor {
     speed_floor: (f32, u32),
     speed_suspect: bool,
     /// The low speed reading is contradicted by the wheels' oscillation: no speed below the
-    /// gate is trusted (not even a held one) until the reading is back above the gate or the
-    /// wheels have been still for `speed_hold_s` (a standstill after braking out of shimmy).
+    /// gate is trusted (not even a held one) until the reading is back above the gate (still
+    /// wheels prove nothing once the fail-safe floor damps them).
     speed_contradicted: bool,
-    /// Time since the wheels last oscillated while the speed was contradicted, s.
-    speed_still_s: f32,
     speed_trusted: Option<(f32, u32)>,
     coil_expected_a: f32,
     coil_mismatch_s: [f32; 2],
@@ -190,7 +188,6 @@ impl Supervisor {
             speed_floor: (0.0, 0),
             speed_suspect: false,
             speed_contradicted: false,
-            speed_still_s: 0.0,
             speed_trusted: None,
             coil_expected_a: 0.0,
             coil_mismatch_s: [0.0; 2],
@@ -393,15 +390,8 @@ impl Supervisor {
         }
     }
 
-    /// `moving`: the wheels oscillate in the shimmy band (the vehicle rolls); `dt_s`: the time
-    /// since the previous frame.
-    fn check_speed(
-        &mut self,
-        f: &RawFrame,
-        moving: bool,
-        dt_s: f32,
-        det: &mut FaultSet,
-    ) -> Option<f32> {
+    /// `moving`: the wheels oscillate in the shimmy band (the vehicle rolls).
+    fn check_speed(&mut self, f: &RawFrame, moving: bool, det: &mut FaultSet) -> Option<f32> {
         let v = f.speed_mps;
         let p = self.p;
         if !f.speed_valid || !v.is_finite() || v < -p.speed_neg_tol_mps || v > p.max_speed_mps {
@@ -416,14 +406,8 @@ impl Supervisor {
             // whatever the history (a sensor lost or frozen before the vehicle set off).
             if v < p.speed_low_mps && moving {
                 self.speed_contradicted = true;
-                self.speed_still_s = 0.0;
             } else if v >= p.speed_low_mps {
                 self.speed_contradicted = false;
-            } else if self.speed_contradicted {
-                self.speed_still_s += dt_s;
-                if self.speed_still_s >= p.speed_hold_s {
-                    self.speed_contradicted = false;
-                }
             }
             if v < p.speed_low_mps && v < self.speed_floor_at(f.t_us) - p.speed_noise_tol_mps {
                 self.speed_suspect = true;
@@ -628,7 +612,7 @@ impl Supervisor {
         self.motion.update(in_phase, dt_s, &p);
         let moving = self.motion.oscillating(&p);
         // Speed.
-        let speed = self.check_speed(f, moving, dt_s, &mut det);
+        let speed = self.check_speed(f, moving, &mut det);
         // Both encoders frozen at speed (advisory): after `both_stuck_samples`, or after
         // `pair_freeze_s` when they froze in the middle of an oscillation.
         let both_frozen = self.enc.iter().all(|e| e.unchanged > 0);

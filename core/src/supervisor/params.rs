@@ -123,9 +123,10 @@ impl Default for SupervisorParams {
     /// check runs from 3.6 ms into the pulse, so an open coil is flagged 54 ms into it); margin
     /// 10 s; recovery 1 s; latched on the 3rd activation within 10 s of the first (one bad read in
     /// 1,500 frames: latched at the third, 3 s after the first; one in 15 s never). Motion
-    /// evidence: the mode meter's shimmy band (3-20 Hz for the car), half-cycles beyond 2.5 mrad
-    /// (0.14 deg: 6.5 quanta of a 14-bit encoder, far above its noise, well below a shimmy that
-    /// matters), four in a row (two cycles).
+    /// evidence: the mode meter's shimmy band (3-20 Hz for the car), half-cycles beyond 1.5 mrad
+    /// (0.09 deg: 4 quanta of a 14-bit encoder, 6 sigma of its high-passed noise, well below a
+    /// shimmy that matters), three in a row (the `hard` set's shimmy grows so fast that a fourth
+    /// lets it past 0.5 deg before the fail-safe floor comes).
     fn default() -> Self {
         let band = EstimatorConfig::default();
         SupervisorParams {
@@ -161,8 +162,8 @@ impl Default for SupervisorParams {
             zero_current_below_mps: ZERO_CURRENT_SAFE_BELOW_MPS,
             shimmy_band_lo_hz: band.band_lo_hz,
             shimmy_band_hi_hz: band.band_hi_hz,
-            motion_rad: 2.5e-3,
-            motion_half_cycles: 4,
+            motion_rad: 1.5e-3,
+            motion_half_cycles: 3,
         }
     }
 }

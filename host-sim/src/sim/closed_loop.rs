@@ -42,10 +42,11 @@ use shimmy_core::supervisor::checks::{Supervisor, SupervisorEvent};
 use shimmy_core::supervisor::faults::{FaultKind, FaultRecord, FaultSet};
 use shimmy_core::supervisor::frame::{MarginStatus, RawFrame};
 use shimmy_core::supervisor::params::SupervisorParams;
-use shimmy_core::supervisor::policy::Mode;
+use shimmy_core::supervisor::policy::{Mode, SupervisorVerdict};
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::car::PlantParams;
+use shimmy_firmware::control::WATCHDOG_TIMEOUT_MAX_S;
 use shimmy_firmware::monitoring::on_board;
 use shimmy_firmware::pil::HostApp;
 
@@ -479,6 +480,9 @@ pub struct FaultLog {
     pub events: Vec<(f64, SupervisorEvent)>,
     /// Frames lost by the fault plan (command held).
     pub lost_frames: u64,
+    /// Watchdog resets: runs of lost frames longer than the watchdog's timeout
+    /// (`shimmy_firmware::control::WATCHDOG_TIMEOUT_MAX_S`).
+    pub watchdog_resets: u32,
     /// Samples the supervisor counted as missing.
     pub missed_samples: u32,
     /// Samples whose command was NaN or outside [0, i_max] (the output contract broken).
@@ -570,18 +574,42 @@ pub trait FirmwareStep {
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error>;
     /// The supervisor, when it runs in this process (the fault log's counters and events).
     fn supervisor(&mut self) -> Option<&mut Supervisor>;
+    /// The board came back from a watchdog reset: the state a boot gives (the latched faults
+    /// kept, as the fault memory does). Where the step cannot be rebooted (an image under QEMU,
+    /// the application's tasks) it keeps its state.
+    fn reboot(&mut self) {}
 }
 
-/// The core's `SafeController` in this process, with a fixed margin status.
-struct InProcess(SafeController, MarginStatus);
+/// The core's `SafeController` in this process, with a fixed margin status; the controller as
+/// it booted, for [`FirmwareStep::reboot`].
+struct InProcess {
+    safe: SafeController,
+    booted: SafeController,
+    margin: MarginStatus,
+}
+
+impl InProcess {
+    fn new(safe: SafeController, margin: MarginStatus) -> Self {
+        InProcess {
+            booted: safe.clone(),
+            safe,
+            margin,
+        }
+    }
+}
 
 impl FirmwareStep for InProcess {
     type Error = std::convert::Infallible;
     fn step(&mut self, frame: &RawFrame) -> Result<SafeOutput, Self::Error> {
-        Ok(self.0.step(frame, self.1))
+        Ok(self.safe.step(frame, self.margin))
     }
     fn supervisor(&mut self) -> Option<&mut Supervisor> {
-        Some(self.0.supervisor_mut())
+        Some(self.safe.supervisor_mut())
+    }
+    fn reboot(&mut self) {
+        let latched = self.safe.supervisor().latched();
+        self.safe = self.booted.clone();
+        self.safe.supervisor_mut().restore_latched(latched);
     }
 }
 
@@ -651,14 +679,14 @@ pub fn run<M: SimModel<N>, const N: usize>(
                 cfg,
                 scenario,
                 observer,
-                &mut InProcess(safe, MarginStatus::Invalid),
+                &mut InProcess::new(safe, MarginStatus::Invalid),
             ),
         },
         None => run_loop(
             cfg,
             scenario,
             observer,
-            &mut InProcess(
+            &mut InProcess::new(
                 safe,
                 if cfg.margin_in_loop() {
                     MarginStatus::Invalid
@@ -717,6 +745,9 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
     let i_max = cfg.control.limits.i_max_a;
     // Command applied over the previous period (held across lost frames).
     let mut held = ControlOutput::default();
+    // Time since the last completed control step, s, and whether the watchdog reset the board.
+    let mut lost_run_s = 0.0;
+    let mut in_reset = false;
     let mut drive = BoardDrive::new(cfg.coil_drive, cfg.coil);
     // The board drive's plant input of the previous period (held across lost frames).
     let mut driven_a = 0.0;
@@ -766,8 +797,36 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
             meas.coil_current_a = None;
         }
         let mut safe_out = None;
+        if meas.lost {
+            lost_run_s += cfg.dt_s;
+        } else {
+            lost_run_s = 0.0;
+            if in_reset {
+                safe.reboot();
+                in_reset = false;
+            }
+        }
         let out = if meas.lost {
             res.faults.lost_frames += 1;
+            if cfg.supervised && !in_reset && lost_run_s > f64::from(WATCHDOG_TIMEOUT_MAX_S) {
+                // No control step completed for the watchdog's timeout: the board resets and
+                // boots with the coil at the fail-safe current (off if a coil fault is latched),
+                // open loop, until control steps complete again.
+                in_reset = true;
+                res.faults.watchdog_resets += 1;
+                res.faults.first_detect_s.get_or_insert(t);
+                res.faults.first_failsafe_s.get_or_insert(t);
+                res.faults.worst_mode = Mode::FailSafe;
+                let dead = last_verdict.is_some_and(|v: SupervisorVerdict| !v.damper_available);
+                held = ControlOutput {
+                    current_cmd_a: if dead {
+                        0.0
+                    } else {
+                        cfg.supervisor.failsafe_current_a
+                    },
+                    ..ControlOutput::default()
+                };
+            }
             held
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
@@ -800,7 +859,15 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
         } else {
             0.0
         };
-        if let (Some(d), false) = (drive.as_mut(), meas.lost) {
+        if let (Some(d), true) = (drive.as_mut(), in_reset) {
+            // The boot's fixed duty: no current loop runs.
+            driven_a = d.plant_input_a(
+                out.current_cmd_a,
+                None,
+                cfg.dt_s as f32,
+                sensors.drive_condition(t),
+            );
+        } else if let (Some(d), false) = (drive.as_mut(), meas.lost) {
             // The firmware's `drive_coil`: off for a coil found open/shorted, else closed loop
             // on the trusted measured current.
             let (available, measured) = match &safe_out {
@@ -924,6 +991,10 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
             .map(|k| (k, sup.record(k)))
             .filter(|(_, r)| r.frames > 0)
             .collect();
+    }
+    if in_reset {
+        // The run ends with the board in its boot's safe state.
+        res.faults.final_mode = Mode::FailSafe;
     }
     Ok(res)
 }
