@@ -6,7 +6,7 @@
 //! window and the disturbance margin in it; table, CSV and PNG.
 
 use crate::model::family::SimModel;
-use crate::model::periodic_orbit::{Branch, Limits, Shooting, Start};
+use crate::model::periodic_orbit::{Branch, HopfPoint, Limits, Shooting, Start};
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
@@ -228,6 +228,8 @@ pub fn run<M: SimModel<N>, const N: usize>(o: &BifurcationOptions<M, N>) -> Resu
 /// speed where it shimmies.
 #[derive(Clone, Debug)]
 pub struct OrbitStudy {
+    /// The plant's Hopf points in the speed range.
+    pub hopf: Vec<HopfPoint>,
     /// The continued branches.
     pub branches: Vec<Branch>,
     /// Speeds (m/s) where the straight run's Jacobian has a pair in the right half-plane, on
@@ -264,7 +266,29 @@ impl OrbitStudy {
         (stable, unstable)
     }
 
-    /// The folds of cycles, m/s, in speed order.
+    /// The type of the Hopf point `h` from the branch through it: supercritical (`true`) when
+    /// the orbits within 0.2 km/h of it and below 0.1 deg are stable, subcritical when they
+    /// are unstable; `None` without such orbits.
+    pub fn supercritical(&self, h: &HopfPoint) -> Option<bool> {
+        let near: Vec<bool> = self
+            .branches
+            .iter()
+            .flat_map(|b| b.orbits.iter())
+            .filter(|o| {
+                (o.speed_mps - h.speed_mps).abs() < kmh_to_mps(0.2)
+                    && o.amp_rad < 0.1f64.to_radians()
+            })
+            .map(|o| o.stable())
+            .collect();
+        match (near.iter().all(|&s| s), near.iter().any(|&s| s)) {
+            _ if near.is_empty() => None,
+            (true, _) => Some(true),
+            (false, false) => Some(false),
+            _ => None,
+        }
+    }
+
+    /// The folds of cycles, m/s, in speed order (one per 0.01 km/h).
     pub fn folds_mps(&self) -> Vec<f64> {
         let mut f: Vec<f64> = self
             .branches
@@ -272,6 +296,7 @@ impl OrbitStudy {
             .flat_map(|b| b.folds_mps.iter().copied())
             .collect();
         f.sort_by(f64::total_cmp);
+        f.dedup_by(|a, b| (*a - *b).abs() < kmh_to_mps(0.01));
         f
     }
 
@@ -305,8 +330,18 @@ pub fn orbits<M: SimModel<N>, const N: usize>(
         .map_err(|e| anyhow::anyhow!("periodic orbits: {e}"))?;
     let lim = Limits::speeds(v_lo, v_hi);
     let hopf = sh.hopf_points(v_lo, v_hi, kmh_to_mps(1.0));
-    let mut branches = Vec::new();
+    let mut branches: Vec<Branch> = Vec::new();
     for h in &hopf {
+        // a branch from an earlier Hopf point may have ended at this one (shrinking to zero)
+        let reached = branches.iter().any(|b| {
+            b.orbits.last().is_some_and(|o| {
+                (o.speed_mps - h.speed_mps).abs() < kmh_to_mps(0.1)
+                    && o.amp_rad < 0.05f64.to_radians()
+            })
+        });
+        if reached {
+            continue;
+        }
         match sh.continue_from_hopf(h, &lim) {
             Ok(b) => branches.push(b),
             Err(e) => println!(
@@ -341,6 +376,7 @@ pub fn orbits<M: SimModel<N>, const N: usize>(
         })
         .collect();
     Ok(OrbitStudy {
+        hopf,
         branches,
         straight_unstable,
     })
@@ -352,33 +388,34 @@ fn print_orbits(s: &OrbitStudy, rows: &[BifurcationRow]) {
         "periodic orbits (shooting, continued in speed; amplitude = peak |measured yaw| on the \
          orbit, stability by Floquet multipliers):"
     );
-    for b in &s.branches {
-        match &b.start {
-            Start::Hopf(h) => {
-                let kind = match b.supercritical() {
-                    Some(true) => "supercritical (a stable cycle grows from zero)",
-                    Some(false) => {
-                        "subcritical (an unstable cycle: shimmy from a large enough \
-                                    disturbance below it)"
-                    }
-                    None => "undetermined",
-                };
-                println!(
-                    "  Hopf {} of the plant at {:.2} km/h ({:.2} Hz): {kind}",
-                    if h.onset { "onset" } else { "offset" },
-                    mps_to_kmh(h.speed_mps),
-                    h.omega / (2.0 * std::f64::consts::PI)
-                );
+    for h in &s.hopf {
+        let kind = match s.supercritical(h) {
+            Some(true) => "supercritical (a stable cycle grows from zero)",
+            Some(false) => {
+                "subcritical (an unstable cycle: shimmy from a large enough disturbance on the \
+                 stable side)"
             }
-            Start::Run {
-                speed_mps,
-                psi0_rad,
-            } => println!(
+            None => "undetermined (no small cycle continued)",
+        };
+        println!(
+            "  Hopf {} of the plant at {:.2} km/h ({:.2} Hz): {kind}",
+            if h.onset { "onset" } else { "offset" },
+            mps_to_kmh(h.speed_mps),
+            h.omega / (2.0 * std::f64::consts::PI)
+        );
+    }
+    for b in &s.branches {
+        if let Start::Run {
+            speed_mps,
+            psi0_rad,
+        } = b.start
+        {
+            println!(
                 "  no Hopf point of the plant in the range (its straight run is linearly stable): \
                  branch from the cycle the {:.2} deg start settles on at {:.1} km/h",
                 psi0_rad.to_degrees(),
-                mps_to_kmh(*speed_mps)
-            ),
+                mps_to_kmh(speed_mps)
+            );
         }
     }
     for f in s.folds_mps() {
@@ -390,19 +427,32 @@ fn print_orbits(s: &OrbitStudy, rows: &[BifurcationRow]) {
     let bi = s.bistable();
     match (bi.first(), bi.last()) {
         (Some(lo), Some(hi)) => {
-            let from = s.folds_mps().first().map_or(format!("{} km/h", lo.0), |f| {
-                format!("{:.2} km/h (the fold)", mps_to_kmh(*f))
-            });
+            // the window's ends: the folds next to the first and the last bistable grid speed
+            let folds: Vec<f64> = s.folds_mps().into_iter().map(mps_to_kmh).collect();
+            let from = folds
+                .iter()
+                .rev()
+                .find(|&&f| f <= lo.0)
+                .map_or(format!("{} km/h (grid point)", lo.0), |f| {
+                    format!("{f:.2} km/h (fold)")
+                });
+            let grid_end = rows.last().map_or(0.0, |r| r.v_kmh);
+            let to = folds.iter().find(|&&f| f >= hi.0).map_or(
+                format!(
+                    "{} km/h (grid point{})",
+                    hi.0,
+                    if hi.0 >= grid_end {
+                        ", the grid's end"
+                    } else {
+                        ""
+                    }
+                ),
+                |f| format!("{f:.2} km/h (fold)"),
+            );
             println!(
-                "  bistable: the straight run and a stable shimmy cycle coexist from {from} to {} \
-                 km/h (grid point{}); disturbance margin = the unstable cycle's amplitude (a \
-                 larger disturbance ends in shimmy):",
-                hi.0,
-                if hi.0 >= rows.last().map_or(0.0, |r| r.v_kmh) {
-                    ", the grid's end"
-                } else {
-                    ""
-                }
+                "  bistable: the straight run and a stable shimmy cycle coexist from {from} to \
+                 {to}; disturbance margin = the unstable cycle's amplitude (a larger disturbance \
+                 ends in shimmy):"
             );
             for (v, m) in &bi {
                 let (stable, _) = s.cycles_at(kmh_to_mps(*v));
@@ -515,7 +565,10 @@ fn plot<M: SimModel<N>, const N: usize>(
     chart
         .configure_mesh()
         .x_desc("speed V [km/h]")
-        .y_desc(format!("peak |psi_L| over last {} s [deg]", o.window_s))
+        .y_desc(format!(
+            "runs: peak |psi_L| over last {} s; orbits: peak |measured yaw| [deg]",
+            o.window_s
+        ))
         .draw()?;
     let series = [
         (format!("start {} deg", o.small_deg), BLUE, true),
@@ -1038,6 +1091,23 @@ mod tests {
         let csv = std::fs::read_to_string(out.join("bifurcation.csv")).expect("csv");
         assert!(csv.starts_with("v_kmh,small_start_deg,small_amp_deg"));
         assert_eq!(csv.lines().count(), 1 + 3);
+        // the branch from the onset: stable cycles only, from 29.35 km/h up to the grid's end
+        let orbits = std::fs::read_to_string(out.join("orbits.csv")).expect("orbits");
+        let rows: Vec<Vec<&str>> = orbits
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect())
+            .collect();
+        assert!(orbits.starts_with("branch,v_kmh,period_s,amp_deg,stable,max_multiplier"));
+        assert!(
+            rows.len() > 10 && rows.iter().all(|r| r[4] == "true"),
+            "{orbits}"
+        );
+        let v: Vec<f64> = rows.iter().map(|r| r[1].parse().unwrap()).collect();
+        assert!(
+            (v[0] - 29.35).abs() < 0.01 && *v.last().unwrap() > 60.0,
+            "{v:?}"
+        );
         let png = std::fs::read(out.join("bifurcation.png")).expect("png");
         assert_eq!(&png[1..4], b"PNG");
         std::fs::remove_dir_all(&out).ok();
@@ -1137,6 +1207,7 @@ mod tests {
         let b = mr_branch();
         let v = kmh_to_mps(45.0);
         let study = OrbitStudy {
+            hopf: Vec::new(),
             branches: vec![b.clone()],
             straight_unstable: vec![(v, false)],
         };

@@ -128,7 +128,7 @@ pub struct Limits {
     pub v_hi_mps: f64,
     /// Largest amplitude, rad.
     pub amp_max_rad: f64,
-    /// Smallest amplitude, rad (a branch that shrinks to the straight run).
+    /// Smallest amplitude of a shrinking branch, rad (it ends at the straight run).
     pub amp_min_rad: f64,
     /// Most orbits per direction.
     pub max_orbits: usize,
@@ -139,14 +139,15 @@ pub struct Limits {
 }
 
 impl Limits {
-    /// Speeds `v_lo_mps` to `v_hi_mps`, amplitudes 1e-4 to 20 deg, at most 400 orbits, steps
-    /// 1e-4 to 0.5 (deg, km/h).
+    /// Speeds `v_lo_mps` to `v_hi_mps`, amplitudes up to 20 deg (a branch shrinking below
+    /// 0.03 deg ends: the start's cycle at a Hopf point is 0.02 deg), at most 400 orbits,
+    /// steps 1e-4 to 0.5 (deg, km/h).
     pub fn speeds(v_lo_mps: f64, v_hi_mps: f64) -> Self {
         Self {
             v_lo_mps,
             v_hi_mps,
             amp_max_rad: 20.0_f64.to_radians(),
-            amp_min_rad: 1e-4_f64.to_radians(),
+            amp_min_rad: 0.03_f64.to_radians(),
             max_orbits: 400,
             ds_max: 0.5,
             ds_min: 1e-4,
@@ -471,14 +472,15 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
         // the first cycle on the hyperplane through the guess normal to the eigenvector
         let (u1, jac, _) = self.correct(&pred, &(&pred - &u_eq).normalize(), t_ref, omega)?;
         let first = self.orbit(&u1, &jac, t_ref)?;
-        let (mut orbits, us) = self.march(&u_eq, &u1, t_ref, omega, lim)?;
+        let (mut orbits, us, _) = self.march(&u_eq, &u1, t_ref, omega, lim)?;
         orbits.insert(0, first);
         let mut all = vec![u1];
         all.extend(us);
+        let folds_mps = folds(&all, &orbits, self.dim() + 1);
         Ok(Branch {
             start: Start::Hopf(hopf.clone()),
             orbits,
-            folds_mps: folds(&all, self.dim() + 1),
+            folds_mps,
         })
     }
 
@@ -495,7 +497,8 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
             return Ok(None);
         };
         let omega = 2.0 * std::f64::consts::PI / t;
-        if let Some(h) = self.least_damped_pair(v_mps) {
+        // the scaled units from the mode of the straight run at the cycle's frequency
+        if let Some(h) = self.pair_nearest(v_mps, omega) {
             self.scale_from(&h.q);
         }
         let t_ref = t;
@@ -506,11 +509,18 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
         let (ua, jac, _) = self.correct(&u0, &e_v, t_ref, omega)?;
         let seed = self.orbit(&ua, &jac, t_ref)?;
         let mut sides = Vec::new();
+        let mut closed = false;
         for sign in [-1.0, 1.0] {
+            if closed {
+                // a closed branch (an isola): the first direction went all the way round
+                sides.push((Vec::new(), Vec::new()));
+                continue;
+            }
             // a second cycle 0.1 km/h away at fixed speed gives the secant
             let (ub, jac_b, _) = self.correct(&(&ua + &e_v * (0.1 * sign)), &e_v, t_ref, omega)?;
             let ob = self.orbit(&ub, &jac_b, t_ref)?;
-            let (mut o, mut u) = self.march(&ua, &ub, t_ref, omega, lim)?;
+            let (mut o, mut u, round) = self.march(&ua, &ub, t_ref, omega, lim)?;
+            closed = round;
             o.insert(0, ob);
             u.insert(0, ub);
             sides.push((o, u));
@@ -523,13 +533,14 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
         down_u.push(ua);
         down_o.extend(up_o);
         down_u.extend(up_u);
+        let folds_mps = folds(&down_u, &down_o, n + 1);
         Ok(Some(Branch {
             start: Start::Run {
                 speed_mps: v_mps,
                 psi0_rad,
             },
             orbits: down_o,
-            folds_mps: folds(&down_u, n + 1),
+            folds_mps,
         }))
     }
 
@@ -599,20 +610,21 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
         Ok(Some((maxima[1].1.clone(), period)))
     }
 
-    /// The oscillatory pair of the Jacobian at `v_mps` with the largest real part.
-    fn least_damped_pair(&self, v_mps: f64) -> Option<HopfPoint> {
+    /// The oscillatory pair of the Jacobian at `v_mps` with the frequency nearest `omega`.
+    fn pair_nearest(&self, v_mps: f64, omega: f64) -> Option<HopfPoint> {
         let lambda = self
             .jacobian(v_mps)
             .complex_eigenvalues()
             .iter()
             .copied()
             .filter(|z| z.im > 1e-6)
-            .max_by(|x, y| x.re.total_cmp(&y.re))?;
+            .min_by(|x, y| (x.im - omega).abs().total_cmp(&(y.im - omega).abs()))?;
         self.pair_at(v_mps, lambda, false)
     }
 
     /// Pseudo-arclength continuation from the branch points `u_a`, `u_b` (scaled unknowns)
-    /// along the secant: the orbits after `u_b` and their unknowns.
+    /// along the secant: the orbits after `u_b`, their unknowns, and whether the branch came
+    /// back to `u_a` (a closed branch; it stops there).
     fn march(
         &self,
         u_a: &DVector<f64>,
@@ -620,9 +632,13 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
         t_ref: f64,
         omega: f64,
         lim: &Limits,
-    ) -> Result<(Vec<Orbit>, Vec<DVector<f64>>), OrbitError> {
+    ) -> Result<Marched, OrbitError> {
         let (mut u_prev, mut u) = (u_a.clone(), u_b.clone());
         let mut ds = (&u - &u_prev).norm().min(lim.ds_max);
+        let u_b_amp = {
+            let (x0, t, v) = self.unpack(u_b, t_ref);
+            self.flow(&x0, t, v)?.1
+        };
         let (mut orbits, mut us) = (Vec::new(), Vec::new());
         while orbits.len() < lim.max_orbits {
             let tangent = (&u - &u_prev).normalize();
@@ -630,10 +646,20 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
             match self.correct(&pred, &tangent, t_ref, omega) {
                 Ok((u_new, jac, iters)) => {
                     let o = self.orbit(&u_new, &jac, t_ref)?;
+                    // back at the start: within this step of it, having been farther
+                    let far = us
+                        .iter()
+                        .any(|x: &DVector<f64>| (x - u_a).norm() > 4.0 * lim.ds_max);
+                    if far && (&u_new - u_a).norm() <= ds {
+                        return Ok((orbits, us, true));
+                    }
+                    // a branch shrinking to the straight run ends there (a Hopf point)
+                    let shrinking =
+                        orbits.last().map_or(u_b_amp, |p: &Orbit| p.amp_rad) > o.amp_rad;
                     let done = o.speed_mps < lim.v_lo_mps
                         || o.speed_mps > lim.v_hi_mps
                         || o.amp_rad > lim.amp_max_rad
-                        || o.amp_rad < lim.amp_min_rad;
+                        || (shrinking && o.amp_rad < lim.amp_min_rad);
                     orbits.push(o);
                     us.push(u_new.clone());
                     u_prev = std::mem::replace(&mut u, u_new);
@@ -648,7 +674,7 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
                 Err(_) => break,
             }
         }
-        Ok((orbits, us))
+        Ok((orbits, us, false))
     }
 
     /// Newton on the residual with the arclength row `tangent . (u - pred) = 0`: the corrected
@@ -686,6 +712,9 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
     }
 }
 
+/// A continuation's orbits, their scaled unknowns, and whether it closed on its start.
+type Marched = (Vec<Orbit>, Vec<DVector<f64>>, bool);
+
 /// The largest multiplier modulus of `mono` other than the one nearest 1 (the trivial one).
 fn nontrivial_max(mono: &DMatrix<f64>) -> f64 {
     let mut ev: Vec<C64> = mono.complex_eigenvalues().iter().copied().collect();
@@ -699,13 +728,22 @@ fn nontrivial_max(mono: &DMatrix<f64>) -> f64 {
     ev.iter().map(|z| z.norm()).fold(0.0, f64::max)
 }
 
-/// The speeds (m/s) where the continued unknowns `us` (speed in km/h at `k`) turn back in
-/// speed: the vertex of the parabola through the three points about each turn, in arclength.
-fn folds(us: &[DVector<f64>], k: usize) -> Vec<f64> {
+/// The speeds (m/s) where the continued unknowns `us` (speed in km/h at `k`) of `orbits` turn
+/// back in speed and the stability changes across the turn (within three orbits each side: a
+/// multiplier passes +1 there; a turn without it is the branch passing through a Hopf point):
+/// the vertex of the parabola through the three points about each turn, in arclength.
+fn folds(us: &[DVector<f64>], orbits: &[Orbit], k: usize) -> Vec<f64> {
     let mut out = Vec::new();
-    for w in us.windows(3) {
+    for (i, w) in us.windows(3).enumerate() {
         let (a, b, c) = (w[0][k], w[1][k], w[2][k]);
         if (b - a) * (c - b) >= 0.0 {
+            continue;
+        }
+        let before = &orbits[i.saturating_sub(2)..=i];
+        let after = &orbits[i + 2..(i + 5).min(orbits.len())];
+        let changes = before.iter().any(|o| o.stable()) && after.iter().any(|o| !o.stable())
+            || before.iter().any(|o| !o.stable()) && after.iter().any(|o| o.stable());
+        if !changes {
             continue;
         }
         let s1 = (&w[1] - &w[0]).norm();
