@@ -433,13 +433,13 @@ fn print_orbits(s: &OrbitStudy, rows: &[BifurcationRow]) {
                 .iter()
                 .rev()
                 .find(|&&f| f <= lo.0)
-                .map_or(format!("{} km/h (grid point)", lo.0), |f| {
+                .map_or(format!("{:.1} km/h (grid point)", lo.0), |f| {
                     format!("{f:.2} km/h (fold)")
                 });
             let grid_end = rows.last().map_or(0.0, |r| r.v_kmh);
             let to = folds.iter().find(|&&f| f >= hi.0).map_or(
                 format!(
-                    "{} km/h (grid point{})",
+                    "{:.1} km/h (grid point{})",
                     hi.0,
                     if hi.0 >= grid_end {
                         ", the grid's end"

@@ -31,7 +31,7 @@ type C64 = Complex<f64>;
 /// their step, so it is tight.
 pub const FLOW_RTOL: f64 = 1e-10;
 /// Output samples per period for the orbit's amplitude (and sub-steps of the flow).
-const SAMPLES: usize = 256;
+pub const SAMPLES: usize = 256;
 /// Difference step of the shooting Jacobian, in scaled units (deg of measured yaw).
 const FD_STEP: f64 = 1e-5;
 /// Largest Floquet multiplier modulus (other than the trivial one) of a stable orbit: 1 plus
