@@ -168,8 +168,9 @@ pub struct Branch {
 }
 
 impl Branch {
-    /// Supercritical when the first orbits are stable (the cycle grows where the straight
-    /// run is unstable), subcritical when they are unstable.
+    /// For a branch from a Hopf point: supercritical (`true`) when its first orbits are stable
+    /// (the cycle grows where the straight run is unstable), subcritical when they are
+    /// unstable; `None` without orbits.
     pub fn supercritical(&self) -> Option<bool> {
         self.orbits
             .iter()
