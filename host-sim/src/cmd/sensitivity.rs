@@ -59,14 +59,16 @@ pub const SENSITIVITY_PARAMS: [Param; 15] = [
 /// A crossing as the sensitivity table shows it: speed km/h, kind, frequency Hz, mode shape.
 pub type CrossingRow = (f64, stability::CrossingKind, f64, ModeShape);
 
-/// The Hopf crossings of a parameter set in 1..250 km/h. The first window (the first onset and
-/// the first offset above it) gets the table's columns; [`Window::all`] keeps every crossing, so
-/// a second instability inside the range is never hidden.
+/// The Hopf crossings of a parameter set in 1..250 km/h. The first shimmy window (the first
+/// onset of the shimmy-shaped mode, [`ModeShape::is_shimmy`], and its first offset above it)
+/// gets the table's columns; [`Window::all`] keeps every crossing, so a second instability
+/// inside the range (another mode's) is never hidden, and never taken for the window.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Window {
-    /// First onset, km/h.
+    /// First onset of the shimmy mode, km/h.
     pub onset_kmh: Option<f64>,
-    /// First offset above the first onset (the first offset when there is no onset), km/h.
+    /// The shimmy mode's first offset above its first onset (its first offset when there is no
+    /// onset), km/h.
     pub offset_kmh: Option<f64>,
     /// Frequency at the first onset, Hz.
     pub onset_freq_hz: Option<f64>,
@@ -108,9 +110,15 @@ pub fn window_of<M: LinearModel<N>, const N: usize>(p: &M) -> Result<Window> {
         DEFAULT_TOL_MPS,
     )
     .context("Hopf search")?;
-    let on = xs.iter().find(|x| x.kind == stability::CrossingKind::Onset);
+    // the window is the shimmy mode's (by shape): another mode's crossing (the 42-47 Hz
+    // anti-phase wheel yaw) is one of the others, never the window
+    let on = xs
+        .iter()
+        .find(|x| x.kind == stability::CrossingKind::Onset && x.shape.is_shimmy());
     let off = xs.iter().find(|x| {
-        x.kind == stability::CrossingKind::Offset && on.is_none_or(|o| x.speed_mps > o.speed_mps)
+        x.kind == stability::CrossingKind::Offset
+            && x.shape.is_shimmy()
+            && on.is_none_or(|o| x.speed_mps > o.speed_mps)
     });
     Ok(Window {
         onset_kmh: on.map(|x| mps_to_kmh(x.speed_mps)),
@@ -263,4 +271,48 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
     crate::sim::files::write_file(&path, &f)?;
     println!("wrote {}", path.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shimmy_core::stability::{mode_at, ModeSelect};
+    use shimmy_core::vehicles::car::{Param, ParamSet};
+
+    /// `gentle` with I_k +20 %: the shimmy window closes and the 42.8 Hz anti-phase wheel-yaw
+    /// mode crosses at 212.4 km/h. The window is the shimmy mode's, so there is none (the
+    /// first onset of any mode, the anti-phase one, used to be reported as the window's); the
+    /// anti-phase crossing stays among the others. Independently, the shimmy-shaped mode's
+    /// real part is negative on a 1 km/h grid over 1..250 km/h. `nominal` keeps its window.
+    #[test]
+    fn another_modes_onset_is_never_the_shimmy_window() {
+        let g = ParamSet::Gentle.params();
+        let p = g.with(Param::IK, g.get(Param::IK) * 1.2);
+        let w = window_of(&p).unwrap();
+        assert_eq!(
+            (w.onset_kmh, w.offset_kmh, w.onset_freq_hz),
+            (None, None, None),
+            "{w:?}"
+        );
+        let others: Vec<&CrossingRow> = w.others().collect();
+        assert_eq!(others.len(), 1, "{w:?}");
+        let (v, kind, f, shape) = *others[0];
+        assert_eq!(
+            (kind, shape),
+            (stability::CrossingKind::Onset, ModeShape::AntiPhaseWheelYaw)
+        );
+        assert!((v - 212.4).abs() < 0.1 && (f - 42.8).abs() < 0.1, "{v} {f}");
+        assert!(
+            w.others_text().contains("anti-phase"),
+            "{}",
+            w.others_text()
+        );
+        for k in 1..=250 {
+            let m = mode_at(&p, kmh_to_mps(f64::from(k)), 0.0, ModeSelect::Shimmy).unwrap();
+            assert!(m.re < 0.0, "{k} km/h: {m:?}");
+        }
+        let n = window_of(&ParamSet::Nominal.params()).unwrap();
+        assert!((n.onset_kmh.unwrap() - 29.3486).abs() < 1e-3, "{n:?}");
+        assert!((n.offset_kmh.unwrap() - 84.1478).abs() < 1e-3, "{n:?}");
+    }
 }

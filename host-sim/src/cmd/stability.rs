@@ -227,7 +227,8 @@ fn report<M: SimModel<N>, const N: usize>(
     let ccsv = args.out.join("crossings.csv");
     write_crossings_csv(&ccsv, &crossings, &types)?;
     let png = args.out.join("stability.png");
-    plot(&png, &rows, &crossings, &args.vehicle, c)?;
+    let shimmy = shimmy_modes(p, c, &rows);
+    plot(&png, &rows, &shimmy, &crossings, &args.vehicle, c)?;
     println!(
         "wrote {}, {}, {}",
         csv.display(),
@@ -417,9 +418,23 @@ fn write_crossings_csv(
     crate::sim::files::write_file(path, &f)
 }
 
+/// The shimmy-shaped mode (`ModeSelect::Shimmy`) at each row's speed, `None` where there is
+/// none: the plot's line (the critical mode can be another shape's, the 42-47 Hz anti-phase
+/// wheel yaw, where the shimmy window is closed).
+fn shimmy_modes<M: LinearModel<N>, const N: usize>(
+    p: &M,
+    c: f64,
+    rows: &[ModeSummary],
+) -> Vec<Option<shimmy_core::eigen::Mode>> {
+    rows.iter()
+        .map(|r| stability::mode_at(p, r.v_mps, c, ModeSelect::Shimmy).ok())
+        .collect()
+}
+
 fn plot(
     path: &Path,
     rows: &[ModeSummary],
+    shimmy: &[Option<shimmy_core::eigen::Mode>],
     crossings: &Crossings,
     name: &str,
     c: f64,
@@ -433,17 +448,24 @@ fn plot(
         &top,
         &xs,
         &format!(
-            "{name}, c_damper = {c:.1} N s/m: max Re lambda [1/s] (oscillatory: line; all: dots)"
+            "{name}, c_damper = {c:.1} N s/m: Re lambda [1/s] (shimmy mode: line; max of all \
+             oscillatory: dots)"
         ),
+        &shimmy
+            .iter()
+            .map(|m| m.map_or(f64::NAN, |m| m.re))
+            .collect::<Vec<_>>(),
         &rows.iter().map(|r| r.critical.re).collect::<Vec<_>>(),
-        &rows.iter().map(|r| r.max_re).collect::<Vec<_>>(),
         crossings,
     )?;
     panel(
         &bottom,
         &xs,
-        "damping ratio zeta [-] (critical mode: line; least-damped mode: dots)",
-        &rows.iter().map(|r| r.critical.zeta).collect::<Vec<_>>(),
+        "damping ratio zeta [-] (shimmy mode: line; least-damped mode: dots)",
+        &shimmy
+            .iter()
+            .map(|m| m.map_or(f64::NAN, |m| m.zeta))
+            .collect::<Vec<_>>(),
         &rows.iter().map(|r| r.least_damped.zeta).collect::<Vec<_>>(),
         crossings,
     )?;
@@ -464,11 +486,13 @@ fn panel(
         .iter()
         .chain(second)
         .cloned()
+        .filter(|v| v.is_finite())
         .fold(f64::INFINITY, f64::min);
     let hi = main
         .iter()
         .chain(second)
         .cloned()
+        .filter(|v| v.is_finite())
         .fold(f64::NEG_INFINITY, f64::max);
     let pad = 0.05 * (hi - lo).max(1e-6);
     let (lo, hi) = (lo.min(0.0) - pad, hi.max(0.0) + pad);
@@ -479,10 +503,16 @@ fn panel(
         .y_label_area_size(60)
         .build_cartesian_2d(x0..x1, lo..hi)?;
     chart.configure_mesh().x_desc("speed [km/h]").draw()?;
-    chart.draw_series(LineSeries::new(
-        xs.iter().cloned().zip(main.iter().cloned()),
-        &BLUE,
-    ))?;
+    // the line breaks where the shimmy mode is not found
+    for seg in xs
+        .iter()
+        .cloned()
+        .zip(main.iter().cloned())
+        .collect::<Vec<_>>()
+        .split(|(_, y)| !y.is_finite())
+    {
+        chart.draw_series(LineSeries::new(seg.iter().copied(), &BLUE))?;
+    }
     chart.draw_series(
         xs.iter()
             .cloned()
@@ -499,10 +529,41 @@ fn panel(
         };
         chart.draw_series(LineSeries::new([(k, lo), (k, hi)], col.stroke_width(2)))?;
         chart.draw_series(std::iter::once(Text::new(
-            format!("{} {:.2} km/h {:.2} Hz", xc.kind.name(), k, xc.freq_hz),
+            format!(
+                "{} {:.2} km/h {:.2} Hz {}",
+                xc.kind.name(),
+                k,
+                xc.freq_hz,
+                xc.shape.name()
+            ),
             (k, hi - 0.1 * (hi - lo)),
             ("sans-serif", 14),
         )))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod shimmy_line_tests {
+    use super::*;
+    use shimmy_core::vehicles::car::{Param, ParamSet};
+
+    /// `gentle` with I_k +20 %: at 220 km/h the critical (largest real part) mode is the
+    /// unstable anti-phase one, the plot's line the shimmy mode, stable there and of its own
+    /// shape (the line used to be the critical mode's).
+    #[test]
+    fn the_plots_line_is_the_shimmy_mode() {
+        let g = ParamSet::Gentle.params();
+        let p = g.with(Param::IK, g.get(Param::IK) * 1.2);
+        let rows = sweep(&p, 0.0, 200.0, 220.0, 10.0).unwrap();
+        let last = rows.last().unwrap();
+        assert!((mps_to_kmh(last.v_mps) - 220.0).abs() < 1e-9);
+        assert!(last.critical.re > 0.0, "{last:?}");
+        assert_eq!(
+            shape_of_critical(&p, last.v_mps, 0.0),
+            ModeShape::AntiPhaseWheelYaw
+        );
+        let m = shimmy_modes(&p, 0.0, &rows).last().unwrap().unwrap();
+        assert!(m.re < 0.0 && m.freq_hz < 15.0, "{m:?}");
+    }
 }

@@ -13,6 +13,7 @@ pub mod faults;
 pub mod hopf_type;
 pub mod integrator;
 pub mod members;
+pub mod periodic_orbit;
 pub mod plant;
 pub mod registry;
 pub mod sensors;

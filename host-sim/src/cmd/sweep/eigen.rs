@@ -13,6 +13,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
 use rayon::prelude::*;
+use shimmy_core::eigen::ModeShape;
 use shimmy_core::model::LinearModel;
 use shimmy_core::stability::{self, CrossingKind};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
@@ -27,8 +28,8 @@ pub struct SweepRow {
     pub value: f64,
     /// Largest real part of the oscillatory eigenvalues at each speed, 1/s.
     pub max_re: Vec<f64>,
-    /// Hopf crossings in the speed range: (speed in km/h, onset?).
-    pub crossings: Vec<(f64, bool)>,
+    /// Hopf crossings in the speed range: (speed in km/h, onset?, the crossing mode's shape).
+    pub crossings: Vec<(f64, bool, ModeShape)>,
 }
 
 /// One map (one damper setting).
@@ -148,7 +149,13 @@ fn row<M: LinearModel<N>, const N: usize>(
     )
     .with_context(|| format!("Hopf crossings, {} = {value}", a.param))?
     .iter()
-    .map(|x| (mps_to_kmh(x.speed_mps), x.kind == CrossingKind::Onset))
+    .map(|x| {
+        (
+            mps_to_kmh(x.speed_mps),
+            x.kind == CrossingKind::Onset,
+            x.shape,
+        )
+    })
     .collect();
     Ok(SweepRow {
         value,
@@ -185,16 +192,9 @@ pub fn command(a: &SweepArgs) -> Result<()> {
         );
         let every = (map.rows.len() / 10).max(1);
         for r in map.rows.iter().step_by(every) {
-            let on = r
-                .crossings
-                .iter()
-                .find(|c| c.1)
-                .map(|c| format!("{:.2}", c.0));
-            let off = r
-                .crossings
-                .iter()
-                .find(|c| !c.1)
-                .map(|c| format!("{:.2}", c.0));
+            let (on, off) = shimmy_window(&r.crossings);
+            let on = on.map(|v| format!("{v:.2}"));
+            let off = off.map(|v| format!("{v:.2}"));
             println!(
                 "  {:>14.6e}  {:>12} {:>12}",
                 r.value,
@@ -212,6 +212,21 @@ pub fn command(a: &SweepArgs) -> Result<()> {
     Ok(())
 }
 
+/// The shimmy window of a row's crossings: the first onset of the shimmy-shaped mode
+/// ([`ModeShape::is_shimmy`]) and its first offset above it (km/h); another mode's crossing
+/// (the 42-47 Hz anti-phase wheel yaw) is never the window.
+pub fn shimmy_window(crossings: &[(f64, bool, ModeShape)]) -> (Option<f64>, Option<f64>) {
+    let on = crossings
+        .iter()
+        .find(|c| c.1 && c.2.is_shimmy())
+        .map(|c| c.0);
+    let off = crossings
+        .iter()
+        .find(|c| !c.1 && c.2.is_shimmy() && on.is_none_or(|o| c.0 > o))
+        .map(|c| c.0);
+    (on, off)
+}
+
 fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> Result<()> {
     let mut s = format!(
         "{} [{}],speed [km/h],max Re lambda (oscillatory) [1/s]\n",
@@ -224,16 +239,17 @@ fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> 
     }
     crate::sim::files::write_file(grid, s)?;
     let mut b = format!(
-        "{} [{}],crossing speed [km/h],kind\n",
+        "{} [{}],crossing speed [km/h],kind,mode\n",
         param.name, param.unit
     );
     for r in &map.rows {
-        for (v, onset) in &r.crossings {
+        for (v, onset, shape) in &r.crossings {
             let _ = writeln!(
                 b,
-                "{:e},{v:.4},{}",
+                "{:e},{v:.4},{},{}",
                 r.value,
-                if *onset { "onset" } else { "offset" }
+                if *onset { "onset" } else { "offset" },
+                shape.name()
             );
         }
     }
@@ -302,10 +318,16 @@ fn plot(path: &Path, param: ParamInfo, map: &SweepMap, set: &str) -> Result<()> 
         40,
         |re| plot_util::diverging(re / scale),
     )?;
+    // the shimmy mode's crossings filled, another mode's hollow
     chart.draw_series(map.rows.iter().flat_map(|r| {
-        r.crossings
-            .iter()
-            .map(move |&(v, _)| Circle::new((v, r.value), 3, BLACK.filled()))
+        r.crossings.iter().map(move |&(v, _, shape)| {
+            let style = if shape.is_shimmy() {
+                BLACK.filled()
+            } else {
+                BLACK.stroke_width(1)
+            };
+            Circle::new((v, r.value), 3, style)
+        })
     }))?;
     png.commit(picture.present())?;
     Ok(())
@@ -388,5 +410,34 @@ mod tests {
         let mut a = args(&out);
         a.v_max_kmh = 1.0;
         assert!(compute(&a, &mut || Ok(())).is_err());
+    }
+
+    /// The table's window is the shimmy mode's: `gentle` with I_k +20 % has only the 42.8 Hz
+    /// anti-phase mode's onset (212.4 km/h) in 5..250 km/h, so no window (the first onset of
+    /// any mode used to be printed as the window's onset); `nominal`'s is its own.
+    #[test]
+    fn the_window_is_the_shimmy_modes() {
+        use shimmy_core::vehicles::car::{Param, ParamSet};
+        let row = |p: &shimmy_core::vehicles::car::PlantParams| -> Vec<(f64, bool, ModeShape)> {
+            stability::hopf_crossings(p, 0.0, kmh_to_mps(5.0), kmh_to_mps(250.0), 0.25, 1e-4)
+                .unwrap()
+                .iter()
+                .map(|x| {
+                    (
+                        mps_to_kmh(x.speed_mps),
+                        x.kind == CrossingKind::Onset,
+                        x.shape,
+                    )
+                })
+                .collect()
+        };
+        let g = ParamSet::Gentle.params();
+        let closed = row(&g.with(Param::IK, g.get(Param::IK) * 1.2));
+        assert_eq!(closed.len(), 1, "{closed:?}");
+        assert_eq!(closed[0].2, ModeShape::AntiPhaseWheelYaw);
+        assert!((closed[0].0 - 212.4).abs() < 0.1, "{closed:?}");
+        assert_eq!(shimmy_window(&closed), (None, None));
+        let (on, off) = shimmy_window(&row(&ParamSet::Nominal.params()));
+        assert!((on.unwrap() - 29.35).abs() < 0.01 && (off.unwrap() - 84.15).abs() < 0.01);
     }
 }
