@@ -3,7 +3,8 @@
 //! ```text
 //! cargo xtask test               host tests, fmt, clippy (host build + target), the Python module's
 //!                                and the FMU's tests, firmware build + size, on-target tests
-//!                                under QEMU (and proof that a failing one fails); in two lanes
+//!                                under QEMU (and proof that a failing one fails), the fault
+//!                                campaign on every shipped vehicle; in two lanes
 //!                                side by side (host, firmware), see `test`
 //! cargo xtask qemu [BIN]         build BIN (default: shimmy-firmware) for QEMU and run it,
 //!                                printing its decoded defmt log
@@ -289,6 +290,10 @@ fn test() -> Result<(), String> {
             || host_build().map(|_| "one feature resolution for every host step".into()),
         ),
         ("host tests (cargo test --workspace)", host_tests),
+        (
+            "fault campaign on every shipped vehicle (shimmy-sim faults --vehicle all)",
+            fault_campaign,
+        ),
         ("Python module (pytest python/tests)", python::module_tests),
         (
             "FMU (fmi-export, fmpy validation, co-simulation)",
@@ -656,6 +661,17 @@ fn host_reference_bench() -> Result<(), String> {
         "--",
         "reference-bench",
     ])
+}
+
+/// The fault campaign (`shimmy-sim faults`) at its defaults on every named set of every model,
+/// on [`host_build`]'s simulator (its dev build takes ~30 s for all of them): any failed check
+/// (a fault not detected, shimmy not suppressed, a mode still changing, ...) fails the step.
+fn fault_campaign() -> Step {
+    let sim = host_build()?.join("shimmy-sim");
+    run(Command::new(&sim)
+        .args(["faults", "--vehicle", "all", "--out", "target/xtask/faults"])
+        .current_dir(root()))?;
+    Ok("every check passed on every shipped vehicle".into())
 }
 
 /// The scenarios of the PIL check, each with the features of its image: 12 s through the Hopf

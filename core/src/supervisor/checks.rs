@@ -16,7 +16,7 @@
 //! | `BothStuckSuspect` | both bit-identical for `both_stuck_samples` at speed, or for `pair_freeze_s` when they froze while the wheels oscillated in the shimmy band (advisory) |
 //! | `SpeedInvalid` | validity flag false, NaN/Inf, < -`speed_neg_tol_mps`, > `max_speed_mps` |
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
-//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band (then a held speed below the gate is not used either: the speed is unknown; held while V < `speed_low_mps`) |
+//! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band and V is either below `zero_current_below_mps` or unchanged for `stuck_samples` (then a held speed below the gate is not used either: the speed is unknown; held while V < `speed_low_mps`) |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
 //! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) and the command both > `coil_min_expected_a`, and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
 //! | `CoilShort` | measured > expected + `coil_over_a` (or at the ADC full scale when that is above it), accumulated the same way |
@@ -124,6 +124,9 @@ pub struct Supervisor {
     /// gate is trusted (not even a held one) until the reading is back above the gate (still
     /// wheels prove nothing once the fail-safe floor damps them).
     speed_contradicted: bool,
+    /// The last speed reading's bits and how many frames in a row it has not changed.
+    speed_bits: Option<u32>,
+    speed_same: u16,
     speed_trusted: Option<(f32, u32)>,
     coil_expected_a: f32,
     coil_mismatch_s: [f32; 2],
@@ -188,6 +191,8 @@ impl Supervisor {
             speed_floor: (0.0, 0),
             speed_suspect: false,
             speed_contradicted: false,
+            speed_bits: None,
+            speed_same: 0,
             speed_trusted: None,
             coil_expected_a: 0.0,
             coil_mismatch_s: [0.0; 2],
@@ -403,8 +408,21 @@ impl Supervisor {
             // (lost pulse train, frozen value); once seen, it stays suspect (time alone does not
             // make it plausible) until the reading is back at or above `speed_low_mps`.
             // A low reading while the wheels oscillate in the shimmy band is contradicted
-            // whatever the history (a sensor lost or frozen before the vehicle set off).
-            if v < p.speed_low_mps && moving {
+            // whatever the history (a sensor lost or frozen before the vehicle set off) when
+            // it says standstill (below `zero_current_below_mps` no analysed vehicle can
+            // shimmy) or has not changed for `stuck_samples` (a frozen value: a rolling wheel's
+            // reading moves); between the two a slowly rolling vehicle near its onset may
+            // oscillate (the `hard` set's onset is 7.6 km/h, above the 7.2 km/h gate).
+            let bits = v.to_bits();
+            self.speed_same = if self.speed_bits == Some(bits) {
+                self.speed_same.saturating_add(1)
+            } else {
+                0
+            };
+            self.speed_bits = Some(bits);
+            let implausible_low =
+                v < p.zero_current_below_mps || self.speed_same >= p.stuck_samples;
+            if v < p.speed_low_mps && moving && implausible_low {
                 self.speed_contradicted = true;
             } else if v >= p.speed_low_mps {
                 self.speed_contradicted = false;

@@ -2,7 +2,6 @@
 
 use crate::control::actuator::FAILSAFE_CURRENT_A;
 use crate::estimator::meter::mode_meter::EstimatorConfig;
-use crate::vehicle::SensorCalibration;
 
 /// Encoder noise from which a healthy encoder never holds one value for `stuck_samples`, LSB
 /// rms: at 0.4 LSB a reading in the middle of a quantum repeats with probability ~0.65 per
@@ -126,7 +125,8 @@ impl Default for SupervisorParams {
     /// evidence: the mode meter's shimmy band (3-20 Hz for the car), half-cycles beyond 1.5 mrad
     /// (0.09 deg: 4 quanta of a 14-bit encoder, 6 sigma of its high-passed noise, well below a
     /// shimmy that matters), three in a row (the `hard` set's shimmy grows so fast that a fourth
-    /// lets it past 0.5 deg before the fail-safe floor comes).
+    /// lets it past 0.5 deg before the fail-safe floor comes). The reference 14-bit encoder's
+    /// 0.5 LSB rms of noise (a vehicle's own: `Vehicle::supervisor_params`).
     fn default() -> Self {
         let band = EstimatorConfig::default();
         SupervisorParams {
@@ -135,7 +135,7 @@ impl Default for SupervisorParams {
             max_disagree_rad: 0.25,
             stuck_samples: 100,
             stuck_motion_rad: 5e-3,
-            encoder_noise_lsb: SensorCalibration::DEFAULT.encoder_noise_lsb,
+            encoder_noise_lsb: 0.5,
             both_stuck_samples: 2000,
             max_speed_mps: 70.0,
             speed_neg_tol_mps: 0.5,

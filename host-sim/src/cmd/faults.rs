@@ -701,8 +701,9 @@ pub struct FaultsArgs {
     /// fault, so no injected fault can be detected and those checks fail.
     #[arg(long, default_value_t = 5.0, alias = "duration", allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md). `--params` is the older name.
+    /// Vehicle: a named set of any model (`shimmy-sim vehicles` lists them), a vehicle file
+    /// (TOML, see docs/vehicle-file.md), or `all`: every named set, each into `<out>/<set>/`.
+    /// `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
     /// The vehicle the firmware believes (controller model, gains): a named set or a vehicle
@@ -928,9 +929,50 @@ pub fn verdict(bad: &[String]) -> Result<()> {
     )
 }
 
+/// `--vehicle` value that runs the campaign on every shipped vehicle.
+pub const ALL_VEHICLES: &str = "all";
+
 /// The command. Every option is checked before anything runs; the table and files are
-/// written either way, then the command fails if any check failed.
+/// written either way, then the command fails if any check failed. `--vehicle all`: the
+/// campaign on every named set of every model, each into `<out>/<set>/`; it fails naming the
+/// vehicles whose checks failed.
 pub fn command(a: &FaultsArgs) -> Result<()> {
+    if a.vehicle != ALL_VEHICLES {
+        return command_one(a);
+    }
+    if a.model_vehicle.is_some() {
+        bail!("--model-vehicle needs one --vehicle, not `{ALL_VEHICLES}`");
+    }
+    a.cases()?;
+    let mut failed = Vec::new();
+    for set in registry::all_sets() {
+        println!("\n== vehicle `{set}`");
+        let one = FaultsArgs {
+            vehicle: set.to_string(),
+            out: a.out.join(set),
+            ..a.clone()
+        };
+        if let Err(e) = command_one(&one) {
+            println!("{e:#}");
+            failed.push(set);
+        }
+    }
+    if !failed.is_empty() {
+        bail!(
+            "the fault campaign failed on {} of the shipped vehicles: {}",
+            failed.len(),
+            failed.join(", ")
+        );
+    }
+    println!(
+        "\nthe fault campaign passed on every shipped vehicle ({})",
+        registry::all_sets().join(", ")
+    );
+    Ok(())
+}
+
+/// The command on one vehicle (a named set or a file).
+fn command_one(a: &FaultsArgs) -> Result<()> {
     struct On<'a>(&'a FaultsArgs);
     impl ModelVisitor for On<'_> {
         type Output = Result<()>;

@@ -315,6 +315,19 @@ pub fn named_vehicle(spec: &str) -> Option<Result<ModelVehicle>> {
     f.1
 }
 
+/// Every named set of every model (the shipped vehicles), in the list's order.
+pub fn all_sets() -> Vec<&'static str> {
+    struct Names(Vec<&'static str>);
+    impl ModelTypeVisitor for Names {
+        fn visit<M: Registered<N>, const N: usize>(&mut self) {
+            self.0.extend(M::set_names());
+        }
+    }
+    let mut n = Names(Vec::new());
+    for_each_model(&mut n);
+    n.0
+}
+
 /// The set names of every model, each model's comma separated, the models' joined by `sep`.
 pub fn all_set_names(sep: &str) -> String {
     struct Names(Vec<String>);

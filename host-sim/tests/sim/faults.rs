@@ -146,6 +146,7 @@ fn without_the_supervisor_a_frozen_encoder_pair_lets_shimmy_grow() {
         quiet: false,
         min_duration_s: 0.0,
         lasts_s: None,
+        pull_away_from_kmh: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     let (bare, _) = fault_campaign::run_case(&s, arm, &c, V_KMH, false).unwrap();
@@ -182,6 +183,7 @@ fn nan_encoder_is_caught_by_both_layers() {
         quiet: false,
         min_duration_s: 0.0,
         lasts_s: None,
+        pull_away_from_kmh: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     let (bare, _) = fault_campaign::run_case(&setup(), arm, &c, V_KMH, false).unwrap();
@@ -254,6 +256,7 @@ fn a_lost_or_frozen_speed_does_not_switch_the_damper_off() {
             quiet: false,
             min_duration_s: 0.0,
             lasts_s: None,
+            pull_away_from_kmh: None,
         };
         let (r, _) = fault_campaign::run_case(&s, arm, &c, v_kmh, true).unwrap();
         println!(
@@ -297,6 +300,7 @@ fn lost_speed_with_both_encoders_failed_holds_the_failsafe_current() {
         quiet: false,
         min_duration_s: 0.0,
         lasts_s: None,
+        pull_away_from_kmh: None,
     };
     let arm = Arm::Mr(ControllerKind::Asmc);
     for v_kmh in [45.0, 60.0] {
@@ -333,6 +337,7 @@ fn a_genuine_braking_to_standstill_raises_no_fault() {
         quiet: false,
         min_duration_s: 0.0,
         lasts_s: None,
+        pull_away_from_kmh: None,
     };
     let v0 = V_KMH / 3.6;
     let (cfg, mut sc) = fault_campaign::build(&s, Arm::Mr(ControllerKind::Asmc), &c.faults, V_KMH);
@@ -503,6 +508,7 @@ fn faults_that_end_are_recovered_from() {
     }
     let open = Case {
         lasts_s: Some(0.5),
+        pull_away_from_kmh: None,
         ..pick(&["coil-open"]).remove(0)
     };
     let (r, _) = fault_campaign::run_case(&setup(), asmc(), &open, V_KMH, true).unwrap();
