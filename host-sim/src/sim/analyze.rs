@@ -454,10 +454,15 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 impl Analysis {
-    /// Why the log cannot be judged (not one valid slow estimate: "no warning" would say
-    /// nothing about the vehicle), or `None` when it can.
+    /// Why the log cannot be judged (not one valid slow estimate and no warning: "no
+    /// warning" would say nothing about the vehicle), or `None` when it can (a warning raised
+    /// from the amplitude alone, shimmy present, is a judgement).
     pub fn not_judged(&self) -> Option<String> {
-        if self.rows.iter().any(|r| r.slow_valid) {
+        if self
+            .rows
+            .iter()
+            .any(|r| r.slow_valid || r.level != Level::Normal)
+        {
             return None;
         }
         let st = &self.resampling;

@@ -101,7 +101,7 @@ pub fn check_firmware_matches<M: PilModel<N>, const N: usize>(
     let compiled_in = M::Board::compiled_in();
     if M::board_vehicle(believed) != compiled_in
         || cfg.control != compiled_in.controller_params()
-        || cfg.supervisor != compiled_in.parts().supervisor_params()
+        || cfg.supervisor != compiled_in.supervisor_params()
     {
         return Err(format!(
             "fields `[model]` (else `[plant]`): the firmware must believe the default {} \
