@@ -346,13 +346,24 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
 
     /// The pair nearest the imaginary axis at `v_mps` and its eigenvector.
     fn critical_pair(&self, v_mps: f64, onset: bool) -> Option<HopfPoint> {
+        self.pair_minimising(v_mps, onset, |z| z.re.abs())
+    }
+
+    /// The oscillatory pair (upper half plane) of the Jacobian at `v_mps` with the least
+    /// `key`, and its eigenvector.
+    fn pair_minimising(
+        &self,
+        v_mps: f64,
+        onset: bool,
+        key: impl Fn(&C64) -> f64,
+    ) -> Option<HopfPoint> {
         let lambda = self
             .jacobian(v_mps)
             .complex_eigenvalues()
             .iter()
             .copied()
             .filter(|z| z.im > 1e-6)
-            .min_by(|x, y| x.re.abs().total_cmp(&y.re.abs()))?;
+            .min_by(|x, y| key(x).total_cmp(&key(y)))?;
         self.pair_at(v_mps, lambda, onset)
     }
 
@@ -613,14 +624,7 @@ impl<M: SimModel<N>, const N: usize> Shooting<M, N> {
 
     /// The oscillatory pair of the Jacobian at `v_mps` with the frequency nearest `omega`.
     fn pair_nearest(&self, v_mps: f64, omega: f64) -> Option<HopfPoint> {
-        let lambda = self
-            .jacobian(v_mps)
-            .complex_eigenvalues()
-            .iter()
-            .copied()
-            .filter(|z| z.im > 1e-6)
-            .min_by(|x, y| (x.im - omega).abs().total_cmp(&(y.im - omega).abs()))?;
-        self.pair_at(v_mps, lambda, false)
+        self.pair_minimising(v_mps, false, |z| (z.im - omega).abs())
     }
 
     /// Pseudo-arclength continuation from the branch points `u_a`, `u_b` (scaled unknowns)
