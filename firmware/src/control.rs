@@ -145,8 +145,9 @@ pub fn encoder_reading(r: Result<f32, SensorFault>) -> EncoderReading {
 /// The raw frame of one sample set: the driver results decoded into the supervisor's input,
 /// time-stamped by the free-running capture timer; the driver-level faults (bus, parity,
 /// error flag, tone-wheel glitch, ADC) are counted here, everything else is judged by the
-/// supervisor.
-pub fn raw_frame(s: &SampleSet, h: &mut Health) -> RawFrame {
+/// supervisor. `coil_drive_a` is the coil driver's drive over the period just sampled
+/// ([`CoilDriver::drive_a`](crate::drivers::coil_pwm::CoilDriver::drive_a)).
+pub fn raw_frame(s: &SampleSet, coil_drive_a: Option<f32>, h: &mut Health) -> RawFrame {
     for r in [s.psi_l_rad, s.psi_r_rad] {
         if let Err(f) = r {
             h.count(f);
@@ -177,6 +178,7 @@ pub fn raw_frame(s: &SampleSet, h: &mut Health) -> RawFrame {
         speed_mps: s.speed.speed_mps,
         speed_valid,
         coil_current_a: Some(coil_current_a),
+        coil_drive_a,
     }
 }
 
@@ -205,10 +207,11 @@ pub fn drive_coil<P: SetDutyCycle>(
 pub fn supervised_step(
     ctrl: &mut SafeController,
     s: &SampleSet,
+    coil_drive_a: Option<f32>,
     margin: MarginStatus,
     h: &mut Health,
 ) -> SafeOutput {
-    let frame = raw_frame(s, h);
+    let frame = raw_frame(s, coil_drive_a, h);
     let before = ctrl.supervisor().mode();
     let out = ctrl.step(&frame, margin);
     if out.verdict.mode != before {
@@ -240,6 +243,12 @@ mod tests {
         }
     }
 
+    /// A healthy coil (L/R = 1/190 s) on the command of the last step, over one 1 ms step.
+    fn lagged_coil(i: &mut f32, cmd_a: f32) -> f32 {
+        *i += (cmd_a - *i) * (1.0 - libm::expf(-0.19));
+        *i
+    }
+
     #[test]
     fn driver_faults_map_onto_the_supervisor_reading() {
         assert!(!encoder_reading(Err(SensorFault::Parity)).parity_ok);
@@ -252,7 +261,7 @@ mod tests {
         s.psi_l_rad = Err(SensorFault::Parity);
         s.speed.status = SpeedStatus::Starting;
         s.coil_current_a = Err(SensorFault::Saturated);
-        let f = raw_frame(&s, &mut h);
+        let f = raw_frame(&s, None, &mut h);
         assert_eq!(f.t_us, 0);
         assert!(!f.speed_valid && f.coil_current_a.is_some_and(f32::is_nan));
         assert_eq!((h.enc_parity, h.current_faults), (1, 1));
@@ -265,15 +274,17 @@ mod tests {
         let mut c = safe_controller();
         let mut h = Health::default();
         let mut modes = Vec::new();
+        let mut coil = 0.0;
         for k in 0..4000u32 {
             let mut s = good(k);
+            s.coil_current_a = Ok(lagged_coil(&mut coil, c.last_command_a()));
             if k == 100 {
                 s.psi_l_rad = Err(SensorFault::Parity);
             }
             if k == 300 {
                 s.psi_r_rad = Err(SensorFault::ErrorFlag(2));
             }
-            let o = supervised_step(&mut c, &s, MarginStatus::NotUsed, &mut h);
+            let o = supervised_step(&mut c, &s, None, MarginStatus::NotUsed, &mut h);
             assert!(o.current_cmd_a.is_finite());
             if modes.last() != Some(&o.verdict.mode) {
                 modes.push(o.verdict.mode);
@@ -313,10 +324,12 @@ mod tests {
         let mut h = Health::default();
         let mut t_us = 0u32;
         let mut last = None;
+        let mut coil = 0.0;
         for k in 0..1200u32 {
             t_us += if k == 1100 { 6000 } else { 1000 };
-            let s = SampleSet { t_us, ..good(k) };
-            let o = supervised_step(&mut c, &s, MarginStatus::NotUsed, &mut h);
+            let mut s = SampleSet { t_us, ..good(k) };
+            s.coil_current_a = Ok(lagged_coil(&mut coil, c.last_command_a()));
+            let o = supervised_step(&mut c, &s, None, MarginStatus::NotUsed, &mut h);
             if k < 1100 {
                 assert!(o.verdict.faults.is_empty(), "k={k} {:?}", o.verdict);
             }

@@ -403,7 +403,13 @@ mod tests {
         for step in 0..sim::SCENARIO_STEPS {
             world.set_step(step);
             let set = sensors.sample(sim::TICKS_PER_STEP);
-            let out = supervised_step(&mut ctrl, &set, MarginStatus::NotUsed, &mut h);
+            let out = supervised_step(
+                &mut ctrl,
+                &set,
+                Some(coil.drive_a()),
+                MarginStatus::NotUsed,
+                &mut h,
+            );
             crate::control::drive_coil(&mut coil, &out).unwrap();
             let s = MeterSample::of(step, &out);
             recorder.on_command(s.cmd_a);

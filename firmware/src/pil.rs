@@ -158,6 +158,7 @@ mod host {
             let out = supervised_step(
                 &mut self.ctrl,
                 &sample_set(raw),
+                raw.coil_drive_a,
                 self.margin,
                 &mut self.health,
             );
@@ -237,7 +238,7 @@ mod tests {
         let mut f = RawFrame::ok(7000, 0.0123, -0.0, 13.5);
         f.coil_current_a = Some(0.75);
         let mut h = Health::default();
-        let back = raw_frame(&sample_set(&f), &mut h);
+        let back = raw_frame(&sample_set(&f), f.coil_drive_a, &mut h);
         assert_eq!(back.left.angle_rad.to_bits(), f.left.angle_rad.to_bits());
         assert_eq!(back.right.angle_rad.to_bits(), f.right.angle_rad.to_bits());
         assert_eq!(
@@ -248,7 +249,7 @@ mod tests {
         f.left.parity_ok = false;
         f.speed_valid = false;
         f.coil_current_a = None;
-        let back = raw_frame(&sample_set(&f), &mut h);
+        let back = raw_frame(&sample_set(&f), f.coil_drive_a, &mut h);
         assert!(!back.left.parity_ok && back.left.angle_rad.is_nan());
         assert!(!back.speed_valid);
         assert!(back.coil_current_a.is_some_and(f32::is_nan));

@@ -197,6 +197,7 @@ pub fn replay(
             speed_mps: v,
             speed_valid: true,
             coil_current_a: None,
+            coil_drive_a: None,
         };
         let out = ctrl.step(&frame, data.margin_status());
         let cmd = out.current_cmd_a;

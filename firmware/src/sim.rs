@@ -433,7 +433,13 @@ pub fn run_closed_loop(
     for step in 0..steps {
         world.set_step(step);
         let set = s.sample(TICKS_PER_STEP);
-        let out = supervised_step(ctrl, &set, MarginStatus::NotUsed, &mut h);
+        let out = supervised_step(
+            ctrl,
+            &set,
+            Some(coil.drive_a()),
+            MarginStatus::NotUsed,
+            &mut h,
+        );
         if let (Mode::Normal, Some((l, r))) = (out.verdict.mode, out.validated.angles_rad) {
             // One count of quantisation (0.38 mrad) plus f32 rounding.
             let tol = 1.5 * crate::drivers::as5047p::RAD_PER_COUNT;

@@ -151,6 +151,8 @@ impl ShimmyController {
                 .coil_current_a
                 .is_finite()
                 .then_some(self.coil_current_a as f32),
+            // The importer's coil drive is not modelled here: an ideal current source.
+            coil_drive_a: None,
         };
         let lp = self.state.as_mut().ok_or(Fmi3Error::Error)?;
         lp.steps += 1;

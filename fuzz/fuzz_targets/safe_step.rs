@@ -68,6 +68,7 @@ fuzz_target!(|data: &[u8]| {
             speed_mps: plaus(f32_at(b, 10), 40.0).abs(),
             speed_valid: flags & 0x40 == 0,
             coil_current_a: (flags & 0x80 != 0).then(|| f32_at(b, 14)),
+            coil_drive_a: (flags & 0x800 != 0).then(|| plaus(f32_at(b, 10), 3.0)),
         };
         let margin = match (flags >> 9) & 3 {
             0 => MarginStatus::NotUsed,

@@ -192,6 +192,7 @@ mod tests {
             speed_mps: 12.5,
             speed_valid: false,
             coil_current_a: None,
+            coil_drive_a: Some(f32::from_bits(0x7f80_0001)),
         });
         let HostFrame::Sensors(back) = roundtrip(&msg) else {
             panic!("variant changed");

@@ -190,6 +190,7 @@ pub struct CoilDriver<P> {
     params: CoilParams,
     integ_v: f32,
     disable_anti_windup: bool,
+    drive_a: f32,
 }
 
 impl<P: SetDutyCycle> CoilDriver<P> {
@@ -200,7 +201,17 @@ impl<P: SetDutyCycle> CoilDriver<P> {
             params,
             integ_v: 0.0,
             disable_anti_windup: false,
+            drive_a: 0.0,
         }
+    }
+
+    /// The drive now, as the steady current the written duty pushes through the nominal coil:
+    /// duty x V_supply / R_coil, A (0 while off). With the measured current it gives the
+    /// coil's voltage-current relation ([`RawFrame::coil_drive_a`]).
+    ///
+    /// [`RawFrame::coil_drive_a`]: crate::supervisor::frame::RawFrame::coil_drive_a
+    pub fn drive_a(&self) -> f32 {
+        self.drive_a
     }
 
     /// The PWM channel back.
@@ -259,6 +270,11 @@ impl<P: SetDutyCycle> CoilDriver<P> {
         let max = self.pwm.max_duty_cycle();
         let counts = clamp_nan_lo(duty * max as f32 + 0.5, 0.0, max as f32) as u16;
         self.pwm.set_duty_cycle(counts)?;
+        self.drive_a = if max > 0 && p.r_coil_ohm > 0.0 {
+            f32::from(counts) / f32::from(max) * vs / p.r_coil_ohm
+        } else {
+            0.0
+        };
         Ok(DriveReport {
             duty,
             duty_counts: counts,
@@ -270,6 +286,7 @@ impl<P: SetDutyCycle> CoilDriver<P> {
     /// Coil off (duty 0) and integrator cleared: the fail-safe state.
     pub fn off(&mut self) -> Result<(), P::Error> {
         self.integ_v = 0.0;
+        self.drive_a = 0.0;
         self.pwm.set_duty_cycle_fully_off()
     }
 }

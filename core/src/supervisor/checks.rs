@@ -18,10 +18,18 @@
 //! | `SpeedJump` | \|dV\| > `max_accel_mps2` x (time since the last good speed) + `speed_noise_tol_mps` |
 //! | `SpeedLowImplausible` | V < `speed_low_mps` and V < the deceleration envelope of the trusted speeds (each decays at `max_accel_mps2`) - `speed_noise_tol_mps`, (held while V < `speed_low_mps`), or V < `speed_low_mps` while the wheels oscillate in the shimmy band and V is either below `zero_current_below_mps` or unchanged for `stuck_samples` (then a held speed below the gate is not used either: the speed is unknown; held while V < `speed_low_mps`) |
 //! | `Timing` | time stamp gap > `max_gap_us` or not increasing (missing samples, clock fault) |
-//! | `CoilOpen` | expected current (the command through the coil's L/R `coil_tau_s`) and the command both > `coil_min_expected_a`, and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
-//! | `CoilShort` | measured > expected + `coil_over_a` (or at the ADC full scale when that is above it), accumulated the same way |
-//! | `CoilSensor` | measured coil current NaN/Inf |
+//! | `CoilOpen` | expected current (the drive, `RawFrame::coil_drive_a` or else the command, through the coil's L/R `coil_tau_s`) and the drive both > `coil_min_expected_a`, and measured < `coil_open_ratio` x expected, for `coil_fault_s` of accumulated mismatch (drains at `coil_heal_ratio` while it matches) |
+//! | `CoilShort` | drive and expected >= `coil_short_min_a` and measured > `coil_short_ratio` x expected (a reading at the ADC's `coil_full_scale_a` proves it only where that is above the ratio), accumulated the same way |
+//! | `CoilSensor` | measured NaN/Inf; or, accumulated the same way: measured > expected + `coil_sensor_zero_a` with no drive (drive <= `coil_no_drive_a`, expected <= `coil_no_drive_check_a`), measured < -`coil_sensor_zero_a`, or (checkable as for open) measured outside [`coil_sensor_lo`, `coil_sensor_hi`] x expected (above it only below full scale) and neither open nor short |
 //! | `MarginUnavailable` | the margin estimate is invalid for `margin_invalid_s` (advisory) |
+//!
+//! Coil sensor or coil: the drive and the measured current are the coil's voltage-current
+//! relation. No coil fault makes current flow without drive, a hot or cold coil stays within
+//! the ratio band, and only a path around the coil carries three times what the drive pushes
+//! through it; a sensor's offset or gain error shows as a reading at zero drive or outside the
+//! band. `CoilSensor` is latched and the coil driven open loop (the policy keeps the damper);
+//! the open and short checks go on with the drive's model, so a short the current loop hid
+//! (it lowers the duty until the reading matches) is found once the loop is open.
 //!
 //! Latent coil faults: after `coil_test_idle_s` without `coil_fault_s` of open checks in a row
 //! (little current demanded, or only single-sample spikes of a chattering command) the verdict
@@ -129,7 +137,7 @@ pub struct Supervisor {
     speed_same: u16,
     speed_trusted: Option<(f32, u32)>,
     coil_expected_a: f32,
-    coil_mismatch_s: [f32; 2],
+    coil_mismatch_s: [f32; 3],
     coil_idle_s: f32,
     /// Time the coil checks have run without a break, s.
     coil_checked_s: f32,
@@ -195,7 +203,7 @@ impl Supervisor {
             speed_same: 0,
             speed_trusted: None,
             coil_expected_a: 0.0,
-            coil_mismatch_s: [0.0; 2],
+            coil_mismatch_s: [0.0; 3],
             coil_idle_s: 0.0,
             coil_checked_s: 0.0,
             coil_pulse_left_s: 0.0,
@@ -307,7 +315,7 @@ impl Supervisor {
         }
         self.escalated = FaultSet::EMPTY;
         self.recurrences = [(0, 0); N_FAULTS];
-        self.coil_mismatch_s = [0.0; 2];
+        self.coil_mismatch_s = [0.0; 3];
     }
 
     fn log(&mut self, e: SupervisorEvent) {
@@ -476,26 +484,27 @@ impl Supervisor {
         within(seconds_since(t_us, t), self.p.speed_hold_s).then_some(v)
     }
 
-    /// Coil checks against the command of the previous step `last_cmd_a`, passed through the
-    /// coil's lag (the expected current); schedules the test pulse while no check can run.
+    /// Coil checks: the measured current against the drive of the previous step (the frame's
+    /// `coil_drive_a`, else the command `last_cmd_a`) passed through the coil's lag (the
+    /// expected current); schedules the test pulse while no check can run.
     fn check_coil(&mut self, f: &RawFrame, last_cmd_a: f32, dt_s: f32, det: &mut FaultSet) {
         let p = self.p;
-        // The current the coil should carry now: first-order lag of the applied command
-        // (backward Euler, no `expf`: lags the true coil by a fraction of a sample, which only
-        // makes the check more tolerant; a NaN or negative dt holds it).
+        let drive = match f.coil_drive_a {
+            Some(d) if d.is_finite() => d,
+            _ => last_cmd_a,
+        };
+        // The current the coil should carry now: first-order lag of the drive (backward
+        // Euler, no `expf`: lags the true coil by a fraction of a sample, which only makes the
+        // check more tolerant; a NaN or negative dt holds it).
         let dt = clamp_dt(dt_s);
         let alpha = dt / (p.coil_tau_s + dt);
-        // The gap to the command decays; below 1 uA it is closed, so a steady command is reached
+        // The gap to the drive decays; below 1 uA it is closed, so a steady drive is reached
         // exactly (f32 rounding would otherwise stall a few ulps short of it).
-        let gap = (1.0 - alpha) * (last_cmd_a - self.coil_expected_a);
-        let expected = if abs(gap) < 1e-6 {
-            last_cmd_a
-        } else {
-            last_cmd_a - gap
-        };
+        let gap = (1.0 - alpha) * (drive - self.coil_expected_a);
+        let expected = if abs(gap) < 1e-6 { drive } else { drive - gap };
         self.coil_expected_a = if expected.is_finite() { expected } else { 0.0 };
         let Some(i_meas) = f.coil_current_a else {
-            self.coil_mismatch_s = [0.0; 2];
+            self.coil_mismatch_s = [0.0; 3];
             self.coil_idle_s = 0.0;
             self.coil_pulse_left_s = 0.0;
             return;
@@ -507,21 +516,40 @@ impl Supervisor {
             return;
         }
         let e = self.coil_expected_a;
-        let over_a = e + p.coil_over_a;
-        let short =
-            i_meas > over_a || (i_meas >= p.coil_full_scale_a && p.coil_full_scale_a >= over_a);
-        // Open is judged while the coil should carry current and the command still asks for
-        // it: on a falling command a current that falls faster than the coil's lag is a short's
-        // signature (no inductance in the path), not an open coil's.
-        let checkable = e > p.coil_min_expected_a && last_cmd_a > p.coil_min_expected_a;
+        // Open and the sensor's ratio band are judged while the coil should carry current and
+        // the drive still pushes it: on a falling drive a current that falls faster than the
+        // coil's lag is a short's signature (no inductance in the path), not an open coil's.
+        let checkable = e > p.coil_min_expected_a && drive > p.coil_min_expected_a;
         let open = checkable && i_meas < p.coil_open_ratio * e;
+        // Short: far more current than the drive can push through the coil (a path around
+        // it); judged while the drive and the expected current are at least
+        // `coil_short_min_a` (below it a sensor offset could pass for one), and not on a
+        // saturated reading that cannot prove the ratio.
+        let short_judged = e >= p.coil_short_min_a
+            && drive >= p.coil_short_min_a
+            && (i_meas < p.coil_full_scale_a || p.coil_full_scale_a > p.coil_short_ratio * e);
+        let short = short_judged && i_meas > p.coil_short_ratio * e;
+        // The sensor: a reading above the decaying coil current with no drive (no coil fault
+        // makes current flow without voltage), a negative one (the driver is unidirectional),
+        // or one outside the band that the coil's resistance over temperature allows (above
+        // it only when not saturated: a saturated reading may be a short's).
+        let no_drive = drive <= p.coil_no_drive_a && e <= p.coil_no_drive_check_a;
+        let negative = i_meas < -p.coil_sensor_zero_a;
+        let sensor = (no_drive && i_meas > e + p.coil_sensor_zero_a)
+            || negative
+            || (checkable
+                && !open
+                && !short
+                && (i_meas < p.coil_sensor_lo * e
+                    || (i_meas > p.coil_sensor_hi * e && i_meas < p.coil_full_scale_a)));
         let heal = dt_s * p.coil_heal_ratio;
-        // Open: judged only while enough current is expected (held otherwise); short: always.
-        for (acc, (cond, judged)) in self
-            .coil_mismatch_s
-            .iter_mut()
-            .zip([(open, checkable), (short, true)])
-        {
+        // Each accumulator grows while its condition holds and drains only while it is
+        // judged and does not hold.
+        for (acc, (cond, judged)) in self.coil_mismatch_s.iter_mut().zip([
+            (open, checkable),
+            (short, short_judged),
+            (sensor, no_drive || negative || checkable),
+        ]) {
             if cond {
                 *acc = (*acc + dt_s).min(1e3);
             } else if judged {
@@ -531,11 +559,14 @@ impl Supervisor {
                 *acc = 0.0;
             }
         }
-        if self.coil_mismatch_s[0] >= p.coil_fault_s {
-            det.insert(FaultKind::CoilOpen);
-        }
-        if self.coil_mismatch_s[1] >= p.coil_fault_s {
-            det.insert(FaultKind::CoilShort);
+        for (acc, kind) in self.coil_mismatch_s.iter().zip([
+            FaultKind::CoilOpen,
+            FaultKind::CoilShort,
+            FaultKind::CoilSensor,
+        ]) {
+            if *acc >= p.coil_fault_s {
+                det.insert(kind);
+            }
         }
         // Test pulse: after `coil_test_idle_s` without an open check (and never into a coil
         // already found dead).
@@ -711,7 +742,11 @@ impl Supervisor {
                 SpeedUse::Trusted(v) | SpeedUse::Held(v) => Some(v),
                 SpeedUse::Unknown => None,
             },
-            coil_current_a: if a.contains(FaultKind::CoilSensor) {
+            // Not for the current loop while the sensor is distrusted, nor during a test
+            // pulse: the pulse is driven open loop, so the coil's voltage-current relation
+            // shows undisturbed by the loop (which hides a short by lowering the duty).
+            coil_current_a: if a.contains(FaultKind::CoilSensor) || verdict.test_current_a.is_some()
+            {
                 None
             } else {
                 f.coil_current_a.filter(|i| i.is_finite())

@@ -46,7 +46,8 @@ pub enum FaultKind {
     CoilOpen,
     /// Coil short (measured current above the command).
     CoilShort,
-    /// Coil-current measurement NaN/Inf.
+    /// Coil-current measurement NaN/Inf, or a reading the coil's voltage-current relation
+    /// rules out (the coil is then driven open loop).
     CoilSensor,
     /// Margin estimate unavailable for long (advisory).
     MarginUnavailable,
@@ -117,7 +118,10 @@ impl FaultKind {
 
     /// Latched until [`Supervisor::clear_latched`](super::checks::Supervisor::clear_latched).
     pub const fn latched(self) -> bool {
-        matches!(self, FaultKind::CoilOpen | FaultKind::CoilShort)
+        matches!(
+            self,
+            FaultKind::CoilOpen | FaultKind::CoilShort | FaultKind::CoilSensor
+        )
     }
 
     /// Latched when it recurs (`SupervisorParams::intermittent_count` activations within the
@@ -131,6 +135,7 @@ impl FaultKind {
                 | FaultKind::MarginUnavailable
                 | FaultKind::CoilOpen
                 | FaultKind::CoilShort
+                | FaultKind::CoilSensor
         )
     }
 }

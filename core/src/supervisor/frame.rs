@@ -52,6 +52,12 @@ pub struct RawFrame {
     pub speed_valid: bool,
     /// Measured coil current in A, if the board measures it.
     pub coil_current_a: Option<f32>,
+    /// The drive over the period in which `coil_current_a` was measured, as the steady current
+    /// it pushes through the nominal coil: PWM duty x supply voltage / coil resistance, A. With
+    /// the measured current it gives the coil's voltage-current relation, which tells a lying
+    /// sensor from a coil fault. `None`: the coil is fed by an ideal current source (the drive
+    /// is the command).
+    pub coil_drive_a: Option<f32>,
 }
 
 impl RawFrame {
@@ -64,6 +70,7 @@ impl RawFrame {
             speed_mps,
             speed_valid: true,
             coil_current_a: None,
+            coil_drive_a: None,
         }
     }
 }

@@ -55,12 +55,32 @@ pub struct SupervisorParams {
     /// command passed through this first-order lag (the *expected* current), so a command step
     /// is not a mismatch.
     pub coil_tau_s: f32,
-    /// Coil checks only run while the expected current is above this, A.
+    /// Open coil and the sensor's ratio band are judged while the expected current and the
+    /// drive are above this, A.
     pub coil_min_expected_a: f32,
     /// Open coil: measured below this fraction of the expected current.
     pub coil_open_ratio: f32,
-    /// Short: measured above the expected current + this, A.
-    pub coil_over_a: f32,
+    /// Short: measured above this multiple of the expected current (no coil resistance over
+    /// temperature and no plausible sensor gain comes near it: only a path around the coil).
+    pub coil_short_ratio: f32,
+    /// The short is judged from this expected current on, A: below it a sensor offset of up
+    /// to (`coil_short_ratio` - 1) x this could pass for a short.
+    pub coil_short_min_a: f32,
+    /// No drive: the drive is at most this, A.
+    pub coil_no_drive_a: f32,
+    /// The no-drive reading is judged while the expected (decaying) current is at most this,
+    /// A: a coil 20 % slower than the nominal L/R then differs from it by < 0.05 A.
+    pub coil_no_drive_check_a: f32,
+    /// `CoilSensor`: a reading this far above the expected current with no drive (no coil
+    /// fault makes current flow without voltage), or below minus this (the driver is
+    /// unidirectional), A.
+    pub coil_sensor_zero_a: f32,
+    /// `CoilSensor`: while the coil is checkable, a reading outside [lo, hi] x the expected
+    /// current that is neither open nor short. The band holds a healthy coil from -40 C (R
+    /// x0.76: x1.31) to 150 C (R x1.5: x0.67) on the nominal drive model.
+    pub coil_sensor_lo: f32,
+    /// Upper end of the band, see `coil_sensor_lo`.
+    pub coil_sensor_hi: f32,
     /// Accumulated mismatch time that raises a coil fault, s (>> the coil's L/R = 5 ms). The
     /// accumulator grows by the time of a mismatch and drains by `coil_heal_ratio` x the time
     /// of a match, so an intermittent fault (a chattering connector) adds up instead of being
@@ -79,9 +99,8 @@ pub struct SupervisorParams {
     /// Time without a coil check before a test pulse, s.
     pub coil_test_idle_s: f32,
     /// Full scale of the coil-current measurement, A: a reading at or above it means "at least
-    /// this much" (ADC saturated), so it counts as over-current whenever full scale is at least
-    /// command plus `coil_over_a`. Without this a short at the largest command (2 A + 0.5 A =
-    /// the ADC's 2.5 A) could never be seen.
+    /// this much" (ADC saturated), so it proves a short only where the short's ratio times the
+    /// expected current is below it.
     pub coil_full_scale_a: f32,
     /// Margin invalid for this long raises `MarginUnavailable`, s (0 disables).
     pub margin_invalid_s: f32,
@@ -147,7 +166,13 @@ impl Default for SupervisorParams {
             coil_tau_s: 1.0 / 190.0,
             coil_min_expected_a: 0.2,
             coil_open_ratio: 0.25,
-            coil_over_a: 0.5,
+            coil_short_ratio: 3.0,
+            coil_short_min_a: 0.3,
+            coil_no_drive_a: 0.02,
+            coil_no_drive_check_a: 0.5,
+            coil_sensor_zero_a: 0.15,
+            coil_sensor_lo: 0.55,
+            coil_sensor_hi: 1.5,
             coil_fault_s: 0.05,
             coil_heal_ratio: 0.25,
             coil_test_current_a: 0.4,

@@ -78,6 +78,7 @@ mod check {
                 speed_mps: f32::from_bits(word(4)),
                 speed_valid: flags & 64 != 0,
                 coil_current_a: (flags & 128 != 0).then(|| f32::from_bits(word(5))),
+                coil_drive_a: (flags & 1024 != 0).then(|| f32::from_bits(word(9))),
             };
             let margin = match flags >> 8 & 3 {
                 0 => MarginStatus::NotUsed,

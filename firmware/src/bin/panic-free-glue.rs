@@ -165,7 +165,8 @@ mod check {
                 }),
                 _ => MarginStatus::Invalid,
             };
-            let o = supervised_step(&mut safe, &set, margin, &mut health);
+            let drive = Some(coil.drive_a());
+            let o = supervised_step(&mut safe, &set, drive, margin, &mut health);
             let _ = drive_coil(&mut coil, &o);
             if record.update(word(4), safe.supervisor().latched().bits()) {
                 out(0, record.resets);

@@ -374,7 +374,7 @@ mod bench {
             WORLD.set_step(step);
             let mut one = || {
                 let s = sensors.sample(sim::TICKS_PER_STEP);
-                let o = supervised_step(&mut ctrl, &s, INSIDE_WINDOW, &mut h);
+                let o = supervised_step(&mut ctrl, &s, Some(coil.drive_a()), INSIDE_WINDOW, &mut h);
                 let _ = drive_coil(&mut coil, &o);
             };
             if step < 1100 {

@@ -53,14 +53,25 @@ pub struct BoardSensors {
     /// exactly one frame).
     buf: [u8; MAX_FRAME],
     len: usize,
+    /// The coil drive the host's last frame reports (the host drives the plant's coil).
+    coil_drive_a: Option<f32>,
 }
 
 impl BoardSensors {
+    /// The coil drive over the period of the last frame, as the host reports it (this board's
+    /// PWM goes nowhere).
+    pub fn coil_drive_a(&self) -> Option<f32> {
+        self.coil_drive_a
+    }
+
     /// Waits for the host's next frame (no virtual time passes) and returns it as the drivers'
     /// results; a `Finish` frame ends the run.
     pub fn sample(&mut self, _dt_ticks: u32) -> SampleSet {
         match self.next_frame() {
-            Ok(HostFrame::Sensors(raw)) => crate::pil::sample_set(&raw),
+            Ok(HostFrame::Sensors(raw)) => {
+                self.coil_drive_a = raw.coil_drive_a;
+                crate::pil::sample_set(&raw)
+            }
             Ok(HostFrame::Finish) => {
                 defmt::info!("pil: the host ended the run");
                 send(&TargetFrame::Finished {
@@ -150,6 +161,7 @@ pub fn init(dp: pac::Peripherals, coil_off: bool) -> (Board, LinkPort) {
         sensors: BoardSensors {
             buf: [0; MAX_FRAME],
             len: 0,
+            coil_drive_a: None,
         },
         coil,
         timer: ControlTimer::start(dp.TIM2, TIMER_CLOCK_HZ),

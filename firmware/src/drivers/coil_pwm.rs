@@ -130,6 +130,12 @@ impl<P: SetDutyCycle> CoilDriver<P> {
         self.inner.off()
     }
 
+    /// The drive now: the steady current the written duty pushes through the nominal coil,
+    /// A (the supervisor's `RawFrame::coil_drive_a`).
+    pub fn drive_a(&self) -> f32 {
+        self.inner.drive_a()
+    }
+
     /// The current last commanded (after clamping), A.
     pub fn commanded_a(&self) -> f32 {
         self.commanded_a

@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | 0-4 s | 20 m/s, both wheels shimmy at [`SHIMMY_HZ`], [`SHIMMY_RAD`] | (the monitor raises `ShimmyPresent`) |
 //! | 4-9 s | 20 m/s, calm | the episode closes (~6.9 s, when the yaw envelope has fallen below the release threshold): one shimmy entry, written while moving |
-//! | 6-7 s | the coil current reads full scale (a short) | the supervisor latches `coil-short` (~6.06 s): one fault entry |
+//! | 6-7 s | the coil current reads five times the command, up to full scale (a short) | the supervisor latches `coil-short` (logged at 6.87 s): one fault entry |
 //! | 9-14 s | braking to 0 (4 m/s^2) | the margin report becomes unavailable as the braking starts: one fault entry (not latched) |
 //! | 14-[`DRIVE_S`] s | standing, coil off | the standstill token: whatever waited for an erase is written |
 //!
@@ -82,8 +82,13 @@ pub fn run<F: NorFlash<Error = FlashError>>(task: &mut StoreTask<F>) -> DriveSum
         let psi = yaw_at(t);
         let mut frame = RawFrame::ok(k.wrapping_mul(NOMINAL_PERIOD_US), psi, psi, speed_at(t));
         let short = (SHORT_S.0..SHORT_S.1).contains(&t);
-        // A healthy coil follows its command; a shorted one reads the channel's full scale.
-        frame.coil_current_a = Some(if short { 2.5 } else { last_cmd_a });
+        // A healthy coil follows its command; through a short the drive pushes five times the
+        // current, up to the channel's 2.5 A full scale.
+        frame.coil_current_a = Some(if short {
+            (5.0 * last_cmd_a).min(2.5)
+        } else {
+            last_cmd_a
+        });
         let out = ctrl.step(&frame, data.margin_status());
         last_cmd_a = out.current_cmd_a;
         cmd_peak_a = cmd_peak_a.max(out.current_cmd_a);

@@ -261,7 +261,7 @@ pub fn standard_cases() -> Vec<Case> {
         lost_actuator(
             "coil-short x5",
             vec![F::CoilShort(5.0)],
-            "CANNOT be handled: the current bypasses the coil, damper passive-off. Seen after 50 ms of more than 0.5 A above the expected current (or a saturated shunt ADC); latched; 0 A (driving a short only heats it), damper_available = false",
+            "CANNOT be handled: the current bypasses the coil, damper passive-off. Seen after 50 ms of more than 3x the current the drive pushes through the coil (a saturated shunt ADC where that proves it; the current loop's lowered duty is part of the drive); latched; 0 A (driving a short only heats it), damper_available = false",
         ),
         case(
             "nan-left+stuck-right",
@@ -320,6 +320,26 @@ pub fn standard_cases() -> Vec<Case> {
             "coil-hot x1.5",
             vec![F::CoilHot(1.5)],
             "coil resistance +50 %: the closed current loop holds the command (open loop: -33 %); nothing to report (not expected to be detected)",
+        ),
+        case(
+            "coil-sensor-offset +0.6A",
+            vec![F::CoilSensorOffset(0.6)],
+            "the shunt amplifier reads 0.6 A high: current with no drive, or outside what the drive can push through the coil, is the sensor's word, not a short's; coil-sensor latched, the coil driven open loop (known error: the coil's resistance), the damper kept",
+        ),
+        case(
+            "coil-sensor-offset +0.3A",
+            vec![F::CoilSensorOffset(0.3)],
+            "reads 0.3 A high (the closed loop would deliver 0.3 A less): found as current with no drive; coil-sensor, open loop, the damper kept",
+        ),
+        case(
+            "coil-sensor-gain x2",
+            vec![F::CoilSensorGain(2.0)],
+            "reads twice the current (the closed loop would deliver half): twice what the drive pushes through the coil, beyond any coil temperature but short of a short's 3x; coil-sensor, open loop, the damper kept",
+        ),
+        case(
+            "coil-sensor-gain x0.4",
+            vec![F::CoilSensorGain(0.4)],
+            "reads 40 % (the closed loop would push 2.5x the command): below the hot coil's 67 %, above an open coil's 25 %; coil-sensor, open loop, the damper kept",
         ),
         case(
             "coil-hot x1.5+error-flag-both",

@@ -108,6 +108,12 @@ impl BoardDrive {
         duty * supply_v / (f64::from(self.nominal.r_coil_ohm) * cond.r_factor)
     }
 
+    /// The drive written last, as the board knows it: the steady current of its duty in the
+    /// nominal coil, A (the supervisor's `RawFrame::coil_drive_a`).
+    pub fn drive_a(&self) -> f32 {
+        self.driver.drive_a()
+    }
+
     /// Coil off (the supervisor found the coil open or shorted).
     pub fn off(&mut self) {
         let Ok(()) = self.driver.off();

@@ -21,12 +21,14 @@
 //! | `speed-implausible` | speed replaced by `speed_kmh` (validity true): also a speed frozen at a plausible value | `SpeedInvalid` (> 252 km/h or < 0) / `SpeedJump`; `SpeedLowImplausible` when below the 2 m/s gate |
 //! | `frame-loss` | `length_samples` of every `period_samples` whole frames lost (command held) | missed-sample counter; `Timing` for gaps > 5 ms |
 //! | `coil-open` | coil carries no current (damper passive-off), shunt reads ~0 | `CoilOpen` (latched) |
-//! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x command | `CoilShort` (latched) |
+//! | `coil-short` | current bypasses the coil (damper passive-off), shunt reads `ratio` x what the drive pushes through the coil (no L/R lag; x the command for an ideal current source) | `CoilShort` (latched) |
 //! | `coil-intermittent` | chattering connector: the coil open `length_samples` of every `period_samples` | `CoilOpen` once the accumulated mismatch reaches 50 ms (latched) |
 //! | `coil-hot` | coil resistance x `ratio` (a board drive, `coil_drive`, sees it: open loop the current falls by the ratio) | nothing: the closed current loop holds the command |
 //! | `supply` | supply voltage of the coil drive, V (a board drive sees it) | nothing: the closed current loop holds the command |
+//! | `coil-sensor-offset` | the coil-current reading + `offset_a` (before the ADC) | `CoilSensor` (latched; the coil driven open loop): a reading without drive, or outside the coil's ratio band |
+//! | `coil-sensor-gain` | the coil-current reading x `gain` (before the ADC) | `CoilSensor` (latched; open loop): outside the coil's ratio band |
 //!
-//! The last three are campaign faults (`shimmy-sim faults`), not scenario-file kinds ([`KINDS`]).
+//! The last five are campaign faults (`shimmy-sim faults`), not scenario-file kinds ([`KINDS`]).
 
 use crate::model::coil_drive::DriveCondition;
 use crate::model::sensors::{CoilState, EncoderStatus, FaultInjector, Measurement};
@@ -122,7 +124,8 @@ pub enum FaultMode {
     },
     /// Coil open circuit.
     CoilOpen,
-    /// Coil terminals shorted; the shunt reads `ratio` x the command.
+    /// Coil terminals shorted; the shunt reads `ratio` x what the drive pushes through the
+    /// coil.
     CoilShort(f64),
     /// Chattering connector: the coil is open `length` of every `period` samples.
     CoilIntermittent {
@@ -135,6 +138,10 @@ pub enum FaultMode {
     CoilHot(f64),
     /// Supply voltage of the coil drive, V.
     Supply(f64),
+    /// The coil-current sensor reads this much more, A (an offset of the shunt amplifier).
+    CoilSensorOffset(f64),
+    /// The coil-current sensor reads this many times the current (a gain error).
+    CoilSensorGain(f64),
 }
 
 /// Distance between two tone-wheel pulses of the board's decoder (48 teeth, 0.35 m rolling
@@ -181,6 +188,8 @@ impl FaultMode {
             FaultMode::CoilIntermittent { .. } => "coil-intermittent",
             FaultMode::CoilHot(_) => "coil-hot",
             FaultMode::Supply(_) => "supply",
+            FaultMode::CoilSensorOffset(_) => "coil-sensor-offset",
+            FaultMode::CoilSensorGain(_) => "coil-sensor-gain",
         }
     }
 
@@ -378,6 +387,18 @@ impl FaultInjector for FaultPlan {
             }
         }
         state
+    }
+
+    fn coil_sensor_error(&self, t_s: f64) -> (f64, f64) {
+        let (mut gain, mut offset) = (1.0, 0.0);
+        for f in self.faults.iter().filter(|f| f.active(t_s)) {
+            match f.mode {
+                FaultMode::CoilSensorOffset(a) => offset += a,
+                FaultMode::CoilSensorGain(g) => gain *= g,
+                _ => {}
+            }
+        }
+        (gain, offset)
     }
 
     fn drive_condition(&self, t_s: f64) -> DriveCondition {

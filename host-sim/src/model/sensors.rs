@@ -174,8 +174,13 @@ impl Default for Measurement {
 }
 
 impl Measurement {
-    /// The core's raw frame of this measurement at time stamp `t_us`.
-    pub fn raw_frame(&self, t_us: u32) -> shimmy_core::supervisor::frame::RawFrame {
+    /// The core's raw frame of this measurement at time stamp `t_us`, with the board's coil
+    /// drive over the period just measured (`None`: an ideal current source).
+    pub fn raw_frame(
+        &self,
+        t_us: u32,
+        coil_drive_a: Option<f32>,
+    ) -> shimmy_core::supervisor::frame::RawFrame {
         use shimmy_core::supervisor::frame::{EncoderReading, RawFrame};
         let enc = |a: f32, s: EncoderStatus| EncoderReading {
             angle_rad: a,
@@ -190,6 +195,7 @@ impl Measurement {
             speed_mps: self.speed_mps,
             speed_valid: self.speed_valid,
             coil_current_a: self.coil_current_a,
+            coil_drive_a,
         }
     }
 }
@@ -226,6 +232,12 @@ pub trait FaultInjector: Send {
     /// default). Only a board drive (`coil_drive`) sees them.
     fn drive_condition(&self, _t_s: f64) -> DriveCondition {
         DriveCondition::default()
+    }
+
+    /// The coil-current sensor's error at `t_s`, (gain, offset A): the shunt amplifier reads
+    /// gain x current + offset before the ADC (exact by default).
+    fn coil_sensor_error(&self, _t_s: f64) -> (f64, f64) {
+        (1.0, 0.0)
     }
 }
 
@@ -336,8 +348,13 @@ impl Sensors {
         } else {
             c.current_full_scale_a / f64::from(1u32 << c.current_adc_bits.min(31))
         };
-        let i_meas = quantise(truth.coil_current_a + c.current_noise_a * n_i, i_q)
-            .clamp(0.0, c.current_full_scale_a);
+        let (gain, offset) = self
+            .fault
+            .as_ref()
+            .map_or((1.0, 0.0), |f| f.coil_sensor_error(t_s));
+        let shunt = gain * truth.coil_current_a + offset;
+        let i_meas =
+            quantise(shunt + c.current_noise_a * n_i, i_q).clamp(0.0, c.current_full_scale_a);
         let mut m = Measurement {
             psi_l_rad: enc(pl, n_l),
             psi_r_rad: enc(pr, n_r),

@@ -773,10 +773,15 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
         let steering = sim.steering_angle_rad();
         let coil_state = sensors.coil_state(t);
         let coil = if no_damper { 0.0 } else { sim.coil_input_a() };
+        // The board's drive over the last period (`None`: an ideal current source).
+        let coil_drive_a = drive.as_ref().map(BoardDrive::drive_a);
         // What the shunt sees: the coil current, or with a shorted coil the driver's current
-        // through the short (no L/R lag), `ratio` x the command held over the last period.
+        // through the short (no L/R lag): `ratio` x what the drive of the last period pushes
+        // through the coil (the command held over it, for an ideal current source).
         let coil_meas = match coil_state {
-            CoilState::Short { ratio } if !no_damper => ratio * f64::from(held.current_cmd_a),
+            CoilState::Short { ratio } if !no_damper => {
+                ratio * f64::from(coil_drive_a.unwrap_or(held.current_cmd_a))
+            }
             _ => coil,
         };
         let mut inputs = scenario.inputs(t, cfg.dt_s);
@@ -831,7 +836,7 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
         } else if cfg.supervised {
             let t_us = ((t * 1e6).round() as u64) as u32;
             let o = safe
-                .step(&meas.raw_frame(t_us))
+                .step(&meas.raw_frame(t_us, coil_drive_a))
                 .map_err(LoopError::Firmware)?;
             log_verdict(&mut res.faults, safe.supervisor(), &o, t);
             last_verdict = Some(o.verdict);
