@@ -863,6 +863,11 @@ fn a_lying_current_sensor_is_a_sensor_fault_not_a_coil_fault() {
             r.delivered_ratio
         );
         let b = coil_run(blind, shunt, false);
+        std::eprintln!(
+            "{name}: coil-sensor, {:.3} x the command delivered; blind: {:.3} x",
+            r.delivered_ratio,
+            b.delivered_ratio
+        );
         assert!(b.faults.is_empty(), "{name} blind: {:?}", b.faults);
         assert!(
             (b.delivered_ratio - 1.0).abs() > err,
