@@ -163,6 +163,20 @@ fn within(x: f32, bound: f32) -> bool {
     x <= bound
 }
 
+/// A coil-mismatch accumulator: grows by `dt_s` while `cond` holds, drains by `heal_s` while
+/// `judged` and not `cond`, held otherwise (and reset if it ever became non-finite).
+#[inline(always)]
+fn accumulate(acc: &mut f32, cond: bool, judged: bool, dt_s: f32, heal_s: f32) {
+    if cond {
+        *acc = (*acc + dt_s).min(1e3);
+    } else if judged {
+        *acc = (*acc - heal_s).max(0.0);
+    }
+    if !acc.is_finite() {
+        *acc = 0.0;
+    }
+}
+
 /// Seconds from time stamp `earlier_us` to `now_us` (wrapping: right across the u32 wrap).
 #[inline]
 fn seconds_since(now_us: u32, earlier_us: u32) -> f32 {
@@ -488,7 +502,7 @@ impl Supervisor {
     /// `coil_drive_a`, else the command `last_cmd_a`) passed through the coil's lag (the
     /// expected current); schedules the test pulse while no check can run.
     fn check_coil(&mut self, f: &RawFrame, last_cmd_a: f32, dt_s: f32, det: &mut FaultSet) {
-        let p = self.p;
+        let p = &self.p;
         let drive = match f.coil_drive_a {
             Some(d) if d.is_finite() => d,
             _ => last_cmd_a,
@@ -516,57 +530,54 @@ impl Supervisor {
             return;
         }
         let e = self.coil_expected_a;
+        let heal = dt_s * p.coil_heal_ratio;
+        let [acc_open, acc_short, acc_sensor] = &mut self.coil_mismatch_s;
+        // Each accumulator grows while its condition holds and drains only while it is
+        // judged and does not hold. A negative reading is the sensor's whatever the drive
+        // (the driver is unidirectional).
+        let negative = i_meas < -p.coil_sensor_zero_a;
         // Open and the sensor's ratio band are judged while the coil should carry current and
         // the drive still pushes it: on a falling drive a current that falls faster than the
         // coil's lag is a short's signature (no inductance in the path), not an open coil's.
         let checkable = e > p.coil_min_expected_a && drive > p.coil_min_expected_a;
-        let open = checkable && i_meas < p.coil_open_ratio * e;
-        // Short: far more current than the drive can push through the coil (a path around
-        // it); judged while the drive and the expected current are at least
-        // `coil_short_min_a` (below it a sensor offset could pass for one), and not on a
-        // saturated reading that cannot prove the ratio.
-        let short_judged = e >= p.coil_short_min_a
-            && drive >= p.coil_short_min_a
-            && (i_meas < p.coil_full_scale_a || p.coil_full_scale_a > p.coil_short_ratio * e);
-        let short = short_judged && i_meas > p.coil_short_ratio * e;
-        // The sensor: a reading above the decaying coil current with no drive (no coil fault
-        // makes current flow without voltage), a negative one (the driver is unidirectional),
-        // or one outside the band that the coil's resistance over temperature allows (above
-        // it only when not saturated: a saturated reading may be a short's).
-        let no_drive = drive <= p.coil_no_drive_a && e <= p.coil_no_drive_check_a;
-        let negative = i_meas < -p.coil_sensor_zero_a;
-        let sensor = (no_drive && i_meas > e + p.coil_sensor_zero_a)
-            || negative
-            || (checkable
-                && !open
-                && !short
-                && (i_meas < p.coil_sensor_lo * e
-                    || (i_meas > p.coil_sensor_hi * e && i_meas < p.coil_full_scale_a)));
-        let heal = dt_s * p.coil_heal_ratio;
-        // Each accumulator grows while its condition holds and drains only while it is
-        // judged and does not hold.
-        for (acc, (cond, judged)) in self.coil_mismatch_s.iter_mut().zip([
-            (open, checkable),
-            (short, short_judged),
-            (sensor, no_drive || negative || checkable),
-        ]) {
-            if cond {
-                *acc = (*acc + dt_s).min(1e3);
-            } else if judged {
-                *acc = (*acc - heal).max(0.0);
-            }
-            if !acc.is_finite() {
-                *acc = 0.0;
-            }
+        if drive <= p.coil_no_drive_a {
+            // No drive: open and short are not judged. A reading above the decaying coil
+            // current is the sensor's (no coil fault makes current flow without voltage),
+            // judged once that current is small enough for the nominal L/R to predict it.
+            let no_drive = e <= p.coil_no_drive_check_a;
+            let sensor = (no_drive && i_meas > e + p.coil_sensor_zero_a) || negative;
+            accumulate(acc_sensor, sensor, no_drive || negative, dt_s, heal);
+        } else {
+            let open = checkable && i_meas < p.coil_open_ratio * e;
+            // Short: far more current than the drive can push through the coil (a path around
+            // it); judged while the drive and the expected current are at least
+            // `coil_short_min_a` (below it a sensor offset could pass for one), and not on a
+            // saturated reading that cannot prove the ratio.
+            let short_judged = e >= p.coil_short_min_a
+                && drive >= p.coil_short_min_a
+                && (i_meas < p.coil_full_scale_a || p.coil_full_scale_a > p.coil_short_ratio * e);
+            let short = short_judged && i_meas > p.coil_short_ratio * e;
+            // The sensor: a reading outside the band that the coil's resistance over
+            // temperature allows (above it only when not saturated: a saturated reading may
+            // be a short's).
+            let sensor = negative
+                || (checkable
+                    && !open
+                    && !short
+                    && (i_meas < p.coil_sensor_lo * e
+                        || (i_meas > p.coil_sensor_hi * e && i_meas < p.coil_full_scale_a)));
+            accumulate(acc_open, open, checkable, dt_s, heal);
+            accumulate(acc_short, short, short_judged, dt_s, heal);
+            accumulate(acc_sensor, sensor, checkable || negative, dt_s, heal);
         }
-        for (acc, kind) in self.coil_mismatch_s.iter().zip([
-            FaultKind::CoilOpen,
-            FaultKind::CoilShort,
-            FaultKind::CoilSensor,
-        ]) {
-            if *acc >= p.coil_fault_s {
-                det.insert(kind);
-            }
+        if *acc_open >= p.coil_fault_s {
+            det.insert(FaultKind::CoilOpen);
+        }
+        if *acc_short >= p.coil_fault_s {
+            det.insert(FaultKind::CoilShort);
+        }
+        if *acc_sensor >= p.coil_fault_s {
+            det.insert(FaultKind::CoilSensor);
         }
         // Test pulse: after `coil_test_idle_s` without an open check (and never into a coil
         // already found dead).
@@ -757,7 +768,15 @@ impl Supervisor {
 
     fn update_active(&mut self, det: FaultSet, t_us: u32, dt_s: f32) {
         let p = self.p;
+        // Only kinds detected now or still active change; on a healthy frame none does.
+        let touched = det.0 | self.active.0;
+        if touched == 0 {
+            return;
+        }
         for (i, k) in FaultKind::ALL.into_iter().enumerate() {
+            if touched & k.bit() == 0 {
+                continue;
+            }
             let (Some(rec), Some(absent), Some(recur)) = (
                 self.records.get_mut(i),
                 self.absent_s.get_mut(i),
