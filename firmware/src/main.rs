@@ -334,12 +334,7 @@ mod app {
 
         let samples = b.sensors.sample(PERIOD_TICKS);
         let status = margin.lock(|m| *m);
-        // The coil drive over the sampled period: the coil driver's own, or in PIL the one the
-        // host's frame reports (the host drives the plant's coil).
-        #[cfg(not(feature = "pil"))]
-        let drive = Some(b.coil.drive_a());
-        #[cfg(feature = "pil")]
-        let drive = b.sensors.coil_drive_a();
+        let drive = b.coil_drive_a();
         let out = health.lock(|h| supervised_step(cx.local.ctrl, &samples, drive, status, h));
         let pwm_ok = drive_coil(&mut b.coil, &out).is_ok();
 

@@ -57,13 +57,14 @@ pub struct BoardSensors {
     coil_drive_a: Option<f32>,
 }
 
-impl BoardSensors {
-    /// The coil drive over the period of the last frame, as the host reports it (this board's
-    /// PWM goes nowhere).
-    pub fn coil_drive_a(&self) -> Option<f32> {
+impl super::parts::CoilDriveSource for BoardSensors {
+    /// The drive of the host's last frame (this board's PWM goes nowhere).
+    fn coil_drive_a(&self, _own_a: f32) -> Option<f32> {
         self.coil_drive_a
     }
+}
 
+impl BoardSensors {
     /// Waits for the host's next frame (no virtual time passes) and returns it as the drivers'
     /// results; a `Finish` frame ends the run.
     pub fn sample(&mut self, _dt_ticks: u32) -> SampleSet {

@@ -848,6 +848,34 @@ pub fn csv(rows: &[CaseResult]) -> String {
     s
 }
 
+/// Largest peak wheel yaw after a fault, relative to the fault-free ASMC run at the same
+/// speed, that the target allows: 1.5.
+pub const PEAK_RATIO_TARGET: f64 = 1.5;
+
+/// The peak after each fault against the fault-free (`healthy`) ASMC run at the same speed,
+/// over the ASMC runs with a working actuator: (runs within [`PEAK_RATIO_TARGET`], runs, the
+/// worst run and its ratio). `None` without a fault-free run (e.g. `--only`).
+pub fn peak_ratios(rows: &[CaseResult]) -> Option<(usize, usize, &CaseResult, f64)> {
+    let asmc = || rows.iter().filter(|r| r.arm != "no-damper");
+    let reference = |v: f64| {
+        asmc()
+            .find(|r| !r.injected && r.speed_kmh == v)
+            .map(|r| r.peak_after_rad)
+    };
+    let mut within = 0;
+    let mut n = 0;
+    let mut worst: Option<(&CaseResult, f64)> = None;
+    for r in asmc().filter(|r| r.injected && r.handleable) {
+        let ratio = r.peak_after_rad / reference(r.speed_kmh)?;
+        n += 1;
+        within += usize::from(ratio <= PEAK_RATIO_TARGET);
+        if worst.is_none_or(|(_, w)| ratio > w) {
+            worst = Some((r, ratio));
+        }
+    }
+    worst.map(|(r, x)| (within, n, r, x))
+}
+
 /// The mode must not change in the last this many seconds of a run (a fault that recurs must
 /// not keep toggling the mode), s.
 pub const SETTLED_S: f64 = 1.5;
@@ -1033,6 +1061,14 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
     println!("{md}");
     crate::sim::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
     crate::sim::files::write_file(&a.out.join("faults.md"), &md)?;
+    if let Some((within, n, worst, ratio)) = peak_ratios(&rows) {
+        println!(
+            "peak yaw after the fault against the fault-free run at the same speed: within {PEAK_RATIO_TARGET}x in {within} of {n} ASMC runs with a working actuator; worst {ratio:.2}x ({} at {} km/h: {:.3} deg)",
+            worst.case,
+            worst.speed_kmh,
+            worst.peak_after_rad.to_degrees()
+        );
+    }
     let bad = check(&rows);
     if bad.is_empty() {
         println!("every injected fault detected (where expected); shimmy suppressed in every ASMC run with a working actuator; coil faults at 0 A fail-safe; every mode settled; every steady command carried by the coil");
