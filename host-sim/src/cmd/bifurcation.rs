@@ -351,7 +351,11 @@ pub fn orbits<M: SimModel<N>, const N: usize>(
         }
     }
     if hopf.is_empty() {
-        if let Some(r) = rows.iter().rev().find(|r| r.large.shimmies()) {
+        // Seeds: the highest grid speed where the large start shimmies, then the middle of
+        // that window (the highest can sit so close to a fold that Newton fails there).
+        let shimmy: Vec<&BifurcationRow> = rows.iter().filter(|r| r.large.shimmies()).collect();
+        let seeds = [shimmy.last(), shimmy.get(shimmy.len() / 2)];
+        for r in seeds.into_iter().flatten() {
             let seed = sh.continue_from_run(
                 kmh_to_mps(r.v_kmh),
                 o.large_deg.to_radians(),
@@ -359,7 +363,10 @@ pub fn orbits<M: SimModel<N>, const N: usize>(
                 &lim,
             );
             match seed {
-                Ok(Some(b)) => branches.push(b),
+                Ok(Some(b)) => {
+                    branches.push(b);
+                    break;
+                }
                 Ok(None) => {}
                 Err(e) => println!(
                     "periodic orbits: the branch from the run at {} km/h failed: {e}",
@@ -690,6 +697,12 @@ pub struct BifurcationArgs {
     /// above 0, at most 300.
     #[arg(long, default_value_t = 3.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(WINDOW_S))]
     pub window_s: f64,
+    /// Two-parameter chart over the damper's coil current: the study at each of these
+    /// currents, A (comma separated, each 0 to the vehicle's coil rating, at most 16); per
+    /// current the plant's Hopf points and the folds of cycles, into `chart.csv` and
+    /// `chart.png` instead of the one-current diagram.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = arg_range::current_a())]
+    pub chart_currents_a: Vec<f64>,
     /// Output directory.
     #[arg(long, default_value = "out/bifurcation")]
     pub out: PathBuf,
@@ -744,8 +757,9 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
                 return command_on(a, &v.model, &v.parts);
             };
             anyhow::ensure!(
-                a.damper_current_a.is_none(),
-                "--damper-current-a: the {} model has no MR damper configured; leave it out",
+                a.damper_current_a.is_none() && a.chart_currents_a.is_empty(),
+                "--damper-current-a, --chart-currents-a: the {} model has no MR damper \
+                 configured; leave them out",
                 registry::name_of::<M, N>()
             );
             dual_axle(t, a)
@@ -760,14 +774,28 @@ fn command_on<M: SimModel<N>, const N: usize>(
     model: &M,
     parts: &shimmy_core::vehicle::Vehicle,
 ) -> Result<()> {
-    let damper = match a.damper_current_a {
+    if !a.chart_currents_a.is_empty() {
+        anyhow::ensure!(
+            a.chart_currents_a.len() <= MAX_CHART_CURRENTS,
+            "--chart-currents-a: {} currents, at most {MAX_CHART_CURRENTS}",
+            a.chart_currents_a.len()
+        );
+        anyhow::ensure!(
+            a.damper_current_a.is_none(),
+            "--damper-current-a and --chart-currents-a: give one of them"
+        );
+        for &i in &a.chart_currents_a {
+            arg_range::check_current("--chart-currents-a", i, parts)?;
+        }
+    }
+    let damper = match a.damper_current_a.or(a.chart_currents_a.first().copied()) {
         None => DamperSetting::Off,
         Some(i) => DamperSetting::Mr {
             damper: parts.damper.spencer,
             current_a: arg_range::check_current("--damper-current-a", i, parts)?,
         },
     };
-    run(&BifurcationOptions {
+    let o = BifurcationOptions {
         params: *model,
         params_name: a.vehicle.clone(),
         damper,
@@ -779,7 +807,202 @@ fn command_on<M: SimModel<N>, const N: usize>(
         duration_s: a.duration_s,
         window_s: a.window_s,
         out: a.out.clone(),
-    })
+    };
+    if a.chart_currents_a.is_empty() {
+        run(&o)
+    } else {
+        run_chart(&o, &a.chart_currents_a)
+    }
+}
+
+/// Most currents of one `--chart-currents-a` chart.
+pub const MAX_CHART_CURRENTS: usize = 16;
+
+/// One coil current of the two-parameter chart.
+#[derive(Clone, Debug)]
+pub struct ChartRow {
+    /// Coil current, A.
+    pub current_a: f64,
+    /// The plant's Hopf points in the speed range: (speed km/h, onset, supercritical).
+    pub hopf: Vec<(f64, bool, Option<bool>)>,
+    /// The folds of cycles, km/h.
+    pub folds_kmh: Vec<f64>,
+    /// The first and last grid speed (km/h) where the straight run is stable and a stable
+    /// shimmy cycle coexists with it.
+    pub bistable_kmh: Option<(f64, f64)>,
+}
+
+/// The two-parameter chart over the MR damper's coil current: the study of `o` (its damper
+/// is the MR damper) at each of `currents_a`, A.
+pub fn chart<M: SimModel<N>, const N: usize>(
+    o: &BifurcationOptions<M, N>,
+    currents_a: &[f64],
+) -> Result<Vec<ChartRow>> {
+    let DamperSetting::Mr { damper, .. } = o.damper else {
+        anyhow::bail!("the chart over the coil current needs the MR damper");
+    };
+    currents_a
+        .iter()
+        .map(|&current_a| {
+            let oi = BifurcationOptions {
+                damper: DamperSetting::Mr { damper, current_a },
+                ..o.clone()
+            };
+            let rows = sweep(&oi, false)?;
+            let study = orbits(&oi, &rows)?;
+            let bi = study.bistable();
+            Ok(ChartRow {
+                current_a,
+                hopf: study
+                    .hopf
+                    .iter()
+                    .map(|h| (mps_to_kmh(h.speed_mps), h.onset, study.supercritical(h)))
+                    .collect(),
+                folds_kmh: study.folds_mps().into_iter().map(mps_to_kmh).collect(),
+                bistable_kmh: bi.first().zip(bi.last()).map(|(a, b)| (a.0, b.0)),
+            })
+        })
+        .collect()
+}
+
+/// `bifurcation --chart-currents-a`: the chart's table, `chart.csv` and `chart.png`.
+fn run_chart<M: SimModel<N>, const N: usize>(
+    o: &BifurcationOptions<M, N>,
+    currents_a: &[f64],
+) -> Result<()> {
+    let _out_dir = crate::sim::files::OutDir::claim(&o.out)?;
+    let t0 = std::time::Instant::now();
+    let rows = chart(o, currents_a)?;
+    println!(
+        "two-parameter chart: `{}`, MR damper coil current x speed ({}-{} km/h): the plant's \
+         Hopf points and the folds of cycles (continued periodic orbits), {:.1} s wall",
+        o.params_name,
+        o.v_min_kmh,
+        o.v_max_kmh,
+        t0.elapsed().as_secs_f64()
+    );
+    println!(
+        "{:>9} | {:<34} | {:<22} | bistable (grid) [km/h]",
+        "current A", "Hopf points [km/h]", "folds of cycles [km/h]"
+    );
+    let mut csv = Vec::new();
+    writeln!(csv, "current_a,kind,speed_kmh,hopf_type")?;
+    for r in &rows {
+        let hopf: Vec<String> = r
+            .hopf
+            .iter()
+            .map(|&(v, onset, sup)| {
+                format!(
+                    "{v:.2} {} {}",
+                    if onset { "on" } else { "off" },
+                    hopf_type(sup)
+                )
+            })
+            .collect();
+        let folds: Vec<String> = r.folds_kmh.iter().map(|v| format!("{v:.2}")).collect();
+        println!(
+            "{:>9.3} | {:<34} | {:<22} | {}",
+            r.current_a,
+            if hopf.is_empty() {
+                "-".into()
+            } else {
+                hopf.join(", ")
+            },
+            if folds.is_empty() {
+                "-".into()
+            } else {
+                folds.join(", ")
+            },
+            r.bistable_kmh
+                .map_or("-".into(), |(lo, hi)| format!("{lo:.1}-{hi:.1}"))
+        );
+        for &(v, onset, sup) in &r.hopf {
+            let kind = if onset { "hopf-onset" } else { "hopf-offset" };
+            writeln!(csv, "{},{kind},{v:.4},{}", r.current_a, hopf_type(sup))?;
+        }
+        for v in &r.folds_kmh {
+            writeln!(csv, "{},fold,{v:.4},", r.current_a)?;
+        }
+    }
+    let csv_path = o.out.join("chart.csv");
+    crate::sim::files::write_file(&csv_path, &csv)?;
+    let png = o.out.join("chart.png");
+    plot_chart(&png, &rows, o)?;
+    println!("wrote {} and {}", csv_path.display(), png.display());
+    Ok(())
+}
+
+fn hopf_type(supercritical: Option<bool>) -> &'static str {
+    match supercritical {
+        Some(true) => "supercritical",
+        Some(false) => "subcritical",
+        None => "undetermined",
+    }
+}
+
+/// The chart: speed across, coil current up; Hopf points as circles, folds of cycles as
+/// crosses.
+fn plot_chart<M: SimModel<N>, const N: usize>(
+    path: &Path,
+    rows: &[ChartRow],
+    o: &BifurcationOptions<M, N>,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let png = crate::sim::files::PendingFile::new(path);
+    let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let i_max = rows.iter().map(|r| r.current_a).fold(0.0f64, f64::max);
+    let pad = (0.05 * i_max).max(0.05);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "Hopf points and folds of cycles over speed and coil current (`{}`)",
+                o.params_name
+            ),
+            ("sans-serif", 22),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(o.v_min_kmh..o.v_max_kmh, -pad..i_max + pad)?;
+    chart
+        .configure_mesh()
+        .x_desc("speed V [km/h]")
+        .y_desc("MR damper coil current [A]")
+        .draw()?;
+    let folds: Vec<(f64, f64)> = rows
+        .iter()
+        .flat_map(|r| r.folds_kmh.iter().map(move |&v| (v, r.current_a)))
+        .collect();
+    chart
+        .draw_series(folds.iter().map(|&p| Cross::new(p, 6, RED.stroke_width(2))))?
+        .label("fold of cycles (a stable and an unstable cycle are born)")
+        .legend(|(x, y)| Cross::new((x + 10, y), 5, RED.stroke_width(2)));
+    let hopf: Vec<(f64, f64)> = rows
+        .iter()
+        .flat_map(|r| r.hopf.iter().map(move |h| (h.0, r.current_a)))
+        .collect();
+    chart
+        .draw_series(hopf.iter().map(|&p| Circle::new(p, 5, BLUE.filled())))?
+        .label("Hopf point of the straight run")
+        .legend(|(x, y)| Circle::new((x + 10, y), 4, BLUE.filled()));
+    // the bistable band per current (grid speeds)
+    let band = BLACK.mix(0.5).stroke_width(3);
+    chart
+        .draw_series(rows.iter().filter_map(|r| {
+            r.bistable_kmh
+                .map(|(lo, hi)| PathElement::new(vec![(lo, r.current_a), (hi, r.current_a)], band))
+        }))?
+        .label("bistable: straight run and shimmy cycle both stable (grid speeds)")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], band));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    png.commit(root.present())?;
+    Ok(())
 }
 
 /// `bifurcation` on the dual-axle truck (`docs/dual-axle-truck.md`): friction off and on from
@@ -1135,6 +1358,7 @@ mod tests {
             large_deg: 3.0,
             duration_s: 4.0,
             window_s: 1.0,
+            chart_currents_a: Vec::new(),
             out: out.clone(),
             friction_eps_radps: 0.01,
             no_directions: true,
@@ -1276,6 +1500,54 @@ mod tests {
         assert!((s_star - 1.0).abs() < 0.01, "{s_star}");
         assert!((s_star * o.amp_rad / cycle - 1.0).abs() < 0.05);
         assert!(kick > cycle && kick < 1.1 * cycle, "{kick} vs {cycle}");
+    }
+
+    /// The two-parameter chart over the coil current: more current closes the bistable window
+    /// from both ends (the folds move inwards), and at each current the folds bracket the speeds
+    /// where the direct simulation's large start ends in shimmy (an independent check of the
+    /// continuation: time-domain runs against shooting).
+    #[test]
+    fn the_chart_folds_close_in_with_current_and_bracket_the_large_starts() {
+        let o = BifurcationOptions {
+            params: PlantParams::nominal(),
+            params_name: "nominal".into(),
+            damper: DamperSetting::reference_mr(0.0),
+            v_min_kmh: 30.0,
+            v_max_kmh: 80.0,
+            step_kmh: 2.5,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 40.0,
+            window_s: 3.0,
+            out: PathBuf::new(),
+        };
+        let rows = chart(&o, &[0.0, 0.3]).unwrap();
+        let folds: Vec<(f64, f64)> = rows
+            .iter()
+            .map(|r| {
+                assert_eq!(r.folds_kmh.len(), 2, "{r:?}");
+                (r.folds_kmh[0], r.folds_kmh[1])
+            })
+            .collect();
+        assert!(
+            folds[1].0 > folds[0].0 + 2.0 && folds[1].1 < folds[0].1 - 2.0,
+            "{folds:?}"
+        );
+        for (r, &(lo, hi)) in rows.iter().zip(&folds) {
+            let oi = BifurcationOptions {
+                damper: DamperSetting::reference_mr(r.current_a),
+                ..o.clone()
+            };
+            for s in sweep(&oi, false).unwrap() {
+                let inside = s.v_kmh > lo + 0.5 && s.v_kmh < hi - 0.5;
+                let outside = s.v_kmh < lo - 0.5 || s.v_kmh > hi + 0.5;
+                assert!(
+                    !(inside && !s.large.shimmies()) && !(outside && s.large.shimmies()),
+                    "{} A, folds {lo:.2}-{hi:.2} km/h: {s:?}",
+                    r.current_a
+                );
+            }
+        }
     }
 
     /// The fold of the car's 0 A branch is where the old two-simulation sweep's large start
