@@ -703,6 +703,15 @@ pub struct BifurcationArgs {
     /// `chart.png` instead of the one-current diagram.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = arg_range::current_a())]
     pub chart_currents_a: Vec<f64>,
+    /// Two-parameter chart over a vehicle parameter (a field name, see `shimmy-sim params`):
+    /// the study at each of `--chart-factors` times its value, with the damper of
+    /// `--damper-current-a` (none: no damper, so the chart shows the Hopf curve).
+    #[arg(long, requires = "chart_factors")]
+    pub chart_param: Option<String>,
+    /// The factors on `--chart-param`'s value (comma separated, each above 0 and at most 10,
+    /// at most 16).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "chart_param", value_parser = arg_range::f64_in(CHART_FACTOR))]
+    pub chart_factors: Vec<f64>,
     /// Output directory.
     #[arg(long, default_value = "out/bifurcation")]
     pub out: PathBuf,
@@ -774,19 +783,48 @@ fn command_on<M: SimModel<N>, const N: usize>(
     model: &M,
     parts: &shimmy_core::vehicle::Vehicle,
 ) -> Result<()> {
-    if !a.chart_currents_a.is_empty() {
-        anyhow::ensure!(
-            a.chart_currents_a.len() <= MAX_CHART_CURRENTS,
-            "--chart-currents-a: {} currents, at most {MAX_CHART_CURRENTS}",
-            a.chart_currents_a.len()
-        );
-        anyhow::ensure!(
-            a.damper_current_a.is_none(),
-            "--damper-current-a and --chart-currents-a: give one of them"
-        );
-        for &i in &a.chart_currents_a {
-            arg_range::check_current("--chart-currents-a", i, parts)?;
+    let axis = match (&a.chart_param, a.chart_currents_a.is_empty()) {
+        (Some(_), false) => anyhow::bail!("--chart-param and --chart-currents-a: give one of them"),
+        (None, true) => None,
+        (None, false) => {
+            anyhow::ensure!(
+                a.damper_current_a.is_none(),
+                "--damper-current-a and --chart-currents-a: give one of them"
+            );
+            for &i in &a.chart_currents_a {
+                arg_range::check_current("--chart-currents-a", i, parts)?;
+            }
+            Some(ChartAxis::CurrentA(a.chart_currents_a.clone()))
         }
+        (Some(name), true) => {
+            let base = model.param(name).with_context(|| {
+                format!(
+                    "--chart-param {name:?}: not a parameter of this model; it has: {}",
+                    M::params()
+                        .iter()
+                        .map(|p| p.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            })?;
+            for &f in &a.chart_factors {
+                CHART_FACTOR.check("--chart-factors", f)?;
+                model
+                    .with_param(name, base * f)
+                    .context("--chart-factors")?;
+            }
+            Some(ChartAxis::Param {
+                name: name.clone(),
+                factors: a.chart_factors.clone(),
+            })
+        }
+    };
+    if let Some(axis) = &axis {
+        anyhow::ensure!(
+            axis.len() <= MAX_CHART_VALUES,
+            "the chart: {} values, at most {MAX_CHART_VALUES}",
+            axis.len()
+        );
     }
     let damper = match a.damper_current_a.or(a.chart_currents_a.first().copied()) {
         None => DamperSetting::Off,
@@ -808,21 +846,54 @@ fn command_on<M: SimModel<N>, const N: usize>(
         window_s: a.window_s,
         out: a.out.clone(),
     };
-    if a.chart_currents_a.is_empty() {
-        run(&o)
-    } else {
-        run_chart(&o, &a.chart_currents_a)
+    match axis {
+        None => run(&o),
+        Some(axis) => run_chart(&o, &axis),
     }
 }
 
-/// Most currents of one `--chart-currents-a` chart.
-pub const MAX_CHART_CURRENTS: usize = 16;
+/// A factor of `--chart-factors`: above 0, at most 10.
+pub const CHART_FACTOR: Range = Range::above(0.0, 10.0, "");
 
-/// One coil current of the two-parameter chart.
+/// Most values of one chart axis.
+pub const MAX_CHART_VALUES: usize = 16;
+
+/// The second axis of a two-parameter chart.
+#[derive(Clone, Debug)]
+pub enum ChartAxis {
+    /// The MR damper's coil current, A.
+    CurrentA(Vec<f64>),
+    /// The vehicle parameter `name` at these factors on its value.
+    Param {
+        /// Field name ([`SimModel::params`]).
+        name: String,
+        /// Factors on the vehicle's value.
+        factors: Vec<f64>,
+    },
+}
+
+impl ChartAxis {
+    fn len(&self) -> usize {
+        match self {
+            ChartAxis::CurrentA(v) => v.len(),
+            ChartAxis::Param { factors, .. } => factors.len(),
+        }
+    }
+
+    /// The axis label.
+    pub fn label(&self) -> String {
+        match self {
+            ChartAxis::CurrentA(_) => "MR damper coil current [A]".into(),
+            ChartAxis::Param { name, .. } => name.clone(),
+        }
+    }
+}
+
+/// One value of the chart's second axis.
 #[derive(Clone, Debug)]
 pub struct ChartRow {
-    /// Coil current, A.
-    pub current_a: f64,
+    /// The axis value: the coil current (A) or the parameter's value.
+    pub value: f64,
     /// The plant's Hopf points in the speed range: (speed km/h, onset, supercritical).
     pub hopf: Vec<(f64, bool, Option<bool>)>,
     /// The folds of cycles, km/h.
@@ -832,27 +903,59 @@ pub struct ChartRow {
     pub bistable_kmh: Option<(f64, f64)>,
 }
 
-/// The two-parameter chart over the MR damper's coil current: the study of `o` (its damper
-/// is the MR damper) at each of `currents_a`, A.
+/// The two-parameter chart: the study of `o` at each value of `axis` (the coil current needs
+/// `o`'s damper to be the MR damper).
 pub fn chart<M: SimModel<N>, const N: usize>(
     o: &BifurcationOptions<M, N>,
-    currents_a: &[f64],
+    axis: &ChartAxis,
 ) -> Result<Vec<ChartRow>> {
-    let DamperSetting::Mr { damper, .. } = o.damper else {
-        anyhow::bail!("the chart over the coil current needs the MR damper");
-    };
-    currents_a
-        .iter()
-        .map(|&current_a| {
-            let oi = BifurcationOptions {
-                damper: DamperSetting::Mr { damper, current_a },
-                ..o.clone()
+    let studies: Vec<(f64, BifurcationOptions<M, N>)> = match axis {
+        ChartAxis::CurrentA(currents) => {
+            let DamperSetting::Mr { damper, .. } = o.damper else {
+                anyhow::bail!("the chart over the coil current needs the MR damper");
             };
+            currents
+                .iter()
+                .map(|&current_a| {
+                    let damper = DamperSetting::Mr { damper, current_a };
+                    (
+                        current_a,
+                        BifurcationOptions {
+                            damper,
+                            ..o.clone()
+                        },
+                    )
+                })
+                .collect()
+        }
+        ChartAxis::Param { name, factors } => {
+            let base = o
+                .params
+                .param(name)
+                .with_context(|| format!("{name}: not a parameter of this model"))?;
+            factors
+                .iter()
+                .map(|&f| {
+                    let params = o.params.with_param(name, base * f)?;
+                    Ok((
+                        base * f,
+                        BifurcationOptions {
+                            params,
+                            ..o.clone()
+                        },
+                    ))
+                })
+                .collect::<Result<_>>()?
+        }
+    };
+    studies
+        .into_iter()
+        .map(|(value, oi)| {
             let rows = sweep(&oi, false)?;
             let study = orbits(&oi, &rows)?;
             let bi = study.bistable();
             Ok(ChartRow {
-                current_a,
+                value,
                 hopf: study
                     .hopf
                     .iter()
@@ -865,28 +968,35 @@ pub fn chart<M: SimModel<N>, const N: usize>(
         .collect()
 }
 
-/// `bifurcation --chart-currents-a`: the chart's table, `chart.csv` and `chart.png`.
+/// `bifurcation --chart-currents-a` / `--chart-param`: the chart's table, `chart.csv` and
+/// `chart.png`.
 fn run_chart<M: SimModel<N>, const N: usize>(
     o: &BifurcationOptions<M, N>,
-    currents_a: &[f64],
+    axis: &ChartAxis,
 ) -> Result<()> {
     let _out_dir = crate::sim::files::OutDir::claim(&o.out)?;
     let t0 = std::time::Instant::now();
-    let rows = chart(o, currents_a)?;
+    let rows = chart(o, axis)?;
+    let damper = match (axis, o.damper) {
+        (ChartAxis::CurrentA(_), _) => "MR damper".to_string(),
+        (_, DamperSetting::Off) => "no damper".to_string(),
+        (_, DamperSetting::Mr { current_a, .. }) => format!("MR damper at {current_a} A"),
+    };
     println!(
-        "two-parameter chart: `{}`, MR damper coil current x speed ({}-{} km/h): the plant's \
-         Hopf points and the folds of cycles (continued periodic orbits), {:.1} s wall",
+        "two-parameter chart: `{}`, {damper}, {} x speed ({}-{} km/h): the plant's Hopf points \
+         and the folds of cycles (continued periodic orbits), {:.1} s wall",
         o.params_name,
+        axis.label(),
         o.v_min_kmh,
         o.v_max_kmh,
         t0.elapsed().as_secs_f64()
     );
     println!(
-        "{:>9} | {:<34} | {:<22} | bistable (grid) [km/h]",
-        "current A", "Hopf points [km/h]", "folds of cycles [km/h]"
+        "{:>12} | {:<48} | {:<22} | bistable (grid) [km/h]",
+        "value", "Hopf points [km/h]", "folds of cycles [km/h]"
     );
     let mut csv = Vec::new();
-    writeln!(csv, "current_a,kind,speed_kmh,hopf_type")?;
+    writeln!(csv, "value,kind,speed_kmh,hopf_type")?;
     for r in &rows {
         let hopf: Vec<String> = r
             .hopf
@@ -901,8 +1011,10 @@ fn run_chart<M: SimModel<N>, const N: usize>(
             .collect();
         let folds: Vec<String> = r.folds_kmh.iter().map(|v| format!("{v:.2}")).collect();
         println!(
-            "{:>9.3} | {:<34} | {:<22} | {}",
-            r.current_a,
+            "{:>12} | {:<48} | {:<22} | {}",
+            format!("{:.6}", r.value)
+                .trim_end_matches('0')
+                .trim_end_matches('.'),
             if hopf.is_empty() {
                 "-".into()
             } else {
@@ -918,16 +1030,16 @@ fn run_chart<M: SimModel<N>, const N: usize>(
         );
         for &(v, onset, sup) in &r.hopf {
             let kind = if onset { "hopf-onset" } else { "hopf-offset" };
-            writeln!(csv, "{},{kind},{v:.4},{}", r.current_a, hopf_type(sup))?;
+            writeln!(csv, "{},{kind},{v:.4},{}", r.value, hopf_type(sup))?;
         }
         for v in &r.folds_kmh {
-            writeln!(csv, "{},fold,{v:.4},", r.current_a)?;
+            writeln!(csv, "{},fold,{v:.4},", r.value)?;
         }
     }
     let csv_path = o.out.join("chart.csv");
     crate::sim::files::write_file(&csv_path, &csv)?;
     let png = o.out.join("chart.png");
-    plot_chart(&png, &rows, o)?;
+    plot_chart(&png, &rows, o, &axis.label())?;
     println!("wrote {} and {}", csv_path.display(), png.display());
     Ok(())
 }
@@ -940,23 +1052,25 @@ fn hopf_type(supercritical: Option<bool>) -> &'static str {
     }
 }
 
-/// The chart: speed across, coil current up; Hopf points as circles, folds of cycles as
-/// crosses.
+/// The chart: speed across, the second axis (`y_label`) up; Hopf points as circles, folds of
+/// cycles as crosses, bistable grid speeds as bars.
 fn plot_chart<M: SimModel<N>, const N: usize>(
     path: &Path,
     rows: &[ChartRow],
     o: &BifurcationOptions<M, N>,
+    y_label: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
     let png = crate::sim::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
-    let i_max = rows.iter().map(|r| r.current_a).fold(0.0f64, f64::max);
-    let pad = (0.05 * i_max).max(0.05);
+    let y_max = rows.iter().map(|r| r.value).fold(f64::MIN, f64::max);
+    let y_min = rows.iter().map(|r| r.value).fold(f64::MAX, f64::min);
+    let pad = (0.05 * (y_max - y_min)).max(0.05 * y_max.abs()).max(1e-9);
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
-                "Hopf points and folds of cycles over speed and coil current (`{}`)",
+                "Hopf points and folds of cycles over speed and {y_label} (`{}`)",
                 o.params_name
             ),
             ("sans-serif", 22),
@@ -964,15 +1078,15 @@ fn plot_chart<M: SimModel<N>, const N: usize>(
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
-        .build_cartesian_2d(o.v_min_kmh..o.v_max_kmh, -pad..i_max + pad)?;
+        .build_cartesian_2d(o.v_min_kmh..o.v_max_kmh, y_min - pad..y_max + pad)?;
     chart
         .configure_mesh()
         .x_desc("speed V [km/h]")
-        .y_desc("MR damper coil current [A]")
+        .y_desc(y_label)
         .draw()?;
     let folds: Vec<(f64, f64)> = rows
         .iter()
-        .flat_map(|r| r.folds_kmh.iter().map(move |&v| (v, r.current_a)))
+        .flat_map(|r| r.folds_kmh.iter().map(move |&v| (v, r.value)))
         .collect();
     chart
         .draw_series(folds.iter().map(|&p| Cross::new(p, 6, RED.stroke_width(2))))?
@@ -980,7 +1094,7 @@ fn plot_chart<M: SimModel<N>, const N: usize>(
         .legend(|(x, y)| Cross::new((x + 10, y), 5, RED.stroke_width(2)));
     let hopf: Vec<(f64, f64)> = rows
         .iter()
-        .flat_map(|r| r.hopf.iter().map(move |h| (h.0, r.current_a)))
+        .flat_map(|r| r.hopf.iter().map(move |h| (h.0, r.value)))
         .collect();
     chart
         .draw_series(hopf.iter().map(|&p| Circle::new(p, 5, BLUE.filled())))?
@@ -991,7 +1105,7 @@ fn plot_chart<M: SimModel<N>, const N: usize>(
     chart
         .draw_series(rows.iter().filter_map(|r| {
             r.bistable_kmh
-                .map(|(lo, hi)| PathElement::new(vec![(lo, r.current_a), (hi, r.current_a)], band))
+                .map(|(lo, hi)| PathElement::new(vec![(lo, r.value), (hi, r.value)], band))
         }))?
         .label("bistable: straight run and shimmy cycle both stable (grid speeds)")
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], band));
@@ -1359,6 +1473,8 @@ mod tests {
             duration_s: 4.0,
             window_s: 1.0,
             chart_currents_a: Vec::new(),
+            chart_param: None,
+            chart_factors: Vec::new(),
             out: out.clone(),
             friction_eps_radps: 0.01,
             no_directions: true,
@@ -1521,7 +1637,7 @@ mod tests {
             window_s: 3.0,
             out: PathBuf::new(),
         };
-        let rows = chart(&o, &[0.0, 0.3]).unwrap();
+        let rows = chart(&o, &ChartAxis::CurrentA(vec![0.0, 0.3])).unwrap();
         let folds: Vec<(f64, f64)> = rows
             .iter()
             .map(|r| {
@@ -1535,7 +1651,7 @@ mod tests {
         );
         for (r, &(lo, hi)) in rows.iter().zip(&folds) {
             let oi = BifurcationOptions {
-                damper: DamperSetting::reference_mr(r.current_a),
+                damper: DamperSetting::reference_mr(r.value),
                 ..o.clone()
             };
             for s in sweep(&oi, false).unwrap() {
@@ -1544,10 +1660,58 @@ mod tests {
                 assert!(
                     !(inside && !s.large.shimmies()) && !(outside && s.large.shimmies()),
                     "{} A, folds {lo:.2}-{hi:.2} km/h: {s:?}",
-                    r.current_a
+                    r.value
                 );
             }
         }
+    }
+
+    /// The chart over a vehicle parameter without damper is the Hopf curve: at each tyre
+    /// cornering stiffness the onset and offset agree with the linear model's crossings
+    /// (`stability::hopf_crossings` on the eigenvalues of A(V), against the shooting's Hopf
+    /// points on the nonlinear plant's Jacobian), and a stiffer tyre widens the window.
+    #[test]
+    fn the_chart_over_a_parameter_is_the_hopf_curve() {
+        use shimmy_core::stability::{hopf_crossings, CrossingKind};
+        let o = BifurcationOptions {
+            params: PlantParams::nominal(),
+            params_name: "nominal".into(),
+            damper: DamperSetting::Off,
+            v_min_kmh: 5.0,
+            v_max_kmh: 130.0,
+            step_kmh: 5.0,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 20.0,
+            window_s: 2.0,
+            out: PathBuf::new(),
+        };
+        let axis = ChartAxis::Param {
+            name: "c_a".into(),
+            factors: vec![0.8, 1.2],
+        };
+        let rows = chart(&o, &axis).unwrap();
+        let mut windows = Vec::new();
+        for r in &rows {
+            let p = PlantParams::nominal().with_param("c_a", r.value).unwrap();
+            let c = hopf_crossings(&p, 0.0, 1.0, 70.0, 0.25, 1e-4).unwrap();
+            let on = c.iter().find(|x| x.kind == CrossingKind::Onset).unwrap();
+            let off = c
+                .iter()
+                .find(|x| x.kind != CrossingKind::Onset && x.speed_mps > on.speed_mps)
+                .unwrap();
+            let hopf: Vec<f64> = r.hopf.iter().map(|h| h.0).collect();
+            assert_eq!(hopf.len(), 2, "{r:?}");
+            for (got, want) in hopf.iter().zip([on.speed_mps, off.speed_mps]) {
+                assert!((got - mps_to_kmh(want)).abs() < 0.05, "{r:?}: {want} m/s");
+            }
+            assert!(
+                r.hopf.iter().all(|h| h.2 == Some(true)),
+                "supercritical: {r:?}"
+            );
+            windows.push(hopf[1] - hopf[0]);
+        }
+        assert!(windows[1] > windows[0] + 10.0, "{windows:?}");
     }
 
     /// The fold of the car's 0 A branch is where the old two-simulation sweep's large start
