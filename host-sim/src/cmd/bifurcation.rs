@@ -5,7 +5,7 @@
 //! ([`crate::model::periodic_orbit`]) give the Hopf type, the folds of cycles, the bistable
 //! window and the disturbance margin in it; table, CSV and PNG.
 
-use crate::model::family::SimModel;
+use crate::model::family::{param_names, SimModel};
 use crate::model::periodic_orbit::{Branch, HopfPoint, Limits, Shooting, Start};
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::sim::arg_range::{self, Range};
@@ -800,11 +800,7 @@ fn command_on<M: SimModel<N>, const N: usize>(
             let base = model.param(name).with_context(|| {
                 format!(
                     "--chart-param {name:?}: not a parameter of this model; it has: {}",
-                    M::params()
-                        .iter()
-                        .map(|p| p.name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    param_names::<M, N>()
                 )
             })?;
             for &f in &a.chart_factors {
