@@ -776,10 +776,15 @@ struct CoilRun {
 /// 0 A) and from 1.5 s on a 7 deg shimmy signal (the command mostly at 2 A), the coil behind
 /// the board's current
 /// loop (core's `CoilDriver`, closed on the trusted reading, open loop otherwise, off when the
-/// damper is unavailable), a nominal coil (L/R = 1/190 s). From 0.5 s the shunt reads
-/// `shunt(coil current, drive)`; `short`: the current bypasses the coil (reading = 5 x drive,
-/// no lag, the coil carries nothing).
-fn coil_run(p: SupervisorParams, shunt: impl Fn(f32, f32) -> f32, short: bool) -> CoilRun {
+/// damper is unavailable), a coil of `r_factor` x the nominal resistance (L/R = 1/190 s at
+/// the nominal one). From 0.5 s the shunt reads `shunt(coil current, drive)`; `short`: the
+/// current bypasses the coil (reading = 5 x drive, no lag, the coil carries nothing).
+fn coil_run(
+    p: SupervisorParams,
+    shunt: impl Fn(f32, f32) -> f32,
+    short: bool,
+    r_factor: f32,
+) -> CoilRun {
     use crate::control::actuator::{CoilDriver, CoilParams};
     let mut s = safe_with(p);
     let mut drv = CoilDriver::new(Duty(0), CoilParams::DEFAULT);
@@ -792,7 +797,7 @@ fn coil_run(p: SupervisorParams, shunt: impl Fn(f32, f32) -> f32, short: bool) -
         coil = if faulty && short {
             0.0
         } else {
-            lagged_coil(&mut coil, drive, 1.0 / 190.0)
+            lagged_coil(&mut coil, drive / r_factor, 1.0 / (190.0 * r_factor))
         };
         let mut f = frame(k, 20.0);
         if k < 1500 {
@@ -813,7 +818,7 @@ fn coil_run(p: SupervisorParams, shunt: impl Fn(f32, f32) -> f32, short: bool) -
         }
         if k >= 2500 && out.current_cmd_a >= 0.5 {
             // The coil settles towards the steady current of this period's drive.
-            sum += drv.drive_a() / out.current_cmd_a;
+            sum += drv.drive_a() / r_factor / out.current_cmd_a;
             n += 1;
         }
     }
@@ -844,7 +849,7 @@ fn a_lying_current_sensor_is_a_sensor_fault_not_a_coil_fault() {
         ("gain x0.4", |i, _| 0.4 * i, 0.4),
     ];
     for (name, shunt, err) in cases {
-        let r = coil_run(SupervisorParams::default(), shunt, false);
+        let r = coil_run(SupervisorParams::default(), shunt, false, 1.0);
 
         assert!(
             r.faults.contains(FaultKind::CoilSensor),
@@ -862,7 +867,7 @@ fn a_lying_current_sensor_is_a_sensor_fault_not_a_coil_fault() {
             "{name}: {}",
             r.delivered_ratio
         );
-        let b = coil_run(blind, shunt, false);
+        let b = coil_run(blind, shunt, false, 1.0);
         std::eprintln!(
             "{name}: coil-sensor, {:.3} x the command delivered; blind: {:.3} x",
             r.delivered_ratio,
@@ -882,16 +887,33 @@ fn a_lying_current_sensor_is_a_sensor_fault_not_a_coil_fault() {
 /// plausible) is found through the drive: the coil is off, the damper unavailable.
 #[test]
 fn a_short_behind_the_current_loop_is_found_through_the_drive() {
-    let r = coil_run(SupervisorParams::default(), |i, _| i, false);
+    let r = coil_run(SupervisorParams::default(), |i, _| i, false, 1.0);
     assert!(r.faults.is_empty(), "healthy: {:?}", r.faults);
     assert!(
         (r.delivered_ratio - 1.0).abs() < 0.05,
         "healthy: {}",
         r.delivered_ratio
     );
-    let r = coil_run(SupervisorParams::default(), |i, _| i, true);
+    let r = coil_run(SupervisorParams::default(), |i, _| i, true, 1.0);
     assert!(r.faults.contains(FaultKind::CoilShort), "{:?}", r.faults);
     assert!(!r.damper_available);
+}
+
+/// A healthy coil hot (R x1.5, 150 C) or cold (R x0.76, -40 C) behind the current loop, the
+/// drive in the frame: the reading sits at 0.67 / 1.31 x what the drive pushes through the
+/// nominal coil, inside the sensor's band, so nothing is raised and the loop delivers the
+/// command.
+#[test]
+fn a_hot_or_cold_coil_is_no_sensor_fault() {
+    for r_factor in [1.5f32, 0.76] {
+        let r = coil_run(SupervisorParams::default(), |i, _| i, false, r_factor);
+        assert!(r.faults.is_empty(), "R x{r_factor}: {:?}", r.faults);
+        assert!(
+            (r.delivered_ratio - 1.0).abs() < 0.05,
+            "R x{r_factor}: {}",
+            r.delivered_ratio
+        );
+    }
 }
 
 /// Without a drive in the frame (an ideal current source) the drive is the command; a reading
