@@ -3,19 +3,23 @@
 //! record, and watches its live margin report; over a serial port (`--serial`), a TCP socket
 //! (`--tcp`, QEMU) or the in-process simulator device (`--sim`, no board needed).
 
+use crate::model::registry::{
+    self, for_each_image_model, image_model_of_schema, image_models, Registered, StudyTypeVisitor,
+    StudyVisitor,
+};
+use crate::model::study::StudyModel;
 use crate::sim::device_link::{
     read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, Port, SerialPort,
     TcpPort,
 };
 use crate::sim::sim_device::SimDevice;
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::vehicle_file;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
 use shimmy_core::vehicle::{
     encode_record, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
-use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
 use shimmy_link::wire::{cause_name, fault_name, level_name, FaultReport, LogEntry};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -114,16 +118,28 @@ pub fn command(a: &DeviceArgs) -> Result<()> {
         (None, None, true) => {
             let v = vehicle_file::load_model(&a.vehicle)?;
             eprintln!("simulating the drive of the in-process device ...");
-            match v {
-                ModelVehicle::Car(v) => run(SimDevice::new(&v)?, ready, &a.action),
-                ModelVehicle::Truck(t) => run(SimDevice::truck(&t)?, ready, &a.action),
-                other => bail!(
-                    "--vehicle {}: a {} model; the in-process device stores a car ({}) or a \
-                     truck ({}) vehicle",
+            struct Sim<'a>(Duration, &'a DeviceAction);
+            impl StudyVisitor for Sim<'_> {
+                type Output = Result<()>;
+                fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(
+                    self,
+                    v: M::File,
+                ) -> Result<()> {
+                    run(
+                        SimDevice::new(&registry::family::<M, N>(v)?)?,
+                        self.0,
+                        self.1,
+                    )
+                }
+            }
+            match registry::with_image_model(v, Sim(ready, &a.action)) {
+                Ok(r) => r,
+                Err(other) => bail!(
+                    "--vehicle {}: a {} model; the in-process device stores a vehicle of the {} \
+                     models",
                     a.vehicle,
                     other.model_name(),
-                    Vehicle::MODEL,
-                    TruckVehicle::MODEL
+                    image_models()
                 ),
             }
         }
@@ -159,17 +175,26 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         DeviceAction::Config {
             action: ConfigAction::Set { file },
         } => {
-            let (now, fields) = match vehicle_file::load_model(file)? {
-                ModelVehicle::Car(v) => store_and_read_back(&mut c, &info, &v)?,
-                ModelVehicle::Truck(t) => {
-                    store_and_read_back(&mut c, &info, &TruckVehicle::from(t))?
+            struct Store<'a, P: Port>(&'a mut Client<P>, &'a DeviceInfo);
+            impl<P: Port> StudyVisitor for Store<'_, P> {
+                type Output = Result<(bool, usize)>;
+                fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(
+                    self,
+                    v: M::File,
+                ) -> Result<(bool, usize)> {
+                    let board = M::board_vehicle(&registry::family::<M, N>(v)?);
+                    store_and_read_back(self.0, self.1, &board)
                 }
-                other => bail!(
-                    "vehicle `{file}` is a {} model; a device stores a car ({}) or a truck ({}) \
-                     vehicle",
+            }
+            let (now, fields) = match registry::with_image_model(
+                vehicle_file::load_model(file)?,
+                Store(&mut c, &info),
+            ) {
+                Ok(r) => r?,
+                Err(other) => bail!(
+                    "vehicle `{file}` is a {} model; a device stores a vehicle of the {} models",
                     other.model_name(),
-                    Vehicle::MODEL,
-                    TruckVehicle::MODEL
+                    image_models()
                 ),
             };
             println!(
@@ -210,17 +235,28 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
     Ok(())
 }
 
-/// The device's record as a vehicle file of its model (the car's or the truck's).
+/// The device's record as a vehicle file of its model (of a model with a firmware image).
 fn record_toml(rec: &[u8]) -> Result<String> {
+    struct Read<'a>(&'a [u8], u32, Option<Result<String>>);
+    impl StudyTypeVisitor for Read<'_> {
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+            if self.2.is_none() && record_schema_of::<M::Board>() == self.1 {
+                self.2 =
+                    Some(read_record::<M::Board>(self.0).map(|b| {
+                        vehicle_file::model_to_toml::<M, N>(&M::file_of(&M::from_board(&b)))
+                    }));
+            }
+        }
+    }
     let schema = rec
         .get(..4)
         .and_then(|b| <[u8; 4]>::try_from(b).ok())
         .map(u32::from_le_bytes);
-    if schema.and_then(record_model) == Some(TruckVehicle::MODEL) {
-        let t: TruckVehicle = read_record(rec)?;
-        return Ok(vehicle_file::truck_to_toml(&t.into()));
-    }
-    Ok(vehicle_file::to_toml(&read_record::<Vehicle>(rec)?))
+    let mut read = Read(rec, schema.unwrap_or(0), None);
+    for_each_image_model(&mut read);
+    // a record of no image's schema: the car's reader names what is wrong with it
+    read.2
+        .unwrap_or_else(|| Ok(vehicle_file::to_toml(&read_record::<Vehicle>(rec)?)))
 }
 
 /// Stores `v` on the device and reads it back: it must hold exactly the record sent. Refused
@@ -273,7 +309,7 @@ fn info_text(i: &DeviceInfo) -> String {
         i.core,
         i.protocol,
         i.vehicle_schema,
-        match record_model(i.vehicle_schema) {
+        match image_model_of_schema(i.vehicle_schema) {
             Some(m) => format!(" ({m} vehicles, a record this tool reads)"),
             None => " (NOT one this tool reads: configurations cannot be exchanged)".into(),
         },

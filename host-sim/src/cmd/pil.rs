@@ -13,12 +13,10 @@ use crate::sim::pil::{
     check_firmware_matches, compare, costs, PilFirmware, PilModel, SilFirmware, TaskCost,
 };
 use crate::sim::scenario::{self, ScenarioSpec};
-use crate::sim::scenario_file;
+use crate::sim::scenario_file::{self, ImageScenarioVisitor, ScenarioModel};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::vehicle::record_schema_of;
-use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -59,13 +57,15 @@ fn cost_table(name: &str, t: &TaskCost, sim_s: f64) -> String {
 
 /// The command.
 pub fn command(a: &PilArgs) -> Result<()> {
-    let s = scenario_file::load_any(&a.scenario)?;
-    let s = match s.into_spec::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>() {
-        Ok(spec) => return run_spec(a, spec),
-        Err(s) => s,
-    };
-    match s.into_spec::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>() {
-        Ok(spec) => run_spec(a, spec),
+    struct Run<'a>(&'a PilArgs);
+    impl ImageScenarioVisitor for Run<'_> {
+        type Output = Result<()>;
+        fn visit<M: ScenarioModel<N>, const N: usize>(self, s: ScenarioSpec<M, N>) -> Result<()> {
+            run_spec(self.0, s)
+        }
+    }
+    match scenario_file::load_any(&a.scenario)?.visit_image(Run(a)) {
+        Ok(r) => r,
         Err(s) => bail!(
             "scenario file {}: its vehicle is a {}; the firmware is built for the {} models",
             a.scenario.display(),
@@ -90,7 +90,7 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
     let _out_dir = crate::sim::files::OutDir::claim(&out)?;
-    let elf = a.elf.clone().unwrap_or_else(|| PathBuf::from(M::ELF));
+    let elf = a.elf.clone().unwrap_or_else(|| PathBuf::from(M::PIL_ELF));
     if !elf.exists() {
         bail!(
             "PIL image {} not found: build it with `cargo xtask pil` (or `cargo build --release \

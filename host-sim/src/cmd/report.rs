@@ -2,6 +2,10 @@
 //! (default: the shipped standard set in `host-sim/scenarios/`) and writes one self-contained
 //! report (see [`report`]). Every file is parsed and validated before anything runs.
 
+use crate::model::registry::{
+    for_each_image_model, image_model_names, image_models, name_of, Registered, StudyTypeVisitor,
+};
+use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
@@ -12,8 +16,6 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
-use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 use std::path::{Path, PathBuf};
 
 /// Options of `shimmy-sim report`.
@@ -192,7 +194,8 @@ pub fn build<M: ScenarioModel<N>, const N: usize>(
     })
 }
 
-/// The vehicle model of the report: `--vehicle`'s, else the first file's, else the car's.
+/// The vehicle model of the report: `--vehicle`'s, else the first file's, else the first
+/// model with a firmware image (the car).
 fn model_name(a: &ReportArgs) -> Result<&'static str> {
     if let Some(v) = &a.vehicle {
         return Ok(vehicle_file::load_model(v)
@@ -201,23 +204,28 @@ fn model_name(a: &ReportArgs) -> Result<&'static str> {
     }
     Ok(match a.scenarios.first() {
         Some(f) => scenario_file::load_any(f)?.model_name(),
-        None => PlantParams::NAME,
+        None => image_model_names()[0],
     })
 }
 
 /// The command.
 pub fn command(a: &ReportArgs) -> Result<()> {
-    match model_name(a)? {
-        m if m == TruckParams::NAME => {
-            command_on::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(a)
+    struct On<'a>(&'a ReportArgs, &'static str, Option<Result<()>>);
+    impl StudyTypeVisitor for On<'_> {
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+            if self.2.is_none() && name_of::<M, N>() == self.1 {
+                self.2 = Some(command_on::<M, N>(self.0));
+            }
         }
-        m if m == PlantParams::NAME => {
-            command_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(a)
-        }
-        m => bail!(
-            "`report` runs scenario files on the {} and {} models, not the {m}",
-            PlantParams::NAME,
-            TruckParams::NAME
+    }
+    let mut on = On(a, model_name(a)?, None);
+    for_each_image_model(&mut on);
+    match on.2 {
+        Some(r) => r,
+        None => bail!(
+            "`report` runs scenario files on the {} models, not the {}",
+            image_models(),
+            on.1
         ),
     }
 }
@@ -358,7 +366,11 @@ mod tests {
             vehicle: None,
             model_vehicle: None,
         };
-        let plan = plan::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(&a).unwrap();
+        let plan = plan::<
+            shimmy_core::vehicles::car::PlantParams,
+            { shimmy_core::vehicles::car::N_STATES },
+        >(&a)
+        .unwrap();
         assert!(plan.len() >= 7, "{} files", plan.len());
     }
 }

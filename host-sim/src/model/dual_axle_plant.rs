@@ -696,7 +696,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     }
 
     fn yaw_torque_scale(&self) -> f64 {
-        self.i_k / shimmy_core::vehicles::car::ParamSet::Nominal.params().i_k
+        self.i_k / shimmy_core::vehicle::Vehicle::nominal().plant.i_k
     }
 
     fn params() -> Vec<super::family::ParamInfo> {
@@ -741,7 +741,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
 /// this truck from the car's reference set against the named set `dual-axle`
 /// (`docs/dual-axle-truck.md`, "Damper, gains and thresholds"):
 /// - the damper (across axle 1's track rod) and the skyhook coefficient scaled as the mining
-///   truck's are (`members::damper_scale_like_the_cars`);
+///   truck's are (`damper_sizing::damper_scale_like_the_cars`);
 /// - the damping-ratio thresholds times the ratio of the shimmy mode's damping slope dzeta/dV
 ///   at the onset, this truck's over the `nominal` car's, so that each stands for the same
 ///   speed distance to the onset as on the car (the speed-margin and time thresholds are that
@@ -775,13 +775,12 @@ fn onset_slope_and_freq<M: LinearModel<N>, const N: usize>(m: &M) -> anyhow::Res
 }
 
 fn compute_dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
-    use shimmy_core::vehicles::car::ParamSet;
     use shimmy_core::vehicles::dual_axle::DualAxleSet;
     let t = DualAxleSet::Rated.params();
-    let mut v = super::members::car_parts_with_damper_scaled(
-        super::members::damper_scale_like_the_cars(&t)?,
+    let mut v = super::damper_sizing::car_parts_with_damper_scaled(
+        super::damper_sizing::damper_scale_like_the_cars(&t)?,
     );
-    let (slope_car, f_car) = onset_slope_and_freq(&ParamSet::Nominal.params())?;
+    let (slope_car, f_car) = onset_slope_and_freq(&shimmy_core::vehicle::Vehicle::nominal().plant)?;
     let (slope_t, f_t) = onset_slope_and_freq(&t)?;
     anyhow::ensure!(
         slope_car < 0.0 && slope_t < 0.0,
@@ -807,7 +806,7 @@ fn compute_dual_axle_parts() -> anyhow::Result<shimmy_core::vehicle::Vehicle> {
 mod parts_tests {
     use super::*;
     use crate::model::damper_equiv::{damper_equivalent, REF_WHEEL_YAW_AMPL_RAD};
-    use crate::model::members::{damper_scale_like_the_cars, least_stabilising_c};
+    use crate::model::damper_sizing::{damper_scale_like_the_cars, least_stabilising_c};
     use shimmy_core::stability::{hopf_crossings, CrossingKind};
     use shimmy_core::units::kmh_to_mps;
     use shimmy_core::vehicles::car::ParamSet;

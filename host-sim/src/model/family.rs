@@ -10,10 +10,8 @@
 //! [`SimModel::non_smooth`] saying when it has no third derivatives), the wheel's rolling radius (the mode meter's wheel order), the damper's lever,
 //! what the controller's model needs (I_k, c_k, l_t) and the parameters by name (sweeps).
 //!
-//! Members (`super::members`): the 4-DOF car (`PlantParams`, 10 states) and the 5-DOF mining
-//! truck (`TruckParams`, 12 states); the dual-axle truck and the trailer (`TrailerParams`, 5
-//! states) in their plants' modules. A new model implements [`LinearModel`] in core and
-//! [`SimModel`] in the simulator; `bifurcation`, `sweep` (eigenvalue maps), `margin` and the closed loop
+//! Members: each model implements [`LinearModel`] in its core folder and [`SimModel`] in its
+//! plant file (the car's `super::plant`, the mining truck's `super::truck_plant`, ...); `bifurcation`, `sweep` (eigenvalue maps), `margin` and the closed loop
 //! are generic over `M: SimModel<N>`; a command dispatches on the vehicle file's model
 //! (`sim::vehicle_file::ModelVehicle`).
 
@@ -24,7 +22,6 @@ use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 
 use super::integrator::IntegrateError;
 use super::plant::{Damper, Inputs, Method};
@@ -184,16 +181,6 @@ pub struct FamilyVehicle<M> {
     pub model: M,
     /// The damper, sensors, gains and thresholds.
     pub parts: Vehicle,
-}
-
-impl FamilyVehicle<PlantParams> {
-    /// The car `v`: its plant is the model.
-    pub fn car(v: Vehicle) -> Self {
-        Self {
-            model: v.plant,
-            parts: v,
-        }
-    }
 }
 
 impl<M> FamilyVehicle<M> {

@@ -4,15 +4,17 @@
 //!
 //! Rule: uses only `shimmy-core` and external crates, never `sim`, `out` or `cmd`.
 
+pub mod board;
+pub mod car_plant;
 pub mod coil_drive;
 pub mod damper_equiv;
+pub mod damper_sizing;
 pub mod disturbance;
 pub mod dual_axle_plant;
 pub mod family;
 pub mod faults;
 pub mod hopf_type;
 pub mod integrator;
-pub mod members;
 pub mod periodic_orbit;
 pub mod plant;
 pub mod registry;

@@ -23,9 +23,10 @@
 
 use anyhow::Result;
 use shimmy_core::model::LinearModel;
-use shimmy_core::vehicle::{Vehicle, SECTIONS};
+use shimmy_core::vehicle::{record_schema_of, Vehicle, SECTIONS};
 use shimmy_core::vehicles::{FieldError, ModelField};
 
+use super::board::BoardModel;
 use super::family::SimModel;
 use super::study::StudyModel;
 
@@ -201,6 +202,11 @@ macro_rules! registry {
             names
         }
 
+        /// Calls `visitor` for every model with a firmware image, in the list's order.
+        pub fn for_each_image_model<V: StudyTypeVisitor>(visitor: &mut V) {
+            $( <$model as MaybeStudy<{ $n }>>::visit_type(visitor); )*
+        }
+
         /// Calls `visitor` for every model, in the list's order.
         pub fn for_each_model<V: ModelTypeVisitor>(visitor: &mut V) {
             $( visitor.visit::<$model, { $n }>(); )*
@@ -228,6 +234,8 @@ macro_rules! registry {
 trait MaybeStudy<const N: usize>: ModelEntry<N> {
     /// Whether the model is a study model.
     const STUDY: bool;
+    /// Calls `visitor` with the model if it is a study model.
+    fn visit_type<V: StudyTypeVisitor>(visitor: &mut V);
     #[allow(clippy::result_large_err)]
     fn study<V: StudyVisitor>(
         f: Self::File,
@@ -240,6 +248,9 @@ macro_rules! maybe_study {
     ($model:ty, $n:expr, study) => {
         impl MaybeStudy<{ $n }> for $model {
             const STUDY: bool = true;
+            fn visit_type<V: StudyTypeVisitor>(visitor: &mut V) {
+                visitor.visit::<Self, { $n }>();
+            }
             #[allow(clippy::result_large_err)]
             fn study<V: StudyVisitor>(
                 f: Self::File,
@@ -252,6 +263,7 @@ macro_rules! maybe_study {
     ($model:ty, $n:expr,) => {
         impl MaybeStudy<{ $n }> for $model {
             const STUDY: bool = false;
+            fn visit_type<V: StudyTypeVisitor>(_: &mut V) {}
             #[allow(clippy::result_large_err)]
             fn study<V: StudyVisitor>(
                 f: Self::File,
@@ -270,6 +282,13 @@ pub trait StudyVisitor {
     type Output;
     /// The call on the vehicle `v` of the model `M`.
     fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(self, v: M::File) -> Self::Output;
+}
+
+/// A generic call on a model with a firmware image, not a vehicle: [`for_each_image_model`]
+/// calls [`Self::visit`] with every such model as `M`.
+pub trait StudyTypeVisitor {
+    /// The call on the model `M`.
+    fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self);
 }
 
 // The models' list: `Variant => parameter type, state count, [study]` (`study`: a model with a
@@ -501,4 +520,43 @@ pub fn and_list(names: &[&str]) -> String {
 /// mining-truck-5dof`), for messages.
 pub fn image_models() -> String {
     and_list(&image_model_names())
+}
+
+/// The name of the model whose firmware image stores records of the schema id `schema`.
+pub fn image_model_of_schema(schema: u32) -> Option<&'static str> {
+    struct Find(u32, Option<&'static str>);
+    impl StudyTypeVisitor for Find {
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+            if record_schema_of::<<M as BoardModel<N>>::Board>() == self.0 {
+                self.1 = Some(name_of::<M, N>());
+            }
+        }
+    }
+    let mut f = Find(schema, None);
+    for_each_image_model(&mut f);
+    f.1
+}
+
+/// [`image_model_of_schema`] for messages: `unknown (schema ...)` when no image stores it.
+pub fn schema_model(schema: u32) -> String {
+    image_model_of_schema(schema).map_or_else(
+        || format!("unknown (schema {schema:#010x})"),
+        str::to_string,
+    )
+}
+
+/// Where `cargo xtask pil` puts each model's image (`the car-4dof's as target/...`), for
+/// messages.
+pub fn image_elfs() -> String {
+    struct Elfs(Vec<String>);
+    impl StudyTypeVisitor for Elfs {
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+            self.0
+                .push(format!("the {}'s as {}", name_of::<M, N>(), M::PIL_ELF));
+        }
+    }
+    let mut e = Elfs(Vec::new());
+    for_each_image_model(&mut e);
+    let names: Vec<&str> = e.0.iter().map(String::as_str).collect();
+    and_list(&names)
 }

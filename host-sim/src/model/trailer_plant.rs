@@ -23,11 +23,11 @@ use shimmy_core::vehicles::trailer::{
 };
 use shimmy_core::vehicles::FieldTable;
 
-use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
-use super::integrator::{rk4_step, Dopri5, IntegrateError};
-use super::members::{
+use super::damper_sizing::{
     car_parts_with_damper_scaled, damper_scale_like_the_cars, reference_tyre_yaw_stiffness,
 };
+use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
+use super::integrator::{rk4_step, Dopri5, IntegrateError};
 use super::plant::{Damper, Inputs, Method};
 
 /// Integration step, s.
@@ -670,7 +670,7 @@ mod tests {
             .c_eq_nspm
                 * s
         };
-        let c_least = super::super::members::least_stabilising_c(&t).unwrap();
+        let c_least = super::super::damper_sizing::least_stabilising_c(&t).unwrap();
         println!(
             "scale {s:.3}; least stabilising c {c_least:.0} N s/m; c_eq of the scaled damper at \
              0 A {:.0}, at 2 A {:.0} N s/m; damper work over 3 s: 0 A {w0:.3} J, rated {w2:.3} J",

@@ -26,10 +26,8 @@ use shimmy_core::estimator::monitor::{Event, Level};
 use shimmy_core::estimator::pipeline::{
     AccelEstimator, DataPipeline, PipelineOutput, ShimmyPipeline,
 };
-use shimmy_core::model::{LinearModel, UpdatableModel};
+use shimmy_core::model::UpdatableModel;
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::TruckParams;
 
 /// The meter's input period, s (1 kHz, the control rate).
 pub const GRID_DT_S: f64 = 1e-3;
@@ -341,10 +339,9 @@ pub fn analyze_with_progress(
     match registry::with_image_model(o.vehicle.clone(), On(log, o, progress)) {
         Ok(r) => r,
         Err(other) => bail!(
-            "analyze runs logs of the car ({}) and the mining truck ({}), not of the {} (its \
-             meter reads other signals than a log's two wheel yaw angles)",
-            PlantParams::NAME,
-            TruckParams::NAME,
+            "analyze runs logs of the {} models, not of the {} (its meter reads other signals \
+             than a log's two wheel yaw angles)",
+            registry::image_models(),
             other.model_name()
         ),
     }

@@ -8,13 +8,16 @@
 //! (a device that was already running when the host connected). Every request frame starts
 //! with a delimiter, which ends whatever partial frame a cut link left in the device's reader.
 
+use crate::model::registry::{
+    for_each_image_model, image_model_of_schema, Registered, StudyTypeVisitor,
+};
+use crate::model::study::StudyModel;
 use anyhow::{anyhow, bail, Context, Result};
 use shimmy_core::estimator::model_update::Statement;
 use shimmy_core::vehicle::{
     check_record_value, decode_record, encode_record, RecordError, RecordVehicle, Vehicle,
     RECORD_MAX_BYTES,
 };
-use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
 use shimmy_link::frame::{self, Fed, FrameReader, DELIMITER, MAX_FRAME};
 use shimmy_link::host::decode_reply;
 use shimmy_link::wire::{
@@ -295,8 +298,7 @@ fn config_problem(p: &ConfigProblem<'_>) -> String {
         } => {
             let (section, name, rule) = (printable(section), printable(name), printable(rule));
             // The field with its range, from the table of the model whose record has it.
-            let checked = check_record_value::<Vehicle>(&section, &name, value)
-                .or_else(|| check_record_value::<TruckVehicle>(&section, &name, value));
+            let checked = check_image_record_value(&section, &name, value);
             match checked {
                 Some(Err(e)) if rule.is_empty() => e.to_string(),
                 Some(_) if rule.is_empty() => {
@@ -306,6 +308,23 @@ fn config_problem(p: &ConfigProblem<'_>) -> String {
             }
         }
     }
+}
+
+/// The field `section.name` = `value` checked against the field table of the first model's
+/// firmware image whose record has that field (`None`: no image's record has it).
+fn check_image_record_value(section: &str, name: &str, value: f64) -> Option<Result<(), String>> {
+    struct Check<'a>(&'a str, &'a str, f64, Option<Result<(), String>>);
+    impl StudyTypeVisitor for Check<'_> {
+        fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+            if self.3.is_none() {
+                self.3 = check_record_value::<M::Board>(self.0, self.1, self.2)
+                    .map(|r| r.map_err(|e| e.to_string()));
+            }
+        }
+    }
+    let mut c = Check(section, name, value, None);
+    for_each_image_model(&mut c);
+    c.3
 }
 
 /// A record from the device read as a vehicle of the model `V`, or an error that names the
@@ -323,7 +342,7 @@ pub fn read_record<V: RecordVehicle>(rec: &[u8]) -> Result<V> {
 /// A record of schema `found` where `whose` (the device's, this) decoder reads `expected`: the
 /// models by name when the ids are the family's, else the ids.
 pub fn schema_mismatch(found: u32, expected: u32, whose: &str) -> String {
-    match (record_model(found), record_model(expected)) {
+    match (image_model_of_schema(found), image_model_of_schema(expected)) {
         (Some(f), Some(e)) => format!(
             "the vehicle record is a {f} vehicle (schema {found:#010x}), {whose} side stores {e} \
              vehicles (schema {expected:#010x}): another vehicle model"
@@ -489,7 +508,7 @@ impl<P: Port> Client<P> {
     }
 
     /// The stored vehicle's record as the device sent it (its schema id names its model,
-    /// [`record_model`]) and whether it still waits for standstill.
+    /// [`image_model_of_schema`]) and whether it still waits for standstill.
     pub fn config_record(&mut self) -> Result<(Vec<u8>, bool)> {
         match self.call(&Request::GetConfig)? {
             Reply::Config(rec, pending) => Ok((rec, pending)),

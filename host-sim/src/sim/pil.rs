@@ -13,17 +13,16 @@
 //! - [`SilFirmware`]: the same application's tasks natively (`shimmy_firmware::pil::HostApp`),
 //!   the software-in-the-loop side; [`compare`] checks the two runs bit for bit.
 
+use crate::model::board::BoardModel;
 use crate::model::family::FamilyVehicle;
+use crate::model::registry::{image_elfs, schema_model};
 use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
 use crate::sim::vehicle_file::FileModel;
 use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
-use shimmy_core::vehicle::{BoardVehicle, Vehicle};
-use shimmy_core::vehicles::car::PlantParams;
-use shimmy_core::vehicles::truck::board::{record_model, TruckVehicle};
-use shimmy_core::vehicles::truck::TruckParams;
+use shimmy_core::vehicle::BoardVehicle;
 use shimmy_firmware::monitoring::{BoardCalibration, CONTROLLER};
 use shimmy_firmware::pil::HostApp;
 use shimmy_pil::{
@@ -48,39 +47,11 @@ const LAST_FRAMES: usize = 12;
 /// Decoded log lines shown with a hang or crash.
 const LAST_LOG_LINES: usize = 40;
 
-/// A vehicle model a PIL image is built for (the firmware's cargo feature `model-truck` picks
-/// the truck): the vehicle its image stores and boots with, and where `cargo xtask pil` puts
-/// the image.
-pub trait PilModel<const N: usize>: FileModel<N> {
-    /// The image's vehicle (its record, its compiled-in default).
-    type Board: BoardVehicle<N, Model = Self::Linear> + BoardCalibration;
-    /// The image `cargo xtask pil` builds for this model.
-    const ELF: &'static str;
-    /// The simulator's vehicle of this model as the image's.
-    fn board_vehicle(v: &FamilyVehicle<Self>) -> Self::Board;
-}
+/// A vehicle model a PIL image is built for ([`BoardModel`]) whose vehicle files the
+/// simulator reads.
+pub trait PilModel<const N: usize>: FileModel<N> + BoardModel<N> {}
 
-impl PilModel<{ shimmy_core::vehicles::car::N_STATES }> for PlantParams {
-    type Board = Vehicle;
-    const ELF: &'static str = "target/xtask/shimmy-firmware.pil.elf";
-    fn board_vehicle(v: &FamilyVehicle<Self>) -> Vehicle {
-        Vehicle {
-            plant: v.model,
-            ..v.parts
-        }
-    }
-}
-
-impl PilModel<{ shimmy_core::vehicles::truck::N_STATES }> for TruckParams {
-    type Board = TruckVehicle;
-    const ELF: &'static str = "target/xtask/shimmy-firmware.pil+model-truck.elf";
-    fn board_vehicle(v: &FamilyVehicle<Self>) -> TruckVehicle {
-        TruckVehicle {
-            truck: v.model,
-            parts: v.parts,
-        }
-    }
-}
+impl<M: FileModel<N> + BoardModel<N>, const N: usize> PilModel<N> for M {}
 
 /// The image runs the firmware's own controller and parameters
 /// (`shimmy_firmware::monitoring::CONTROLLER`, the margin-scheduled ASMC; its compiled-in
@@ -110,14 +81,6 @@ pub fn check_firmware_matches<M: PilModel<N>, const N: usize>(
         ));
     }
     Ok(())
-}
-
-/// The vehicle model of a record schema id, for messages.
-fn schema_model(schema: u32) -> String {
-    record_model(schema).map_or_else(
-        || format!("unknown (schema {schema:#010x})"),
-        str::to_string,
-    )
 }
 
 /// What the image sent in one control period: its step report, then the frames of its
@@ -431,13 +394,11 @@ impl PilFirmware {
             TargetFrame::Hello { vehicle_schema: s } if s == vehicle_schema => Ok(fw),
             TargetFrame::Hello { vehicle_schema: s } => Err(format!(
                 "the PIL image {} is built for the {} model, the scenario's vehicle is a {}: \
-                 pass the image built for it (`cargo xtask pil` builds the car's as {} and the \
-                 truck's as {})",
+                 pass the image built for it (`cargo xtask pil` builds {})",
                 elf.display(),
                 schema_model(s),
                 schema_model(vehicle_schema),
-                PlantParams::ELF,
-                TruckParams::ELF
+                image_elfs()
             )),
             other => Err(fw.failure(&format!(
                 "the image's first frame is not its hello but {}",
@@ -842,6 +803,7 @@ pub fn costs(periods: &[Period]) -> Costs {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicle::Vehicle;
 
     #[test]
     fn quantiles_histogram_and_share() {

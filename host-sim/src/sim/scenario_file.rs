@@ -72,7 +72,9 @@ use crate::model::disturbance::{
 };
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
-use crate::model::registry::{self, for_each_model, ModelTypeVisitor, ModelVisitor, Registered};
+use crate::model::registry::{
+    self, for_each_model, ModelTypeVisitor, ModelVisitor, Registered, StudyTypeVisitor,
+};
 use crate::model::sensors::SensorConfig;
 use crate::model::study::StudyModel;
 use crate::sim::arg_range::Range;
@@ -368,6 +370,53 @@ impl AnyScenario {
         };
         for_each_model(&mut f);
         f.out.expect("a scenario is of a registered model")
+    }
+}
+
+/// A generic call on a scenario of a model with a firmware image:
+/// [`AnyScenario::visit_image`] calls [`Self::visit`] with the scenario's model as `M`.
+pub trait ImageScenarioVisitor {
+    /// What the call gives.
+    type Output;
+    /// The call on the scenario `s` of the model `M`.
+    fn visit<M: ScenarioModel<N>, const N: usize>(self, s: ScenarioSpec<M, N>) -> Self::Output;
+}
+
+impl AnyScenario {
+    /// Calls `visitor` on the scenario with its model as `M` if that is a model with a
+    /// firmware image, else gives the scenario back.
+    pub fn visit_image<V: ImageScenarioVisitor>(
+        self,
+        visitor: V,
+    ) -> std::result::Result<V::Output, Self> {
+        struct Find<V: ImageScenarioVisitor> {
+            s: Option<AnyScenario>,
+            visitor: Option<V>,
+            out: Option<V::Output>,
+        }
+        impl<V: ImageScenarioVisitor> StudyTypeVisitor for Find<V> {
+            fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
+                let Some(s) = self.s.take() else { return };
+                match s.into_spec::<M, N>() {
+                    Ok(spec) => {
+                        let v = self.visitor.take().expect("called once");
+                        self.out = Some(v.visit(spec));
+                    }
+                    Err(s) => self.s = Some(s),
+                }
+            }
+        }
+        let mut f = Find {
+            s: Some(self),
+            visitor: Some(visitor),
+            out: None,
+        };
+        registry::for_each_image_model(&mut f);
+        match (f.out, f.s) {
+            (Some(out), _) => Ok(out),
+            (None, Some(s)) => Err(s),
+            (None, None) => unreachable!("the scenario is either taken or given back"),
+        }
     }
 }
 

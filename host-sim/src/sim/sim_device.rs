@@ -9,13 +9,14 @@
 //! log; the 10 Hz margin reports become the telemetry stream. After the drive the vehicle stands
 //! still, so a configuration write takes effect at once.
 
+use crate::model::board::BoardModel;
 use crate::model::disturbance::{Scenario, SpeedProfile};
 use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopObserver, SampleRecord};
-use crate::sim::demo_case::{demo_case_for, ROAD_SEED};
+use crate::sim::demo_case::ROAD_SEED;
 use crate::sim::device_link::Port;
-use crate::sim::standard::road;
+use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
 use shimmy_core::control::ControllerKind;
 use shimmy_core::estimator::meter::mode_meter::WheelOrder;
@@ -25,8 +26,6 @@ use shimmy_core::supervisor::faults::FaultSet;
 use shimmy_core::supervisor::safe_controller::SafeController;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::{record_schema_of, RecordVehicle, Vehicle};
-use shimmy_core::vehicles::truck::board::TruckVehicle;
-use shimmy_core::vehicles::truck::TruckParams;
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
 use shimmy_link::log::{EventSink, Pager, RamLog, Recorder};
 use shimmy_link::wire::{
@@ -47,8 +46,8 @@ pub const DRIVE_S: (f64, f64, f64) = (16.0, 4.0, 1.0);
 /// The injected parity fault on the left encoder: start and end, s.
 pub const PARITY_FAULT_S: (f64, f64) = (6.0, 6.5);
 
-/// What the simulated device serves: a vehicle of the model `V` (the car by default, or the
-/// truck: `TruckVehicle`) and what its drive logged.
+/// What the simulated device serves: a vehicle record of a model's firmware image (the car's
+/// `Vehicle` by default, [`BoardModel::Board`]) and what its drive logged.
 pub struct SimBackend<V: RecordVehicle = Vehicle> {
     vehicle: V,
     pending: bool,
@@ -180,55 +179,29 @@ impl<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> LoopObserver
 /// value, so the simulated device and a board agree on what a standstill is).
 pub use shimmy_firmware::store::STANDSTILL_SPEED_MPS as STANDSTILL_MPS;
 
-impl From<FamilyVehicle<TruckParams>> for TruckVehicle {
-    /// The truck as the record stores it (the same two parts).
-    fn from(v: FamilyVehicle<TruckParams>) -> Self {
-        TruckVehicle {
-            truck: v.model,
-            parts: v.parts,
-        }
-    }
-}
-
-impl From<TruckVehicle> for FamilyVehicle<TruckParams> {
-    fn from(v: TruckVehicle) -> Self {
-        FamilyVehicle {
-            model: v.truck,
-            parts: v.parts,
-        }
-    }
-}
-
-/// Top speed of the truck's drive, km/h: through the full truck's onset (23.5 km/h) towards the
-/// truck class's top speed (~64 km/h, `docs/mining-truck.md`); the car's ramp goes to 120.
-pub const TRUCK_TOP_KMH: f64 = 50.0;
-
-/// Runs the drive with `vehicle` as plant and firmware model; returns the filled backend.
-pub fn drive(vehicle: &Vehicle) -> Result<SimBackend> {
-    let case = demo_case_for(vehicle, vehicle, DRIVE_S.0)?;
-    drive_model(
-        &FamilyVehicle::car(*vehicle),
-        *vehicle,
-        vehicle.pipeline_params(),
-        case.scenario,
-        120.0,
-    )
-}
-
-/// The drive of the truck `vehicle` (plant and firmware model): road noise and the wheels'
-/// imbalance as the demo's (scaled to the truck's tyre by the closed loop) on a ramp to
-/// [`TRUCK_TOP_KMH`]; the device stores it as a truck record.
-pub fn drive_truck(vehicle: &FamilyVehicle<TruckParams>) -> Result<SimBackend<TruckVehicle>> {
-    let mut scenario = Scenario::new(SpeedProfile::Piecewise(vec![]));
+/// Runs the drive with `vehicle` as plant and firmware model; returns the filled backend,
+/// which stores the vehicle as its model's firmware image does.
+pub fn drive<M: BoardModel<N>, const N: usize>(
+    vehicle: &FamilyVehicle<M>,
+) -> Result<SimBackend<M::Board>> {
     let (noise, imbalance) = road(ROAD_SEED, vehicle.model.rolling_radius_m());
+    let mut scenario = Scenario::new(SpeedProfile::Piecewise(vec![]));
     scenario.noise = Some(noise);
     scenario.imbalance = Some(imbalance);
+    if M::DEVICE_POTHOLE {
+        // the demo's pothole, where the model's shimmy grows fastest on the ramp
+        let (v0, v1) = (kmh_to_mps(20.0), kmh_to_mps(M::DEVICE_TOP_KMH));
+        let v_fg = fastest_growth_speed(&vehicle.model.linear());
+        scenario
+            .impulses
+            .push(pothole(DRIVE_S.0 * (v_fg - v0) / (v1 - v0), POTHOLE_NM));
+    }
     drive_model(
         vehicle,
-        TruckVehicle::from(*vehicle),
+        M::board_vehicle(vehicle),
         vehicle.pipeline_params(),
         scenario,
-        TRUCK_TOP_KMH,
+        M::DEVICE_TOP_KMH,
     )
 }
 
@@ -311,17 +284,13 @@ pub struct SimDevice<V: RecordVehicle = Vehicle> {
     last_report: Option<Instant>,
 }
 
-impl SimDevice {
-    /// Runs the drive with `vehicle` and announces the device (the ready frame).
-    pub fn new(vehicle: &Vehicle) -> Result<Self> {
+impl<V: RecordVehicle> SimDevice<V> {
+    /// Runs the drive with `vehicle` and announces the device (the ready frame): a device that
+    /// stores vehicles of the model `M`.
+    pub fn new<M: BoardModel<N, Board = V>, const N: usize>(
+        vehicle: &FamilyVehicle<M>,
+    ) -> Result<Self> {
         SimDevice::with_backend(drive(vehicle)?)
-    }
-}
-
-impl SimDevice<TruckVehicle> {
-    /// A device that stores a truck vehicle, after the drive of `vehicle`.
-    pub fn truck(vehicle: &FamilyVehicle<TruckParams>) -> Result<Self> {
-        SimDevice::with_backend(drive_truck(vehicle)?)
     }
 }
 

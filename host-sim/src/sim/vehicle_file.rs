@@ -28,17 +28,14 @@
 //! validation (`Vehicle::set`, then `Vehicle::validate`): a bad file is rejected with a message
 //! naming the field, the value and the allowed range; nothing is half-applied.
 
-use crate::model::family::FamilyVehicle;
 use crate::model::registry::{
     self, all_set_names, for_each_model, name_of, set_names_of, ModelEntry, ModelTypeVisitor,
     Registered,
 };
 use anyhow::{bail, Context, Result};
-use shimmy_core::model::LinearModel;
 use shimmy_core::vehicle::{RecordVehicle, SetError, Vehicle, FIELDS, SECTIONS};
 use shimmy_core::vehicles::car::ParamSet;
-use shimmy_core::vehicles::truck::{TruckParams, TruckSet, TRUCK_FIELDS};
-use shimmy_core::vehicles::{FieldError, FieldTable};
+use shimmy_core::vehicles::FieldError;
 use std::path::{Path, PathBuf};
 
 pub use crate::model::registry::ModelVehicle;
@@ -366,20 +363,31 @@ pub fn to_toml(v: &Vehicle) -> String {
     out
 }
 
-/// Writes the truck `v` as a vehicle file (`model = "mining-truck-5dof"`): every `[truck]`
-/// field and every field of the shared sections, so that [`parse_model`] reads back the same
+/// Writes `f`, a vehicle of the model `M`, as a vehicle file: the `model` key (for a model
+/// other than the car's whole-vehicle files), every field of the model's section and every
+/// field of the shared sections its files take, so that [`parse_model`] reads back the same
 /// vehicle bit for bit.
-pub fn truck_to_toml(v: &FamilyVehicle<TruckParams>) -> String {
-    let mut out = format!(
-        "# Vehicle file (docs/mining-truck.md): every field, as read from a device or written by shimmy-sim.\nmodel = \"{}\"\nbase = \"{}\"\n\n[truck]\n",
-        TruckParams::NAME,
-        TruckSet::Full.name()
+pub fn model_to_toml<M: ModelEntry<N>, const N: usize>(f: &M::File) -> String {
+    let mut out = String::from(
+        "# Vehicle file (docs/vehicle-file.md): every field, as read from a device or written by shimmy-sim.\n",
     );
-    for f in &TRUCK_FIELDS {
-        let x = v.model.get(f.name).unwrap_or(f64::NAN);
-        out.push_str(&format!("{} = {x:?}  # {}\n", f.name, f.unit));
+    if let Some(section) = M::SECTION {
+        out.push_str(&format!(
+            "model = \"{}\"\nbase = \"{}\"\n\n[{section}]\n",
+            registry::name_of::<M, N>(),
+            M::DEFAULT_SET
+        ));
+        let m = M::model_of(f);
+        for field in M::fields() {
+            let x = m.field(field.name).unwrap_or(f64::NAN);
+            out.push_str(&format!("{} = {x:?}  # {}\n", field.name, field.unit));
+        }
+    } else {
+        out.push_str(&format!("base = \"{}\"\n", M::DEFAULT_SET));
     }
-    push_sections(&mut out, &v.parts, &SECTIONS[1..]);
+    if let Some(parts) = M::parts_of(f) {
+        push_sections(&mut out, parts, registry::shared_sections::<M, N>());
+    }
     out
 }
 
@@ -473,8 +481,10 @@ fn format_default(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::family::FamilyVehicle;
     use shimmy_core::vehicles::dual_axle::DualAxleSet;
     use shimmy_core::vehicles::trailer::TrailerSet;
+    use shimmy_core::vehicles::truck::TruckSet;
 
     /// `model` picks the model (the car by default), a truck file sets `[truck]` fields by
     /// name, and bad models, sections, fields, values and charges are rejected naming them.

@@ -10,11 +10,14 @@ use shimmy_core::vehicle::{
     RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
 use shimmy_core::vehicles::truck::board::TruckVehicle;
+use shimmy_core::vehicles::truck::TruckParams;
 use shimmy_link::frame::{self, MAX_FRAME};
 use shimmy_link::wire::{
     ErrorReply, FaultReport, Header, Identity, LogEntry, Response, Telemetry, PROTOCOL_HEADER,
 };
 use shimmy_link::PROTOCOL_VERSION;
+use shimmy_sim::model::board::BoardModel;
+use shimmy_sim::model::family::FamilyVehicle;
 use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
 use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
 use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
@@ -64,7 +67,7 @@ impl Port for Line {
 
 /// A fresh simulated device (its drive takes well under a second) behind a healthy line.
 fn device() -> Client<Line> {
-    let dev = SimDevice::new(&Vehicle::nominal()).expect("simulated drive");
+    let dev = SimDevice::new(&FamilyVehicle::car(Vehicle::nominal())).expect("simulated drive");
     let line = Line {
         dev,
         trouble: Trouble::None,
@@ -302,7 +305,7 @@ fn truck_device() -> (
     let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {
         panic!("truck-full is a truck")
     };
-    let dev = SimDevice::truck(&t).expect("simulated truck drive");
+    let dev = SimDevice::new(&t).expect("simulated truck drive");
     let (mut c, info) = Client::connect(dev, Duration::from_millis(100)).expect("ready frame");
     c.set_timeout(Duration::from_millis(300));
     (c, info)
@@ -321,7 +324,7 @@ fn a_truck_vehicle_round_trips_through_a_truck_device() {
     let ModelVehicle::Truck(t) = vehicle_file::parse_model(text).unwrap() else {
         panic!("a truck file")
     };
-    let sent = TruckVehicle::from(t);
+    let sent = TruckParams::board_vehicle(&t);
     assert!(c.set_config(&sent).unwrap(), "in effect at standstill");
     let (rec, pending) = c.config_record().unwrap();
     assert!(!pending);
@@ -331,7 +334,9 @@ fn a_truck_vehicle_round_trips_through_a_truck_device() {
     assert_eq!(back.parts.controller.slew_a_per_s, 123.0);
     assert_eq!(*c.port_mut().backend().stored_vehicle(), back);
     // ... and through the vehicle file writer and reader, bit for bit.
-    let file = vehicle_file::truck_to_toml(&back.into());
+    let file = vehicle_file::model_to_toml::<TruckParams, { shimmy_core::vehicles::truck::N_STATES }>(
+        &TruckParams::from_board(&back),
+    );
     let ModelVehicle::Truck(reread) = vehicle_file::parse_model(&file).unwrap() else {
         panic!("the written file reads as a truck: {file}")
     };
@@ -381,7 +386,7 @@ fn before_truck() -> TruckVehicle {
     let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {
         panic!("truck-full is a truck")
     };
-    TruckVehicle::from(t)
+    TruckParams::board_vehicle(&t)
 }
 
 /// The command line with a truck device: `config get` writes a truck vehicle file, `config

@@ -7,9 +7,9 @@
 use std::path::{Path, PathBuf};
 
 use shimmy_core::estimator::pipeline::PipelineParams;
+use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::model::family::SimModel;
-use shimmy_sim::model::members::truck_parts;
 use shimmy_sim::model::study::StudyModel;
 use shimmy_sim::sim::margin_run::{onset_kmh, run, MarginScenario};
 
@@ -223,7 +223,7 @@ fn the_trucks_thresholds_lead_and_stay_quiet_on_a_mismatched_plant() {
         .unwrap();
     let pp = shimmy_sim::model::family::FamilyVehicle {
         model,
-        parts: truck_parts(),
+        parts: TruckVehicle::default_parts(),
     }
     .pipeline_params();
     let on = onset_kmh(&plant.linear()).unwrap();
@@ -255,7 +255,7 @@ fn the_trucks_fusion_keeps_plant_equal_model_quiet_where_the_cars_warns() {
     let on = onset_kmh(&model.linear()).unwrap();
     let truck = shimmy_sim::model::family::FamilyVehicle {
         model,
-        parts: truck_parts(),
+        parts: TruckVehicle::default_parts(),
     };
     let pp = truck.pipeline_params();
     assert_eq!(pp.fusion.less_stable_sigmas, 3.0);
