@@ -8,6 +8,7 @@
 use crate::model::family::{param_names, SimModel};
 use crate::model::periodic_orbit::{Branch, HopfPoint, Limits, Shooting, Start};
 use crate::model::registry::{self, ModelVisitor, Registered};
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::sim::arg_range::{self, Range};
 use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
 use crate::sim::reference::shimmy_mode_with_damper;
@@ -15,16 +16,12 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
-use shimmy_core::vehicles::car::PlantParams;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Options of the `bifurcation` command, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct BifurcationOptions<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct BifurcationOptions<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Parameter set.
     pub params: M,
     /// Name of the parameter set (for titles).
@@ -1403,6 +1400,7 @@ fn plot_dual(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::car::PlantParams;
 
     #[test]
     fn command_writes_table_csv_and_png() {

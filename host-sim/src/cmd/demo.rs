@@ -7,6 +7,7 @@ use crate::model::family::SimModel;
 use crate::model::plant::Method;
 use crate::model::registry::image_models;
 use crate::model::registry::{self, Registered, StudyVisitor};
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::model::study::StudyModel;
 use crate::out::plot_util;
 use crate::out::provenance::Provenance;
@@ -22,7 +23,6 @@ use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
 use shimmy_core::units::mps_to_kmh;
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -54,10 +54,7 @@ pub const RAMP_S_DEFAULT: f64 = 30.0;
 
 /// Demo options, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct DemoOptions<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct DemoOptions<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Output directory.
     pub out: PathBuf,
     /// Ramp duration, s (20 -> 120 km/h).
@@ -86,7 +83,7 @@ impl<M: FileModel<N>, const N: usize> DemoOptions<M, N> {
     /// The default demo on the simulated vehicle `plant` (`--vehicle` as given, or `nominal`)
     /// with the options of `a` (range-checked, the model vehicle loaded and validated).
     pub fn from_args(a: &DemoArgs, plant: M::Vehicle) -> Result<Self> {
-        let default = DemoOptions::<PlantParams>::default();
+        let default = DemoOptions::<ReferenceModel>::default();
         Ok(DemoOptions {
             ramp_s: RAMP_S.check("--ramp-s", a.ramp_s)?,
             method: match &a.integrator {

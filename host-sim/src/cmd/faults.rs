@@ -13,6 +13,7 @@ use crate::model::disturbance::{Impulse, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side};
 use crate::model::registry::{self, ModelVisitor, Registered};
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::out::progress;
 use crate::out::table::opt;
 use crate::sim::arg_range::{self, Range};
@@ -28,7 +29,6 @@ use shimmy_core::supervisor::checks::SupervisorEvent;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -399,10 +399,7 @@ pub fn standard_cases() -> Vec<Case> {
 /// the kick and noise torques are the car's, scaled by `SimModel::yaw_torque_scale` in the
 /// loop).
 #[derive(Clone, Copy, Debug)]
-pub struct Setup<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct Setup<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// The true vehicle (plant, damper, sensors).
     pub plant: M::Vehicle,
     /// The vehicle the firmware believes (controller model and gains); `None`: `plant`.

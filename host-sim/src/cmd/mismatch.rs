@@ -24,6 +24,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use crate::model::registry::ReferenceModel;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -31,7 +32,6 @@ use shimmy_core::estimator::model_update::ModelUpdateConfig;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::UpdatableModel;
-use shimmy_core::vehicles::car::PlantParams;
 
 use crate::model::family::FamilyVehicle;
 use crate::model::registry::image_models;
@@ -127,7 +127,7 @@ pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
 
 /// One plant/model pair of the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct MismatchCase<M = PlantParams> {
+pub struct MismatchCase<M = ReferenceModel> {
     /// Name, e.g. `C_a +20 %`.
     pub name: String,
     /// The simulated plant.
@@ -258,7 +258,7 @@ pub struct RampResult {
 
 /// Results of one case.
 #[derive(Clone, Debug)]
-pub struct CaseResult<M = PlantParams> {
+pub struct CaseResult<M = ReferenceModel> {
     /// The case.
     pub case: MismatchCase<M>,
     /// True linear onset of the plant, km/h.
@@ -864,6 +864,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::car::PlantParams;
 
     fn row(case: MismatchCase<PlantParams>) -> CaseResult<PlantParams> {
         CaseResult {

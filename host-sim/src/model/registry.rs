@@ -306,6 +306,13 @@ registry! {
     Trailer => shimmy_core::vehicles::trailer::TrailerParams, shimmy_core::vehicles::trailer::N_STATES, [];
 }
 
+/// The reference model: the car (`car-4dof`). The default of the simulator's generic types
+/// (`LoopConfig`, `ScenarioSpec`, `DemoCase`, ...) and of a vehicle file without a `model` key,
+/// and the vehicle the other models' dampers and road disturbances are sized against.
+pub type ReferenceModel = shimmy_core::vehicles::car::PlantParams;
+/// The reference model's state count.
+pub const REFERENCE_N: usize = shimmy_core::vehicles::car::N_STATES;
+
 /// The names of the models, in the list's order.
 pub fn model_names() -> Vec<&'static str> {
     struct Names(Vec<&'static str>);

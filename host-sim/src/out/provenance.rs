@@ -10,7 +10,6 @@ use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use sha2::{Digest, Sha256};
 use shimmy_core::vehicle::{Vehicle, RECORD_MAX_BYTES};
-use shimmy_core::vehicles::car::ParamSet;
 use std::path::Path;
 
 /// The build's `git describe --always --dirty --tags` (or why there is none).
@@ -101,12 +100,12 @@ impl Provenance {
     /// Adds a vehicle given as on the command line (`spec`: a set name or a file) and resolved
     /// to `v`: the file's content hash (for a file) and the record hash of what was used.
     pub fn vehicle(mut self, role: &str, spec: &str, v: &Vehicle) -> Result<Self> {
-        if ParamSet::from_name(spec).is_none() {
+        if registry::model_of_set(spec).is_none() {
             self = self.file(&format!("{role} file"), Path::new(spec))?;
         }
         self.inputs.push(Input {
             role: format!("{role} record"),
-            source: if ParamSet::from_name(spec).is_some() {
+            source: if registry::model_of_set(spec).is_some() {
                 format!("built-in set `{spec}`")
             } else {
                 format!("resolved from {spec}")
@@ -195,6 +194,7 @@ impl Provenance {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::vehicles::car::ParamSet;
 
     #[test]
     fn hashes_quoting_and_the_vehicle() {

@@ -11,6 +11,7 @@
 //! report's [`Provenance`] ([`write_pages`], also used by `shimmy-sim analyze`).
 
 use crate::model::family::SimModel;
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::out::file_name::sanitize;
 use crate::out::html;
 use crate::out::plots::{plot_margin, plot_runs};
@@ -20,16 +21,12 @@ use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
 use crate::sim::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
-use shimmy_core::vehicles::car::PlantParams;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// One closed-loop run of a report, on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct ReportRun<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct ReportRun<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Legend and table label (usually the controller).
     pub label: String,
     /// Its configuration.
@@ -60,10 +57,7 @@ impl<M: SimModel<N>, const N: usize> ReportRun<M, N> {
 
 /// One scenario with its runs.
 #[derive(Clone, Debug)]
-pub struct Section<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct Section<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Scenario name (heading; file names use a sanitised form).
     pub name: String,
     /// Markdown text under the heading.
@@ -76,10 +70,7 @@ pub struct Section<
 
 /// A whole report.
 #[derive(Clone, Debug)]
-pub struct Report<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct Report<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Page title.
     pub title: String,
     /// Markdown under the title.

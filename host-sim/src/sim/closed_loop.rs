@@ -27,6 +27,7 @@ use crate::model::family::{FamilyVehicle, SimModel, SimPlant};
 use crate::model::faults::{FaultPlan, FaultSpec};
 use crate::model::integrator::IntegrateError;
 use crate::model::plant::{Damper, Inputs, Method};
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
 use shimmy_core::control::actuator::CoilParams;
 use shimmy_core::control::{
@@ -45,7 +46,6 @@ use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::supervisor::policy::{Mode, SupervisorVerdict};
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 use shimmy_firmware::control::WATCHDOG_TIMEOUT_MAX_S;
 use shimmy_firmware::monitoring::on_board;
 use shimmy_firmware::pil::HostApp;
@@ -88,10 +88,7 @@ impl Arm {
 /// Configuration of one closed-loop run on the vehicle model `M` (the car by default; any
 /// member of the family, `crate::model::family`).
 #[derive(Clone, Debug)]
-pub struct LoopConfig<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct LoopConfig<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// The true plant (the controller knows only `control.nominal`).
     pub plant: M,
     /// The true damper (the controller knows only `control.mr`); `Arm::NoDamper` removes it.

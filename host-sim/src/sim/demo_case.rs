@@ -6,6 +6,7 @@
 use crate::model::disturbance::{Scenario, SpeedProfile};
 use crate::model::family::SimModel;
 use crate::model::plant::Method;
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use crate::sim::standard::{fastest_growth_speed, pothole, road, POTHOLE_NM};
 use anyhow::{Context, Result};
@@ -13,15 +14,11 @@ use shimmy_core::control::ControllerKind;
 use shimmy_core::stability::{hopf_crossings, CrossingKind, HopfCrossing};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 
 /// The demo's case on the vehicle model `M` (the car by default): the vehicles, the ramp
 /// scenario and the facts the report states.
 #[derive(Clone, Debug)]
-pub struct DemoCase<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct DemoCase<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// The simulated vehicle.
     pub plant: M::Vehicle,
     /// The vehicle the firmware believes (its controller's and estimator's models, gains).
@@ -59,7 +56,7 @@ pub const ROAD_SEED: u64 = 7;
 /// The demo's case on the simulated vehicle `plant` with a firmware that believes `model`;
 /// the Hopf window and the pothole's speed are the simulated plant's.
 pub fn demo_case_for(plant: &Vehicle, model: &Vehicle, ramp_s: f64) -> Result<DemoCase> {
-    demo_case_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(plant, model, ramp_s)
+    demo_case_on::<ReferenceModel, { REFERENCE_N }>(plant, model, ramp_s)
 }
 
 /// [`demo_case_for`] on a vehicle of any model of the family (the road's torques are the

@@ -7,6 +7,7 @@
 //! ([`ModeSelect::Shimmy`]) and the Hopf onset by an independent scan
 //! ([`stability::hopf_crossings`]).
 
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use anyhow::{Context, Result};
 use shimmy_core::estimator::meter::mode_meter::{Sample, WheelOrder};
 use shimmy_core::estimator::model_update::ParamEstimate;
@@ -17,7 +18,6 @@ use shimmy_core::estimator::pipeline::{
 use shimmy_core::model::UpdatableModel;
 use shimmy_core::stability::{self, ModeSelect};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
-use shimmy_core::vehicles::car::PlantParams;
 
 use crate::model::disturbance::{Imbalance, RoadNoise, Scenario, SpeedProfile};
 use crate::model::family::{SimModel, SimPlant};
@@ -28,10 +28,7 @@ pub const DT_S: f64 = 1e-3;
 
 /// An open-loop margin scenario on the vehicle model `M` (the car by default).
 #[derive(Clone, Debug)]
-pub struct MarginScenario<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct MarginScenario<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Parameters of the simulated plant.
     pub params: M,
     /// Parameters of the pipeline's model (the same as `params` unless a mismatch is studied);

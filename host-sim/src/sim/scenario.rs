@@ -7,6 +7,7 @@
 use crate::model::disturbance::Scenario;
 use crate::model::family::{yaw_state, FamilyVehicle, SimModel};
 use crate::model::faults::FaultSpec;
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::model::sensors::SensorConfig;
 use crate::sim::arg_range;
 use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
@@ -14,7 +15,6 @@ use crate::sim::vehicle_file::FileModel;
 use anyhow::{bail, Context, Result};
 use shimmy_core::control::ControlParams;
 use shimmy_core::model::LinearModel;
-use shimmy_core::vehicles::car::PlantParams;
 use std::path::{Path, PathBuf};
 
 /// The controller names, one per controller, as they appear in tables, legends and file names
@@ -41,10 +41,7 @@ pub const ON_CURRENT_FIELD: &str = "field `controller.on_current_a`";
 
 /// A validated scenario on the vehicle model `M` (the car by default), ready to run.
 #[derive(Clone, Debug)]
-pub struct ScenarioSpec<
-    M: SimModel<N> = PlantParams,
-    const N: usize = { shimmy_core::vehicles::car::N_STATES },
-> {
+pub struct ScenarioSpec<M: SimModel<N> = ReferenceModel, const N: usize = { REFERENCE_N }> {
     /// Short name (tables, headings; file names use its sanitised form).
     pub name: String,
     /// One line on what it is (plot titles of `compare`); empty for scenario files.

@@ -73,7 +73,8 @@ use crate::model::disturbance::{
 use crate::model::family::SimModel;
 use crate::model::faults::{FaultMode, FaultSpec, Side, KINDS};
 use crate::model::registry::{
-    self, for_each_model, ModelTypeVisitor, ModelVisitor, Registered, StudyTypeVisitor,
+    self, for_each_model, ModelTypeVisitor, ModelVisitor, ReferenceModel, Registered,
+    StudyTypeVisitor, REFERENCE_N,
 };
 use crate::model::sensors::SensorConfig;
 use crate::model::study::StudyModel;
@@ -82,10 +83,8 @@ use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURREN
 use crate::sim::vehicle_file::{self, ModelVehicle};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
-use shimmy_core::model::LinearModel;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -427,7 +426,7 @@ fn car(s: AnyScenario) -> Result<ScenarioSpec> {
             "scenario `{}` is on a {} vehicle; this command runs the {} only",
             s.name(),
             s.model_name(),
-            PlantParams::NAME
+            registry::name_of::<ReferenceModel, REFERENCE_N>()
         )
     })
 }
@@ -493,7 +492,7 @@ pub fn parse_any_in(text: &str, default_name: &str, dir: &Path) -> Result<AnySce
 
     let plant = match &f.plant {
         Some(p) => vehicle_of("plant", p, dir)?,
-        None => ModelVehicle::Car(Vehicle::nominal()),
+        None => ModelVehicle::from(Vehicle::nominal()),
     };
     let model_vehicle = match &f.model {
         Some(m) => Some(vehicle_of("model", m, dir)?),
@@ -948,6 +947,7 @@ fn other_model(name: &str, is: &str, wanted: &str) -> anyhow::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use shimmy_core::model::LinearModel;
     use shimmy_core::vehicles::truck::TruckParams;
 
     const GOOD: &str = r#"

@@ -5,6 +5,7 @@
 use crate::model::disturbance::{
     DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
 };
+use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::model::study::StudyModel;
 use crate::sim::scenario::ScenarioSpec;
 use crate::sim::scenario_file::ScenarioModel;
@@ -13,7 +14,6 @@ use shimmy_core::model::LinearModel;
 use shimmy_core::stability::{mode_at, ModeSelect};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::PlantParams;
 
 /// The speed (m/s) where the no-damper shimmy mode grows fastest (largest real part of the
 /// in-phase wheel-yaw mode of the linearisation), on a 0.25 m/s grid over 2-45 m/s.
@@ -61,7 +61,7 @@ pub fn road(seed: u64, radius_m: f64) -> (RoadNoise, Imbalance) {
 /// The standard scenario set on `vehicle` (its plant, damper, sensors; the firmware believes
 /// it). `quick` shortens the runs (for tests).
 pub fn standard_scenarios(vehicle: &Vehicle, quick: bool) -> Vec<ScenarioSpec> {
-    standard_scenarios_on::<PlantParams, { shimmy_core::vehicles::car::N_STATES }>(vehicle, quick)
+    standard_scenarios_on::<ReferenceModel, { REFERENCE_N }>(vehicle, quick)
         .expect("the car's variants are infallible")
 }
 

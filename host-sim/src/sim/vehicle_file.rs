@@ -30,11 +30,10 @@
 
 use crate::model::registry::{
     self, all_set_names, for_each_model, name_of, set_names_of, ModelEntry, ModelTypeVisitor,
-    Registered,
+    ReferenceModel, Registered, REFERENCE_N,
 };
 use anyhow::{bail, Context, Result};
 use shimmy_core::vehicle::{RecordVehicle, SetError, Vehicle, FIELDS, SECTIONS};
-use shimmy_core::vehicles::car::ParamSet;
 use shimmy_core::vehicles::FieldError;
 use std::path::{Path, PathBuf};
 
@@ -258,8 +257,8 @@ pub fn load(spec: &str) -> Result<Vehicle> {
 /// [`load`] with a relative path taken relative to `dir` (e.g. the folder of the scenario file
 /// that names the vehicle). Set names win over files of the same name.
 pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
-    if let Some(set) = ParamSet::from_name(spec) {
-        return Ok(Vehicle::from_set(set));
+    if let Some(v) = <ReferenceModel as ModelEntry<REFERENCE_N>>::named(spec) {
+        return v;
     }
     if let Some(model) = registry::model_of_set(spec) {
         bail!("{}", car_only(&format!("vehicle `{spec}`"), model));
@@ -304,7 +303,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
             other.type_str()
         ),
     };
-    let Some(set) = ParamSet::from_name(base) else {
+    let Some(plant) = <ReferenceModel as ModelEntry<REFERENCE_N>>::set(base) else {
         bail!(
             "field `base`: unknown set `{base}`, allowed: {}",
             set_names()
@@ -313,7 +312,7 @@ pub fn parse(text: &str) -> Result<Vehicle> {
     if table.contains_key("plant") && table.contains_key(PLANT_ALIAS) {
         bail!("field `{PLANT_ALIAS}`: the same section as `plant`; give only one of them");
     }
-    let mut v = Vehicle::from_set(set);
+    let mut v = Vehicle::with_plant(plant);
     for (key, value) in &table {
         if key == "base" {
             continue;
@@ -433,11 +432,7 @@ pub fn field_names(section: &str) -> Vec<&'static str> {
 
 /// The named sets, for messages.
 pub fn set_names() -> String {
-    ParamSet::ALL
-        .iter()
-        .map(|s| s.name())
-        .collect::<Vec<_>>()
-        .join(", ")
+    set_names_of::<ReferenceModel, REFERENCE_N>()
 }
 
 /// The field table as Markdown, one table per section (field, unit, default, range, meaning):
@@ -482,6 +477,7 @@ fn format_default(x: f64) -> String {
 mod tests {
     use super::*;
     use crate::model::family::FamilyVehicle;
+    use shimmy_core::vehicles::car::ParamSet;
     use shimmy_core::vehicles::dual_axle::DualAxleSet;
     use shimmy_core::vehicles::trailer::TrailerSet;
     use shimmy_core::vehicles::truck::TruckSet;

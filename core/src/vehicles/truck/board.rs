@@ -37,7 +37,7 @@ pub struct TruckVehicle {
 /// the least coefficient that closes the loaded truck's Hopf window as the car's is of the
 /// `nominal` car's. The sizing takes a describing-function study that has no place in the
 /// firmware, so the value is the simulator's result (`shimmy-sim`'s
-/// `members::damper_scale_like_the_cars` for `truck-full`, `docs/mining-truck.md`); a host test
+/// `damper_sizing::damper_scale_like_the_cars` for `truck-full`, `docs/mining-truck.md`); a host test
 /// recomputes it and fails when the two differ.
 pub const TRUCK_DAMPER_SCALE: f64 = 34.15839289106305;
 

@@ -7,7 +7,6 @@ use crate::sim::scenario::controller_name;
 use anyhow::{bail, Result};
 use clap::Args;
 use shimmy_core::vehicle::Vehicle;
-use shimmy_core::vehicles::car::Param;
 use std::path::PathBuf;
 
 /// Options of `shimmy-sim sweep`.
@@ -86,22 +85,9 @@ pub const MAX_CURRENTS: usize = 16;
 /// Most closed-loop runs (speeds x values x controllers) in one time-domain sweep.
 pub const MAX_RUNS: usize = 20_000;
 
-/// The grid axes: speeds in km/h, parameter values and the parameter, validated, and the
-/// currents checked against `vehicle`'s coil rating (`default_steps` = (speeds, values) when
-/// not given).
-pub fn axes(
-    a: &SweepArgs,
-    vehicle: &Vehicle,
-    default_steps: (usize, usize),
-) -> Result<(Vec<f64>, Vec<f64>, Param)> {
-    let (speeds, values, info) = axes_of(a, &vehicle.plant, vehicle, default_steps)?;
-    let Some(param) = Param::from_name(info.name) else {
-        bail!("--param {}: not a parameter of the car", a.param);
-    };
-    Ok((speeds, values, param))
-}
-
-/// [`axes`] for any vehicle model `model` of the family (the coil rating from `parts`).
+/// The grid axes for the vehicle model `model`: speeds in km/h, parameter values and the
+/// parameter, validated, and the currents checked against the coil rating of `parts`
+/// (`default_steps` = (speeds, values) when not given).
 pub fn axes_of<M: SimModel<N>, const N: usize>(
     a: &SweepArgs,
     model: &M,
@@ -150,7 +136,7 @@ pub fn axes_of<M: SimModel<N>, const N: usize>(
 }
 
 /// The single-option ranges again (for arguments built in code rather than parsed; the
-/// currents are checked in [`axes`], against the vehicle) and the checks that involve several
+/// currents are checked in [`axes_of`], against the vehicle) and the checks that involve several
 /// options: `--factor-min <= --factor-max`, `--v-min-kmh <
 /// --v-max-kmh`, at most [`MAX_CURRENTS`] currents and [`MAX_RUNS`] time-domain runs.
 pub fn check(a: &SweepArgs) -> Result<()> {
