@@ -4,6 +4,8 @@
 //!   of `core`, `host-sim` and `firmware` has no cycle);
 //! - host-sim's layers are used only downwards (`model` < `sim` < `out` < `cmd`), and no
 //!   command imports another command;
+//! - core's layers are used only downwards (`model` < `control` < `estimation` < `supervision`
+//!   < `vehicle`);
 //! - a concrete vehicle model is named in few files outside its own: its core folder, its plant
 //!   file and the model registry (`host-sim/src/model/registry.rs`) are where it lives; every
 //!   other file of the simulator and the Python bindings reaches it through the registry
@@ -380,6 +382,114 @@ fn layer_violations(c: &Crate) -> Vec<String> {
 fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
     let bad = layer_violations(&load("shimmy-sim", "host-sim"));
     assert!(bad.is_empty(), "layer violations:\n{}", bad.join("\n"));
+}
+
+/// The layer of a module of `shimmy-core` (`docs/architecture.md`, "Layers"): model <
+/// control < estimation < supervision (the safe controller schedules the damper on the
+/// estimator's margin report and hands the estimator its validated samples) < vehicle. A
+/// model's board record (`vehicles/<model>/board.rs`: its vehicle as the firmware stores it) is
+/// vehicle-level configuration above the model; `lib.rs` is the crate's map.
+fn core_layer(m: &ModPath) -> Option<usize> {
+    const MODEL: [&str; 10] = [
+        "fmt",
+        "eigen",
+        "float",
+        "model",
+        "mr_damper",
+        "sqrt",
+        "stability",
+        "trig",
+        "units",
+        "vehicles",
+    ];
+    let first = m.first()?.as_str();
+    if first == "vehicles" && m.get(2).is_some_and(|f| f == "board") {
+        return Some(4);
+    }
+    if MODEL.contains(&first) {
+        return Some(0);
+    }
+    ["control", "estimator", "supervisor", "vehicle"]
+        .iter()
+        .position(|l| *l == first)
+        .map(|i| i + 1)
+}
+
+/// core's rule: a file uses only its own or lower layers (a file of tests, `.../tests.rs`, may
+/// use any).
+fn core_layer_violations(c: &Crate) -> Vec<String> {
+    const NAMES: [&str; 5] = ["model", "control", "estimation", "supervision", "vehicle"];
+    let mut bad = Vec::new();
+    for (m, deps) in graph(c) {
+        if m.last().is_some_and(|l| l == "tests") {
+            continue;
+        }
+        let Some(lm) = core_layer(&m) else {
+            if !m.is_empty() {
+                bad.push(format!("{} is in no layer", show(c, &m)));
+            }
+            continue;
+        };
+        for d in &deps {
+            match core_layer(d) {
+                Some(ld) if ld > lm => bad.push(format!(
+                    "{} ({}) uses the higher layer {} ({})",
+                    show(c, &m),
+                    NAMES[lm],
+                    show(c, d),
+                    NAMES[ld]
+                )),
+                None if !d.is_empty() => bad.push(format!("{} uses {}", show(c, &m), show(c, d))),
+                _ => {}
+            }
+        }
+    }
+    bad
+}
+
+#[test]
+fn core_layers_are_used_downwards() {
+    let bad = core_layer_violations(&load("shimmy-core", "core"));
+    assert!(
+        bad.is_empty(),
+        "layer violations in core:\n{}",
+        bad.join("\n")
+    );
+}
+
+/// The core layer check sees a model file using the estimator and a file outside the layers,
+/// and lets a file of tests and a board record use the layers above the model.
+#[test]
+fn the_core_layer_check_finds_planted_violations() {
+    let (c, dir) = scratch(
+        "core-layers",
+        &[
+            (
+                "lib.rs",
+                "pub mod estimator;\npub mod vehicles;\npub mod vehicle;\npub mod extra;\n",
+            ),
+            ("estimator/mod.rs", "pub fn m() {}\n"),
+            ("vehicle.rs", "pub fn v() {}\n"),
+            ("extra.rs", "pub fn e() {}\n"),
+            ("vehicles/mod.rs", "pub mod car;\n"),
+            (
+                "vehicles/car/mod.rs",
+                "pub mod board;\nmod tests;\npub fn f() { crate::estimator::m(); }\n",
+            ),
+            (
+                "vehicles/car/board.rs",
+                "pub fn b() { crate::vehicle::v(); }\n",
+            ),
+            ("vehicles/car/tests.rs", "fn t() { crate::vehicle::v(); }\n"),
+        ],
+    );
+    let bad = core_layer_violations(&c);
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(bad.len(), 2, "{bad:#?}");
+    assert!(bad.iter().any(|b| b.contains("extra.rs is in no layer")));
+    assert!(bad.iter().any(
+        |b| b.contains("car/mod.rs (model) uses the higher layer") && b.contains("estimation")
+    ));
 }
 
 /// The layer check must see each kind of violation (else the test above proves nothing): a
