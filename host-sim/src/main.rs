@@ -20,8 +20,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print and validate a vehicle (a name: nominal, gentle, hard; or a vehicle file): every
-    /// field with its unit and allowed range.
+    /// Print and validate a vehicle (a named set, `shimmy-sim vehicles` lists them, or a vehicle
+    /// file): every field with its unit and allowed range.
     Params {
         /// Named set or vehicle file (TOML: `base = "nominal"` plus sections of fields by name,
         /// docs/vehicle-file.md; parameter files with `[overrides]` are vehicle files).

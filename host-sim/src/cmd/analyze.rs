@@ -65,9 +65,9 @@ pub struct AnalyzeArgs {
     /// Unit of the speed column: m/s, km/h, mph.
     #[arg(long)]
     pub speed_unit: Option<String>,
-    /// Vehicle (rolling radius, warning thresholds, model plant): a named set or a vehicle file.
-    #[arg(long, default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Data only: no model margin (the fusion then has the data alone).
     #[arg(long)]
     pub data_only: bool,
@@ -116,7 +116,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         .then(&a.changes())
         .mapping()
         .context("log mapping (options or mapping file)")?;
-    let vehicle = vehicle_file::load_model(&a.vehicle).context("--vehicle")?;
+    let vehicle = vehicle_file::load_model(&a.vehicle.spec).context("--vehicle")?;
     let log = log_file::load(&a.log, &map)?;
     let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
     let _out_dir = crate::sim::files::OutDir::claim(&out)?;
@@ -134,7 +134,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut provenance = Provenance::of_this_process()
         .file("log", &a.log)?
-        .model_vehicle("vehicle", &a.vehicle, &opts.vehicle)?;
+        .model_vehicle("vehicle", &a.vehicle.spec, &opts.vehicle)?;
     if let Some(p) = &a.mapping {
         provenance = provenance.file("mapping file", p)?;
     }
@@ -146,7 +146,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     let title = format!("shimmy-sim analyze: {source}");
     let md = format!(
         "# {title}\n\n{}",
-        analysis::markdown(&result, &source, &a.vehicle, "analysis.png")
+        analysis::markdown(&result, &source, &a.vehicle.spec, "analysis.png")
     );
     let pages = write_pages(
         &out,

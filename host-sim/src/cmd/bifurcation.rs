@@ -663,11 +663,9 @@ pub const WINDOW_S: Range = Range::above(0.0, 300.0, "s");
 /// Command-line arguments of `shimmy-sim bifurcation`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BifurcationArgs {
-    /// Vehicle: a named set (nominal, gentle, hard; the dual-axle truck's dual-axle) or a
-    /// vehicle file (TOML, see docs/vehicle-file.md; parameter files are vehicle files).
-    /// `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Fit the MR damper and hold this coil current in A (0 to the vehicle's coil rating);
     /// without it there is no damper (F_d = 0).
     #[arg(long, alias = "damper-current", allow_negative_numbers = true, value_parser = arg_range::current_a())]
@@ -771,7 +769,10 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
             dual_axle(t, a)
         }
     }
-    registry::with_model(crate::sim::vehicle_file::load_model(&a.vehicle)?, On(a))
+    registry::with_model(
+        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
+        On(a),
+    )
 }
 
 /// The command on the vehicle model `model` with the damper of `parts`.
@@ -828,7 +829,7 @@ fn command_on<M: SimModel<N>, const N: usize>(
     };
     let o = BifurcationOptions {
         params: *model,
-        params_name: a.vehicle.clone(),
+        params_name: a.vehicle.spec.clone(),
         damper,
         v_min_kmh: a.v_min_kmh,
         v_max_kmh: a.v_max_kmh,
@@ -1137,7 +1138,7 @@ pub fn dual_axle(
     println!(
         "bifurcation: `{}` (dual-axle truck, kingpin friction M_f = {} N m smoothed by eps = {} \
          rad/s); {} s runs, amplitude = peak |(psi_1L + psi_1R)/2| over the last {} s",
-        a.vehicle, t.m_f, a.friction_eps_radps, a.duration_s, a.window_s
+        a.vehicle.spec, t.m_f, a.friction_eps_radps, a.duration_s, a.window_s
     );
     println!(
         "{:>8} | {:>12} | {:>12} | {:>12} | {:>10}",
@@ -1320,7 +1321,7 @@ fn plot_dual(
         .caption(
             format!(
                 "Dual-axle truck: wheel-yaw amplitude vs speed (`{}`)",
-                a.vehicle
+                a.vehicle.spec
             ),
             ("sans-serif", 22),
         )
@@ -1457,7 +1458,7 @@ mod tests {
         )
         .unwrap();
         let a = BifurcationArgs {
-            vehicle: file.display().to_string(),
+            vehicle: crate::cmd::VehicleArg::new(&file.display().to_string()),
             damper_current_a: None,
             v_min_kmh: 30.0,
             v_max_kmh: 90.0,

@@ -75,11 +75,9 @@ pub struct CompareArgs {
     /// Ideal sensors (no quantisation, noise or delay) instead of the 14-bit encoder model.
     #[arg(long)]
     pub ideal_sensors: bool,
-    /// Vehicle the scenario set runs on: a named set (nominal, gentle, hard, truck-full,
-    /// truck-empty) or a vehicle file (TOML, see docs/vehicle-file.md). `--params` is the older
-    /// name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// The vehicle the firmware believes (controller model, gains; the gain options above
     /// override its gains): a named set or a vehicle file; default: `--vehicle`.
     #[arg(long)]
@@ -545,13 +543,13 @@ pub fn command(a: &CompareArgs) -> Result<()> {
             command_on::<M, N>(self.0, M::vehicle(v)?)
         }
     }
-    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle.spec)?, On(a)) {
         Ok(r) => r,
         Err(other) => bail!(
             "`compare` runs the {} models, not the {} (vehicle `{}`)",
             image_models(),
             other.model_name(),
-            a.vehicle
+            a.vehicle.spec
         ),
     }
 }

@@ -29,8 +29,9 @@ use std::path::{Path, PathBuf};
 /// Options of the demo on the command line (`shimmy-sim [--vehicle V] [--model-vehicle M]`).
 #[derive(clap::Args, Clone, Debug)]
 pub struct DemoArgs {
-    /// The demo's simulated vehicle: a named set (nominal, gentle, hard, truck-full,
-    /// truck-empty) or a vehicle file (TOML, see docs/vehicle-file.md) [default: nominal].
+    /// The demo's simulated vehicle: a named set of a model with a firmware image (`shimmy-sim
+    /// vehicles` lists the sets) or a vehicle file (TOML, see docs/vehicle-file.md) [default:
+    /// nominal].
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
     /// The vehicle the demo's firmware believes (its controller's and estimator's models,

@@ -30,9 +30,9 @@ use crate::sim::vehicle_file;
 /// Options of `shimmy-sim identifiability`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct IdentifiabilityArgs {
-    /// The vehicle whose model is updated: a named set or a vehicle file (car or truck).
-    #[arg(long, default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// The meter's sigma of the damping ratio, one table per value, each 0.001 to 0.1.
     #[arg(long, value_delimiter = ',', default_value = "0.005,0.01,0.02", value_parser = arg_range::f64_in(SIGMA_ZETA))]
     pub sigma_zeta: Vec<f64>,
@@ -217,7 +217,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
     println!(
         "identifiability of the {} model's updated parameters (`{}`, damper off): {} s at each speed, evidence accumulated from {:.0} % of the onset",
         M::NAME,
-        a.vehicle,
+        a.vehicle.spec,
         a.seconds_per_speed,
         a.from_fraction * 100.0
     );
@@ -247,12 +247,12 @@ pub fn command(a: &IdentifiabilityArgs) -> Result<()> {
             command_on(self.0, &M::model_of(&v).linear())
         }
     }
-    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle.spec)?, On(a)) {
         Ok(r) => r,
         Err(other) => bail!(
             "`identifiability` runs the models with updatable parameters (car, truck), not the {} (vehicle `{}`)",
             other.model_name(),
-            a.vehicle
+            a.vehicle.spec
         ),
     }
 }

@@ -32,10 +32,9 @@ pub const DURATION_S: Range = Range::above(0.0, 3600.0, "s");
 /// Arguments of `shimmy-sim margin`.
 #[derive(Args, Debug, Clone)]
 pub struct MarginArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// The vehicle the firmware believes (the pipeline's model and thresholds): a named set or
     /// a vehicle file; default: `--vehicle`.
     #[arg(long)]
@@ -282,13 +281,13 @@ pub fn check(a: &MarginArgs) -> Result<()> {
 /// `shimmy-sim margin`.
 pub fn command(a: &MarginArgs) -> Result<()> {
     check(a)?;
-    let vehicle = vehicle_file::load_model(&a.vehicle)?;
+    let vehicle = vehicle_file::load_model(&a.vehicle.spec)?;
     let model = match &a.model_vehicle {
         Some(m) => vehicle_file::load_model(m).context("--model-vehicle")?,
         None => vehicle.clone(),
     };
     let mut provenance =
-        Provenance::of_this_process().model_vehicle("vehicle", &a.vehicle, &vehicle)?;
+        Provenance::of_this_process().model_vehicle("vehicle", &a.vehicle.spec, &vehicle)?;
     if let Some(m) = &a.model_vehicle {
         provenance = provenance.model_vehicle("model vehicle", m, &model)?;
     }
@@ -305,7 +304,7 @@ pub fn command(a: &MarginArgs) -> Result<()> {
                      model is of the vehicle's model",
                     a.model_vehicle.as_deref().unwrap_or_default(),
                     model.model_name(),
-                    a.vehicle,
+                    a.vehicle.spec,
                     registry::name_of::<M, N>()
                 ),
             };
@@ -351,8 +350,8 @@ fn run_on<M: SimModel<N>, const N: usize>(
     bar.finish_and_clear();
     println!(
         "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m (x {:.4} on this model), seed {}",
-        a.vehicle,
-        a.model_vehicle.as_deref().unwrap_or(&a.vehicle),
+        a.vehicle.spec,
+        a.model_vehicle.as_deref().unwrap_or(&a.vehicle.spec),
         sc.noise_nm,
         sc.imbalance_nm,
         p.yaw_torque_scale(),
@@ -418,7 +417,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
     let csv = a.out.join("margin.csv");
     write_csv(&csv, &run.rows)?;
     let png = a.out.join("margin.png");
-    plot(&png, &run, &a.vehicle)?;
+    plot(&png, &run, &a.vehicle.spec)?;
     let json = a.out.join("summary.json");
     let mut summary = summary_json(&sc, &run);
     summary["provenance"] = provenance.json();

@@ -59,10 +59,9 @@ pub const COVERAGE_PCT: (f64, f64) = (60.0, 76.0);
 /// Arguments of `shimmy-sim meter-accuracy`.
 #[derive(Args, Debug, Clone)]
 pub struct MeterAccuracyArgs {
-    /// Vehicle (plant, damper and truth): a named set or a vehicle file (docs/vehicle-file.md);
-    /// `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Speeds of the damper-off arm, km/h (outside the plant's Hopf window), each 1 to 250
     /// [default: 10,20,90,105,120 on the car, 8,12,16,20 on the mining truck].
     #[arg(long, value_delimiter = ',', value_parser = arg_range::speed_kmh())]
@@ -376,13 +375,13 @@ pub fn command(a: &MeterAccuracyArgs) -> Result<()> {
             command_on(self.0, &registry::family::<M, N>(v)?)
         }
     }
-    match registry::with_image_model(vehicle_file::load_model(&a.vehicle)?, On(a)) {
+    match registry::with_image_model(vehicle_file::load_model(&a.vehicle.spec)?, On(a)) {
         Ok(r) => r,
         Err(other) => bail!(
             "`meter-accuracy` runs the {} models, not the {} (vehicle `{}`)",
             crate::model::registry::image_models(),
             other.model_name(),
-            a.vehicle
+            a.vehicle.spec
         ),
     }
 }
@@ -426,7 +425,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         "mode meter (slow, AR({}), f32, time scale {}) on the simulated plant `{}`: {} seeds x {:.0} s per speed, {:.0} s wall",
         cfg.ar_order,
         scale,
-        a.vehicle,
+        a.vehicle.spec,
         a.seeds,
         a.record_s,
         wall.elapsed().as_secs_f64()

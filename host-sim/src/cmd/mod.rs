@@ -24,3 +24,35 @@ pub mod stability;
 pub mod sway_damping;
 pub mod sweep;
 pub mod vehicles;
+
+/// `--vehicle` of the commands that run one vehicle of any model (`#[command(flatten)]`): one
+/// argument with one help text that lists every named set of every model.
+#[derive(clap::Args, Clone, Debug, PartialEq)]
+pub struct VehicleArg {
+    /// The vehicle: a named set or a vehicle file (the help lists the sets).
+    #[arg(
+        id = "vehicle",
+        long = "vehicle",
+        value_name = "VEHICLE",
+        visible_alias = "params",
+        default_value = "nominal",
+        help = vehicle_help()
+    )]
+    pub spec: String,
+}
+
+impl VehicleArg {
+    /// The vehicle `spec` (a set name or a file).
+    pub fn new(spec: &str) -> Self {
+        Self { spec: spec.into() }
+    }
+}
+
+/// The help of `--vehicle`: every named set of every model (from the registry).
+fn vehicle_help() -> String {
+    format!(
+        "Vehicle: a named set ({}) or a vehicle file (TOML, docs/vehicle-file.md); `shimmy-sim \
+         vehicles` tabulates the sets. `--params` is the older name",
+        crate::model::registry::all_set_names("; ")
+    )
+}

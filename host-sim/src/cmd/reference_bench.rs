@@ -45,10 +45,9 @@ const SIM_RTOL: f64 = 1e-7;
 /// Options of `shimmy-sim reference-bench`.
 #[derive(Args, Debug)]
 pub struct ReferenceBenchArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Simulated time of the time-domain run, s: above 0, at most 600.
     #[arg(long, default_value_t = 10.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
@@ -133,7 +132,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
     if !(2..=100_000).contains(&a.sweep_points) {
         bail!("--sweep-points {}: allowed 2 to 100000", a.sweep_points);
     }
-    let vehicle = crate::sim::vehicle_file::load(&a.vehicle)?;
+    let vehicle = crate::sim::vehicle_file::load(&a.vehicle.spec)?;
     arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
@@ -408,7 +407,7 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
     let _ = writeln!(
         t,
         "reference bench: {} at {} km/h, MR damper at {} A, {} deg start, {} s; sweep of {} speeds",
-        a.vehicle, a.speed_kmh, a.current_a, a.initial_yaw_deg, a.duration_s, a.sweep_points
+        a.vehicle.spec, a.speed_kmh, a.current_a, a.initial_yaw_deg, a.duration_s, a.sweep_points
     );
     let _ = writeln!(
         t,

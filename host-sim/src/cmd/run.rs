@@ -32,7 +32,7 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle (overrides the file's `[plant]`, sensors included): a named set
-    /// (nominal, gentle, hard) or a vehicle file (TOML, see docs/vehicle-file.md).
+    /// (`shimmy-sim vehicles` lists them) or a vehicle file (TOML, see docs/vehicle-file.md).
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
     /// The vehicle the firmware believes (overrides the file's `[model]`): a set or a file.

@@ -18,11 +18,9 @@ use crate::sim::vehicle_file;
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct SensitivityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full; the dual-axle truck's dual-axle; the trailer's trailer) or a vehicle file (TOML, see docs/vehicle-file.md; parameter files are
-    /// vehicle files). `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Relative change applied down and up in %: above 0, at most 90.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::arg_range::f64_in(PERCENT))]
     pub percent: f64,
@@ -178,7 +176,7 @@ impl ModelVisitor for Variants {
 /// Runs `shimmy-sim sensitivity`.
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
-    let vehicle = vehicle_file::load_model(&args.vehicle)?;
+    let vehicle = vehicle_file::load_model(&args.vehicle.spec)?;
     let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
     // one variant per parameter: (name, unit, base value, the window at a factor, or None
     // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
@@ -186,7 +184,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
     let (on0, off0, f0) = (w0.onset_kmh, w0.offset_kmh, w0.onset_freq_hz);
     println!(
         "Hopf window sensitivity of `{}` (+-{}% per parameter, no damper, 1..250 km/h)",
-        args.vehicle, args.percent
+        args.vehicle.spec, args.percent
     );
     println!(
         "base: onset {} km/h, offset {} km/h, onset frequency {} Hz",

@@ -21,12 +21,9 @@ use crate::sim::vehicle_file;
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct StabilityArgs {
-    /// Vehicle: a named set (nominal, gentle, hard; the mining truck's truck-empty,
-    /// truck-full; the dual-axle truck's dual-axle; the trailer's trailer) or a vehicle file
-    /// (TOML, see docs/vehicle-file.md; parameter files are vehicle files). `--params` is the
-    /// older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Constant MR-damper coil current in A; the damper enters as its energy-equivalent viscous
     /// coefficient (describing function). Without it there is no damper force. 0 to the
     /// vehicle's coil rating.
@@ -83,7 +80,10 @@ pub fn command(args: &StabilityArgs) -> Result<()> {
         args.v_min_kmh,
         args.v_max_kmh
     );
-    registry::with_model(vehicle_file::load_model(&args.vehicle)?, Stability(args))
+    registry::with_model(
+        vehicle_file::load_model(&args.vehicle.spec)?,
+        Stability(args),
+    )
 }
 
 /// The command on a vehicle of the model `M`: with its damper, or none when the model's files
@@ -108,7 +108,10 @@ impl ModelVisitor for Stability<'_> {
             registry::name_of::<M, N>()
         );
         let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
-        println!("stability of straight running: vehicle `{}`", args.vehicle);
+        println!(
+            "stability of straight running: vehicle `{}`",
+            args.vehicle.spec
+        );
         println!("damper: none (F_d = 0)");
         report(&M::model_of(&f), Damper::None, 0.0, args)
     }
@@ -136,7 +139,10 @@ fn with_damper<M: SimModel<N>, const N: usize>(
             (d.c_eq_nspm, Some(d))
         }
     };
-    println!("stability of straight running: vehicle `{}`", args.vehicle);
+    println!(
+        "stability of straight running: vehicle `{}`",
+        args.vehicle.spec
+    );
     match damper {
         None => println!("damper: none (F_d = 0)"),
         Some(d) => println!(
@@ -228,7 +234,7 @@ fn report<M: SimModel<N>, const N: usize>(
     write_crossings_csv(&ccsv, &crossings, &types)?;
     let png = args.out.join("stability.png");
     let shimmy = shimmy_modes(p, c, &rows);
-    plot(&png, &rows, &shimmy, &crossings, &args.vehicle, c)?;
+    plot(&png, &rows, &shimmy, &crossings, &args.vehicle.spec, c)?;
     println!(
         "wrote {}, {}, {}",
         csv.display(),

@@ -114,6 +114,17 @@ pub struct Truth {
     pub coil_current_a: f64,
 }
 
+/// One control period's sensing ([`Sensors::period`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Period {
+    /// What the sensors read.
+    pub meas: Measurement,
+    /// The coil's state (healthy without a coil).
+    pub coil: CoilState,
+    /// The coil driver's condition (the true coil and supply).
+    pub drive: DriveCondition,
+}
+
 /// Status bits of one encoder transaction (as in the AS5047P frame).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct EncoderStatus {
@@ -297,6 +308,35 @@ impl Sensors {
     /// The configuration.
     pub fn config(&self) -> &SensorConfig {
         &self.cfg
+    }
+
+    /// One control period's sensing at `t_s`, the one place the closed loop asks the fault
+    /// plan: the coil's state and the coil driver's condition, and the measurement of `truth`.
+    /// What the shunt sees: `truth.coil_current_a`, or with a shorted coil the driver's current
+    /// through the short (no L/R lag), `ratio` x `drive_a` (what the drive of the last period
+    /// pushes through the coil). Without a coil (`no_coil`) the coil is taken as healthy and
+    /// there is no current sensor.
+    pub fn period(&mut self, t_s: f64, truth: &Truth, drive_a: f64, no_coil: bool) -> Period {
+        let coil = self.coil_state(t_s);
+        let coil_current_a = match coil {
+            CoilState::Short { ratio } if !no_coil => ratio * drive_a,
+            _ => truth.coil_current_a,
+        };
+        let mut meas = self.sample(
+            t_s,
+            &Truth {
+                coil_current_a,
+                ..*truth
+            },
+        );
+        if no_coil {
+            meas.coil_current_a = None;
+        }
+        Period {
+            meas,
+            coil: if no_coil { CoilState::Healthy } else { coil },
+            drive: self.drive_condition(t_s),
+        }
     }
 
     /// The coil's state at `t_s` according to the fault injector (healthy without one).

@@ -28,7 +28,7 @@ use crate::model::faults::{FaultPlan, FaultSpec};
 use crate::model::integrator::IntegrateError;
 use crate::model::plant::{Damper, Inputs, Method};
 use crate::model::registry::{ReferenceModel, REFERENCE_N};
-use crate::model::sensors::{CoilState, Measurement, SensorConfig, Sensors, Truth};
+use crate::model::sensors::{CoilState, Measurement, Period, SensorConfig, Sensors, Truth};
 use shimmy_core::control::actuator::CoilParams;
 use shimmy_core::control::{
     ControlInput, ControlOutput, ControlParams, Controller, ControllerKind,
@@ -768,36 +768,29 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
         let t = k as f64 * cfg.dt_s;
         let [psi_l, psi_r] = sim.wheel_yaw_rad();
         let steering = sim.steering_angle_rad();
-        let coil_state = sensors.coil_state(t);
         let coil = if no_damper { 0.0 } else { sim.coil_input_a() };
-        // The board's drive over the last period (`None`: an ideal current source).
+        // The board's drive over the last period (`None`: an ideal current source, whose drive
+        // is the command held over it).
         let coil_drive_a = drive.as_ref().map(BoardDrive::drive_a);
-        // What the shunt sees: the coil current, or with a shorted coil the driver's current
-        // through the short (no L/R lag): `ratio` x what the drive of the last period pushes
-        // through the coil (the command held over it, for an ideal current source).
-        let coil_meas = match coil_state {
-            CoilState::Short { ratio } if !no_damper => {
-                ratio * f64::from(coil_drive_a.unwrap_or(held.current_cmd_a))
-            }
-            _ => coil,
-        };
         let mut inputs = scenario.inputs(t, cfg.dt_s);
         for tq in &mut inputs.yaw_torque_nm {
             *tq *= torque_scale;
         }
-        let mut meas = sensors.sample(
+        let Period {
+            meas,
+            coil: coil_state,
+            drive: drive_condition,
+        } = sensors.period(
             t,
             &Truth {
                 psi_l_rad: psi_l,
                 psi_r_rad: psi_r,
                 speed_mps: inputs.speed_mps,
-                coil_current_a: coil_meas,
+                coil_current_a: coil,
             },
+            f64::from(coil_drive_a.unwrap_or(held.current_cmd_a)),
+            no_damper,
         );
-        if no_damper {
-            // No coil, no current sensor.
-            meas.coil_current_a = None;
-        }
         let mut safe_out = None;
         if meas.lost {
             lost_run_s += cfg.dt_s;
@@ -863,12 +856,7 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
         };
         if let (Some(d), true) = (drive.as_mut(), in_reset) {
             // The boot's fixed duty: no current loop runs.
-            driven_a = d.plant_input_a(
-                out.current_cmd_a,
-                None,
-                cfg.dt_s as f32,
-                sensors.drive_condition(t),
-            );
+            driven_a = d.plant_input_a(out.current_cmd_a, None, cfg.dt_s as f32, drive_condition);
         } else if let (Some(d), false) = (drive.as_mut(), meas.lost) {
             // The firmware's `drive_coil`: off for a coil found open/shorted, else closed loop
             // on the trusted measured current.
@@ -881,7 +869,7 @@ fn run_loop<M: SimModel<N>, const N: usize, F: FirmwareStep>(
                     out.current_cmd_a,
                     measured,
                     cfg.dt_s as f32,
-                    sensors.drive_condition(t),
+                    drive_condition,
                 )
             } else {
                 d.off();

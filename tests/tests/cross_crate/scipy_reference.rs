@@ -21,7 +21,7 @@ use shimmy_sim::cmd::reference_bench::{compare, ReferenceBenchArgs};
 fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
     let out = std::env::temp_dir().join(format!("shimmy-scipy-ref-{}", std::process::id()));
     let args = ReferenceBenchArgs {
-        vehicle: "nominal".into(),
+        vehicle: shimmy_sim::cmd::VehicleArg::new("nominal"),
         duration_s: 2.0,
         speed_kmh: 60.0,
         current_a: 0.5,

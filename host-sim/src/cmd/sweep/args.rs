@@ -12,10 +12,9 @@ use std::path::PathBuf;
 /// Options of `shimmy-sim sweep`.
 #[derive(Args, Debug, Clone)]
 pub struct SweepArgs {
-    /// Vehicle: a named set (nominal, gentle, hard) or a vehicle file (TOML, see
-    /// docs/vehicle-file.md; parameter files are vehicle files). `--params` is the older name.
-    #[arg(long, visible_alias = "params", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle (`--vehicle`, a named set or a vehicle file).
+    #[command(flatten)]
+    pub vehicle: crate::cmd::VehicleArg,
     /// Parameter varied on the vertical axis (field name, see `shimmy-sim params`).
     #[arg(long, default_value = "k_d")]
     pub param: String,

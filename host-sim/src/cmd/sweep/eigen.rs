@@ -61,7 +61,7 @@ pub fn compute(
         }
     }
     registry::with_model(
-        crate::sim::vehicle_file::load_model(&a.vehicle)?,
+        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
         On(a, ready),
     )
 }
@@ -181,10 +181,10 @@ pub fn command(a: &SweepArgs) -> Result<()> {
         let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name));
         let png = a.out.join(format!("sweep-{}-{tag}.png", param.name));
         write_csv(&grid, &boundary, param, map)?;
-        plot(&png, param, map, &a.vehicle)?;
+        plot(&png, param, map, &a.vehicle.spec)?;
         println!(
             "{} ({}, c = {:.1} N s/m): Hopf boundary vs {} [{}]",
-            a.vehicle, map.damper, map.c_nspm, param.name, param.unit
+            a.vehicle.spec, map.damper, map.c_nspm, param.name, param.unit
         );
         println!(
             "  {:>14}  {:>12} {:>12}",
@@ -339,7 +339,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            vehicle: "nominal".into(),
+            vehicle: crate::cmd::VehicleArg::new("nominal"),
             param: "k_d".into(),
             factor_min: 0.8,
             factor_max: 1.0,

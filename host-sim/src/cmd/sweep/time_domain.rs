@@ -166,7 +166,7 @@ pub fn compute(
         }
     }
     registry::with_model(
-        crate::sim::vehicle_file::load_model(&a.vehicle)?,
+        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
         On(a, ready),
     )
 }
@@ -417,7 +417,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
         let c = a.out.join(format!("td-{name}-{}.csv", m.controller));
         crate::sim::files::write_file(&c, csv(&g, m))?;
         let png = a.out.join(format!("td-{name}-{}.png", m.controller));
-        plot(&png, &g, m, &a.vehicle, scale_deg)?;
+        plot(&png, &g, m, &a.vehicle.spec, scale_deg)?;
         files.push(c);
         files.push(png);
     }
@@ -433,7 +433,7 @@ mod tests {
 
     fn args(out: &Path) -> SweepArgs {
         SweepArgs {
-            vehicle: "nominal".into(),
+            vehicle: crate::cmd::VehicleArg::new("nominal"),
             param: "k_d".into(),
             factor_min: 1.0,
             factor_max: 1.0,
