@@ -40,7 +40,7 @@ mod app {
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
     use shimmy_firmware::store::{ConfigSource, LogEntry, Motion, StoreTask};
     use shimmy_link::device::{Device, REPLY_BYTES};
-    use shimmy_link::log::Recorder;
+    use shimmy_link::log::{DiagnosisWatch, Recorder};
 
     /// The probe's telemetry line every this many meter runs (1 Hz; feature `probe-telemetry`).
     #[cfg(feature = "probe-telemetry")]
@@ -203,7 +203,7 @@ mod app {
     /// meter tasks preempt it at any instruction. Each cycle's margin is published; one in ten
     /// (1 Hz) is logged. A pass runs after each meter run or while a cycle is under way
     /// (`PassGate`); other wakes go back to sleep.
-    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false, diagnosed: Option<&'static str> = None], shared = [model, measurement, now, health, motion, link, store_task])]
+    #[idle(local = [model_task, log_rx, gate: PassGate = PassGate::new(), restart_due: bool = false, diagnosis: DiagnosisWatch = DiagnosisWatch::new(), diagnosis_entry: Option<LogEntry> = None], shared = [model, measurement, now, health, motion, link, store_task])]
     fn idle(mut cx: idle::Context) -> ! {
         loop {
             let motion = cx.shared.motion.lock(|m| *m);
@@ -222,9 +222,10 @@ mod app {
             }
             let log_rx = &mut *cx.local.log_rx;
             let restart_due = &mut *cx.local.restart_due;
+            let diagnosis = cx.local.diagnosis_entry.take();
             let link = &mut cx.shared.link;
             cx.shared.store_task.lock(|task| {
-                store_pass(task, log_rx, motion);
+                store_pass(task, log_rx, diagnosis, motion);
                 *restart_due |= save_host_config(task, link, motion.t_s);
                 if *restart_due && may_restart(task, motion.t_s, log_rx.ready()) {
                     defmt::info!("restarting to run the saved vehicle");
@@ -243,10 +244,11 @@ mod app {
                 let up = task.updater();
                 cx.shared.link.lock(|l| l.on_model_update(up));
                 // the diagnosis in the log when it names another part (or none any more)
-                let d = up.diagnosis();
-                if d.map(|d| d.field) != *cx.local.diagnosed {
-                    *cx.local.diagnosed = d.map(|d| d.field);
-                    match d {
+                let d = up.diagnosis_indexed();
+                let t_ms = (t_s * 1e3) as u32;
+                if let Some(e) = cx.local.diagnosis.on_update(t_ms, d) {
+                    *cx.local.diagnosis_entry = Some(LogEntry::Diagnosis(e));
+                    match d.map(|(_, d)| d) {
                         Some(d) => {
                             let (lo, hi) = d.two_sigma();
                             defmt::warn!(
@@ -529,9 +531,13 @@ mod app {
     fn store_pass(
         task: &mut StoreTask<TargetFlash>,
         rx: &mut Consumer<'static, LogEntry>,
+        diagnosis: Option<LogEntry>,
         motion: Motion,
     ) {
-        let pass = task.step(motion, core::iter::from_fn(|| rx.dequeue()));
+        let pass = task.step(
+            motion,
+            core::iter::from_fn(|| rx.dequeue()).chain(diagnosis),
+        );
         if pass.appended > 0 {
             defmt::info!(
                 "store: {=u32} log entries appended at t = {=f64} s ({=usize} waiting for a standstill)",

@@ -58,7 +58,7 @@ fn shimmies(s: &mut Store<Flash>, ghost_max: u32) -> Vec<u32> {
     s.read_log(
         &mut |e| match e.expect("an entry that does not read back whole") {
             &LogEntry::Shimmy(x) => seqs.push(x.start_s as u32),
-            LogEntry::Boot(_) | LogEntry::Fault(_) => {}
+            LogEntry::Boot(_) | LogEntry::Fault(_) | LogEntry::Diagnosis(_) => {}
         },
     )
     .expect("the log reads");

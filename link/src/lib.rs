@@ -27,7 +27,7 @@ pub mod wire;
 
 /// Version of the message schema; a frame of another version is answered with
 /// [`wire::ErrorReply::Version`]. Raise it on any change of [`wire`]'s types.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// Serial speed of the link, baud (the board's USART1 and the host tool's default): a 0.8 KiB
 /// reply (a vehicle record) takes 9 ms on the wire.

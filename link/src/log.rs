@@ -4,22 +4,66 @@
 //! the damper commands in between, the supervisor's active and latched fault bits) into
 //! [`LogEntry`]s: one [`ShimmyEvent`] per closed monitor episode, with the controller's action
 //! during it, and one [`FaultEvent`] per fault that became active. The episode still open is
-//! not an entry yet ([`Recorder::open_event`] shows it).
+//! not an entry yet ([`Recorder::open_event`] shows it). [`DiagnosisWatch`] makes a
+//! [`DiagnosisEvent`] each time the online model update's diagnosis names another part.
 //!
 //! [`RamLog`] is a bounded queue of entries in RAM (oldest dropped when full, drop count kept):
 //! the simulator's device keeps its log there; the firmware's recorder feeds the flash log
 //! (`shimmy_firmware::store`) behind the same [`EventSink`]. [`Pager`] cuts either into the
 //! pages a host reads.
 
+use shimmy_core::estimator::model_update::ParamEstimate;
 use shimmy_core::estimator::monitor::{Event, Monitor};
 use shimmy_core::supervisor::faults::FaultKind;
 
-use crate::wire::{fault_code, level_code, FaultEvent, LogEntry, ShimmyEvent, EVENTS_PER_PAGE};
+use crate::wire::{
+    fault_code, level_code, DiagnosisEvent, FaultEvent, LogEntry, ShimmyEvent, EVENTS_PER_PAGE,
+};
 
 /// Where recorded entries go (a RAM queue, the flash log).
 pub trait EventSink {
     /// Appends an entry (the oldest goes when full).
     fn append(&mut self, e: LogEntry);
+}
+
+/// Watches the online model update's diagnosis
+/// (`shimmy_core::estimator::model_update::ModelUpdater::diagnosis_indexed`): an entry when it
+/// names another part than the last entry did, or none any more; nothing while it stays.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DiagnosisWatch {
+    /// The part the last entry named (`None`: none, or no entry yet).
+    named: Option<u8>,
+}
+
+impl DiagnosisWatch {
+    /// A watch that has logged nothing yet.
+    pub const fn new() -> Self {
+        Self { named: None }
+    }
+
+    /// The entry for the diagnosis `d` (the parameter's index and its estimate) at `t_ms`, if
+    /// it names another part than before.
+    pub fn on_update(
+        &mut self,
+        t_ms: u32,
+        d: Option<(usize, ParamEstimate)>,
+    ) -> Option<DiagnosisEvent> {
+        let param = d.and_then(|(i, _)| u8::try_from(i).ok());
+        if param == self.named {
+            return None;
+        }
+        self.named = param;
+        let e = d.map(|(_, e)| e);
+        let num = |f: fn(&ParamEstimate) -> f64| e.as_ref().map_or(0.0, |e| f(e) as f32);
+        Some(DiagnosisEvent {
+            t_ms,
+            param,
+            factor: num(|e| e.factor),
+            sigma_ln: num(|e| e.sigma_ln),
+            band_low: num(|e| e.band.0),
+            band_high: num(|e| e.band.1),
+        })
+    }
 }
 
 /// Turns monitor episodes and fault bits into log entries.
@@ -374,5 +418,40 @@ mod tests {
         // Mostly 1.5 A, plus the 0.2 A of the release time after the shimmy.
         assert!(e.mean_current_a > 0.2 && e.mean_current_a <= 1.5);
         assert!(r.open_event(&m).is_none());
+    }
+
+    /// The watch logs a diagnosis once when it appears, again only when another part is
+    /// named, and once when every part is back within its band; an unchanged diagnosis logs
+    /// nothing.
+    #[test]
+    fn a_diagnosis_is_logged_when_it_names_another_part() {
+        let est = |factor: f64| ParamEstimate {
+            field: "k_d",
+            what: "steering linkage stiffness",
+            factor,
+            sigma_ln: 0.02,
+            prior_sigma_ln: 0.15,
+            band: (0.7, 1.3),
+            out_of_band: true,
+        };
+        let mut w = DiagnosisWatch::default();
+        assert_eq!(w.on_update(0, None), None, "nothing named, nothing logged");
+        let e = w
+            .on_update(1000, Some((2, est(0.5))))
+            .expect("a new diagnosis");
+        assert_eq!((e.t_ms, e.param), (1000, Some(2)));
+        assert_eq!((e.factor, e.band_low, e.band_high), (0.5, 0.7, 1.3));
+        assert_eq!(
+            w.on_update(2000, Some((2, est(0.48)))),
+            None,
+            "the same part"
+        );
+        let e = w
+            .on_update(3000, Some((0, est(1.6))))
+            .expect("another part");
+        assert_eq!(e.param, Some(0));
+        let e = w.on_update(4000, None).expect("resolved");
+        assert_eq!((e.param, e.factor), (None, 0.0));
+        assert_eq!(w.on_update(5000, None), None);
     }
 }

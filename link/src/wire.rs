@@ -144,6 +144,8 @@ pub enum LogEntry {
     Fault(FaultEvent),
     /// The device started.
     Boot(BootEvent),
+    /// The online model update's diagnosis named another part, or none any more.
+    Diagnosis(DiagnosisEvent),
 }
 
 /// A warning episode as the core monitor logs it (`shimmy_core::estimator::monitor::Event`),
@@ -181,6 +183,26 @@ pub struct FaultEvent {
     pub kind: u8,
     /// The supervisor latched it (kept across resets until the next power-on).
     pub latched: bool,
+}
+
+/// The online model update's diagnosis changed
+/// (`shimmy_core::estimator::model_update::ModelUpdater::diagnosis`): the parameter furthest
+/// outside its plausible band, with its estimate, or none any more.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiagnosisEvent {
+    /// Time since boot, ms.
+    pub t_ms: u32,
+    /// The parameter's index in the model's update set, the order of [`ModelReport::params`]
+    /// (`None`: every part within its band again; the numbers below are then 0).
+    pub param: Option<u8>,
+    /// The factor on the vehicle file's value.
+    pub factor: f32,
+    /// One-sigma uncertainty of ln(factor).
+    pub sigma_ln: f32,
+    /// The factor's plausible band, low end.
+    pub band_low: f32,
+    /// The factor's plausible band, high end.
+    pub band_high: f32,
 }
 
 /// A start of the device.

@@ -460,10 +460,16 @@ impl<M: UpdatableModel<N>, const N: usize, T: SolveFloat> ModelUpdater<M, N, T> 
 
     /// The parameter furthest outside its plausible band (beyond two sigmas), if any.
     pub fn diagnosis(&self) -> Option<ParamEstimate> {
-        self.estimates()
-            .into_iter()
-            .filter(|e| e.out_of_band)
-            .max_by(|a, b| {
+        self.diagnosis_indexed().map(|(_, e)| e)
+    }
+
+    /// [`Self::diagnosis`] with the parameter's index in `M::UPDATE_PARAMS` (the order of
+    /// [`Self::estimates`]).
+    pub fn diagnosis_indexed(&self) -> Option<(usize, ParamEstimate)> {
+        (0..self.k)
+            .filter_map(|i| self.estimate(i).map(|e| (i, e)))
+            .filter(|(_, e)| e.out_of_band)
+            .max_by(|(_, a), (_, b)| {
                 libm::fabs(libm::log(a.factor) / a.sigma_ln.max(1e-12))
                     .total_cmp(&libm::fabs(libm::log(b.factor) / b.sigma_ln.max(1e-12)))
             })

@@ -105,6 +105,10 @@ mod app {
                         e.mean_current_a
                     );
                 }
+                Ok(LogEntry::Diagnosis(d)) => {
+                    defmt::error!("log {=usize}: a diagnosis at t = {=u32} ms", n, d.t_ms);
+                    check(false, "only what boots 1 and 2 wrote");
+                }
                 Err(u) => {
                     defmt::error!("log {=usize}: unreadable entry {}", n, u);
                     check(false, "every entry reads back whole");

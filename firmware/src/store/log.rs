@@ -6,10 +6,12 @@
 //! - shimmy episode ([`ShimmyEvent`], closed): start time (f64), then speed, frequency, peak
 //!   amplitude, duration, time in shimmy, peak and mean coil command (f32), then the level;
 //! - fault ([`FaultEvent`]): time (u32 ms), kind, latched (0 or 1);
-//! - boot ([`BootEvent`]): cause, resets since power-on, the store's persistent boot count.
+//! - boot ([`BootEvent`]): cause, resets since power-on, the store's persistent boot count;
+//! - diagnosis ([`DiagnosisEvent`]): time (u32 ms), the parameter's index (255: none), factor,
+//!   sigma of ln(factor), band low and high (f32).
 
 use shimmy_core::supervisor::faults::FaultKind;
-pub use shimmy_link::wire::{BootEvent, FaultEvent, LogEntry, ShimmyEvent};
+pub use shimmy_link::wire::{BootEvent, DiagnosisEvent, FaultEvent, LogEntry, ShimmyEvent};
 
 /// The longest entry, bytes.
 pub const ENTRY_MAX_BYTES: usize = 40;
@@ -17,6 +19,9 @@ pub const ENTRY_MAX_BYTES: usize = 40;
 const TAG_SHIMMY: u8 = 1;
 const TAG_FAULT: u8 = 2;
 const TAG_BOOT: u8 = 3;
+const TAG_DIAGNOSIS: u8 = 4;
+/// The diagnosis' parameter index for "none".
+const NO_PARAM: u8 = u8::MAX;
 /// Level codes run 0..=this (`shimmy_link::wire::level_code`).
 const LEVEL_MAX: u8 = 3;
 
@@ -98,6 +103,14 @@ pub fn encode(entry: &LogEntry, out: &mut [u8; ENTRY_MAX_BYTES]) -> usize {
             w.put(&b.resets_since_power_on.to_le_bytes());
             w.put(&b.boot_count.to_le_bytes());
         }
+        LogEntry::Diagnosis(d) => {
+            w.put(&[TAG_DIAGNOSIS]);
+            w.put(&d.t_ms.to_le_bytes());
+            w.put(&[d.param.unwrap_or(NO_PARAM)]);
+            for v in [d.factor, d.sigma_ln, d.band_low, d.band_high] {
+                w.put(&v.to_le_bytes());
+            }
+        }
     }
     w.at
 }
@@ -159,6 +172,22 @@ pub fn decode(bytes: &[u8]) -> Result<LogEntry, Unreadable> {
                 boot_count,
             }))
         })(),
+        Some(TAG_DIAGNOSIS) => (|| {
+            let t_ms = r.u32()?;
+            let param = match r.u8()? {
+                NO_PARAM => None,
+                i => Some(i),
+            };
+            let [factor, sigma_ln, band_low, band_high] = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
+            Some(LogEntry::Diagnosis(DiagnosisEvent {
+                t_ms,
+                param,
+                factor,
+                sigma_ln,
+                band_low,
+                band_high,
+            }))
+        })(),
         _ => None,
     };
     match entry {
@@ -201,6 +230,22 @@ mod tests {
                 cause: ResetCause::Watchdog as u8,
                 resets_since_power_on: 3,
                 boot_count: 1000,
+            }),
+            LogEntry::Diagnosis(DiagnosisEvent {
+                t_ms: 61_000,
+                param: Some(2),
+                factor: 0.5,
+                sigma_ln: 0.02,
+                band_low: 0.7,
+                band_high: 1.3,
+            }),
+            LogEntry::Diagnosis(DiagnosisEvent {
+                t_ms: 62_000,
+                param: None,
+                factor: 0.0,
+                sigma_ln: 0.0,
+                band_low: 0.0,
+                band_high: 0.0,
             }),
         ];
         for e in entries {

@@ -9,18 +9,21 @@ use crate::model::registry::{
 };
 use crate::model::study::StudyModel;
 use crate::sim::device_link::{
-    read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, Port, SerialPort,
-    TcpPort,
+    read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, ParamState, Port,
+    SerialPort, TcpPort,
 };
 use crate::sim::sim_device::SimDevice;
 use crate::sim::vehicle_file;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
+use shimmy_core::estimator::model_update::Statement;
 use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
 use shimmy_core::vehicle::{
     encode_record, record_schema_of, RecordVehicle, Vehicle, RECORD_HEADER_BYTES, RECORD_MAX_BYTES,
 };
-use shimmy_link::wire::{cause_name, fault_name, level_name, FaultReport, LogEntry};
+use shimmy_link::wire::{
+    cause_name, fault_name, level_name, DiagnosisEvent, FaultReport, LogEntry,
+};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -209,14 +212,16 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
         }
         DeviceAction::Events { csv, clear } => {
             let log = c.events()?;
+            // the update's parameters name a logged diagnosis
+            let params = c.model()?.params;
             match csv.as_deref() {
-                Some(p) if p.as_os_str() == "-" => print!("{}", events_csv(&log)),
+                Some(p) if p.as_os_str() == "-" => print!("{}", events_csv(&log, &params)),
                 Some(p) => {
-                    crate::sim::files::write_file(p, events_csv(&log))?;
-                    print!("{}", events_table(&log));
+                    crate::sim::files::write_file(p, events_csv(&log, &params))?;
+                    print!("{}", events_table(&log, &params));
                     eprintln!("CSV written to {}", p.display());
                 }
-                None => print!("{}", events_table(&log)),
+                None => print!("{}", events_table(&log, &params)),
             }
             if *clear {
                 let n = c.clear_events()?;
@@ -386,17 +391,40 @@ fn faults_text(f: &FaultReport) -> String {
 }
 
 /// The CSV header of the event log.
-pub const EVENTS_CSV_HEADER: &str = "index,kind,start_s,speed_kmh,freq_hz,peak_amplitude_mrad,duration_s,shimmy_s,level,open,peak_current_a,mean_current_a,fault,latched,cause,resets_since_power_on,boot_count";
+pub const EVENTS_CSV_HEADER: &str = "index,kind,start_s,speed_kmh,freq_hz,peak_amplitude_mrad,duration_s,shimmy_s,level,open,peak_current_a,mean_current_a,fault,latched,cause,resets_since_power_on,boot_count,diagnosis";
 
-/// The log as CSV, one row per entry (shimmy columns empty for a fault and vice versa).
-pub fn events_csv(log: &EventLog) -> String {
+/// A logged diagnosis in words, its parameter named by `params` (the device's update
+/// parameters, in their order).
+pub fn diagnosis_text(d: &DiagnosisEvent, params: &[ParamState]) -> String {
+    let Some(i) = d.param else {
+        return "model update: every part within its band".into();
+    };
+    match params.get(usize::from(i)) {
+        Some(p) => Statement {
+            what: &p.what,
+            field: &p.field,
+            factor: f64::from(d.factor),
+            sigma_ln: f64::from(d.sigma_ln),
+            band: (f64::from(d.band_low), f64::from(d.band_high)),
+        }
+        .to_string(),
+        None => format!(
+            "update parameter {i} (not one this device reports) x{:.2}",
+            d.factor
+        ),
+    }
+}
+
+/// The log as CSV, one row per entry (shimmy columns empty for a fault and vice versa), a
+/// diagnosis named by `params`.
+pub fn events_csv(log: &EventLog, params: &[ParamState]) -> String {
     let mut s = String::from(EVENTS_CSV_HEADER);
     s.push('\n');
     for (i, e) in log.entries.iter().enumerate() {
         let _ = match e {
             LogEntry::Shimmy(x) => writeln!(
                 s,
-                "{i},shimmy,{:.3},{:.1},{:.2},{:.2},{:.2},{:.2},{},{},{:.3},{:.3},,,,,",
+                "{i},shimmy,{:.3},{:.1},{:.2},{:.2},{:.2},{:.2},{},{},{:.3},{:.3},,,,,,",
                 x.start_s,
                 f64::from(x.speed_mps) * 3.6,
                 x.freq_hz,
@@ -410,7 +438,7 @@ pub fn events_csv(log: &EventLog) -> String {
             ),
             LogEntry::Fault(f) => writeln!(
                 s,
-                "{i},fault,{:.3},,,,,,,,,,{},{},,,",
+                "{i},fault,{:.3},,,,,,,,,,{},{},,,,",
                 f64::from(f.t_ms) * 1e-3,
                 fault_name(f.kind),
                 f.latched
@@ -418,17 +446,24 @@ pub fn events_csv(log: &EventLog) -> String {
             // A boot has no time of its own (each run's clock starts at 0).
             LogEntry::Boot(b) => writeln!(
                 s,
-                "{i},boot,,,,,,,,,,,,,{},{},{}",
+                "{i},boot,,,,,,,,,,,,,{},{},{},",
                 cause_name(b.cause),
                 b.resets_since_power_on,
                 b.boot_count
+            ),
+            // the statement has commas: quoted
+            LogEntry::Diagnosis(d) => writeln!(
+                s,
+                "{i},diagnosis,{:.3},,,,,,,,,,,,,,,\"{}\"",
+                f64::from(d.t_ms) * 1e-3,
+                diagnosis_text(d, params).replace('"', "'")
             ),
         };
     }
     s
 }
 
-fn events_table(log: &EventLog) -> String {
+fn events_table(log: &EventLog, params: &[ParamState]) -> String {
     let mut s = format!(
         "{} entries{}\n  #  kind     start s   km/h    Hz  peak mrad  dur s  level                 I peak/mean A  fault\n",
         log.entries.len(),
@@ -470,6 +505,13 @@ fn events_table(log: &EventLog) -> String {
                 cause_name(b.cause),
                 b.resets_since_power_on
             ),
+            LogEntry::Diagnosis(d) => writeln!(
+                s,
+                "{i:>3}  model  {:>9.3} {:>59}  {}",
+                f64::from(d.t_ms) * 1e-3,
+                "",
+                diagnosis_text(d, params)
+            ),
         };
     }
     s
@@ -510,4 +552,61 @@ fn watch<P: Port>(c: &mut Client<P>, for_: Duration) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::device_link::EventLog;
+
+    /// A logged diagnosis reads as the model update's statement, its parameter named by the
+    /// device's update parameters; its end, and an index the device does not report, read
+    /// as such; in the CSV the statement is one quoted field of the last column.
+    #[test]
+    fn a_logged_diagnosis_is_named_by_the_devices_update_parameters() {
+        let params = vec![ParamState {
+            field: "k_d".into(),
+            what: "steering linkage stiffness".into(),
+            factor: 1.0,
+            sigma_ln: 0.1,
+            band: (0.7, 1.3),
+            out_of_band: false,
+        }];
+        let d = DiagnosisEvent {
+            t_ms: 61_500,
+            param: Some(0),
+            factor: 0.5,
+            sigma_ln: 0.01,
+            band_low: 0.7,
+            band_high: 1.3,
+        };
+        let text = diagnosis_text(&d, &params);
+        assert!(
+            text.starts_with("steering linkage stiffness (k_d) 50 % below the vehicle file"),
+            "{text}"
+        );
+        let ended = DiagnosisEvent { param: None, ..d };
+        assert!(diagnosis_text(&ended, &params).contains("every part within its band"));
+        let unknown = DiagnosisEvent {
+            param: Some(3),
+            ..d
+        };
+        assert!(diagnosis_text(&unknown, &params).contains("update parameter 3"));
+        let log = EventLog {
+            dropped: 0,
+            entries: vec![LogEntry::Diagnosis(d)],
+        };
+        let csv = events_csv(&log, &params);
+        let row = csv.lines().nth(1).unwrap();
+        assert!(row.starts_with("0,diagnosis,61.500,"), "{row}");
+        assert_eq!(
+            row.split(",\"").nth(1).map(|s| s.trim_end_matches('"')),
+            Some(text.as_str())
+        );
+        assert_eq!(
+            csv.lines().next().unwrap().split(',').count(),
+            row.split(",\"").next().unwrap().split(',').count() + 1
+        );
+        assert!(events_table(&log, &params).contains("model     61.500"));
+    }
 }

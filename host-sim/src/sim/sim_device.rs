@@ -27,7 +27,7 @@ use shimmy_core::supervisor::safe_controller::SafeController;
 use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::{record_schema_of, RecordVehicle, Vehicle};
 use shimmy_link::device::{Backend, Device, REPLY_BYTES};
-use shimmy_link::log::{EventSink, Pager, RamLog, Recorder};
+use shimmy_link::log::{DiagnosisWatch, EventSink, Pager, RamLog, Recorder};
 use shimmy_link::wire::{
     level_code, BootEvent, ErrorReply, FaultReport, Identity, LogEntry, ModelReport, ShimmyEvent,
     Telemetry,
@@ -104,6 +104,7 @@ impl<V: RecordVehicle> Backend for SimBackend<V> {
 struct DriveObserver<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> {
     pipe: Box<ShimmyPipeline<16, L, S>>,
     recorder: Recorder,
+    diagnosis: DiagnosisWatch,
     backend: SimBackend<V>,
     radius_m: f32,
     last_v: Option<(f64, f32)>,
@@ -156,6 +157,13 @@ impl<V: RecordVehicle, L: UpdatableModel<S>, const S: usize> LoopObserver
         };
         self.recorder.on_update(self.pipe.monitor(), &mut b.log);
         b.open = self.recorder.open_event(self.pipe.monitor());
+        // the online model update's diagnosis, as the board's background loop logs it
+        if let Some(e) = self
+            .diagnosis
+            .on_update(t_ms, self.pipe.updater().diagnosis_indexed())
+        {
+            b.log.append(LogEntry::Diagnosis(e));
+        }
         self.updates += 1;
         if self.updates.is_multiple_of(10) {
             let m = &u.report;
@@ -245,6 +253,7 @@ fn drive_model<M: SimModel<N>, const N: usize, V: RecordVehicle>(
     let mut obs = DriveObserver {
         pipe: Box::new(pipe),
         recorder: Recorder::new(),
+        diagnosis: DiagnosisWatch::new(),
         backend: SimBackend {
             vehicle: stored,
             pending: false,

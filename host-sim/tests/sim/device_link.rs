@@ -104,7 +104,7 @@ fn the_simulated_drive_logs_its_shimmy_episode_and_its_fault_and_config_round_tr
         .iter()
         .filter_map(|e| match e {
             LogEntry::Shimmy(s) => Some(*s),
-            LogEntry::Fault(_) | LogEntry::Boot(_) => None,
+            LogEntry::Fault(_) | LogEntry::Boot(_) | LogEntry::Diagnosis(_) => None,
         })
         .collect();
     assert!(!shimmy.is_empty(), "a warning episode in {log:?}");
@@ -118,7 +118,7 @@ fn the_simulated_drive_logs_its_shimmy_episode_and_its_fault_and_config_round_tr
         .iter()
         .filter_map(|e| match e {
             LogEntry::Fault(f) => Some(f.t_ms),
-            LogEntry::Shimmy(_) | LogEntry::Boot(_) => None,
+            LogEntry::Shimmy(_) | LogEntry::Boot(_) | LogEntry::Diagnosis(_) => None,
         })
         .collect();
     let start_ms = (PARITY_FAULT_S.0 * 1e3) as u32;
