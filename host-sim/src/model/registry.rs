@@ -14,12 +14,15 @@
 //! - [`Registered`]: a model's way into and out of [`ModelVehicle`].
 //!
 //! A command is written once, generic over `M: Registered<N>`, and called through
-//! [`with_model`]. What only some models have (a firmware image, scenario files) is an optional
-//! method of [`ModelEntry`] with a default, not a match.
+//! [`with_model`]. What only some models have is not a match: scenario files are an optional
+//! constant of [`ModelEntry`] with a default; a firmware image is the model's
+//! [`BoardModel`] and [`StudyModel`], marked `study` in the list, which
+//! [`with_image_model`] and [`for_each_image_model`] visit.
 //!
 //! Adding a model: a core folder (`core/src/vehicles/<model>/`), a plant file
 //! (`host-sim/src/model/<model>_plant.rs`: its [`SimPlant`](super::family::SimPlant),
-//! [`SimModel`] and [`ModelEntry`]) and a line in the list below.
+//! [`SimModel`] and [`ModelEntry`], and for a model with a firmware image its [`BoardModel`]
+//! and [`StudyModel`]) and a line in the list below.
 
 use anyhow::Result;
 use shimmy_core::model::LinearModel;
