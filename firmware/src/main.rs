@@ -13,8 +13,9 @@
 //! The `qemu` build runs the same application on simulated sensors with injected faults and
 //! exits after `board::QEMU_STEPS` steps with the counters, failing if they are not what the
 //! simulation injected. The `pil` build runs it on the host's plant in lockstep
-//! (`board/pil.rs`); the `#[cfg(feature = "pil")]` lines report to the host, and the idle
-//! loop starts the next step at once where the board would wait for the timer.
+//! (`board/pil.rs`): the tasks call the build's hooks (`board::hooks`), which there report to
+//! the host, and the idle loop starts the next step at once where the board would wait for the
+//! timer; on the board they are empty.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
@@ -28,6 +29,7 @@ mod app {
     use shimmy_core::supervisor::safe_controller::SafeController;
     use shimmy_core::vehicle::BoardVehicle;
     use shimmy_firmware::background::PassGate;
+    use shimmy_firmware::board::hooks::{AppHooks, Hooks};
     use shimmy_firmware::board::{self, Board};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
@@ -214,10 +216,7 @@ mod app {
             {
                 // Nothing new since the last pass: sleep until the next interrupt (PIL: the
                 // next step at once, as after a pass with nothing due; its timer is off).
-                #[cfg(not(feature = "pil"))]
-                cortex_m::asm::wfi();
-                #[cfg(feature = "pil")]
-                board::pil::background_pass(false);
+                Hooks::idle(false);
                 continue;
             }
             let log_rx = &mut *cx.local.log_rx;
@@ -235,11 +234,9 @@ mod app {
             let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
             let task = &mut *cx.local.model_task;
             task.offer(cx.shared.measurement.lock(Option::take));
-            #[cfg(feature = "pil")]
-            let call = board::pil::ModelCall::start();
+            let call = Hooks::model_call_start();
             let done = task.step(t_s, speed_mps);
-            #[cfg(feature = "pil")]
-            call.end(done.as_ref());
+            Hooks::model_call_end(call, done.as_ref());
             if task.take_applied() {
                 let up = task.updater();
                 cx.shared.link.lock(|l| l.on_model_update(up));
@@ -271,8 +268,7 @@ mod app {
                 let m = published.margin;
                 cx.shared.model.lock(|x| {
                     *x = Some(published);
-                    #[cfg(feature = "pil")]
-                    board::pil::model_published();
+                    Hooks::model_published();
                 });
                 let late = task.tracker().overruns();
                 let cycles = cx.shared.health.lock(|h| {
@@ -295,23 +291,16 @@ mod app {
                     );
                 }
             }
-            let busy = task.tracker().busy();
-            if !busy {
-                // Nothing due: sleep until the next interrupt (at most 1 ms).
-                #[cfg(not(feature = "pil"))]
-                cortex_m::asm::wfi();
-            }
-            // PIL: the next step at once when nothing is due, else at the period's end.
-            #[cfg(feature = "pil")]
-            board::pil::background_pass(busy);
+            // Nothing due: sleep until the next interrupt, at most 1 ms (PIL: the next step at
+            // once when nothing is due, else at the period's end).
+            Hooks::idle(task.tracker().busy());
         }
     }
 
     #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, cadence, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
-        #[cfg(feature = "pil")]
-        let entry_instructions = board::pil::instructions();
+        let entry_instructions = Hooks::entry();
         let entry = b.timer.now_ticks();
         b.timer.clear_update();
         if *cx.local.hold_safe {
@@ -363,8 +352,7 @@ mod app {
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
         *cx.local.step = step.wrapping_add(1);
-        #[cfg(feature = "pil")]
-        board::pil::report_step(step, &out, entry_instructions);
+        Hooks::report_step(step, &out, entry_instructions);
 
         #[cfg(all(feature = "qemu", not(feature = "pil")))]
         if step + 1 == board::QEMU_STEPS {
@@ -374,31 +362,24 @@ mod app {
 
     #[task(priority = 2, local = [rx, data, meter_runs, recorder, log_tx, cmd_peak_a: f32 = 0.0], shared = [health, model, measurement, now, margin, motion, link, latched])]
     async fn meter(mut cx: meter::Context) {
-        #[cfg(feature = "pil")]
-        let entry_instructions = board::pil::instructions();
+        let entry_instructions = Hooks::entry();
         let published = cx.shared.model.lock(|m| {
-            #[cfg(feature = "pil")]
-            board::pil::meter_took_model();
+            Hooks::meter_took_model();
             *m
         });
         if let Some(p) = &published {
             cx.local.data.set_margin_sigma(p.onset_sigma_mps);
         }
         let model = published.map(|p| p.margin);
-        #[cfg(feature = "pil")]
         let mut spawned_by = None;
         while let Some(s) = cx.local.rx.dequeue() {
             cx.local.recorder.on_command(s.cmd_a);
             *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
-            #[cfg(feature = "pil")]
-            {
-                spawned_by = Some(s.step);
-            }
+            spawned_by = Some(s.step);
             let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
                 continue;
             };
-            #[cfg(feature = "pil")]
-            board::pil::report_margin(s.step, &u.report, u.level);
+            Hooks::report_margin(s.step, &u.report, u.level);
             let health = cx.shared.health.lock(|h| *h);
             let latched = cx.shared.latched.lock(|l| l.bits());
             let monitor = cx.local.data.pipeline().monitor();
@@ -476,9 +457,8 @@ mod app {
                 );
             }
         }
-        #[cfg(feature = "pil")]
         if let Some(step) = spawned_by {
-            board::pil::report_meter_run(step, entry_instructions);
+            Hooks::report_meter_run(step, entry_instructions);
         }
     }
 

@@ -10,6 +10,7 @@
 //! - `pil` build (`pil.rs`, QEMU too): the sensors and the coil are the host's plant in
 //!   lockstep (processor in the loop, `shimmy-sim pil`).
 
+pub mod hooks;
 pub mod parts;
 
 #[cfg(not(feature = "qemu"))]

@@ -405,3 +405,40 @@ impl ModelCall {
         }
     }
 }
+
+/// The PIL build's hooks ([`super::hooks::AppHooks`]): every task's frames and instruction
+/// counts to the host; the background loop starts the next step at once where the board
+/// would wait for the timer ([`background_pass`]).
+pub struct PilHooks;
+
+impl super::hooks::AppHooks for PilHooks {
+    type Entry = u32;
+    type ModelCall = ModelCall;
+    fn entry() -> u32 {
+        instructions()
+    }
+    fn idle(busy: bool) {
+        background_pass(busy);
+    }
+    fn report_step(step: u32, out: &SafeOutput, entry: u32) {
+        report_step(step, out, entry);
+    }
+    fn meter_took_model() {
+        meter_took_model();
+    }
+    fn report_margin(step: u32, report: &MarginReport, level: Level) {
+        report_margin(step, report, level);
+    }
+    fn report_meter_run(step: u32, entry: u32) {
+        report_meter_run(step, entry);
+    }
+    fn model_published() {
+        model_published();
+    }
+    fn model_call_start() -> ModelCall {
+        ModelCall::start()
+    }
+    fn model_call_end(call: ModelCall, done: Option<&ModelPoint>) {
+        call.end(done);
+    }
+}
