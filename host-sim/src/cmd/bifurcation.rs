@@ -1661,6 +1661,63 @@ mod tests {
         }
     }
 
+    /// The bistable window of the car at 0 A (between its folds of cycles, where a large
+    /// disturbance starts shimmy that a small one does not) lies above the no-damper onset the
+    /// board's model tracker watches, so the monitor's margin there is already below zero and
+    /// the margin-scheduled ASMC damps: inside the window, below the 0 A linear onset
+    /// (`stability --damper-current-a 0`: 37.5 km/h), a 3 deg start that the damper at 0 A lets
+    /// grow into shimmy decays under `margin-asmc`.
+    #[test]
+    fn the_margin_scheduled_asmc_damps_large_starts_in_the_bistable_window() {
+        use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
+        use crate::model::family::{onset_kmh, FamilyVehicle};
+        use crate::sim::closed_loop::{self, Arm, LoopConfig};
+        use shimmy_core::control::ControllerKind;
+        use shimmy_core::units::kmh_to_mps;
+        use shimmy_core::vehicle::Vehicle;
+        let o = BifurcationOptions {
+            params: PlantParams::nominal(),
+            params_name: "nominal".into(),
+            damper: DamperSetting::reference_mr(0.0),
+            v_min_kmh: 30.0,
+            v_max_kmh: 80.0,
+            step_kmh: 2.5,
+            small_deg: 0.05,
+            large_deg: 3.0,
+            duration_s: 40.0,
+            window_s: 3.0,
+            out: PathBuf::new(),
+        };
+        let rows = chart(&o, &ChartAxis::CurrentA(vec![0.0])).unwrap();
+        let fold = rows[0].folds_kmh[0];
+        let onset = onset_kmh(&PlantParams::nominal()).unwrap();
+        println!("fold of cycles at 0 A {fold:.2} km/h, no-damper onset {onset:.2} km/h");
+        assert!(fold > onset + 1.0, "fold {fold}, onset {onset}");
+        let v_kmh = fold + 1.5;
+        let car = FamilyVehicle::car(Vehicle::nominal());
+        let end_peak_deg = |kind: ControllerKind| {
+            let mut cfg = LoopConfig::for_vehicle(&car, Arm::Mr(kind), 30.0);
+            cfg.x0 = initial_yaw(3f64.to_radians());
+            let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(v_kmh)));
+            let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
+            let psi = &r.series.psi_l_rad;
+            psi[psi.len() - 3000..]
+                .iter()
+                .fold(0.0_f64, |m, x| m.max(x.abs()))
+                .to_degrees()
+        };
+        let (passive, scheduled) = (
+            end_peak_deg(ControllerKind::PassiveOff),
+            end_peak_deg(ControllerKind::MarginAsmc),
+        );
+        println!(
+            "{v_kmh:.2} km/h, 3 deg start, peak over the last 3 s: 0 A {passive:.3} deg, \
+             margin-asmc {scheduled:.4} deg"
+        );
+        assert!(passive > 1.0, "the damper at 0 A shimmies: {passive} deg");
+        assert!(scheduled < 0.1, "margin-asmc damps: {scheduled} deg");
+    }
+
     /// The chart over a vehicle parameter without damper is the Hopf curve: at each tyre
     /// cornering stiffness the onset and offset agree with the linear model's crossings
     /// (`stability::hopf_crossings` on the eigenvalues of A(V), against the shooting's Hopf
