@@ -36,7 +36,7 @@ mod app {
     use shimmy_firmware::link::{may_restart, save_vehicle, Batch, BoardLink, LinkState, Saved};
     use shimmy_firmware::monitoring::{
         board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
-        MeterSample, ModelTask, Published,
+        MeterEvent, MeterSample, ModelTask, Published,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -367,96 +367,100 @@ mod app {
             Hooks::meter_took_model();
             *m
         });
-        if let Some(p) = &published {
-            cx.local.data.set_margin_sigma(p.onset_sigma_mps);
-        }
-        let model = published.map(|p| p.margin);
-        let mut spawned_by = None;
-        while let Some(s) = cx.local.rx.dequeue() {
-            cx.local.recorder.on_command(s.cmd_a);
-            *cx.local.cmd_peak_a = cx.local.cmd_peak_a.max(s.cmd_a);
-            spawned_by = Some(s.step);
-            let Some((u, changed)) = cx.local.data.push(&s, model.as_ref()) else {
-                continue;
-            };
-            Hooks::report_margin(s.step, &u.report, u.level);
-            let health = cx.shared.health.lock(|h| *h);
-            let latched = cx.shared.latched.lock(|l| l.bits());
-            let monitor = cx.local.data.pipeline().monitor();
-            // The log: closed episodes and raised faults to the store, the open episode to the
-            // link; then the motion for the store's standstill watch.
-            let recorder = &mut *cx.local.recorder;
-            let mut batch = Batch::new();
-            recorder.on_update(monitor, &mut batch);
-            recorder.on_faults(s.step, health.active_faults, latched, &mut batch);
-            let open = recorder.open_event(monitor);
-            cx.shared
-                .link
-                .lock(|l| l.on_update(&u, open, &health, latched, s.step));
-            let lost = batch.lost;
-            for e in batch {
-                if cx.local.log_tx.enqueue(e).is_err() {
-                    defmt::error!("store queue full: a log entry at step {=u32} lost", s.step);
+        let rx = &mut *cx.local.rx;
+        let recorder = &mut *cx.local.recorder;
+        let cmd_peak_a = &mut *cx.local.cmd_peak_a;
+        let log_tx = &mut *cx.local.log_tx;
+        let meter_runs = &mut *cx.local.meter_runs;
+        let shared = &mut cx.shared;
+        let spawned_by = cx.local.data.run(
+            published.as_ref(),
+            || rx.dequeue(),
+            |data, event| match event {
+                MeterEvent::Sample(s) => {
+                    recorder.on_command(s.cmd_a);
+                    *cmd_peak_a = cmd_peak_a.max(s.cmd_a);
                 }
-            }
-            if lost > 0 {
-                defmt::error!("{=u32} log entries at step {=u32} lost", lost, s.step);
-            }
-            let motion = Motion {
-                t_s: u.report.t_s,
-                speed_mps: cx.local.data.speed_mps(),
-                cmd_peak_a: core::mem::take(cx.local.cmd_peak_a),
-            };
-            cx.shared.motion.lock(|m| *m = motion);
-            let now = (u.report.t_s, cx.local.data.speed_mps());
-            cx.shared.now.lock(|n| *n = now);
-            if let Some(m) = cx.local.data.take_measurement() {
-                cx.shared.measurement.lock(|x| *x = Some(m));
-            }
-            let status = cx.local.data.margin_status();
-            cx.shared.margin.lock(|m| *m = status);
-            *cx.local.meter_runs += 1;
-            let runs = *cx.local.meter_runs;
-            if runs.is_multiple_of(LINK_STREAM_DIVIDER) {
-                rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
-            }
-            if changed {
-                defmt::warn!(
-                    "warning level {=str} at t = {=f64} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
-                    level_name(u.level),
-                    u.report.t_s,
-                    u.report.speed_mps,
-                    u.report.zeta_fast,
-                    u.report.zeta_data,
-                    u.report.freq_hz,
-                    u.meter.amplitude_rad * 1e3,
-                    u.report.speed_margin_mps.unwrap_or(f32::NAN)
-                );
-            }
-            // The margin report and the counters over the probe at 1 Hz, for a debug build: a
-            // host watches the report over the link (`watch`, 10 Hz) instead.
-            #[cfg(feature = "probe-telemetry")]
-            if runs.is_multiple_of(TELEMETRY_DIVIDER) {
-                let h = cx.shared.health.lock(|h| *h);
-                let r = &u.report;
-                defmt::info!(
-                    "margin: t {=f64} s, v {=f32} m/s, zeta data {=f32} +- {=f32} (valid {=bool}), fast {=f32}, {=f32} Hz, model zeta {=f32}, margin {=f32} m/s, ttc {=f32} s, consistent {=bool}, level {=str}; {}",
-                    r.t_s,
-                    r.speed_mps,
-                    r.zeta_data,
-                    r.sigma_zeta_data,
-                    r.data_valid,
-                    r.zeta_fast,
-                    r.freq_hz,
-                    r.zeta_model.unwrap_or(f32::NAN),
-                    r.speed_margin_mps.unwrap_or(f32::NAN),
-                    r.time_to_critical_s.unwrap_or(f32::NAN),
-                    r.model_consistent,
-                    level_name(u.level),
-                    h
-                );
-            }
-        }
+                MeterEvent::Update(s, u, changed) => {
+                    Hooks::report_margin(s.step, &u.report, u.level);
+                    let health = shared.health.lock(|h| *h);
+                    let latched = shared.latched.lock(|l| l.bits());
+                    let monitor = data.pipeline().monitor();
+                    // The log: closed episodes and raised faults to the store, the open episode to the
+                    // link; then the motion for the store's standstill watch.
+                    let mut batch = Batch::new();
+                    recorder.on_update(monitor, &mut batch);
+                    recorder.on_faults(s.step, health.active_faults, latched, &mut batch);
+                    let open = recorder.open_event(monitor);
+                    shared
+                        .link
+                        .lock(|l| l.on_update(u, open, &health, latched, s.step));
+                    let lost = batch.lost;
+                    for e in batch {
+                        if log_tx.enqueue(e).is_err() {
+                            defmt::error!("store queue full: a log entry at step {=u32} lost", s.step);
+                        }
+                    }
+                    if lost > 0 {
+                        defmt::error!("{=u32} log entries at step {=u32} lost", lost, s.step);
+                    }
+                    let motion = Motion {
+                        t_s: u.report.t_s,
+                        speed_mps: data.speed_mps(),
+                        cmd_peak_a: core::mem::take(cmd_peak_a),
+                    };
+                    shared.motion.lock(|m| *m = motion);
+                    let now = (u.report.t_s, data.speed_mps());
+                    shared.now.lock(|n| *n = now);
+                    if let Some(m) = data.take_measurement() {
+                        shared.measurement.lock(|x| *x = Some(m));
+                    }
+                    let status = data.margin_status();
+                    shared.margin.lock(|m| *m = status);
+                    *meter_runs += 1;
+                    let runs = *meter_runs;
+                    if runs.is_multiple_of(LINK_STREAM_DIVIDER) {
+                        rtic::pend(shimmy_firmware::hal::pac::Interrupt::USART1);
+                    }
+                    if changed {
+                        defmt::warn!(
+                            "warning level {=str} at t = {=f64} s, {=f32} m/s: zeta fast {=f32} slow {=f32} ({=f32} Hz), amplitude {=f32} mrad, speed margin {=f32} m/s",
+                            level_name(u.level),
+                            u.report.t_s,
+                            u.report.speed_mps,
+                            u.report.zeta_fast,
+                            u.report.zeta_data,
+                            u.report.freq_hz,
+                            u.meter.amplitude_rad * 1e3,
+                            u.report.speed_margin_mps.unwrap_or(f32::NAN)
+                        );
+                    }
+                    // The margin report and the counters over the probe at 1 Hz, for a debug build: a
+                    // host watches the report over the link (`watch`, 10 Hz) instead.
+                    #[cfg(feature = "probe-telemetry")]
+                    if runs.is_multiple_of(TELEMETRY_DIVIDER) {
+                        let h = shared.health.lock(|h| *h);
+                        let r = &u.report;
+                        defmt::info!(
+                            "margin: t {=f64} s, v {=f32} m/s, zeta data {=f32} +- {=f32} (valid {=bool}), fast {=f32}, {=f32} Hz, model zeta {=f32}, margin {=f32} m/s, ttc {=f32} s, consistent {=bool}, level {=str}; {}",
+                            r.t_s,
+                            r.speed_mps,
+                            r.zeta_data,
+                            r.sigma_zeta_data,
+                            r.data_valid,
+                            r.zeta_fast,
+                            r.freq_hz,
+                            r.zeta_model.unwrap_or(f32::NAN),
+                            r.speed_margin_mps.unwrap_or(f32::NAN),
+                            r.time_to_critical_s.unwrap_or(f32::NAN),
+                            r.model_consistent,
+                            level_name(u.level),
+                            h
+                        );
+                    }
+                }
+            },
+        );
         if let Some(step) = spawned_by {
             Hooks::report_meter_run(step, entry_instructions);
         }

@@ -311,6 +311,33 @@ impl DataMargin {
         Some((out, changed))
     }
 
+    /// One run of the meter task, the one body the RTIC app's `meter` task and the host's
+    /// `pil::HostApp` both run: the model cycle `published` (its margin and the onset's
+    /// sigma), then every sample `next` gives from the queue into [`Self::push`]. `on` hears of
+    /// each sample before it is pushed and of each margin update after (with the sample it
+    /// came from and whether the warning level changed). Returns the step of the last sample
+    /// (the control step that spawned the run), `None` when the queue was empty.
+    pub fn run(
+        &mut self,
+        published: Option<&Published>,
+        mut next: impl FnMut() -> Option<MeterSample>,
+        mut on: impl FnMut(&mut Self, MeterEvent<'_>),
+    ) -> Option<u32> {
+        if let Some(p) = published {
+            self.set_margin_sigma(p.onset_sigma_mps);
+        }
+        let model = published.map(|p| p.margin);
+        let mut last = None;
+        while let Some(s) = next() {
+            last = Some(s.step);
+            on(self, MeterEvent::Sample(&s));
+            if let Some((u, changed)) = self.push(&s, model.as_ref()) {
+                on(self, MeterEvent::Update(&s, &u, changed));
+            }
+        }
+        last
+    }
+
     /// The newest due measurement of the online model update, for the model task
     /// ([`ModelTask::offer`]); None when none came since the last call.
     pub fn take_measurement(&mut self) -> Option<Measurement> {
@@ -380,6 +407,15 @@ pub const SIGMA_EVERY: u32 = 5;
 /// eigen-solves in [`ModelFloat`].
 pub type BoardUpdater<M = ImageModel, const N: usize = IMAGE_MODEL_STATES> =
     ModelUpdater<M, N, ModelFloat>;
+
+/// What a meter run ([`DataMargin::run`]) tells its task.
+#[derive(Clone, Copy, Debug)]
+pub enum MeterEvent<'a> {
+    /// A sample from the queue, before it is pushed.
+    Sample(&'a MeterSample),
+    /// A margin update of that sample, and whether the warning level changed.
+    Update(&'a MeterSample, &'a MarginUpdate, bool),
+}
 
 /// A completed model cycle as the model task publishes it to the meter task.
 #[derive(Clone, Copy, Debug, PartialEq)]

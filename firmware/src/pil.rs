@@ -57,7 +57,7 @@ mod host {
     use crate::control::{supervised_step, Health};
     use crate::monitoring::{
         board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
-        MeterSample, ModelTask, Published,
+        MeterEvent, MeterSample, ModelTask, Published,
     };
     use heapless::Deque;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
@@ -178,23 +178,23 @@ mod host {
                     .checked_sub(1)
                     .and_then(|i| self.published.get(i))
                     .copied();
-                if let Some(p) = &model {
-                    self.data.set_margin_sigma(p.onset_sigma_mps);
-                }
-                let margin = model.map(|p| p.margin);
-                while let Some(s) = self.queue.pop_front() {
-                    let Some((u, _)) = self.data.push(&s, margin.as_ref()) else {
-                        continue;
-                    };
-                    self.now = (u.report.t_s, self.data.speed_mps());
-                    self.margin = self.data.margin_status();
-                    emit(TargetFrame::Margin(MarginFrame {
-                        step: s.step,
-                        report: u.report,
-                        level: u.level,
-                        model_cycles: seen as u32,
-                    }));
-                }
+                let (queue, now, margin) = (&mut self.queue, &mut self.now, &mut self.margin);
+                self.data.run(
+                    model.as_ref(),
+                    || queue.pop_front(),
+                    |data, event| {
+                        if let MeterEvent::Update(s, u, _) = event {
+                            *now = (u.report.t_s, data.speed_mps());
+                            *margin = data.margin_status();
+                            emit(TargetFrame::Margin(MarginFrame {
+                                step: s.step,
+                                report: u.report,
+                                level: u.level,
+                                model_cycles: seen as u32,
+                            }));
+                        }
+                    },
+                );
                 emit(TargetFrame::MeterRun {
                     step,
                     instructions: 0,
