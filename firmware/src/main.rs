@@ -29,8 +29,8 @@ mod app {
     use shimmy_core::supervisor::safe_controller::SafeController;
     use shimmy_core::vehicle::BoardVehicle;
     use shimmy_firmware::background::PassGate;
-    use shimmy_firmware::board::hooks::{AppHooks, Hooks};
-    use shimmy_firmware::board::{self, Board};
+    use shimmy_firmware::board::hooks::AppHooks;
+    use shimmy_firmware::board::{self, Board, Hooks};
     use shimmy_firmware::control::{drive_coil, supervised_step, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::{may_restart, save_vehicle, Batch, BoardLink, LinkState, Saved};

@@ -1,7 +1,7 @@
 //! What the application does beside its work, per build: the board sleeps when the background
 //! loop has nothing to do and reports nothing; the `pil` build reports each task's frames and
 //! instruction counts to the host and starts the next step at once (`pil.rs`). The RTIC app
-//! (`main.rs`) calls [`AppHooks`] through the build's [`Hooks`]; the board's methods are
+//! (`main.rs`) calls [`AppHooks`] through the build's `board::Hooks`; the board's methods are
 //! empty and inline to nothing.
 
 use shimmy_core::estimator::fusion::MarginReport;
@@ -73,10 +73,3 @@ impl AppHooks for BoardHooks {
     #[inline(always)]
     fn model_call_end(_: Unmeasured, _: Option<&ModelPoint>) {}
 }
-
-/// The hooks of this build.
-#[cfg(not(feature = "pil"))]
-pub type Hooks = BoardHooks;
-/// The hooks of this build.
-#[cfg(feature = "pil")]
-pub type Hooks = super::pil::PilHooks;

@@ -27,3 +27,10 @@ pub use qemu::{init, Board, BoardSensors, Pwm, QEMU_STEPS, WORLD};
 pub mod pil;
 #[cfg(feature = "pil")]
 pub use pil::{init, Board, BoardSensors, Pwm};
+
+/// The application's hooks of this build ([`hooks::AppHooks`]).
+#[cfg(not(feature = "pil"))]
+pub use hooks::BoardHooks as Hooks;
+/// The application's hooks of this build ([`hooks::AppHooks`]).
+#[cfg(feature = "pil")]
+pub use pil::PilHooks as Hooks;
