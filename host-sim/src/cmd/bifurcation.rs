@@ -1613,13 +1613,10 @@ mod tests {
         assert!(kick > cycle && kick < 1.1 * cycle, "{kick} vs {cycle}");
     }
 
-    /// The two-parameter chart over the coil current: more current closes the bistable window
-    /// from both ends (the folds move inwards), and at each current the folds bracket the speeds
-    /// where the direct simulation's large start ends in shimmy (an independent check of the
-    /// continuation: time-domain runs against shooting).
-    #[test]
-    fn the_chart_folds_close_in_with_current_and_bracket_the_large_starts() {
-        let o = BifurcationOptions {
+    /// The nominal car with the damper at 0 A over 30-80 km/h (2.5 km/h grid, 40 s runs): the
+    /// speeds of its bistable window.
+    fn car_window_at_0a() -> BifurcationOptions {
+        BifurcationOptions {
             params: PlantParams::nominal(),
             params_name: "nominal".into(),
             damper: DamperSetting::reference_mr(0.0),
@@ -1631,7 +1628,16 @@ mod tests {
             duration_s: 40.0,
             window_s: 3.0,
             out: PathBuf::new(),
-        };
+        }
+    }
+
+    /// The two-parameter chart over the coil current: more current closes the bistable window
+    /// from both ends (the folds move inwards), and at each current the folds bracket the speeds
+    /// where the direct simulation's large start ends in shimmy (an independent check of the
+    /// continuation: time-domain runs against shooting).
+    #[test]
+    fn the_chart_folds_close_in_with_current_and_bracket_the_large_starts() {
+        let o = car_window_at_0a();
         let rows = chart(&o, &ChartAxis::CurrentA(vec![0.0, 0.3])).unwrap();
         let folds: Vec<(f64, f64)> = rows
             .iter()
@@ -1675,19 +1681,7 @@ mod tests {
         use shimmy_core::control::ControllerKind;
         use shimmy_core::units::kmh_to_mps;
         use shimmy_core::vehicle::Vehicle;
-        let o = BifurcationOptions {
-            params: PlantParams::nominal(),
-            params_name: "nominal".into(),
-            damper: DamperSetting::reference_mr(0.0),
-            v_min_kmh: 30.0,
-            v_max_kmh: 80.0,
-            step_kmh: 2.5,
-            small_deg: 0.05,
-            large_deg: 3.0,
-            duration_s: 40.0,
-            window_s: 3.0,
-            out: PathBuf::new(),
-        };
+        let o = car_window_at_0a();
         let rows = chart(&o, &ChartAxis::CurrentA(vec![0.0])).unwrap();
         let fold = rows[0].folds_kmh[0];
         let onset = onset_kmh(&PlantParams::nominal()).unwrap();

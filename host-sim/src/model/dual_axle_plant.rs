@@ -667,11 +667,7 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     }
 
     fn plant(&self, damper: super::plant::Damper, method: super::plant::Method) -> DualAxlePlant {
-        use super::plant::Method;
-        let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
-            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
-        };
+        let rtol = method.rtol();
         DualAxlePlant::new(self, damper, rtol)
     }
 
@@ -700,30 +696,15 @@ impl super::family::SimModel<N_STATES> for DualAxleParams {
     }
 
     fn params() -> Vec<super::family::ParamInfo> {
-        shimmy_core::vehicles::dual_axle::DUAL_AXLE_FIELDS
-            .iter()
-            .map(|f| super::family::ParamInfo {
-                name: f.name,
-                unit: f.unit,
-            })
-            .collect()
+        super::family::table_params::<Self>()
     }
 
     fn param(&self, name: &str) -> Option<f64> {
-        self.get(name)
+        FieldTable::get(self, name)
     }
 
     fn with_param(&self, name: &str, value: f64) -> anyhow::Result<Self> {
-        let mut t = *self;
-        match t.set(name, value) {
-            Ok(()) => Ok(t),
-            Err(shimmy_core::vehicles::FieldError::Unknown) => anyhow::bail!(
-                "parameter `{name}`: no such parameter of {}, allowed: {}",
-                <DualAxleParams as LinearModel<N_STATES>>::NAME,
-                super::family::param_names::<Self, N_STATES>()
-            ),
-            Err(e) => anyhow::bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
-        }
+        super::family::with_table_param::<Self, N_STATES>(self, name, value)
     }
 
     /// The kingpins' dry friction (smoothed for the integrator, but a Coulomb torque in the

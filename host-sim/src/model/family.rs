@@ -22,6 +22,7 @@ use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::supervisor::params::SupervisorParams;
 use shimmy_core::vehicle::Vehicle;
+use shimmy_core::vehicles::{FieldError, FieldTable};
 
 use super::integrator::IntegrateError;
 use super::plant::{Damper, Inputs, Method};
@@ -127,6 +128,38 @@ pub fn param_names<M: SimModel<N>, const N: usize>() -> String {
         .map(|p| p.name)
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// The parameters of a model whose sweepable parameters are its field table
+/// ([`SimModel::params`] of the truck, the trailer, the dual-axle truck).
+pub fn table_params<M: FieldTable>() -> Vec<ParamInfo> {
+    M::FIELDS
+        .iter()
+        .map(|f| ParamInfo {
+            name: f.name,
+            unit: f.unit,
+        })
+        .collect()
+}
+
+/// `m` with its field-table parameter `name` set to `value` ([`SimModel::with_param`] of such
+/// a model): an unknown name is refused with the model's parameters, a value out of range
+/// with the field's allowed range.
+pub fn with_table_param<M: SimModel<N> + FieldTable, const N: usize>(
+    m: &M,
+    name: &str,
+    value: f64,
+) -> Result<M> {
+    let mut t = *m;
+    match t.set(name, value) {
+        Ok(()) => Ok(t),
+        Err(FieldError::Unknown) => anyhow::bail!(
+            "parameter `{name}`: no such parameter of {}, allowed: {}",
+            <M::Linear as LinearModel<N>>::NAME,
+            param_names::<M, N>()
+        ),
+        Err(e) => anyhow::bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
+    }
 }
 
 /// The state of `M` at rest with its measured yaw at `psi_rad` (both wheels in phase:

@@ -365,6 +365,15 @@ impl Method {
         }
     }
 
+    /// The relative tolerance of an adaptive method, 1e-7 for the fixed-step ones: what a
+    /// plant with a single adaptive integrator takes from any method.
+    pub fn rtol(&self) -> f64 {
+        match *self {
+            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
+            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
+        }
+    }
+
     /// The name [`Method::from_name`] parses back.
     pub fn name(&self) -> String {
         match self {
@@ -523,10 +532,7 @@ impl Simulator {
 
     /// A simulator with a chosen integrator.
     pub fn with_method(plant: Plant, x0: State, method: Method) -> Self {
-        let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
-            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
-        };
+        let rtol = method.rtol();
         Simulator {
             plant,
             x: x0,

@@ -12,21 +12,21 @@
 //! 70 / 0.4 = 175 1/s at the top speed of the named set, 0.35 per step (RK4's real-axis limit
 //! is 2.8).
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use nalgebra::SVector;
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::model::{LinearModel, Matrix};
 use shimmy_core::mr_damper::{self, SpencerState};
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::trailer::{
-    TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, TRAILER_FIELDS, Y,
+    TrailerParams, TrailerSet, ALPHA, DPSI, DY, N_STATES, PSI, Y,
 };
 use shimmy_core::vehicles::FieldTable;
 
 use super::damper_sizing::{
     car_parts_with_damper_scaled, damper_scale_like_the_cars, reference_tyre_yaw_stiffness,
 };
-use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
+use super::family::{FamilyVehicle, ParamInfo, SimModel, SimPlant};
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
 use super::plant::{Damper, Inputs, Method};
 
@@ -405,10 +405,7 @@ impl SimModel<N_STATES> for TrailerParams {
     /// One integrator (Dopri5) at `method`'s relative tolerance (1e-7 for the fixed-step
     /// methods).
     fn plant(&self, damper: Damper, method: Method) -> TrailerPlant {
-        let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
-            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
-        };
+        let rtol = method.rtol();
         TrailerPlant::new(self, damper, rtol)
     }
 
@@ -444,30 +441,15 @@ impl SimModel<N_STATES> for TrailerParams {
     }
 
     fn params() -> Vec<ParamInfo> {
-        TRAILER_FIELDS
-            .iter()
-            .map(|f| ParamInfo {
-                name: f.name,
-                unit: f.unit,
-            })
-            .collect()
+        super::family::table_params::<Self>()
     }
 
     fn param(&self, name: &str) -> Option<f64> {
-        self.get(name)
+        FieldTable::get(self, name)
     }
 
     fn with_param(&self, name: &str, value: f64) -> Result<Self> {
-        let mut t = *self;
-        match t.set(name, value) {
-            Ok(()) => Ok(t),
-            Err(shimmy_core::vehicles::FieldError::Unknown) => bail!(
-                "parameter `{name}`: no such parameter of {}, allowed: {}",
-                <TrailerParams as LinearModel<N_STATES>>::NAME,
-                param_names::<Self, N_STATES>()
-            ),
-            Err(e) => bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
-        }
+        super::family::with_table_param::<Self, N_STATES>(self, name, value)
     }
 }
 

@@ -20,17 +20,16 @@ use shimmy_core::vehicles::truck::{
     PSI_L, PSI_R, THETA_C, Y,
 };
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use shimmy_core::control::smc::NominalPlant;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_core::vehicles::truck::board::TruckVehicle;
-use shimmy_core::vehicles::truck::TRUCK_FIELDS;
 use shimmy_core::vehicles::FieldTable;
 
 use shimmy_firmware::monitoring::BoardCalibration;
 
 use super::damper_sizing::reference_tyre_yaw_stiffness;
-use super::family::{param_names, FamilyVehicle, ParamInfo, SimModel, SimPlant};
+use super::family::{FamilyVehicle, ParamInfo, SimModel, SimPlant};
 use super::integrator::{rk4_step, Dopri5, IntegrateError};
 use super::plant::{Damper, Inputs, Method};
 
@@ -529,10 +528,7 @@ impl SimModel<{ N_STATES }> for TruckParams {
     /// The truck has one integrator (Dopri5); it takes `method`'s relative tolerance (1e-7
     /// for the fixed-step methods).
     fn plant(&self, damper: Damper, method: Method) -> TruckPlant {
-        let rtol = match method {
-            Method::Dopri5 { rtol } | Method::Imex { rtol } | Method::Vern65 { rtol } => rtol,
-            Method::Rk4 { .. } | Method::ImexFixed { .. } => 1e-7,
-        };
+        let rtol = method.rtol();
         TruckPlant::new(self, damper, rtol)
     }
 
@@ -561,30 +557,15 @@ impl SimModel<{ N_STATES }> for TruckParams {
     }
 
     fn params() -> Vec<ParamInfo> {
-        TRUCK_FIELDS
-            .iter()
-            .map(|f| ParamInfo {
-                name: f.name,
-                unit: f.unit,
-            })
-            .collect()
+        super::family::table_params::<Self>()
     }
 
     fn param(&self, name: &str) -> Option<f64> {
-        self.get(name)
+        FieldTable::get(self, name)
     }
 
     fn with_param(&self, name: &str, value: f64) -> Result<Self> {
-        let mut t = *self;
-        match t.set(name, value) {
-            Ok(()) => Ok(t),
-            Err(shimmy_core::vehicles::FieldError::Unknown) => bail!(
-                "parameter `{name}`: no such parameter of {}, allowed: {}",
-                TruckParams::NAME,
-                param_names::<Self, { N_STATES }>()
-            ),
-            Err(e) => bail!("{}", e.to_string().replacen("field `", "parameter `", 1)),
-        }
+        super::family::with_table_param::<Self, N_STATES>(self, name, value)
     }
 }
 

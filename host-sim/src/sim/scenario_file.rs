@@ -343,6 +343,19 @@ impl AnyScenario {
             .expect("checked above"))
     }
 
+    /// The scenario in `slot` if it is on the model `M` (taken out), else `None` (left in).
+    fn take_spec<M: SimModel<N>, const N: usize>(
+        slot: &mut Option<Self>,
+    ) -> Option<ScenarioSpec<M, N>> {
+        match slot.take()?.into_spec::<M, N>() {
+            Ok(spec) => Some(spec),
+            Err(s) => {
+                *slot = Some(s);
+                None
+            }
+        }
+    }
+
     /// Calls `visitor` on the scenario with its model as `M`.
     pub fn visit<V: ScenarioVisitor>(self, visitor: V) -> V::Output {
         struct Find<V: ScenarioVisitor> {
@@ -352,13 +365,9 @@ impl AnyScenario {
         }
         impl<V: ScenarioVisitor> ModelTypeVisitor for Find<V> {
             fn visit<M: Registered<N>, const N: usize>(&mut self) {
-                let Some(s) = self.s.take() else { return };
-                match s.into_spec::<M, N>() {
-                    Ok(spec) => {
-                        let v = self.visitor.take().expect("called once");
-                        self.out = Some(v.visit(spec));
-                    }
-                    Err(s) => self.s = Some(s),
+                if let Some(spec) = AnyScenario::take_spec::<M, N>(&mut self.s) {
+                    let v = self.visitor.take().expect("called once");
+                    self.out = Some(v.visit(spec));
                 }
             }
         }
@@ -395,13 +404,9 @@ impl AnyScenario {
         }
         impl<V: ImageScenarioVisitor> StudyTypeVisitor for Find<V> {
             fn visit<M: Registered<N> + StudyModel<N>, const N: usize>(&mut self) {
-                let Some(s) = self.s.take() else { return };
-                match s.into_spec::<M, N>() {
-                    Ok(spec) => {
-                        let v = self.visitor.take().expect("called once");
-                        self.out = Some(v.visit(spec));
-                    }
-                    Err(s) => self.s = Some(s),
+                if let Some(spec) = AnyScenario::take_spec::<M, N>(&mut self.s) {
+                    let v = self.visitor.take().expect("called once");
+                    self.out = Some(v.visit(spec));
                 }
             }
         }

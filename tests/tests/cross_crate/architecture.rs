@@ -340,15 +340,18 @@ fn the_checker_finds_a_planted_cycle() {
     assert!(found[0][0].ends_with("a/b.rs") && found[0][1].ends_with("a/mod.rs"));
 }
 
-/// host-sim's rule: a file uses only its own or lower layers (`model` < `sim` < `out` <
-/// `cmd`), no command uses another command, and only the crate root sits outside the layers.
-fn layer_violations(c: &Crate) -> Vec<String> {
-    const LAYERS: [&str; 4] = ["model", "sim", "out", "cmd"];
-    let layer = |m: &ModPath| m.first().and_then(|t| LAYERS.iter().position(|l| l == t));
+/// The files of `c` that sit in no layer (`layer`; the crate root, the map, aside) or import a
+/// file of a higher layer (`names`: the layers' names, lowest first), and what `other` finds
+/// wrong with an import of the same or a lower layer, or of a file in no layer.
+fn layered_violations(
+    c: &Crate,
+    names: &[&str],
+    layer: impl Fn(&ModPath) -> Option<usize>,
+    other: impl Fn(&ModPath, usize, &ModPath, Option<usize>) -> Option<String>,
+) -> Vec<String> {
     let mut bad = Vec::new();
     for (m, deps) in graph(c) {
         let Some(lm) = layer(&m) else {
-            // Only the crate root (the map) may sit outside the layers.
             if !m.is_empty() {
                 bad.push(format!("{} is in no layer", show(c, &m)));
             }
@@ -359,23 +362,32 @@ fn layer_violations(c: &Crate) -> Vec<String> {
                 Some(ld) if ld > lm => bad.push(format!(
                     "{} ({}) uses the higher layer {} ({})",
                     show(c, &m),
-                    LAYERS[lm],
+                    names[lm],
                     show(c, d),
-                    LAYERS[ld]
+                    names[ld]
                 )),
-                // Two different commands: cmd/<a>... and cmd/<b>...
-                Some(3) if lm == 3 && m.get(1) != d.get(1) && m.len() > 1 && d.len() > 1 => bad
-                    .push(format!(
-                        "command {} imports command {}",
-                        show(c, &m),
-                        show(c, d)
-                    )),
-                None => bad.push(format!("{} uses the crate root", show(c, &m))),
-                _ => {}
+                ld => bad.extend(other(&m, lm, d, ld)),
             }
         }
     }
     bad
+}
+
+/// host-sim's rule: a file uses only its own or lower layers (`model` < `sim` < `out` <
+/// `cmd`), no command uses another command, and only the crate root sits outside the layers.
+fn layer_violations(c: &Crate) -> Vec<String> {
+    const LAYERS: [&str; 4] = ["model", "sim", "out", "cmd"];
+    let layer = |m: &ModPath| m.first().and_then(|t| LAYERS.iter().position(|l| l == t));
+    layered_violations(c, &LAYERS, layer, |m, lm, d, ld| match ld {
+        // Two different commands: cmd/<a>... and cmd/<b>...
+        Some(3) if lm == 3 && m.get(1) != d.get(1) && m.len() > 1 && d.len() > 1 => Some(format!(
+            "command {} imports command {}",
+            show(c, m),
+            show(c, d)
+        )),
+        None => Some(format!("{} uses the crate root", show(c, m))),
+        _ => None,
+    })
 }
 
 #[test]
@@ -388,7 +400,8 @@ fn host_sim_layers_are_used_downwards_and_commands_stand_alone() {
 /// control < estimation < supervision (the safe controller schedules the damper on the
 /// estimator's margin report and hands the estimator its validated samples) < vehicle. A
 /// model's board record (`vehicles/<model>/board.rs`: its vehicle as the firmware stores it) is
-/// vehicle-level configuration above the model; `lib.rs` is the crate's map.
+/// vehicle-level configuration above the model; a file of tests (`.../tests.rs`) sits at the
+/// top, so it may use any layer; `lib.rs` is the crate's map.
 fn core_layer(m: &ModPath) -> Option<usize> {
     const MODEL: [&str; 10] = [
         "fmt",
@@ -403,8 +416,11 @@ fn core_layer(m: &ModPath) -> Option<usize> {
         "vehicles",
     ];
     let first = m.first()?.as_str();
-    if first == "vehicles" && m.get(2).is_some_and(|f| f == "board") {
-        return Some(4);
+    let top = Some(4);
+    if m.last().is_some_and(|l| l == "tests")
+        || (first == "vehicles" && m.get(2).is_some_and(|f| f == "board"))
+    {
+        return top;
     }
     if MODEL.contains(&first) {
         return Some(0);
@@ -415,36 +431,12 @@ fn core_layer(m: &ModPath) -> Option<usize> {
         .map(|i| i + 1)
 }
 
-/// core's rule: a file uses only its own or lower layers (a file of tests, `.../tests.rs`, may
-/// use any).
+/// core's rule: a file uses only its own or lower layers.
 fn core_layer_violations(c: &Crate) -> Vec<String> {
     const NAMES: [&str; 5] = ["model", "control", "estimation", "supervision", "vehicle"];
-    let mut bad = Vec::new();
-    for (m, deps) in graph(c) {
-        if m.last().is_some_and(|l| l == "tests") {
-            continue;
-        }
-        let Some(lm) = core_layer(&m) else {
-            if !m.is_empty() {
-                bad.push(format!("{} is in no layer", show(c, &m)));
-            }
-            continue;
-        };
-        for d in &deps {
-            match core_layer(d) {
-                Some(ld) if ld > lm => bad.push(format!(
-                    "{} ({}) uses the higher layer {} ({})",
-                    show(c, &m),
-                    NAMES[lm],
-                    show(c, d),
-                    NAMES[ld]
-                )),
-                None if !d.is_empty() => bad.push(format!("{} uses {}", show(c, &m), show(c, d))),
-                _ => {}
-            }
-        }
-    }
-    bad
+    layered_violations(c, &NAMES, core_layer, |m, _, d, ld| {
+        (ld.is_none() && !d.is_empty()).then(|| format!("{} uses {}", show(c, m), show(c, d)))
+    })
 }
 
 #[test]
