@@ -4,7 +4,7 @@
 //! `docs/vehicle-file.md`).
 //!
 //! Per control period (1 ms) the FMU does exactly what the simulator's closed loop does
-//! (`host-sim/src/sim/closed_loop.rs`, steps 2 and 3): the raw frame goes through the core's
+//! (`host-sim/src/sim/run/closed_loop.rs`, steps 2 and 3): the raw frame goes through the core's
 //! `SafeController::step` (supervisor, ASMC, final limiter) with the vehicle's control and
 //! supervisor parameters, and the validated sample feeds the core's `ShimmyPipeline` (mode
 //! meter, model margin, fusion, monitor) with the vehicle's pipeline parameters. The outputs
@@ -22,7 +22,7 @@ use shimmy_core::estimator::pipeline::ShimmyPipeline;
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::SafeController;
-use shimmy_sim::sim::vehicle_file;
+use shimmy_sim::sim::input::vehicle_file;
 
 /// The control period, s (the firmware's 1 kHz step).
 pub const CONTROL_PERIOD_S: f64 = 1e-3;

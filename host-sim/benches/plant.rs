@@ -13,8 +13,8 @@ use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicles::car::PlantParams;
 use shimmy_sim::model::disturbance::initial_yaw;
 use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator};
-use shimmy_sim::sim::closed_loop::CLOSED_LOOP_METHOD;
-use shimmy_sim::sim::demo_case::{self, ARMS};
+use shimmy_sim::sim::run::closed_loop::CLOSED_LOOP_METHOD;
+use shimmy_sim::sim::run::demo_case::{self, ARMS};
 use std::hint::black_box;
 
 /// The explicit 5(4) pair (the closed loop's integrator before Vern65).

@@ -9,8 +9,8 @@
 //! ARM: 0 damper off, 1 ASMC (default); METHOD as `--integrator` takes (e.g. `dopri5`).
 use shimmy_sim::model::family::SimModel;
 use shimmy_sim::model::plant::{Damper, Inputs, Method, Plant, Simulator, State, N_STATE};
-use shimmy_sim::sim::closed_loop::{self, LoopConfig, LoopObserver, SampleRecord};
-use shimmy_sim::sim::demo_case::{self, ARMS};
+use shimmy_sim::sim::run::closed_loop::{self, LoopConfig, LoopObserver, SampleRecord};
+use shimmy_sim::sim::run::demo_case::{self, ARMS};
 
 /// The state at the start of each period and the inputs held over it.
 struct Recorder(Vec<(State, Inputs)>);

@@ -6,8 +6,9 @@
 //!
 //! - [`model`]: what is simulated -- the plant, its integrator, disturbances, sensors, sensor
 //!   and coil faults, the MR damper's viscous equivalent.
-//! - [`sim`]: how it is run -- the closed and open loops, parameter and scenario files (the one
-//!   [`sim::scenario::ScenarioSpec`]), the standard scenario set and the demo case.
+//! - [`sim`]: how it is run, one folder per concern -- what the user hands in (vehicle and
+//!   scenario files, option ranges), the closed and open loops (the one
+//!   [`sim::run::scenario::ScenarioSpec`]), the device link and PIL, the one-model studies.
 //! - [`out`]: what is written -- plots, the Markdown/CSV report and the one file-name
 //!   sanitiser.
 //! - [`cmd`]: one module per `shimmy-sim` subcommand; `main.rs` only parses the command line

@@ -1,6 +1,6 @@
 //! `shimmy-sim`: the simulator's command-line tool. Parses the command line and calls the
 //! subcommand's `command` in `shimmy_sim::cmd`; nothing else happens here (but for making a
-//! failed write to the standard output an error, `shimmy_sim::sim::files`).
+//! failed write to the standard output an error, `shimmy_sim::sim::input::files`).
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use shimmy_sim::cmd;
@@ -88,7 +88,7 @@ enum Command {
 }
 
 fn main() -> Result<()> {
-    shimmy_sim::sim::files::report_stdout_errors();
+    shimmy_sim::sim::input::files::report_stdout_errors();
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Params { params }) => cmd::params::command(&params),

@@ -39,12 +39,15 @@ use shimmy_sim::model::hopf_type::{hopf_type_at, HopfType, HopfTypeError};
 use shimmy_sim::model::plant::Damper;
 use shimmy_sim::model::registry::{self, ModelVisitor, Registered};
 use shimmy_sim::sim::analyze::{self as sim_analyze, Analysis, AnalysisRow, AnalyzeOptions};
-use shimmy_sim::sim::arg_range::{self, SPEED_KMH};
-use shimmy_sim::sim::closed_loop::{LoopResult, RunMetrics};
-use shimmy_sim::sim::log_file::{self, MappingChanges};
-use shimmy_sim::sim::scenario::ScenarioSpec;
-use shimmy_sim::sim::vehicle_file::ModelVehicle;
-use shimmy_sim::sim::{scenario, scenario_file, vehicle_file};
+use shimmy_sim::sim::input::arg_range::{self, SPEED_KMH};
+use shimmy_sim::sim::input::log_file::{self, MappingChanges};
+use shimmy_sim::sim::input::vehicle_file::ModelVehicle;
+use shimmy_sim::sim::run::closed_loop::{LoopResult, RunMetrics};
+use shimmy_sim::sim::run::scenario::ScenarioSpec;
+use shimmy_sim::sim::{
+    input::vehicle_file,
+    run::{scenario, scenario_file},
+};
 
 /// The Rust error as a Python `ValueError` with the whole context chain.
 fn value_error(e: impl Into<anyhow::Error>) -> PyErr {

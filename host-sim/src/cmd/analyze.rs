@@ -1,6 +1,6 @@
 //! `shimmy-sim analyze LOG.csv`: the board's mode meter, fusion and monitor on a measured log
 //! ([`crate::sim::analyze`]; columns, units and rate from options or a mapping file,
-//! [`crate::sim::log_file`]). Writes `analysis.csv`, `events.csv`, `analysis.png`,
+//! [`crate::sim::input::log_file`]). Writes `analysis.csv`, `events.csv`, `analysis.png`,
 //! `report.md`, `report.html` and `summary.json` (with provenance) into `--out`. A bad log or
 //! option stops it before anything is written, with a message naming the line and column (or
 //! the option) and a non-zero exit status.
@@ -11,9 +11,9 @@ use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::write_pages;
 use crate::sim::analyze::{analyze_with_progress, level_name, AnalyzeOptions, MAX_GAP_RANGE_S};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::log_file::{self, MappingChanges};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::log_file::{self, MappingChanges};
+use crate::sim::input::vehicle_file;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -119,7 +119,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
     let vehicle = vehicle_file::load_model(&a.vehicle.spec).context("--vehicle")?;
     let log = log_file::load(&a.log, &map)?;
     let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
-    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&out)?;
     let opts = AnalyzeOptions {
         vehicle,
         model: !a.data_only,

@@ -9,9 +9,9 @@ use crate::model::family::{param_names, SimModel};
 use crate::model::periodic_orbit::{Branch, HopfPoint, Limits, Shooting, Start};
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::model::registry::{ReferenceModel, REFERENCE_N};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::open_loop::{run_speed, DamperSetting, RunSummary};
-use crate::sim::reference::shimmy_mode_with_damper;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::run::open_loop::{run_speed, DamperSetting, RunSummary};
+use crate::sim::run::reference::shimmy_mode_with_damper;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -146,7 +146,7 @@ pub fn sweep<M: SimModel<N>, const N: usize>(
 
 /// The `bifurcation` command: sweep, table, CSV, PNG.
 pub fn run<M: SimModel<N>, const N: usize>(o: &BifurcationOptions<M, N>) -> Result<()> {
-    let _out_dir = crate::sim::files::OutDir::claim(&o.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&o.out)?;
     let t0 = std::time::Instant::now();
     let rows = sweep(o, true)?;
     let wall = t0.elapsed().as_secs_f64();
@@ -491,7 +491,7 @@ fn write_orbits_csv(path: &Path, s: &OrbitStudy) -> Result<()> {
             )?;
         }
     }
-    crate::sim::files::write_file(path, &w)?;
+    crate::sim::input::files::write_file(path, &w)?;
     Ok(())
 }
 
@@ -526,7 +526,7 @@ fn write_csv(path: &Path, rows: &[BifurcationRow]) -> Result<()> {
             r.eig_re_per_s
         )?;
     }
-    crate::sim::files::write_file(path, &w)?;
+    crate::sim::input::files::write_file(path, &w)?;
     Ok(())
 }
 
@@ -538,7 +538,7 @@ fn plot<M: SimModel<N>, const N: usize>(
     damper: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let y_max = rows
@@ -770,7 +770,7 @@ pub fn command(a: &BifurcationArgs) -> Result<()> {
         }
     }
     registry::with_model(
-        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
+        crate::sim::input::vehicle_file::load_model(&a.vehicle.spec)?,
         On(a),
     )
 }
@@ -968,7 +968,7 @@ fn run_chart<M: SimModel<N>, const N: usize>(
     o: &BifurcationOptions<M, N>,
     axis: &ChartAxis,
 ) -> Result<()> {
-    let _out_dir = crate::sim::files::OutDir::claim(&o.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&o.out)?;
     let t0 = std::time::Instant::now();
     let rows = chart(o, axis)?;
     let damper = match (axis, o.damper) {
@@ -1031,7 +1031,7 @@ fn run_chart<M: SimModel<N>, const N: usize>(
         }
     }
     let csv_path = o.out.join("chart.csv");
-    crate::sim::files::write_file(&csv_path, &csv)?;
+    crate::sim::input::files::write_file(&csv_path, &csv)?;
     let png = o.out.join("chart.png");
     plot_chart(&png, &rows, o, &axis.label())?;
     println!("wrote {} and {}", csv_path.display(), png.display());
@@ -1055,7 +1055,7 @@ fn plot_chart<M: SimModel<N>, const N: usize>(
     y_label: &str,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let y_max = rows.iter().map(|r| r.value).fold(f64::MIN, f64::max);
@@ -1120,8 +1120,8 @@ pub fn dual_axle(
     t: &shimmy_core::vehicles::dual_axle::DualAxleParams,
     a: &BifurcationArgs,
 ) -> Result<()> {
-    use crate::sim::dual_axle_study::{self as study, CycleRuns};
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    use crate::sim::study::dual_axle_study::{self as study, CycleRuns};
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let runs = CycleRuns {
         small_deg: a.small_deg,
         large_deg: a.large_deg,
@@ -1243,7 +1243,7 @@ pub fn dual_axle(
             a.friction_eps_radps
         )?;
     }
-    crate::sim::files::write_file(&csv, &w)?;
+    crate::sim::input::files::write_file(&csv, &w)?;
     let png = a.out.join("bifurcation.png");
     plot_dual(&png, &rows, a, lin, on_large)?;
     println!("wrote {} and {}", csv.display(), png.display());
@@ -1288,7 +1288,7 @@ pub fn dual_axle(
                 agrees.map_or(String::new(), |g| g.amplitude.to_string())
             )?;
         }
-        crate::sim::files::write_file(&path, &f)?;
+        crate::sim::input::files::write_file(&path, &f)?;
         println!("wrote {}", path.display());
     }
     let simulated = 3.0 * rows.len() as f64 * a.duration_s;
@@ -1302,13 +1302,13 @@ pub fn dual_axle(
 
 fn plot_dual(
     path: &Path,
-    rows: &[crate::sim::dual_axle_study::DualBifurcationRow],
+    rows: &[crate::sim::study::dual_axle_study::DualBifurcationRow],
     a: &BifurcationArgs,
     linear_onset_kmh: Option<f64>,
     friction_onset_kmh: Option<f64>,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 620)).into_drawing_area();
     root.fill(&WHITE)?;
     let y_max = rows
@@ -1337,7 +1337,7 @@ fn plot_dual(
             a.window_s
         ))
         .draw()?;
-    type Pick = fn(&crate::sim::dual_axle_study::DualBifurcationRow) -> f64;
+    type Pick = fn(&crate::sim::study::dual_axle_study::DualBifurcationRow) -> f64;
     let series: [(String, RGBColor, Pick); 3] = [
         (
             format!("no friction, start {} deg", a.small_deg),
@@ -1677,7 +1677,7 @@ mod tests {
     fn the_margin_scheduled_asmc_damps_large_starts_in_the_bistable_window() {
         use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
         use crate::model::family::{onset_kmh, FamilyVehicle};
-        use crate::sim::closed_loop::{self, Arm, LoopConfig};
+        use crate::sim::run::closed_loop::{self, Arm, LoopConfig};
         use shimmy_core::control::ControllerKind;
         use shimmy_core::units::kmh_to_mps;
         use shimmy_core::vehicle::Vehicle;

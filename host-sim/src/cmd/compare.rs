@@ -10,12 +10,12 @@ use crate::out::file_name::sanitize;
 use crate::out::plots::plot_runs;
 use crate::out::progress;
 use crate::out::table::opt;
-use crate::sim::arg_range::{f32_in, Range};
-use crate::sim::closed_loop::{Arm, LoopResult, RunMetrics};
-use crate::sim::scenario::{self, ScenarioSpec};
-use crate::sim::scenario_file::ScenarioModel;
-use crate::sim::standard::standard_scenarios_on;
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{f32_in, Range};
+use crate::sim::input::vehicle_file;
+use crate::sim::run::closed_loop::{Arm, LoopResult, RunMetrics};
+use crate::sim::run::scenario::{self, ScenarioSpec};
+use crate::sim::run::scenario_file::ScenarioModel;
+use crate::sim::run::standard::standard_scenarios_on;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use shimmy_core::control::schedule::SpeedSchedule;
@@ -43,7 +43,7 @@ pub struct CompareArgs {
     /// Current of `passive-on` in A; default: the least constant current (bisection to 0.02 A)
     /// with which no scenario of the set shimmies. 0 to the coil rating of the vehicle the
     /// firmware believes.
-    #[arg(long, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
+    #[arg(long, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::input::arg_range::current_a())]
     pub on_current_a: Option<f64>,
     /// Short runs (a few seconds each).
     #[arg(long)]
@@ -502,7 +502,7 @@ pub fn write_csv(path: &Path, rows: &[RunRow]) -> Result<()> {
             r.speedup
         )?;
     }
-    crate::sim::files::write_file(path, &w)?;
+    crate::sim::input::files::write_file(path, &w)?;
     Ok(())
 }
 
@@ -565,7 +565,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     };
     let model_family = M::family_vehicle(&model);
     if let Some(i) = a.on_current_a {
-        crate::sim::arg_range::check_current("--on-current-a", i, &model_family.parts)?;
+        crate::sim::input::arg_range::check_current("--on-current-a", i, &model_family.parts)?;
     }
     // The margin-scheduled arm reads the firmware's margin report, which exists for the models
     // a firmware image is built for: on another model it is left out, and said so.
@@ -584,7 +584,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
             keep
         })
         .collect();
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let mut specs = standard_scenarios_on::<M, N>(&vehicle, a.quick)?;
     for s in &mut specs {
         s.model_vehicle = Some(model);
@@ -684,7 +684,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     write_csv(&a.out.join("compare.csv"), &rows)?;
     let md = format!("{tab}\n```\n{ver}```\n\n{mtab}\n```\n{mver}```\n");
     crate::out::html::check_tables(&md).context("compare.md")?;
-    crate::sim::files::write_file(&a.out.join("compare.md"), md)?;
+    crate::sim::input::files::write_file(&a.out.join("compare.md"), md)?;
     for spec in &specs {
         let runs: Vec<(&str, &LoopResult)> = rows
             .iter()

@@ -12,12 +12,12 @@ use crate::model::study::StudyModel;
 use crate::out::plot_util;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::closed_loop::{LoopResult, RunMetrics, CLOSED_LOOP_METHOD};
-use crate::sim::demo_case::{demo_case_on, run_arm, ARMS, ROAD_SEED};
-use crate::sim::scenario_file::ScenarioModel;
-use crate::sim::standard::POTHOLE_NM;
-use crate::sim::vehicle_file::{self, FileModel, ModelVehicle};
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file::{self, FileModel, ModelVehicle};
+use crate::sim::run::closed_loop::{LoopResult, RunMetrics, CLOSED_LOOP_METHOD};
+use crate::sim::run::demo_case::{demo_case_on, run_arm, ARMS, ROAD_SEED};
+use crate::sim::run::scenario_file::ScenarioModel;
+use crate::sim::run::standard::POTHOLE_NM;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use shimmy_core::model::LinearModel;
@@ -123,7 +123,7 @@ fn plot_meter(
     window_kmh: Option<(f64, f64)>,
 ) -> Result<()> {
     use plotters::prelude::*;
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1100, 700)).into_drawing_area();
     root.fill(&WHITE)?;
     let (a, b) = root.split_vertically(350);
@@ -173,7 +173,7 @@ fn plot_meter(
 /// Runs the demo and writes `report.md` with its plots into `o.out` (through
 /// [`report::write`], the same writer as `shimmy-sim report`).
 pub fn run_demo<M: ScenarioModel<N>, const N: usize>(o: &DemoOptions<M, N>) -> Result<DemoOutput> {
-    let out_dir = crate::sim::files::OutDir::claim(&o.out)?;
+    let out_dir = crate::sim::input::files::OutDir::claim(&o.out)?;
     let (plant_name, plant) = &o.plant;
     let model = o.model.as_ref().map_or(plant, |(_, m)| m);
     let mut case = demo_case_on::<M, N>(plant, model, o.ramp_s)?;

@@ -8,12 +8,12 @@ use crate::model::registry::{
     StudyVisitor,
 };
 use crate::model::study::StudyModel;
-use crate::sim::device_link::{
+use crate::sim::device::device_link::{
     read_record, schema_mismatch, Client, DeviceInfo, EventLog, ModelState, ParamState, Port,
     SerialPort, TcpPort,
 };
-use crate::sim::sim_device::SimDevice;
-use crate::sim::vehicle_file;
+use crate::sim::device::sim_device::SimDevice;
+use crate::sim::input::vehicle_file;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use shimmy_core::estimator::model_update::Statement;
@@ -161,7 +161,7 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
             let text = record_toml(&rec)?;
             match out {
                 Some(p) => {
-                    crate::sim::files::write_file(p, &text)?;
+                    crate::sim::input::files::write_file(p, &text)?;
                     eprintln!(
                         "vehicle written to {}{}",
                         p.display(),
@@ -217,7 +217,7 @@ fn run<P: Port>(port: P, ready: Duration, action: &DeviceAction) -> Result<()> {
             match csv.as_deref() {
                 Some(p) if p.as_os_str() == "-" => print!("{}", events_csv(&log, &params)),
                 Some(p) => {
-                    crate::sim::files::write_file(p, events_csv(&log, &params))?;
+                    crate::sim::input::files::write_file(p, events_csv(&log, &params))?;
                     print!("{}", events_table(&log, &params));
                     eprintln!("CSV written to {}", p.display());
                 }
@@ -557,7 +557,7 @@ fn watch<P: Port>(c: &mut Client<P>, for_: Duration) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::device_link::EventLog;
+    use crate::sim::device::device_link::EventLog;
 
     /// A logged diagnosis reads as the model update's statement, its parameter named by the
     /// device's update parameters; its end, and an index the device does not report, read

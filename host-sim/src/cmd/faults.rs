@@ -16,9 +16,9 @@ use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::out::progress;
 use crate::out::table::opt;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use crate::sim::vehicle_file::{self, FileModel};
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file::{self, FileModel};
+use crate::sim::run::closed_loop::{self, Arm, LoopConfig, LoopResult};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -1040,7 +1040,7 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         kick_nm: a.kick_nm,
         ..Setup::<M, N>::on(plant)
     };
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
@@ -1056,8 +1056,8 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         wall.elapsed().as_secs_f64()
     );
     println!("{md}");
-    crate::sim::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
-    crate::sim::files::write_file(&a.out.join("faults.md"), &md)?;
+    crate::sim::input::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
+    crate::sim::input::files::write_file(&a.out.join("faults.md"), &md)?;
     if let Some((within, n, worst, ratio)) = peak_ratios(&rows) {
         println!(
             "peak yaw after the fault against the fault-free run at the same speed: within {PEAK_RATIO_TARGET}x in {within} of {n} ASMC runs with a working actuator; worst {ratio:.2}x ({} at {} km/h: {:.3} deg)",

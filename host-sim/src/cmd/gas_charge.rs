@@ -13,9 +13,9 @@ use shimmy_core::vehicles::truck::TruckParams;
 
 use crate::model::registry::Registered;
 use crate::out::plot_util::{self, diverging};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::truck_study::{self, WindowPoint};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
+use crate::sim::study::truck_study::{self, WindowPoint};
 
 /// Options of `shimmy-sim gas-charge`.
 #[derive(clap::Args, Debug, Clone)]
@@ -67,7 +67,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             TruckParams::NAME
         ),
     };
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
     let ans = truck_study::gas_charge(
         &t,
         args.speed_kmh,
@@ -205,7 +205,7 @@ fn write_charge_csv(path: &Path, ans: &truck_study::ChargeAnswer) -> Result<()> 
             ans.speed_kmh
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 /// Growth rate over speed x one truck parameter, and the first window per row.
@@ -262,12 +262,12 @@ impl Map {
                 )?;
             }
         }
-        crate::sim::files::write_file(path, &f)
+        crate::sim::input::files::write_file(path, &f)
     }
 }
 
 fn plot(path: &Path, by_gas: &Map, by_load: &Map, name: &str, v0_l: f64) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(450);

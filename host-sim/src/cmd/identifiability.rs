@@ -24,8 +24,8 @@ use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use crate::model::family::onset_kmh;
 use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
 
 /// Options of `shimmy-sim identifiability`.
 #[derive(clap::Args, Debug, Clone)]
@@ -203,7 +203,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
     a: &IdentifiabilityArgs,
     model: &M,
 ) -> Result<()> {
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let speeds = usize::from(a.speeds);
     let rows = study(
         model,
@@ -222,7 +222,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
         a.from_fraction * 100.0
     );
     print!("{md}");
-    crate::sim::files::write_file(&a.out.join("identifiability.md"), md.trim_start())?;
+    crate::sim::input::files::write_file(&a.out.join("identifiability.md"), md.trim_start())?;
     let mut csv = String::from("sigma_zeta,speed_kmh,field,sigma_ln,onset_sigma_kmh\n");
     for r in &rows {
         for (u, s) in M::UPDATE_PARAMS.iter().zip(&r.sigma_ln) {
@@ -233,7 +233,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
             );
         }
     }
-    crate::sim::files::write_file(&a.out.join("identifiability.csv"), csv)?;
+    crate::sim::input::files::write_file(&a.out.join("identifiability.csv"), csv)?;
     Ok(())
 }
 

@@ -1,7 +1,7 @@
 //! `shimmy-sim margin`: the open-loop eigenvalue-margin demonstration.
 //!
 //! The run itself (plant, disturbances, pipeline, true eigenvalues) is
-//! [`crate::sim::margin_run`]; this command prints the report once a second next to the true
+//! [`crate::sim::run::margin_run`]; this command prints the report once a second next to the true
 //! eigenvalue and writes `margin.csv`, `margin.png` and `summary.json` under `--out`, with the
 //! warning lead time.
 
@@ -18,9 +18,11 @@ use crate::model::family::SimModel;
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::progress;
 use crate::out::provenance::Provenance;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::margin_run::{onset_kmh, run_with_progress, MarginRow, MarginRun, MarginScenario};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file::{self, ModelVehicle};
+use crate::sim::run::margin_run::{
+    onset_kmh, run_with_progress, MarginRow, MarginRun, MarginScenario,
+};
 
 /// Lead-in before the ramp: 0 to 600 s.
 pub const SETTLE_S: Range = Range::closed(0.0, 600.0, "s");
@@ -150,7 +152,7 @@ pub fn write_csv(path: &Path, rows: &[MarginRow]) -> Result<()> {
             r.zeta_correction
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
@@ -200,7 +202,7 @@ pub fn plot(path: &Path, run: &MarginRun, title: &str) -> Result<()> {
         return Ok(());
     };
     let t = (a.t_s, b.t_s);
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1200, 1000)).into_drawing_area();
     root.fill(&WHITE)?;
     let parts = root.split_evenly((3, 1));
@@ -341,7 +343,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
         pipeline.update = shimmy_core::estimator::model_update::ModelUpdateConfig::ON;
     }
     let provenance = provenance.seed("road noise", sc.seed);
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let bar = progress::bar(0, "1 ms steps");
     let run = run_with_progress(&sc, pipeline, 10, &mut |done, total| {
         bar.set_length(total as u64);
@@ -421,7 +423,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
     let json = a.out.join("summary.json");
     let mut summary = summary_json(&sc, &run);
     summary["provenance"] = provenance.json();
-    crate::sim::files::write_file(&json, serde_json::to_string_pretty(&summary)? + "\n")?;
+    crate::sim::input::files::write_file(&json, serde_json::to_string_pretty(&summary)? + "\n")?;
     println!(
         "wrote {}, {} and {}",
         csv.display(),

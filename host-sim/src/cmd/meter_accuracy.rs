@@ -39,8 +39,8 @@ use crate::model::plant::{Damper, Method};
 use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
 use crate::out::progress;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
 
 /// Control period, s.
 const DT_S: f64 = 1e-3;
@@ -410,7 +410,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             speed_kmh: v,
         }))
         .collect();
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let scale = a
         .meter_time_scale
@@ -431,7 +431,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    crate::sim::files::write_file(&a.out.join("meter_accuracy.md"), &md)?;
+    crate::sim::input::files::write_file(&a.out.join("meter_accuracy.md"), &md)?;
     let mut f = Vec::new();
     writeln!(f, "current_a,speed_kmh,zeta_true,freq_true_hz,freq_est_hz,b,bias_b,spread_b,sigma_b,coverage_pct,n,valid_pct,passes")?;
     for r in &rows {
@@ -453,7 +453,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             r.passes()
         )?;
     }
-    crate::sim::files::write_file(&a.out.join("meter_accuracy.csv"), &f)?;
+    crate::sim::input::files::write_file(&a.out.join("meter_accuracy.csv"), &f)?;
     let missed = rows.iter().filter(|r| !r.passes()).count();
     if missed > 0 {
         bail!(

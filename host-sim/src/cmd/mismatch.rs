@@ -40,9 +40,9 @@ use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::table::opt;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
+use crate::sim::run::margin_run::{onset_kmh, run, MarginRun, MarginScenario};
 
 /// Required warning lead at 1 km/h/s in the single-parameter cases, km/h.
 pub const MIN_LEAD_KMH: f64 = 3.0;
@@ -757,7 +757,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
         bail!("--only matches no case; cases: {}", names.join(", "));
     }
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let wall = std::time::Instant::now();
     let mut pp = vehicle.pipeline_params();
     if a.model_update {
@@ -800,11 +800,11 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    crate::sim::files::write_file(
+    crate::sim::input::files::write_file(
         &a.out.join("mismatch.md"),
         format!("{}\n\n{}", md.trim_end(), provenance.markdown()),
     )?;
-    crate::sim::files::write_file(
+    crate::sim::input::files::write_file(
         &a.out.join("summary.json"),
         serde_json::to_string_pretty(&summary_json(&rows, &provenance))? + "\n",
     )?;
@@ -838,7 +838,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             )?;
         }
     }
-    crate::sim::files::write_file(&a.out.join("mismatch.csv"), &f)?;
+    crate::sim::input::files::write_file(&a.out.join("mismatch.csv"), &f)?;
     let mut missed: Vec<String> = rows
         .iter()
         .filter(|r| !r.passes())

@@ -1,7 +1,7 @@
 //! `shimmy-sim params`: print and validate a vehicle (a set name or a vehicle file).
 
 use crate::model::registry::{self, ModelVisitor, Registered};
-use crate::sim::vehicle_file;
+use crate::sim::input::vehicle_file;
 use anyhow::Result;
 use shimmy_core::vehicle::{Vehicle, FIELDS, SECTIONS};
 

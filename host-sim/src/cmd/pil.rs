@@ -8,12 +8,12 @@
 use crate::model::registry::image_models;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
-use crate::sim::closed_loop;
-use crate::sim::pil::{
+use crate::sim::device::pil::{
     check_firmware_matches, compare, costs, PilFirmware, PilModel, SilFirmware, TaskCost,
 };
-use crate::sim::scenario::{self, ScenarioSpec};
-use crate::sim::scenario_file::{self, ImageScenarioVisitor, ScenarioModel};
+use crate::sim::run::closed_loop;
+use crate::sim::run::scenario::{self, ScenarioSpec};
+use crate::sim::run::scenario_file::{self, ImageScenarioVisitor, ScenarioModel};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::vehicle::record_schema_of;
@@ -89,7 +89,7 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
         .clone()
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));
-    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&out)?;
     let elf = a.elf.clone().unwrap_or_else(|| PathBuf::from(M::PIL_ELF));
     if !elf.exists() {
         bail!(
@@ -161,7 +161,7 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
     println!("\ninstructions per task (QEMU -icount shift=0, closed-loop data):\n{table}");
     println!("histogram of the control step:\n{hist}");
     let report = out.join("instructions.md");
-    crate::sim::files::write_file(
+    crate::sim::input::files::write_file(
         &report,
         format!("# Instructions per task: {}\n\n{table}\n{hist}", spec.name),
     )?;

@@ -17,8 +17,8 @@
 //! simulated second; the ratio is a lower bound of the speed-up on equal work.
 
 use crate::model::plant::{default_atol, idx, Inputs, Method, Plant, Simulator, N_STATE};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::files::{self, OutDir};
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::files::{self, OutDir};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use shimmy_core::mr_damper::SpencerParams;
@@ -132,7 +132,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
     if !(2..=100_000).contains(&a.sweep_points) {
         bail!("--sweep-points {}: allowed 2 to 100000", a.sweep_points);
     }
-    let vehicle = crate::sim::vehicle_file::load(&a.vehicle.spec)?;
+    let vehicle = crate::sim::input::vehicle_file::load(&a.vehicle.spec)?;
     arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
@@ -189,16 +189,24 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
 
     // Closed loop: the demo's ASMC run (nominal plant, as the demo).
     let ramp_s = a.cl_ramp_s;
-    let demo_case = crate::sim::demo_case::demo_case(ramp_s)?;
-    let (_, cl) =
-        crate::sim::demo_case::run_arm(&demo_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
+    let demo_case = crate::sim::run::demo_case::demo_case(ramp_s)?;
+    let (_, cl) = crate::sim::run::demo_case::run_arm(
+        &demo_case,
+        crate::sim::run::demo_case::ARMS[1].1,
+        ramp_s,
+        5,
+    )?;
     // The same run with the plant on the fixed-step IMEX (2 steps per period), side by side.
-    let imex_case = crate::sim::demo_case::DemoCase {
+    let imex_case = crate::sim::run::demo_case::DemoCase {
         method: Method::ImexFixed { substeps: 2 },
         ..demo_case.clone()
     };
-    let (_, cl_imex) =
-        crate::sim::demo_case::run_arm(&imex_case, crate::sim::demo_case::ARMS[1].1, ramp_s, 5)?;
+    let (_, cl_imex) = crate::sim::run::demo_case::run_arm(
+        &imex_case,
+        crate::sim::run::demo_case::ARMS[1].1,
+        ramp_s,
+        5,
+    )?;
     let cl_peak = cl
         .series
         .psi_l_rad
@@ -209,7 +217,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
     let case = a.out.join("case.toml");
     let mut text = case_toml(&params, &damper, a, v_mps, &sample_times, &sweep);
     text.push_str(&ramp_toml(&demo_case, ramp_s, a.cl_gain_a_per_radps)?);
-    crate::sim::files::write_file(&case, text)?;
+    crate::sim::input::files::write_file(&case, text)?;
     let result = a.out.join("scipy.json");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference/plant_scipy.py");
     let status = Command::new(&a.python)
@@ -290,7 +298,11 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
 
 /// The `[ramp]` section: the demo's drive (nominal plant parameters are the `[plant]` section
 /// only when `--params nominal`; the demo always uses nominal, so its plant is written here).
-fn ramp_toml(case: &crate::sim::demo_case::DemoCase, ramp_s: f64, gain: f64) -> Result<String> {
+fn ramp_toml(
+    case: &crate::sim::run::demo_case::DemoCase,
+    ramp_s: f64,
+    gain: f64,
+) -> Result<String> {
     use crate::model::disturbance::SpeedProfile;
     let SpeedProfile::Ramp {
         v0_mps,
@@ -485,6 +497,6 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
         r.max_traj_diff_rad, r.max_psi_rad, r.max_eig_diff
     );
     print!("{t}");
-    crate::sim::files::write_file(&a.out.join("summary.txt"), &t)?;
+    crate::sim::input::files::write_file(&a.out.join("summary.txt"), &t)?;
     Ok(())
 }

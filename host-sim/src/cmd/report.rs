@@ -9,9 +9,9 @@ use crate::model::study::StudyModel;
 use crate::out::progress;
 use crate::out::provenance::Provenance;
 use crate::out::report::{self, Report, ReportRun, Section};
-use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file::{self, ScenarioModel};
-use crate::sim::vehicle_file;
+use crate::sim::input::vehicle_file;
+use crate::sim::run::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::run::scenario_file::{self, ScenarioModel};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
@@ -33,7 +33,7 @@ pub struct ReportArgs {
     pub controllers: Vec<String>,
     /// Fixed current of `passive-on` when given in `--controllers`, in A: 0 to the coil rating
     /// of the vehicle the firmware believes.
-    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
+    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::input::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle for every scenario (overrides each file's `[plant]`, sensors
     /// included): a named set or a vehicle file (TOML, see docs/vehicle-file.md).
@@ -233,7 +233,7 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 /// The command on scenarios of the model `M`.
 fn command_on<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<()> {
     let plan = plan::<M, N>(a)?;
-    let out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let report = build(a, plan)?;
     let w = report::write(&out_dir, &report)?;
     let rows: Vec<(&str, &ReportRun<M, N>)> = report

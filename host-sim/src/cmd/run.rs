@@ -7,10 +7,10 @@ use crate::model::family::SimModel;
 use crate::model::registry::Registered;
 use crate::out::file_name::sanitize;
 use crate::out::plots::{plot_margin, plot_runs};
-use crate::sim::closed_loop::LoopResult;
-use crate::sim::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
-use crate::sim::scenario_file::{self, ScenarioVisitor};
-use crate::sim::vehicle_file::FileModel;
+use crate::sim::input::vehicle_file::FileModel;
+use crate::sim::run::closed_loop::LoopResult;
+use crate::sim::run::scenario::{self, controller_name, ScenarioSpec, CONTROLLERS};
+use crate::sim::run::scenario_file::{self, ScenarioVisitor};
 use anyhow::{Context, Result};
 use clap::Args;
 use std::f64::consts::PI;
@@ -29,7 +29,7 @@ pub struct RunArgs {
     pub controller: Option<String>,
     /// Fixed current for `--controller passive-on`, in A: 0 to the coil rating of the vehicle
     /// the firmware believes.
-    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::arg_range::current_a())]
+    #[arg(long, default_value_t = 1.0, alias = "on-current", allow_negative_numbers = true, value_parser = crate::sim::input::arg_range::current_a())]
     pub on_current_a: f64,
     /// The simulated vehicle (overrides the file's `[plant]`, sensors included): a named set
     /// (`shimmy-sim vehicles` lists them) or a vehicle file (TOML, see docs/vehicle-file.md).
@@ -83,7 +83,7 @@ fn run_spec<M: FileModel<N>, const N: usize>(
         spec.trace_every = n as usize;
     }
     let out = out_dir(a, &spec);
-    let _out_dir = crate::sim::files::OutDir::claim(&out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&out)?;
     let (cfg, r) = scenario::run(&spec)?;
     let m = r.metrics(&cfg, spec.t_dist_s);
 

@@ -13,7 +13,7 @@ use shimmy_core::vehicles::car::{Param, PlantParams};
 
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::table::opt;
-use crate::sim::vehicle_file;
+use crate::sim::input::vehicle_file;
 
 /// Options of `shimmy-sim sensitivity`.
 #[derive(clap::Args, Debug, Clone)]
@@ -22,7 +22,7 @@ pub struct SensitivityArgs {
     #[command(flatten)]
     pub vehicle: crate::cmd::VehicleArg,
     /// Relative change applied down and up in %: above 0, at most 90.
-    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::arg_range::f64_in(PERCENT))]
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::input::arg_range::f64_in(PERCENT))]
     pub percent: f64,
     /// Output directory (CSV).
     #[arg(long, default_value = "out/sensitivity")]
@@ -30,8 +30,8 @@ pub struct SensitivityArgs {
 }
 
 /// The relative change: above 0, at most 90 % (at 100 % a parameter would vanish).
-pub const PERCENT: crate::sim::arg_range::Range =
-    crate::sim::arg_range::Range::above(0.0, 90.0, "%");
+pub const PERCENT: crate::sim::input::arg_range::Range =
+    crate::sim::input::arg_range::Range::above(0.0, 90.0, "%");
 
 /// Parameters varied by the sensitivity study (those the linear model depends on; F_z, mu, C_s
 /// only shape the nonlinear tyre and l_t only the damper lever, so they have no effect without
@@ -177,7 +177,7 @@ impl ModelVisitor for Variants {
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
     let vehicle = vehicle_file::load_model(&args.vehicle.spec)?;
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
     // one variant per parameter: (name, unit, base value, the window at a factor, or None
     // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
     let (w0, variants) = registry::with_model(vehicle, Variants)?;
@@ -266,7 +266,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
             println!("  {l}");
         }
     }
-    crate::sim::files::write_file(&path, &f)?;
+    crate::sim::input::files::write_file(&path, &f)?;
     println!("wrote {}", path.display());
     Ok(())
 }

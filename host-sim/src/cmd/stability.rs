@@ -15,8 +15,8 @@ use crate::model::damper_equiv::damper_equivalent;
 use crate::model::hopf_type::{hopf_type_at, Criticality, HopfType, HopfTypeError};
 use crate::model::plant::Damper;
 use crate::model::registry::{self, ModelVisitor, Registered};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
 
 /// Options of `shimmy-sim stability`.
 #[derive(clap::Args, Debug, Clone)]
@@ -98,7 +98,7 @@ impl ModelVisitor for Stability<'_> {
             if let Some(i) = args.damper_current_a {
                 arg_range::check_current("--damper-current-a", i, parts)?;
             }
-            let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
+            let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
             return with_damper(&M::model_of(&f), parts, args);
         }
         anyhow::ensure!(
@@ -107,7 +107,7 @@ impl ModelVisitor for Stability<'_> {
              (`sway-damping` gives the sway damper it needs)",
             registry::name_of::<M, N>()
         );
-        let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
+        let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
         println!(
             "stability of straight running: vehicle `{}`",
             args.vehicle.spec
@@ -377,7 +377,7 @@ fn write_sweep_csv<M: LinearModel<N>, const N: usize>(
             c
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 fn write_crossings_csv(
@@ -421,7 +421,7 @@ fn write_crossings_csv(
             x.converged
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 /// The shimmy-shaped mode (`ModeSelect::Shimmy`) at each row's speed, `None` where there is
@@ -445,7 +445,7 @@ fn plot(
     name: &str,
     c: f64,
 ) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 800)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(400);

@@ -14,9 +14,9 @@ use shimmy_core::vehicles::trailer::TrailerParams;
 
 use crate::model::registry::Registered;
 use crate::out::plot_util;
-use crate::sim::arg_range::{self, Range};
-use crate::sim::trailer_study::{self, DhPoint, ZETA_DAMPER_MAX};
-use crate::sim::vehicle_file;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::input::vehicle_file;
+use crate::sim::study::trailer_study::{self, DhPoint, ZETA_DAMPER_MAX};
 
 /// Options of `shimmy-sim sway-damping`.
 #[derive(clap::Args, Debug, Clone)]
@@ -81,7 +81,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
             TrailerParams::NAME
         ),
     };
-    let _out_dir = crate::sim::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
     let crossings = stability::hopf_crossings(
         &t,
         0.0,
@@ -225,7 +225,7 @@ fn write_speed_csv(path: &Path, t: &TrailerParams, rows: &[SpeedRow], zeta: f64)
             t.l_d
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 fn write_dh_csv(path: &Path, map: &[DhPoint]) -> Result<()> {
@@ -247,7 +247,7 @@ fn write_dh_csv(path: &Path, map: &[DhPoint]) -> Result<()> {
             o(p.zeta_needed)
         )?;
     }
-    crate::sim::files::write_file(path, &f)
+    crate::sim::input::files::write_file(path, &f)
 }
 
 fn plot(
@@ -259,7 +259,7 @@ fn plot(
     name: &str,
     zeta: f64,
 ) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1000, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, bottom) = root.split_vertically(430);

@@ -21,10 +21,10 @@ use std::path::PathBuf;
 
 use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::registry::{self, ModelVisitor, Registered};
-use crate::sim::arg_range;
-use crate::sim::margin_run::{run, MarginScenario};
-use crate::sim::open_loop::{run_speed, DamperSetting, Trend};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::input::arg_range;
+use crate::sim::input::vehicle_file::{self, ModelVehicle};
+use crate::sim::run::margin_run::{run, MarginScenario};
+use crate::sim::run::open_loop::{run_speed, DamperSetting, Trend};
 
 /// The named sets of the table by default: one or more per model of the family.
 pub const DEFAULT_SETS: &str =
@@ -101,7 +101,7 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
                 .map(|v| (s.clone(), v))
         })
         .collect::<Result<_>>()?;
-    let _out_dir = crate::sim::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
     let rows: Vec<VehicleRow> = loaded
         .par_iter()
         .map(|(name, v)| row(name, v, a).with_context(|| format!("vehicle `{name}`")))
@@ -109,9 +109,9 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
     let (header, cells) = table(&rows, a.rate_kmh_per_s);
     let md = markdown(&header, &cells);
     let md_path = a.out.join("vehicles.md");
-    crate::sim::files::write_file(&md_path, &md)?;
+    crate::sim::input::files::write_file(&md_path, &md)?;
     let csv = a.out.join("vehicles.csv");
-    crate::sim::files::write_file(&csv, csv_text(&header, &cells))?;
+    crate::sim::input::files::write_file(&csv, csv_text(&header, &cells))?;
     print!("{md}");
     let md = md_path;
     println!("wrote {} and {}", md.display(), csv.display());
@@ -315,7 +315,7 @@ pub fn table(rows: &[VehicleRow], rate_kmh_per_s: f64) -> (Vec<String>, Vec<Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::margin_run::onset_kmh;
+    use crate::sim::run::margin_run::onset_kmh;
 
     fn args() -> VehiclesArgs {
         VehiclesArgs {

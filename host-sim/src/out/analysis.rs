@@ -42,7 +42,7 @@ pub fn write_rows_csv(path: &Path, a: &Analysis) -> Result<()> {
             level_name(r.level)
         );
     }
-    crate::sim::files::write_file(path, s)
+    crate::sim::input::files::write_file(path, s)
 }
 
 /// Writes `events.csv`: one warning episode a row.
@@ -64,7 +64,7 @@ pub fn write_events_csv(path: &Path, a: &Analysis) -> Result<()> {
             u8::from(e.open)
         );
     }
-    crate::sim::files::write_file(path, s)
+    crate::sim::input::files::write_file(path, s)
 }
 
 fn level_color(l: Level) -> RGBColor {
@@ -92,7 +92,7 @@ fn level_spans(a: &Analysis) -> Vec<(f64, f64, Level)> {
 /// Damping (slow +- sigma, fast, model), frequency and speed over time; the warning levels
 /// as coloured bands behind every panel.
 pub fn plot_analysis(path: &Path, title: &str, a: &Analysis) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1100, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, rest) = root.split_vertically(40);

@@ -51,8 +51,11 @@ pub fn page(title: &str, md: &str, dir: &Path) -> Result<String> {
                 id,
             }) if !dest_url.starts_with("data:") => {
                 let path = dir.join(dest_url.as_ref());
-                let bytes = crate::sim::files::read_bytes(&path, crate::sim::files::DATA_LIMIT)
-                    .context("embedding a plot")?;
+                let bytes = crate::sim::input::files::read_bytes(
+                    &path,
+                    crate::sim::input::files::DATA_LIMIT,
+                )
+                .context("embedding a plot")?;
                 Event::Start(Tag::Image {
                     link_type,
                     dest_url: CowStr::from(format!("data:image/png;base64,{}", base64(&bytes))),

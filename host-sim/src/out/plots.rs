@@ -3,8 +3,8 @@
 
 use crate::model::family::SimModel;
 use crate::out::plot_util::{self, COLORS};
-use crate::sim::closed_loop::{LoopConfig, LoopResult, MeterRow, TraceRow};
-use crate::sim::reference::{reference_line, REFERENCE_LABEL};
+use crate::sim::run::closed_loop::{LoopConfig, LoopResult, MeterRow, TraceRow};
+use crate::sim::run::reference::{reference_line, REFERENCE_LABEL};
 use anyhow::Result;
 use plotters::prelude::*;
 use std::path::Path;
@@ -14,7 +14,7 @@ pub const REFERENCE_EVERY_S: f64 = 0.25;
 
 /// Wheel yaw, coil current and adaptive gain vs time, one line per run, three panels.
 pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1100, 900)).into_drawing_area();
     root.fill(&WHITE)?;
     let (top, rest) = root.split_vertically(40);
@@ -79,13 +79,13 @@ pub fn plot_runs(path: &Path, title: &str, runs: &[(&str, &LoopResult)]) -> Resu
 /// Mode-meter damping estimate (slow: dots in a shaded +- one sigma band) of each run over time
 /// next to its reference line (same colour, drawn on top): the damping ratio of the plant's
 /// shimmy mode as the run goes, linearised with the damper's equivalent viscous coefficient at
-/// the run's current and amplitude ([`crate::sim::reference`]). The axis spans the data (and 0).
+/// the run's current and amplitude ([`crate::sim::run::reference`]). The axis spans the data (and 0).
 pub fn plot_margin<M: SimModel<N>, const N: usize>(
     path: &Path,
     title: &str,
     runs: &[(&str, &LoopConfig<M, N>, &LoopResult)],
 ) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let root = BitMapBackend::new(png.tmp(), (1100, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let t_end = runs

@@ -5,7 +5,7 @@
 //! and as an object into its JSON summary.
 
 use crate::model::registry::{self, ModelVisitor, Registered};
-use crate::sim::vehicle_file::ModelVehicle;
+use crate::sim::input::vehicle_file::ModelVehicle;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use sha2::{Digest, Sha256};
@@ -88,7 +88,8 @@ impl Provenance {
 
     /// Adds a file input (its content hashed).
     pub fn file(mut self, role: &str, path: &Path) -> Result<Self> {
-        let bytes = crate::sim::files::read_bytes(path, crate::sim::files::DATA_LIMIT)?;
+        let bytes =
+            crate::sim::input::files::read_bytes(path, crate::sim::input::files::DATA_LIMIT)?;
         self.inputs.push(Input {
             role: role.to_string(),
             source: path.display().to_string(),

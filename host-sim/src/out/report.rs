@@ -17,8 +17,8 @@ use crate::out::html;
 use crate::out::plots::{plot_margin, plot_runs};
 use crate::out::provenance::Provenance;
 use crate::out::table::opt;
-use crate::sim::closed_loop::{LoopConfig, LoopResult, RunMetrics};
-use crate::sim::reference::REFERENCE_LABEL;
+use crate::sim::run::closed_loop::{LoopConfig, LoopResult, RunMetrics};
+use crate::sim::run::reference::REFERENCE_LABEL;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
@@ -120,7 +120,7 @@ pub fn write_pages(
             format!("{}\n", serde_json::to_string_pretty(&summary)?),
         ),
     ] {
-        crate::sim::files::write_file(path, text)?;
+        crate::sim::input::files::write_file(path, text)?;
     }
     Ok(pages)
 }
@@ -243,12 +243,12 @@ fn write_metrics_csv<M: SimModel<N>, const N: usize>(
             );
         }
     }
-    crate::sim::files::write_file(path, s)
+    crate::sim::input::files::write_file(path, s)
 }
 
 /// Writes the report into the output folder `out`, claimed by the caller for its run.
 pub fn write<M: SimModel<N>, const N: usize>(
-    out: &crate::sim::files::OutDir,
+    out: &crate::sim::input::files::OutDir,
     report: &Report<M, N>,
 ) -> Result<Written> {
     let out = out.path();

@@ -1,5 +1,5 @@
 //! The board's margin path on a measured log: [`analyze`] resamples the log's wheel yaw and
-//! speed ([`crate::sim::log_file`]) onto the mode meter's 1 kHz input grid and runs the core's
+//! speed ([`crate::sim::input::log_file`]) onto the mode meter's 1 kHz input grid and runs the core's
 //! pipeline on it exactly as the firmware's meter task does (`firmware::monitoring::DataMargin`):
 //! the same [`DataPipeline`] (mode meter -> fusion -> monitor, the vehicle's thresholds), the
 //! same acceleration estimate ([`AccelEstimator`]), the last valid speed held, a sample with no
@@ -18,8 +18,8 @@
 use crate::model::family::{FamilyVehicle, SimModel};
 use crate::model::registry::{self, Registered, StudyVisitor};
 use crate::model::study::StudyModel;
-use crate::sim::log_file::LogSample;
-use crate::sim::vehicle_file::ModelVehicle;
+use crate::sim::input::log_file::LogSample;
+use crate::sim::input::vehicle_file::ModelVehicle;
 use anyhow::{bail, Context, Result};
 use shimmy_core::estimator::meter::mode_meter::{EstimateStatus, Sample, WheelOrder};
 use shimmy_core::estimator::monitor::{Event, Level};

@@ -7,10 +7,10 @@ use crate::common;
 
 use common::{run_in, temp_dir};
 use shimmy_sim::sim::analyze::{analyze, Analysis, AnalyzeOptions};
-use shimmy_sim::sim::closed_loop::{LoopConfig, LoopResult};
-use shimmy_sim::sim::log_file::{self, LogMapping, MappingChanges};
-use shimmy_sim::sim::reference::reference_line;
-use shimmy_sim::sim::{scenario, scenario_file};
+use shimmy_sim::sim::input::log_file::{self, LogMapping, MappingChanges};
+use shimmy_sim::sim::run::closed_loop::{LoopConfig, LoopResult};
+use shimmy_sim::sim::run::reference::reference_line;
+use shimmy_sim::sim::run::{scenario, scenario_file};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -455,7 +455,7 @@ fn a_truck_log_is_read_with_the_trucks_meter() {
     use shimmy_core::vehicle::Vehicle;
     use shimmy_core::vehicles::truck::TruckSet;
     use shimmy_sim::model::family::SimModel;
-    use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
+    use shimmy_sim::sim::input::vehicle_file::{self, ModelVehicle};
 
     let dir = temp_dir("analyze-truck");
     let Ok(spec) = scenario_file::parse_any_in(TRUCK_SCENARIO, "analyze-truck-log", &dir)
@@ -520,7 +520,7 @@ fn a_truck_log_is_read_with_the_trucks_meter() {
 /// A model whose meter reads other signals than two wheel yaw angles is refused by name.
 #[test]
 fn analyze_refuses_a_model_its_log_cannot_feed() {
-    use shimmy_sim::sim::vehicle_file;
+    use shimmy_sim::sim::input::vehicle_file;
     let log = [];
     let e = analyze(
         &log,

@@ -6,9 +6,9 @@
 use shimmy_core::control::{ControlParams, ControllerKind};
 use shimmy_sim::cmd::compare;
 use shimmy_sim::model::sensors::SensorConfig;
-use shimmy_sim::sim::closed_loop::{self, Arm, LoopConfig, SHIMMY_AMP_RAD};
-use shimmy_sim::sim::scenario::ScenarioSpec;
-use shimmy_sim::sim::standard::standard_scenarios;
+use shimmy_sim::sim::run::closed_loop::{self, Arm, LoopConfig, SHIMMY_AMP_RAD};
+use shimmy_sim::sim::run::scenario::ScenarioSpec;
+use shimmy_sim::sim::run::standard::standard_scenarios;
 
 fn spec(name: &str) -> ScenarioSpec {
     standard_scenarios(&shimmy_core::vehicle::Vehicle::nominal(), false)

@@ -18,9 +18,9 @@ use shimmy_link::wire::{
 use shimmy_link::PROTOCOL_VERSION;
 use shimmy_sim::model::board::BoardModel;
 use shimmy_sim::model::family::FamilyVehicle;
-use shimmy_sim::sim::device_link::{read_record, Client, DeviceInfo, Port};
-use shimmy_sim::sim::sim_device::{SimDevice, PARITY_FAULT_S};
-use shimmy_sim::sim::vehicle_file::{self, ModelVehicle};
+use shimmy_sim::sim::device::device_link::{read_record, Client, DeviceInfo, Port};
+use shimmy_sim::sim::device::sim_device::{SimDevice, PARITY_FAULT_S};
+use shimmy_sim::sim::input::vehicle_file::{self, ModelVehicle};
 use std::time::Duration;
 
 /// What can go wrong on the way to the device.
@@ -299,7 +299,7 @@ fn the_tool_refuses_a_bad_vehicle_file_and_a_missing_device() {
 
 /// A simulated device that stores trucks, behind a healthy line.
 fn truck_device() -> (
-    Client<shimmy_sim::sim::sim_device::SimDevice<TruckVehicle>>,
+    Client<shimmy_sim::sim::device::sim_device::SimDevice<TruckVehicle>>,
     DeviceInfo,
 ) {
     let ModelVehicle::Truck(t) = vehicle_file::load_model("truck-full").unwrap() else {

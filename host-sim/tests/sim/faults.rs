@@ -11,7 +11,7 @@ use shimmy_core::supervisor::faults::FaultKind;
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_sim::cmd::faults::{self as fault_campaign, standard_cases, Case, Setup};
 use shimmy_sim::model::faults::{FaultMode, Side};
-use shimmy_sim::sim::closed_loop::{Arm, SHIMMY_AMP_RAD};
+use shimmy_sim::sim::run::closed_loop::{Arm, SHIMMY_AMP_RAD};
 
 const V_KMH: f64 = 45.0;
 
@@ -199,9 +199,9 @@ fn nan_encoder_is_caught_by_both_layers() {
 fn the_sensor_faults_scenario_detects_each_fault() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/sensor-faults.toml");
-    let spec = shimmy_sim::sim::scenario_file::load(&path).unwrap();
+    let spec = shimmy_sim::sim::run::scenario_file::load(&path).unwrap();
     assert_eq!(spec.faults.len(), 4);
-    let (_, r) = shimmy_sim::sim::scenario::run(&spec).unwrap();
+    let (_, r) = shimmy_sim::sim::run::scenario::run(&spec).unwrap();
     let log = &r.faults;
     for k in [
         FaultKind::LeftStuck,
@@ -324,7 +324,7 @@ fn lost_speed_with_both_encoders_failed_holds_the_failsafe_current() {
 #[test]
 fn a_genuine_braking_to_standstill_raises_no_fault() {
     use shimmy_sim::model::disturbance::SpeedProfile;
-    use shimmy_sim::sim::closed_loop;
+    use shimmy_sim::sim::run::closed_loop;
     let s = Setup {
         duration_s: 4.0,
         ..setup()

@@ -21,8 +21,8 @@
 
 use shimmy_sim::cmd::demo::{self, DemoOptions};
 use shimmy_sim::model::plant::idx;
-use shimmy_sim::sim::closed_loop::{self, LoopConfig, LoopResult, TraceRow};
-use shimmy_sim::sim::demo_case::{self, ARMS};
+use shimmy_sim::sim::run::closed_loop::{self, LoopConfig, LoopResult, TraceRow};
+use shimmy_sim::sim::run::demo_case::{self, ARMS};
 use std::path::PathBuf;
 
 const EVERY: usize = 20; // 1 kHz -> 50 Hz

@@ -12,7 +12,7 @@ use shimmy_sim::model::plant::{
     fd_eigenvalues, idx, jacobian_fd, least_damped_mode, Damper, Inputs, Method, Plant, Simulator,
     State, N_PLANT, N_STATE,
 };
-use shimmy_sim::sim::open_loop::{fit_growth, peaks, run_speed, DamperSetting, Trend};
+use shimmy_sim::sim::run::open_loop::{fit_growth, peaks, run_speed, DamperSetting, Trend};
 
 const DT: f64 = 1e-3;
 
@@ -531,7 +531,7 @@ fn scenario_runs_are_reproducible_and_record_the_trace() {
     use shimmy_sim::model::disturbance::{
         DriverTorque, Imbalance, Impulse, RoadNoise, Scenario, SpeedProfile,
     };
-    use shimmy_sim::sim::open_loop::simulate;
+    use shimmy_sim::sim::run::open_loop::simulate;
     let p = PlantParams::nominal();
     let make = |seed: u64| {
         let mut s = Scenario::new(SpeedProfile::Ramp {

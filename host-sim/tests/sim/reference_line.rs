@@ -1,4 +1,4 @@
-//! The reference line of a run (`shimmy_sim::sim::reference`, what the margin plots draw) is the
+//! The reference line of a run (`shimmy_sim::sim::run::reference`, what the margin plots draw) is the
 //! plant as it runs. For the damper-off run (the MR damper at 0 A, which is not "no damper") its
 //! growth rate matches a time-domain measurement of that run, cycle by cycle, within 5 %; the
 //! eigenvalue of the plant without damper, and the least-damped mode in place of the shimmy mode
@@ -14,8 +14,8 @@ use shimmy_core::units::kmh_to_mps;
 use shimmy_core::vehicle::Vehicle;
 use shimmy_sim::model::disturbance::{initial_yaw, Scenario};
 use shimmy_sim::model::sensors::SensorConfig;
-use shimmy_sim::sim::closed_loop::{self, Arm, LoopConfig, LoopResult};
-use shimmy_sim::sim::reference::{reference_at, yaw_peaks};
+use shimmy_sim::sim::run::closed_loop::{self, Arm, LoopConfig, LoopResult};
+use shimmy_sim::sim::run::reference::{reference_at, yaw_peaks};
 
 /// The damper-off run: 0 A, constant speed, an initial in-phase kick, no road input, every
 /// 1 ms period in the trace.

@@ -10,7 +10,7 @@ use shimmy_core::vehicles::trailer::{TrailerParams, TrailerSet, PSI};
 use shimmy_sim::model::family::{FamilyVehicle, SimModel, SimPlant};
 use shimmy_sim::model::plant::{Damper, Inputs, Method};
 use shimmy_sim::model::trailer_plant::trailer_vehicle;
-use shimmy_sim::sim::margin_run::{self, onset_kmh, MarginScenario};
+use shimmy_sim::sim::run::margin_run::{self, onset_kmh, MarginScenario};
 
 fn onset_mps(t: &TrailerParams, c: f64) -> f64 {
     stability::hopf_crossings(t, c, 1.0, 70.0, 0.5, DEFAULT_TOL_MPS)
@@ -156,9 +156,9 @@ fn no_warning_at_70_percent_of_the_trailers_onset() {
 /// the MR sway damper holds it, at 0 A already, and the ASMC settles it sooner.
 #[test]
 fn the_trailers_gust_scenario_runs_and_the_damper_holds_the_sway() {
-    use shimmy_sim::sim::closed_loop::Arm;
-    use shimmy_sim::sim::scenario::{self, ScenarioSpec};
-    use shimmy_sim::sim::scenario_file;
+    use shimmy_sim::sim::run::closed_loop::Arm;
+    use shimmy_sim::sim::run::scenario::{self, ScenarioSpec};
+    use shimmy_sim::sim::run::scenario_file;
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenarios")
         .join("trailer");
@@ -255,7 +255,7 @@ fn the_slowed_meter_reads_the_sway_damping() {
 /// trailer has no steering), a car as the firmware's model.
 #[test]
 fn a_bad_trailer_scenario_is_rejected_naming_the_field() {
-    use shimmy_sim::sim::scenario_file;
+    use shimmy_sim::sim::run::scenario_file;
     let base = "duration_s = 5.0\n[speed]\nconstant_kmh = 90.0\n[plant]\nvehicle = \"trailer\"\n";
     let err = |extra: &str| {
         let text = format!("{base}{extra}");

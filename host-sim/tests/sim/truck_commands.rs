@@ -11,7 +11,7 @@ use shimmy_core::vehicles::truck::board::TruckVehicle;
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::model::family::SimModel;
 use shimmy_sim::model::study::StudyModel;
-use shimmy_sim::sim::margin_run::{onset_kmh, run, MarginScenario};
+use shimmy_sim::sim::run::margin_run::{onset_kmh, run, MarginScenario};
 
 use crate::common;
 

@@ -7,7 +7,7 @@ use shimmy_core::stability::{self, CrossingKind, DEFAULT_TOL_MPS};
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicles::truck::{TruckParams, TruckSet};
 use shimmy_sim::model::truck_plant::{envelope_growth_1ps, yaw_start};
-use shimmy_sim::sim::truck_study;
+use shimmy_sim::sim::study::truck_study;
 
 /// Settle 5 s (the tyre-lag and linkage transients decay), compare the 3-s envelopes at the
 /// start and end of 30 s (about 90 shimmy cycles at 3 Hz).
@@ -67,9 +67,9 @@ fn the_least_gas_charge_separates_growth_from_decay_in_the_time_domain() {
 /// (mean square wheel yaw) by more than 4x; with no damper at all the limit cycle is larger.
 #[test]
 fn truck_closed_loop_asmc_suppresses_the_shimmy_that_the_damper_at_0_a_leaves() {
-    use shimmy_sim::sim::closed_loop::Arm;
-    use shimmy_sim::sim::scenario::{self, ScenarioSpec};
-    use shimmy_sim::sim::scenario_file;
+    use shimmy_sim::sim::run::closed_loop::Arm;
+    use shimmy_sim::sim::run::scenario::{self, ScenarioSpec};
+    use shimmy_sim::sim::run::scenario_file;
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenarios")
         .join("truck")
@@ -121,8 +121,8 @@ fn truck_closed_loop_asmc_suppresses_the_shimmy_that_the_damper_at_0_a_leaves() 
 #[test]
 fn the_trucks_margin_warning_leads_its_onset_on_a_ramp() {
     use shimmy_sim::model::family::FamilyVehicle;
-    use shimmy_sim::sim::margin_run::{self, MarginScenario};
-    use shimmy_sim::sim::vehicle_file::{load_model, ModelVehicle};
+    use shimmy_sim::sim::input::vehicle_file::{load_model, ModelVehicle};
+    use shimmy_sim::sim::run::margin_run::{self, MarginScenario};
     let ModelVehicle::Truck(FamilyVehicle { model: t, parts }) = load_model("truck-full").unwrap()
     else {
         panic!("truck-full is a truck")

@@ -373,12 +373,37 @@ fn layered_violations(
     bad
 }
 
+/// The concern of a file of host-sim's `sim` layer, lowest first: what the user hands in
+/// (`input`) < running the model (`run`) < what runs it for a purpose (`device`, `study`,
+/// `analyze`: siblings, none uses another).
+fn sim_concern(m: &ModPath) -> Option<(usize, &str)> {
+    let c = m.get(1)?.as_str();
+    let rank = match c {
+        "input" => 0,
+        "run" => 1,
+        "device" | "study" | "analyze" => 2,
+        _ => return None,
+    };
+    Some((rank, c))
+}
+
 /// host-sim's rule: a file uses only its own or lower layers (`model` < `sim` < `out` <
-/// `cmd`), no command uses another command, and only the crate root sits outside the layers.
+/// `cmd`), inside `sim` only its own or lower concerns ([`sim_concern`]), no command uses
+/// another command, and only the crate root sits outside the layers.
 fn layer_violations(c: &Crate) -> Vec<String> {
     const LAYERS: [&str; 4] = ["model", "sim", "out", "cmd"];
     let layer = |m: &ModPath| m.first().and_then(|t| LAYERS.iter().position(|l| l == t));
-    layered_violations(c, &LAYERS, layer, |m, lm, d, ld| match ld {
+    let mut bad = layered_violations(c, &LAYERS, layer, |m, lm, d, ld| match ld {
+        Some(1) if lm == 1 => match (sim_concern(m), sim_concern(d)) {
+            (Some((rm, cm)), Some((rd, cd))) if rd > rm || (rd == rm && rm == 2 && cm != cd) => {
+                Some(format!(
+                    "sim/{cm} ({}) uses sim/{cd} ({})",
+                    show(c, m),
+                    show(c, d)
+                ))
+            }
+            _ => None,
+        },
         // Two different commands: cmd/<a>... and cmd/<b>...
         Some(3) if lm == 3 && m.get(1) != d.get(1) && m.len() > 1 && d.len() > 1 => Some(format!(
             "command {} imports command {}",
@@ -387,7 +412,12 @@ fn layer_violations(c: &Crate) -> Vec<String> {
         )),
         None => Some(format!("{} uses the crate root", show(c, m))),
         _ => None,
-    })
+    });
+    let no_concern = graph(c).into_keys().filter(|m| {
+        m.first().is_some_and(|t| t == "sim") && m.len() > 1 && sim_concern(m).is_none()
+    });
+    bad.extend(no_concern.map(|m| format!("{} is in no concern of sim", show(c, &m))));
+    bad
 }
 
 #[test]
@@ -485,14 +515,18 @@ fn the_core_layer_check_finds_planted_violations() {
 }
 
 /// The layer check must see each kind of violation (else the test above proves nothing): a
-/// model file using a command, one command using another, a file outside the layers; a command
-/// using a model file and its own sibling file is fine.
+/// model file using a command, one command using another, a file outside the layers, a `sim`
+/// concern using a higher or a sibling one, a `sim` file in no concern; a command using a model
+/// file and its own sibling file, a concern using a lower one, are fine.
 #[test]
 fn the_layer_check_finds_planted_violations() {
     let (c, dir) = scratch(
         "layers",
         &[
-            ("lib.rs", "pub mod cmd;\npub mod model;\npub mod extra;\n"),
+            (
+                "lib.rs",
+                "pub mod cmd;\npub mod model;\npub mod extra;\npub mod sim;\n",
+            ),
             ("model/mod.rs", "pub mod plant;\n"),
             ("model/plant.rs", "pub fn f() { crate::cmd::a::run(); }\n"),
             ("cmd/mod.rs", "pub mod a;\npub mod b;\n"),
@@ -503,14 +537,40 @@ fn the_layer_check_finds_planted_violations() {
             ),
             ("cmd/b.rs", "pub fn h() { crate::cmd::a::args::g(); }\n"),
             ("extra.rs", "pub fn e() {}\n"),
+            (
+                "sim/mod.rs",
+                "pub mod input;\npub mod run;\npub mod device;\npub mod study;\npub mod misc;\n",
+            ),
+            (
+                "sim/input/files.rs",
+                "pub fn r() { crate::sim::run::go(); }\n",
+            ),
+            ("sim/input/mod.rs", "pub mod files;\n"),
+            (
+                "sim/run.rs",
+                "pub fn go() { crate::sim::input::files::r(); }\n",
+            ),
+            ("sim/device.rs", "pub fn d() { crate::sim::study::s(); }\n"),
+            ("sim/study.rs", "pub fn s() { crate::sim::run::go(); }\n"),
+            ("sim/misc.rs", "pub fn m() { crate::model::plant::f(); }\n"),
         ],
     );
     let bad = layer_violations(&c);
     std::fs::remove_dir_all(&dir).ok();
-    assert_eq!(bad.len(), 3, "{bad:#?}");
-    assert!(bad[0].contains("cmd/b.rs") && bad[0].contains("imports command"));
-    assert!(bad[1].contains("extra.rs is in no layer"));
-    assert!(bad[2].contains("model/plant.rs (model) uses the higher layer"));
+    assert_eq!(bad.len(), 6, "{bad:#?}");
+    let found = |a: &str, b: &str| bad.iter().any(|x| x.contains(a) && x.contains(b));
+    assert!(found("cmd/b.rs", "imports command"));
+    assert!(found("extra.rs", "is in no layer"));
+    assert!(found("model/plant.rs (model)", "uses the higher layer"));
+    assert!(
+        found("sim/input (", "uses sim/run"),
+        "a lower concern using a higher one"
+    );
+    assert!(
+        found("sim/device (", "uses sim/study"),
+        "one sibling concern using another"
+    );
+    assert!(found("sim/misc.rs", "no concern of sim"));
 }
 
 /// A concrete vehicle model as the sources name it: its types and constants, the paths of its

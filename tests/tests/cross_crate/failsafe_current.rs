@@ -32,7 +32,7 @@ use shimmy_core::supervisor::params::ZERO_CURRENT_SAFE_BELOW_MPS;
 use shimmy_core::units::{kmh_to_mps, mps_to_kmh};
 use shimmy_core::vehicles::car::{Param, ParamSet, PlantParams};
 use shimmy_sim::model::damper_equiv::mr_equivalent_viscous;
-use shimmy_sim::sim::open_loop::{run_speed, DamperSetting};
+use shimmy_sim::sim::run::open_loop::{run_speed, DamperSetting};
 
 /// Safety margin on the current.
 const MARGIN: f64 = 1.25;

@@ -13,7 +13,7 @@
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::estimator::pipeline::PipelineParams;
 use shimmy_core::vehicles::car::ParamSet;
-use shimmy_sim::sim::margin_run::{run, MarginScenario};
+use shimmy_sim::sim::run::margin_run::{run, MarginScenario};
 
 /// Constant-speed drive per speed: 10 minutes [s].
 const DRIVE_S: f64 = 600.0;
@@ -71,7 +71,7 @@ fn no_false_warning_well_below_the_window() {
 mod wrong_model {
     use super::*;
     use shimmy_sim::cmd::mismatch::{cases, drive_scenario, ramp_scenario, MismatchCase};
-    use shimmy_sim::sim::margin_run::{onset_kmh, MarginRun};
+    use shimmy_sim::sim::run::margin_run::{onset_kmh, MarginRun};
 
     fn case(name: &str) -> MismatchCase {
         cases(&shimmy_core::vehicle::Vehicle::nominal().plant)

@@ -2,8 +2,8 @@
 //! time-domain map), so that neither has to import the other.
 
 use crate::model::family::{param_names, ParamInfo, SimModel};
-use crate::sim::arg_range::{self, Range};
-use crate::sim::scenario::controller_name;
+use crate::sim::input::arg_range::{self, Range};
+use crate::sim::run::scenario::controller_name;
 use anyhow::{bail, Result};
 use clap::Args;
 use shimmy_core::vehicle::Vehicle;

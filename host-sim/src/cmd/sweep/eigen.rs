@@ -61,7 +61,7 @@ pub fn compute(
         }
     }
     registry::with_model(
-        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
+        crate::sim::input::vehicle_file::load_model(&a.vehicle.spec)?,
         On(a, ready),
     )
 }
@@ -168,7 +168,7 @@ fn row<M: LinearModel<N>, const N: usize>(
 pub fn command(a: &SweepArgs) -> Result<()> {
     let mut _out_dir = None;
     let (param, maps) = compute(a, &mut || {
-        _out_dir = Some(crate::sim::files::OutDir::claim(&a.out)?);
+        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out)?);
         Ok(())
     })?;
     for (k, map) in maps.iter().enumerate() {
@@ -237,7 +237,7 @@ fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> 
             let _ = writeln!(s, "{:e},{v},{re:e}", r.value);
         }
     }
-    crate::sim::files::write_file(grid, s)?;
+    crate::sim::input::files::write_file(grid, s)?;
     let mut b = format!(
         "{} [{}],crossing speed [km/h],kind,mode\n",
         param.name, param.unit
@@ -253,12 +253,12 @@ fn write_csv(grid: &Path, boundary: &Path, param: ParamInfo, map: &SweepMap) -> 
             );
         }
     }
-    crate::sim::files::write_file(boundary, b)?;
+    crate::sim::input::files::write_file(boundary, b)?;
     Ok(())
 }
 
 fn plot(path: &Path, param: ParamInfo, map: &SweepMap, set: &str) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let picture =
         BitMapBackend::new(png.tmp(), (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
     picture.fill(&WHITE)?;

@@ -15,7 +15,7 @@ use crate::model::disturbance::Scenario;
 use crate::model::family::{yaw_state, FamilyVehicle, ParamInfo, SimModel};
 use crate::model::registry::{self, ModelVisitor, Registered};
 use crate::out::plot_util;
-use crate::sim::closed_loop::{self, Arm, LoopConfig, RunMetrics};
+use crate::sim::run::closed_loop::{self, Arm, LoopConfig, RunMetrics};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
@@ -166,7 +166,7 @@ pub fn compute(
         }
     }
     registry::with_model(
-        crate::sim::vehicle_file::load_model(&a.vehicle.spec)?,
+        crate::sim::input::vehicle_file::load_model(&a.vehicle.spec)?,
         On(a, ready),
     )
 }
@@ -270,7 +270,7 @@ fn boundary_csv(g: &TdGrid) -> String {
 /// Heat map of the end amplitude (white 0 -> red at `scale_deg`), shimmy cells marked with a
 /// black cross, the linear no-damper Hopf boundary as black dots joined per onset/offset.
 pub fn plot(path: &Path, g: &TdGrid, m: &TdMap, set: &str, scale_deg: f64) -> Result<()> {
-    let png = crate::sim::files::PendingFile::new(path);
+    let png = crate::sim::input::files::PendingFile::new(path);
     let picture =
         BitMapBackend::new(png.tmp(), (1000 + plot_util::COLOUR_BAR_PX, 700)).into_drawing_area();
     picture.fill(&WHITE)?;
@@ -341,13 +341,13 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
     let mut _out_dir = None;
     let wall = std::time::Instant::now();
     let (g, maps) = compute(a, &mut || {
-        _out_dir = Some(crate::sim::files::OutDir::claim(&a.out)?);
+        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out)?);
         Ok(())
     })?;
     let wall_s = wall.elapsed().as_secs_f64();
     let name = g.param.name;
     let boundary = a.out.join(format!("td-boundary-{name}.csv"));
-    crate::sim::files::write_file(&boundary, boundary_csv(&g))?;
+    crate::sim::input::files::write_file(&boundary, boundary_csv(&g))?;
     let mut files = vec![boundary];
     // One colour scale for all controllers (so maps compare), at least 1 deg.
     let scale_deg = maps
@@ -415,7 +415,7 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
             amp
         );
         let c = a.out.join(format!("td-{name}-{}.csv", m.controller));
-        crate::sim::files::write_file(&c, csv(&g, m))?;
+        crate::sim::input::files::write_file(&c, csv(&g, m))?;
         let png = a.out.join(format!("td-{name}-{}.png", m.controller));
         plot(&png, &g, m, &a.vehicle.spec, scale_deg)?;
         files.push(c);

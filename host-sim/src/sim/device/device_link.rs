@@ -1,7 +1,7 @@
 //! The host side of the link (`shimmy-link`): a [`Client`] that sends typed requests and turns
 //! every answer into an owned value or a clear error, over a [`Port`]: a serial port, a TCP
 //! socket (QEMU's `-serial tcp:...`) or the in-process simulator device
-//! ([`crate::sim::sim_device::SimDevice`]).
+//! ([`crate::sim::device::sim_device::SimDevice`]).
 //!
 //! Start-up: a device announces itself with a ready frame once its port listens (bytes sent
 //! before are lost); [`Client::connect`] waits for it, and falls back to asking for the identity

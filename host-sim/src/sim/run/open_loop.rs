@@ -229,7 +229,7 @@ impl Trace {
                 self.driver_torque_nm[k]
             )?;
         }
-        crate::sim::files::write_file(path, &w)
+        crate::sim::input::files::write_file(path, &w)
     }
 }
 

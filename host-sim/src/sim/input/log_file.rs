@@ -296,7 +296,7 @@ impl MappingChanges {
 
     /// Loads a mapping file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)
+        let text = crate::sim::input::files::read_text(path, crate::sim::input::files::TEXT_LIMIT)
             .context("reading mapping file")?;
         Self::parse_toml(&text).with_context(|| format!("mapping file {}", path.display()))
     }
@@ -571,8 +571,8 @@ pub fn parse(text: &str, map: &LogMapping) -> Result<Log> {
 
 /// Reads and parses a log file; errors start with the file name.
 pub fn load(path: &Path, map: &LogMapping) -> Result<Log> {
-    let text =
-        crate::sim::files::read_text(path, crate::sim::files::DATA_LIMIT).context("reading log")?;
+    let text = crate::sim::input::files::read_text(path, crate::sim::input::files::DATA_LIMIT)
+        .context("reading log")?;
     parse(&text, map).with_context(|| format!("log {}", path.display()))
 }
 

@@ -99,7 +99,7 @@ pub fn load_model_relative(spec: &str, dir: &Path) -> Result<ModelVehicle> {
             all_set_names(", ")
         );
     }
-    let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)
+    let text = crate::sim::input::files::read_text(path, crate::sim::input::files::TEXT_LIMIT)
         .context("reading vehicle file")?;
     parse_model(&text).with_context(|| format!("in vehicle file {}", path.display()))
 }
@@ -275,7 +275,7 @@ pub fn load_relative(spec: &str, dir: &Path) -> Result<Vehicle> {
             set_names()
         );
     }
-    let text = crate::sim::files::read_text(&path, crate::sim::files::TEXT_LIMIT)
+    let text = crate::sim::input::files::read_text(&path, crate::sim::input::files::TEXT_LIMIT)
         .context("reading vehicle file")?;
     parse(&text).with_context(|| format!("in vehicle file {}", path.display()))
 }

@@ -20,7 +20,7 @@
 
 use crate::model::damper_equiv::{mr_equivalent_viscous, stroke_amplitude_m};
 use crate::model::family::SimModel;
-use crate::sim::closed_loop::{Arm, LoopConfig, LoopResult, TraceRow};
+use crate::sim::run::closed_loop::{Arm, LoopConfig, LoopResult, TraceRow};
 use rayon::prelude::*;
 use shimmy_core::eigen::{EigenError, Mode};
 use shimmy_core::mr_damper::SpencerParams;

@@ -380,7 +380,7 @@ mod margin_tests {
     use crate::model::dual_axle_plant::*;
     use crate::model::family::{SimModel, SimPlant};
     use crate::model::plant::{Damper, Method};
-    use crate::sim::margin_run::{self, MarginScenario};
+    use crate::sim::run::margin_run::{self, MarginScenario};
     use shimmy_core::estimator::meter::mode_meter::{MarginEstimator, Sample, WheelOrder};
     use shimmy_core::estimator::monitor::Level;
     use shimmy_core::stability::{mode_at, ModeSelect};

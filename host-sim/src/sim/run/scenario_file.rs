@@ -78,9 +78,9 @@ use crate::model::registry::{
 };
 use crate::model::sensors::SensorConfig;
 use crate::model::study::StudyModel;
-use crate::sim::arg_range::Range;
-use crate::sim::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
-use crate::sim::vehicle_file::{self, ModelVehicle};
+use crate::sim::input::arg_range::Range;
+use crate::sim::input::vehicle_file::{self, ModelVehicle};
+use crate::sim::run::scenario::{controller_name, ScenarioSpec, CONTROLLERS, ON_CURRENT_FIELD};
 use anyhow::{bail, Context, Result};
 use serde::Deserialize;
 use shimmy_core::units::kmh_to_mps;
@@ -249,7 +249,7 @@ pub fn load(path: &Path) -> Result<ScenarioSpec> {
 
 /// [`load`] for a scenario on a vehicle of any model of the family.
 pub fn load_any(path: &Path) -> Result<AnyScenario> {
-    let text = crate::sim::files::read_text(path, crate::sim::files::TEXT_LIMIT)?;
+    let text = crate::sim::input::files::read_text(path, crate::sim::input::files::TEXT_LIMIT)?;
     let stem = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -917,7 +917,7 @@ fn parse_speed(s: &SpeedSection, duration_s: f64) -> Result<SpeedProfile> {
 /// [`AnyScenario`] (and, from [`StudyModel`], where its shipped scenarios are: `shimmy-sim
 /// report` on a vehicle of the model). Every study model of the registry is one.
 pub trait ScenarioModel<const N: usize>:
-    crate::sim::vehicle_file::FileModel<N> + StudyModel<N>
+    crate::sim::input::vehicle_file::FileModel<N> + StudyModel<N>
 {
     /// The scenario `s` if it is on this model, else an error naming both models.
     fn scenario(s: AnyScenario) -> Result<ScenarioSpec<Self, N>> {

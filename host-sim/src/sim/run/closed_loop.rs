@@ -546,7 +546,7 @@ impl LoopResult {
                 r.speed_meas_mps
             )?;
         }
-        crate::sim::files::write_file(path, &w)
+        crate::sim::input::files::write_file(path, &w)
     }
 }
 

@@ -7,8 +7,8 @@ use crate::model::disturbance::{
 };
 use crate::model::registry::{ReferenceModel, REFERENCE_N};
 use crate::model::study::StudyModel;
-use crate::sim::scenario::ScenarioSpec;
-use crate::sim::scenario_file::ScenarioModel;
+use crate::sim::run::scenario::ScenarioSpec;
+use crate::sim::run::scenario_file::ScenarioModel;
 use anyhow::Result;
 use shimmy_core::model::LinearModel;
 use shimmy_core::stability::{mode_at, ModeSelect};

@@ -1,6 +1,6 @@
 //! Processor in the loop: the firmware image under QEMU (`netduinoplus2`, `-icount
 //! shift=0,sleep=off`) closes the simulator's loop in lockstep, in place of the in-process
-//! `SafeController` ([`closed_loop::run_on`](crate::sim::closed_loop::run_on)); the frames are
+//! `SafeController` ([`closed_loop::run_on`](crate::sim::run::closed_loop::run_on)); the frames are
 //! `shimmy_pil`'s, the image is built with the firmware's `pil` feature (`board/pil.rs`).
 //!
 //! - [`Qemu`]: the QEMU process with its two named pipes in a fresh directory (QEMU's working
@@ -16,8 +16,8 @@
 use crate::model::board::BoardModel;
 use crate::model::family::FamilyVehicle;
 use crate::model::registry::{image_elfs, schema_model};
-use crate::sim::closed_loop::{Arm, FirmwareStep, LoopConfig};
-use crate::sim::vehicle_file::FileModel;
+use crate::sim::input::vehicle_file::FileModel;
+use crate::sim::run::closed_loop::{Arm, FirmwareStep, LoopConfig};
 use shimmy_core::model::{LinearModel, UpdatableModel};
 use shimmy_core::supervisor::checks::Supervisor;
 use shimmy_core::supervisor::frame::RawFrame;
@@ -184,8 +184,9 @@ impl Qemu {
     }
 
     fn start_program(qemu: &str, elf: &Path) -> Result<Self, String> {
-        let elf_bytes = crate::sim::files::read_bytes(elf, crate::sim::files::DATA_LIMIT)
-            .map_err(|e| format!("PIL image: {e:#}"))?;
+        let elf_bytes =
+            crate::sim::input::files::read_bytes(elf, crate::sim::input::files::DATA_LIMIT)
+                .map_err(|e| format!("PIL image: {e:#}"))?;
         static RUN: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let n = RUN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let dir = std::env::temp_dir().join(format!("shimmy-pil-{}-{n}", std::process::id()));
@@ -900,7 +901,7 @@ mod tests {
     /// naming the field.
     #[test]
     fn the_demo_fits_the_image_and_other_firmware_beliefs_do_not() {
-        use crate::sim::{scenario, scenario_file};
+        use crate::sim::run::{scenario, scenario_file};
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
         let mut spec = scenario_file::load(&path).expect("valid demo");
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
@@ -916,7 +917,8 @@ mod tests {
             );
         }
         spec.controller = "margin-asmc".into();
-        spec.model_vehicle = Some(crate::sim::vehicle_file::load("hard").expect("named set"));
+        spec.model_vehicle =
+            Some(crate::sim::input::vehicle_file::load("hard").expect("named set"));
         let cfg = scenario::loop_config(&spec, spec.arm().expect("arm"));
         let e = check_firmware_matches(&cfg, &spec.model_family()).expect_err("hard");
         assert!(e.contains("[model]"), "{e}");
@@ -927,8 +929,8 @@ mod tests {
     /// bit for bit, so the simulator's studies show what the image does.
     #[test]
     fn the_simulators_closed_loop_runs_the_firmware_app() {
-        use crate::sim::closed_loop::{self, run_on};
-        use crate::sim::{scenario, scenario_file};
+        use crate::sim::run::closed_loop::{self, run_on};
+        use crate::sim::run::{scenario, scenario_file};
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios/pil/demo.toml");
         let mut spec = scenario_file::load(&path).expect("valid demo");
         spec.duration_s = 3.0;
