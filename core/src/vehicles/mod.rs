@@ -14,6 +14,7 @@
 pub mod car;
 pub mod dual_axle;
 pub mod fields;
+pub mod towed_wheel;
 pub mod trailer;
 pub mod truck;
 
