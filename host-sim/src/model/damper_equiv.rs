@@ -157,8 +157,10 @@ pub fn damper_equivalent<M: SimModel<N>, const N: usize>(
     }
     let mut freq = stability::mode_at(p, v_ref, 0.0, ModeSelect::Shimmy)?.freq_hz;
     let mut c = mr_equivalent_viscous(sp, current_a, freq, amp);
-    for _ in 0..1 {
-        freq = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy)?.freq_hz;
+    // one refinement at the damped frequency; a damper that overdamps the mode (a light
+    // model under the car's damper) leaves the undamped frequency
+    if let Ok(m) = stability::mode_at(p, v_ref, c, ModeSelect::Shimmy) {
+        freq = m.freq_hz;
         c = mr_equivalent_viscous(sp, current_a, freq, amp);
     }
     Ok(DamperEquivalent {

@@ -25,12 +25,20 @@ pub fn reference_tyre_yaw_stiffness() -> f64 {
 /// to 150 km/h, N s/m (0 when it has none without a damper; bisection to 0.1 %); `None` when
 /// no coefficient up to 1e9 N s/m does.
 pub fn least_stabilising_c<M: LinearModel<N>, const N: usize>(m: &M) -> Option<f64> {
+    least_stabilising_c_in(m, (1.0, 150.0))
+}
+
+/// [`least_stabilising_c`] over the speeds `kmh` (lowest, highest), km/h.
+pub fn least_stabilising_c_in<M: LinearModel<N>, const N: usize>(
+    m: &M,
+    kmh: (f64, f64),
+) -> Option<f64> {
     let unstable = |c: f64| {
         hopf_crossings(
             m,
             c,
-            kmh_to_mps(1.0),
-            kmh_to_mps(150.0),
+            kmh_to_mps(kmh.0),
+            kmh_to_mps(kmh.1),
             kmh_to_mps(0.5),
             1e-3,
         )
@@ -61,7 +69,8 @@ pub fn least_stabilising_c<M: LinearModel<N>, const N: usize>(m: &M) -> Option<f
 /// The factor on the car's reference damper that sizes it for `model` as the car's is sized
 /// for the `nominal` car: its energy-equivalent viscous coefficient at the rated current
 /// (describing function at the default 0.5 deg, [`damper_equivalent`]) the same multiple of
-/// the least coefficient that closes `model`'s Hopf window ([`least_stabilising_c`]).
+/// the least coefficient that closes `model`'s Hopf window ([`least_stabilising_c`]), each over
+/// its model's sizing speeds ([`SimModel::SIZING_SPEEDS_KMH`]).
 pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> Result<f64> {
     let car = Vehicle::nominal();
     let sp = car.damper.spencer;
@@ -69,10 +78,12 @@ pub fn damper_scale_like_the_cars<M: SimModel<N>, const N: usize>(model: &M) -> 
     let (v0, v1) = (kmh_to_mps(1.0), kmh_to_mps(150.0));
     let amp_deg = super::damper_equiv::REF_WHEEL_YAW_AMPL_RAD.to_degrees();
     let ceq_car = damper_equivalent(&car.plant, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
-    let ceq_m = damper_equivalent(model, &sp, rated, amp_deg, v0, v1)?.c_eq_nspm;
+    let kmh = M::SIZING_SPEEDS_KMH;
+    let (m0, m1) = (kmh_to_mps(kmh.0), kmh_to_mps(kmh.1));
+    let ceq_m = damper_equivalent(model, &sp, rated, amp_deg, m0, m1)?.c_eq_nspm;
     let (Some(c_car), Some(c_m)) = (
         least_stabilising_c(&car.plant),
-        least_stabilising_c(&model.linear()),
+        least_stabilising_c_in(&model.linear(), kmh),
     ) else {
         bail!("damper sizing: no viscous damper closes a Hopf window");
     };

@@ -104,6 +104,9 @@ pub trait SimModel<const N: usize>: Copy + Send + Sync + std::fmt::Debug + 'stat
     /// A copy with the parameter `name` set to `value`, or an error naming it and its range.
     fn with_param(&self, name: &str, value: f64) -> Result<Self>;
 
+    /// The speeds its damper is sized over (lowest, highest), km/h: the road vehicles' 1-150.
+    const SIZING_SPEEDS_KMH: (f64, f64) = (1.0, 150.0);
+
     /// What keeps the plant's right-hand side with `damper` from being three times
     /// differentiable at straight running, if anything (the Hopf type needs its third
     /// derivatives, `super::hopf_type`): by default the MR damper (the Bouc-Wen `|z|` terms).

@@ -20,6 +20,7 @@ pub mod plant;
 pub mod registry;
 pub mod sensors;
 pub mod study;
+pub mod towed_wheel_plant;
 pub mod trailer_plant;
 pub mod truck_plant;
 pub mod tyre;

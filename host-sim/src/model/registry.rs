@@ -307,6 +307,9 @@ registry! {
     DualAxle => shimmy_core::vehicles::dual_axle::DualAxleParams, shimmy_core::vehicles::dual_axle::N_STATES, [];
     /// The trailer on a compliant hitch (`trailer-2dof`): its linear model's parameters.
     Trailer => shimmy_core::vehicles::trailer::TrailerParams, shimmy_core::vehicles::trailer::N_STATES, [];
+    /// The towed wheel on a stretched-string tyre (`towed-wheel-string`): the public shimmy
+    /// benchmark of Takács, Orosz & Stépán (2009).
+    TowedWheel => shimmy_core::vehicles::towed_wheel::TowedWheelParams, shimmy_core::vehicles::towed_wheel::N_STATES, [];
 }
 
 /// The reference model: the car (`car-4dof`). The default of the simulator's generic types

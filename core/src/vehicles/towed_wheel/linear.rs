@@ -48,25 +48,25 @@ pub const Q0: usize = 2;
 /// The trailing edge's state.
 pub const Q_TRAIL: usize = Q0 + N_PATCH - 1;
 
-/// Short names of the states, for tables and CSV headers.
-pub const STATE_NAMES: [&str; N_STATES] = [
-    "psi_rad",
-    "dpsi_radps",
-    "q00_m",
-    "q01_m",
-    "q02_m",
-    "q03_m",
-    "q04_m",
-    "q05_m",
-    "q06_m",
-    "q07_m",
-    "q08_m",
-    "q09_m",
-    "q10_m",
-    "q11_m",
-    "q12_m",
-    "q13_m",
+/// Names of the patch's states, as many as a collocation may use.
+const PATCH_NAMES: [&str; 32] = [
+    "q00_m", "q01_m", "q02_m", "q03_m", "q04_m", "q05_m", "q06_m", "q07_m", "q08_m", "q09_m",
+    "q10_m", "q11_m", "q12_m", "q13_m", "q14_m", "q15_m", "q16_m", "q17_m", "q18_m", "q19_m",
+    "q20_m", "q21_m", "q22_m", "q23_m", "q24_m", "q25_m", "q26_m", "q27_m", "q28_m", "q29_m",
+    "q30_m", "q31_m",
 ];
+
+/// Short names of the states, for tables and CSV headers.
+pub const STATE_NAMES: [&str; N_STATES] = {
+    let mut n = ["psi_rad"; N_STATES];
+    n[DPSI] = "dpsi_radps";
+    let mut j = 0;
+    while j < N_PATCH {
+        n[Q0 + j] = PATCH_NAMES[j];
+        j += 1;
+    }
+    n
+};
 
 /// The collocation on the patch `[-a, a]`: points (j = 0 the leading edge), differentiation
 /// matrix and quadrature weights.

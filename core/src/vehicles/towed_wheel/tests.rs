@@ -117,7 +117,10 @@ mod model {
             let s = shimmy(&p, v);
             let r = root_near(s, &p, v).unwrap();
             let rel = (r - s).norm() / s.norm();
-            assert!(rel < 1e-4, "V = {vv}: collocation {s}, delay equation {r}: {rel:.2e}");
+            assert!(
+                rel < 1e-4,
+                "V = {vv}: collocation {s}, delay equation {r}: {rel:.2e}"
+            );
         }
     }
 
