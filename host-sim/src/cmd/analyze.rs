@@ -75,9 +75,9 @@ pub struct AnalyzeArgs {
     /// missing, as on the board), ms: 1 to 10000.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(MAX_GAP_MS))]
     pub max_gap_ms: f64,
-    /// Output folder (default: `out/analyze/<log file name>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder (`--out`; default: `out/analyze/<log file name>`).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
 }
 
 impl AnalyzeArgs {
@@ -118,7 +118,7 @@ pub fn command(a: &AnalyzeArgs) -> Result<()> {
         .context("log mapping (options or mapping file)")?;
     let vehicle = vehicle_file::load_model(&a.vehicle.spec).context("--vehicle")?;
     let log = log_file::load(&a.log, &map)?;
-    let out = a.out.clone().unwrap_or_else(|| default_out(&a.log));
+    let out = a.out.dir.clone().unwrap_or_else(|| default_out(&a.log));
     let _out_dir = crate::sim::input::files::OutDir::claim(&out)?;
     let opts = AnalyzeOptions {
         vehicle,

@@ -707,9 +707,9 @@ pub struct BifurcationArgs {
     /// at most 16).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, requires = "chart_param", value_parser = arg_range::f64_in(CHART_FACTOR))]
     pub chart_factors: Vec<f64>,
-    /// Output directory.
-    #[arg(long, default_value = "out/bifurcation")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/bifurcation, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// The dual-axle truck: the kingpin friction's smoothing `tanh(psi'/eps)`, rad/s: above 0,
     /// at most 1.
     #[arg(long, default_value_t = crate::model::dual_axle_plant::DEFAULT_EPS_RADPS, allow_negative_numbers = true, value_parser = arg_range::f64_in(EPS_RADPS))]
@@ -718,6 +718,13 @@ pub struct BifurcationArgs {
     /// friction, trail, caster at -20 % / +20 %).
     #[arg(long)]
     pub no_directions: bool,
+}
+
+impl BifurcationArgs {
+    /// The output folder: `--out`, else out/bifurcation.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/bifurcation")
+    }
 }
 
 /// Friction smoothing: above 0, at most 1 rad/s.
@@ -838,7 +845,7 @@ fn command_on<M: SimModel<N>, const N: usize>(
         large_deg: a.large_deg,
         duration_s: a.duration_s,
         window_s: a.window_s,
-        out: a.out.clone(),
+        out: a.out_dir(),
     };
     match axis {
         None => run(&o),
@@ -1121,7 +1128,7 @@ pub fn dual_axle(
     a: &BifurcationArgs,
 ) -> Result<()> {
     use crate::sim::study::dual_axle_study::{self as study, CycleRuns};
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let runs = CycleRuns {
         small_deg: a.small_deg,
         large_deg: a.large_deg,
@@ -1219,7 +1226,7 @@ pub fn dual_axle(
              the two; bisection to 0.01 deg)"
         );
     }
-    let csv = a.out.join("bifurcation.csv");
+    let csv = a.out_dir().join("bifurcation.csv");
     let mut w = Vec::new();
     writeln!(
         w,
@@ -1244,7 +1251,7 @@ pub fn dual_axle(
         )?;
     }
     crate::sim::input::files::write_file(&csv, &w)?;
-    let png = a.out.join("bifurcation.png");
+    let png = a.out_dir().join("bifurcation.png");
     plot_dual(&png, &rows, a, lin, on_large)?;
     println!("wrote {} and {}", csv.display(), png.display());
     if !a.no_directions {
@@ -1254,7 +1261,7 @@ pub fn dual_axle(
              onset from {} deg, limit-cycle amplitude at {DUAL_AXLE_REF_KMH} km/h from {} deg",
             a.large_deg, a.large_deg
         );
-        let path = a.out.join("directions.csv");
+        let path = a.out_dir().join("directions.csv");
         let mut f = Vec::new();
         writeln!(
             f,
@@ -1470,7 +1477,7 @@ mod tests {
             chart_currents_a: Vec::new(),
             chart_param: None,
             chart_factors: Vec::new(),
-            out: out.clone(),
+            out: crate::cmd::OutArg::new(&out),
             friction_eps_radps: 0.01,
             no_directions: true,
         };

@@ -28,9 +28,9 @@ use std::path::{Path, PathBuf};
 /// Command-line arguments of `shimmy-sim compare`.
 #[derive(clap::Args, Clone, Debug)]
 pub struct CompareArgs {
-    /// Output directory (CSV, PNG).
-    #[arg(long, default_value = "out/compare")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/compare, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Controllers (comma separated): no-damper, passive-off, passive-on, smc, asmc, skyhook,
     /// speed-sched (current as a function of speed only, tuned on the set), margin-asmc (the
     /// ASMC scheduled by the margin report in the loop, with the quiet coil).
@@ -78,10 +78,16 @@ pub struct CompareArgs {
     /// The vehicle (`--vehicle`, a named set or a vehicle file).
     #[command(flatten)]
     pub vehicle: crate::cmd::VehicleArg,
-    /// The vehicle the firmware believes (controller model, gains; the gain options above
-    /// override its gains): a named set or a vehicle file; default: `--vehicle`.
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
+}
+
+impl CompareArgs {
+    /// The output folder: `--out`, else out/compare.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/compare")
+    }
 }
 
 impl CompareArgs {
@@ -559,7 +565,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
     a: &CompareArgs,
     vehicle: M::Vehicle,
 ) -> Result<()> {
-    let model = match &a.model_vehicle {
+    let model = match a.model_vehicle.given() {
         Some(m) => M::load_vehicle(m, Path::new("")).context("--model-vehicle")?,
         None => vehicle,
     };
@@ -584,7 +590,7 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
             keep
         })
         .collect();
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let mut specs = standard_scenarios_on::<M, N>(&vehicle, a.quick)?;
     for s in &mut specs {
         s.model_vehicle = Some(model);
@@ -681,26 +687,26 @@ fn command_on<M: StudyModel<N> + ScenarioModel<N>, const N: usize>(
         wall_s,
         rayon::current_num_threads()
     );
-    write_csv(&a.out.join("compare.csv"), &rows)?;
+    write_csv(&a.out_dir().join("compare.csv"), &rows)?;
     let md = format!("{tab}\n```\n{ver}```\n\n{mtab}\n```\n{mver}```\n");
     crate::out::html::check_tables(&md).context("compare.md")?;
-    crate::sim::input::files::write_file(&a.out.join("compare.md"), md)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("compare.md"), md)?;
     for spec in &specs {
         let runs: Vec<(&str, &LoopResult)> = rows
             .iter()
             .filter(|r| r.scenario == spec.name)
             .map(|r| (r.arm.name(), &r.result))
             .collect();
-        let file = a.out.join(format!("{}.png", sanitize(&spec.name)));
+        let file = a.out_dir().join(format!("{}.png", sanitize(&spec.name)));
         plot_runs(&file, &spec.description, &runs)?;
         for r in rows.iter().filter(|r| r.scenario == spec.name) {
-            r.result.write_trace_csv(&a.out.join(format!(
+            r.result.write_trace_csv(&a.out_dir().join(format!(
                 "{}_{}.csv",
                 sanitize(&spec.name),
                 r.arm.name()
             )))?;
         }
     }
-    println!("wrote {}", a.out.display());
+    println!("wrote {}", a.out_dir().display());
     Ok(())
 }

@@ -34,10 +34,9 @@ pub struct DemoArgs {
     /// nominal].
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
-    /// The vehicle the demo's firmware believes (its controller's and estimator's models,
-    /// gains, thresholds): a set or a file [default: the simulated vehicle].
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
     /// Length of the speed ramp 20 -> 120 km/h, s: 1 to 600.
     #[arg(long, default_value_t = RAMP_S_DEFAULT, allow_negative_numbers = true, value_parser = arg_range::f64_in(RAMP_S))]
     pub ramp_s: f64,
@@ -95,9 +94,9 @@ impl<M: FileModel<N>, const N: usize> DemoOptions<M, N> {
             },
             out: default.out,
             plant: (a.vehicle.clone().unwrap_or(default.plant.0), plant),
-            model: match &a.model_vehicle {
+            model: match a.model_vehicle.given() {
                 Some(m) => Some((
-                    m.clone(),
+                    m.to_string(),
                     M::load_vehicle(m, Path::new("")).context("--model-vehicle")?,
                 )),
                 None => None,

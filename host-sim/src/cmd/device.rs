@@ -94,6 +94,7 @@ pub enum ConfigAction {
     /// Read the stored vehicle and write it as a vehicle TOML file.
     Get {
         /// File to write (default: standard output).
+        // A file, not a folder: not the shared `--out` (`cmd::OutArg`).
         #[arg(long, short)]
         out: Option<PathBuf>,
     },

@@ -698,9 +698,9 @@ pub const MAX_SPEEDS: usize = 32;
 /// Command-line arguments of `shimmy-sim faults`.
 #[derive(Args, Clone, Debug)]
 pub struct FaultsArgs {
-    /// Output directory (faults.csv, faults.md).
-    #[arg(long, default_value = "out/faults")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/faults, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Speeds, km/h (comma separated): two inside the 29.35-84.15 km/h window, two outside.
     /// Each 1 to 250 km/h, at most 32 speeds.
     #[arg(
@@ -723,14 +723,20 @@ pub struct FaultsArgs {
     /// `--params` is the older name.
     #[arg(long, visible_alias = "params", default_value = "nominal")]
     pub vehicle: String,
-    /// The vehicle the firmware believes (controller model, gains): a named set or a vehicle
-    /// file; default: `--vehicle`.
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
     /// Peak of the yaw kick after the fault (20 ms half-sine on both wheels), N m for the car
     /// (another model: times its `yaw_torque_scale`): 0 to 5000.
     #[arg(long, default_value_t = 100.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(KICK_NM))]
     pub kick_nm: f64,
+}
+
+impl FaultsArgs {
+    /// The output folder: `--out`, else out/faults.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/faults")
+    }
 }
 
 /// The kick's peak torque: 0 to 5000 N m (car-equivalent).
@@ -985,7 +991,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
     if a.vehicle != ALL_VEHICLES {
         return command_one(a);
     }
-    if a.model_vehicle.is_some() {
+    if a.model_vehicle.given().is_some() {
         bail!("--model-vehicle needs one --vehicle, not `{ALL_VEHICLES}`");
     }
     a.cases()?;
@@ -994,7 +1000,7 @@ pub fn command(a: &FaultsArgs) -> Result<()> {
         println!("\n== vehicle `{set}`");
         let one = FaultsArgs {
             vehicle: set.to_string(),
-            out: a.out.join(set),
+            out: crate::cmd::OutArg::new(a.out_dir().join(set)),
             ..a.clone()
         };
         if let Err(e) = command_one(&one) {
@@ -1032,7 +1038,7 @@ fn command_one(a: &FaultsArgs) -> Result<()> {
 fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle) -> Result<()> {
     let cases = a.cases()?;
     let setup = Setup {
-        model_vehicle: match &a.model_vehicle {
+        model_vehicle: match a.model_vehicle.given() {
             Some(m) => Some(M::load_vehicle(m, Path::new("")).context("--model-vehicle")?),
             None => None,
         },
@@ -1040,7 +1046,7 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         kick_nm: a.kick_nm,
         ..Setup::<M, N>::on(plant)
     };
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let wall = std::time::Instant::now();
     let rows = campaign(&setup, &cases, &a.speeds_kmh)?;
     let md = markdown(&rows);
@@ -1056,8 +1062,8 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
         wall.elapsed().as_secs_f64()
     );
     println!("{md}");
-    crate::sim::input::files::write_file(&a.out.join("faults.csv"), csv(&rows))?;
-    crate::sim::input::files::write_file(&a.out.join("faults.md"), &md)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("faults.csv"), csv(&rows))?;
+    crate::sim::input::files::write_file(&a.out_dir().join("faults.md"), &md)?;
     if let Some((within, n, worst, ratio)) = peak_ratios(&rows) {
         println!(
             "peak yaw after the fault against the fault-free run at the same speed: within {PEAK_RATIO_TARGET}x in {within} of {n} ASMC runs with a working actuator; worst {ratio:.2}x ({} at {} km/h: {:.3} deg)",
@@ -1075,6 +1081,6 @@ fn command_on<M: FileModel<N>, const N: usize>(a: &FaultsArgs, plant: M::Vehicle
             println!("  {b}");
         }
     }
-    println!("wrote {}", a.out.display());
+    println!("wrote {}", a.out_dir().display());
     verdict(&bad)
 }

@@ -38,9 +38,16 @@ pub struct GasChargeArgs {
     /// Highest speed of the maps, km/h: 1 to 250.
     #[arg(long, default_value_t = 70.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub map_v_max_kmh: f64,
-    /// Output directory (CSV, PNG).
-    #[arg(long, default_value = "out/gas-charge")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/gas-charge, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl GasChargeArgs {
+    /// The output folder: `--out`, else out/gas-charge.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/gas-charge")
+    }
 }
 
 /// Initial gas volume: 0.1 to 200 l (the truck field's range).
@@ -67,7 +74,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             TruckParams::NAME
         ),
     };
-    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out_dir())?;
     let ans = truck_study::gas_charge(
         &t,
         args.speed_kmh,
@@ -103,7 +110,7 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
             );
         }
     }
-    let csv = args.out.join("gas-charge.csv");
+    let csv = args.out_dir().join("gas-charge.csv");
     write_charge_csv(&csv, &ans)?;
 
     let gas: Vec<f64> = ans.rows.iter().map(|r| r.v0_l).collect();
@@ -116,11 +123,11 @@ pub fn command(args: &GasChargeArgs) -> Result<()> {
         .collect();
     let by_gas = Map::compute(&speeds, &gas, |v0_l| t.with_gas_volume(v0_l * 1e-3))?;
     let by_load = Map::compute(&speeds, &payloads, |kg| t.with_payload(kg))?;
-    let gas_csv = args.out.join("hopf-vs-gas.csv");
+    let gas_csv = args.out_dir().join("hopf-vs-gas.csv");
     by_gas.write_csv(&gas_csv, "v0_l", 1.0)?;
-    let load_csv = args.out.join("hopf-vs-load.csv");
+    let load_csv = args.out_dir().join("hopf-vs-load.csv");
     by_load.write_csv(&load_csv, "payload_t", 1e-3)?;
-    let png = args.out.join("hopf-map.png");
+    let png = args.out_dir().join("hopf-map.png");
     plot(&png, &by_gas, &by_load, &args.vehicle, t.hps.v0_m3 * 1e3)?;
     println!();
     println!("onset (first Hopf crossing, km/h) vs initial gas volume at this payload:");

@@ -46,9 +46,16 @@ pub struct IdentifiabilityArgs {
     /// Number of speeds: 2 to 50.
     #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u16).range(2..=50))]
     pub speeds: u16,
-    /// Output directory (identifiability.md, identifiability.csv).
-    #[arg(long, default_value = "out/identifiability")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/identifiability, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl IdentifiabilityArgs {
+    /// The output folder: `--out`, else out/identifiability.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/identifiability")
+    }
 }
 
 /// The meter's damping sigma: 0.001 to 0.1.
@@ -203,7 +210,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
     a: &IdentifiabilityArgs,
     model: &M,
 ) -> Result<()> {
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let speeds = usize::from(a.speeds);
     let rows = study(
         model,
@@ -222,7 +229,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
         a.from_fraction * 100.0
     );
     print!("{md}");
-    crate::sim::input::files::write_file(&a.out.join("identifiability.md"), md.trim_start())?;
+    crate::sim::input::files::write_file(&a.out_dir().join("identifiability.md"), md.trim_start())?;
     let mut csv = String::from("sigma_zeta,speed_kmh,field,sigma_ln,onset_sigma_kmh\n");
     for r in &rows {
         for (u, s) in M::UPDATE_PARAMS.iter().zip(&r.sigma_ln) {
@@ -233,7 +240,7 @@ fn command_on<M: UpdatableModel<N>, const N: usize>(
             );
         }
     }
-    crate::sim::input::files::write_file(&a.out.join("identifiability.csv"), csv)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("identifiability.csv"), csv)?;
     Ok(())
 }
 

@@ -37,10 +37,9 @@ pub struct MarginArgs {
     /// The vehicle (`--vehicle`, a named set or a vehicle file).
     #[command(flatten)]
     pub vehicle: crate::cmd::VehicleArg,
-    /// The vehicle the firmware believes (the pipeline's model and thresholds): a named set or
-    /// a vehicle file; default: `--vehicle`.
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
     /// Ramp start speed, km/h: 1 to 250.
     #[arg(long, default_value_t = 15.0, allow_negative_numbers = true, value_parser = arg_range::speed_kmh())]
     pub ramp_from_kmh: f64,
@@ -69,13 +68,20 @@ pub struct MarginArgs {
     /// Duration of the constant-speed drive, s: above 0, at most 3600.
     #[arg(long, default_value_t = 600.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(DURATION_S))]
     pub duration_s: f64,
-    /// Output directory.
-    #[arg(long, default_value = "out/margin")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/margin, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Update the model's parameters online from the data (`docs/margin-estimator.md`, "Model
     /// updating") and print them with their uncertainty and a diagnosis at the end.
     #[arg(long)]
     pub model_update: bool,
+}
+
+impl MarginArgs {
+    /// The output folder: `--out`, else out/margin.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/margin")
+    }
 }
 
 fn level_num(l: Level) -> u8 {
@@ -284,13 +290,13 @@ pub fn check(a: &MarginArgs) -> Result<()> {
 pub fn command(a: &MarginArgs) -> Result<()> {
     check(a)?;
     let vehicle = vehicle_file::load_model(&a.vehicle.spec)?;
-    let model = match &a.model_vehicle {
+    let model = match a.model_vehicle.given() {
         Some(m) => vehicle_file::load_model(m).context("--model-vehicle")?,
         None => vehicle.clone(),
     };
     let mut provenance =
         Provenance::of_this_process().model_vehicle("vehicle", &a.vehicle.spec, &vehicle)?;
-    if let Some(m) = &a.model_vehicle {
+    if let Some(m) = a.model_vehicle.given() {
         provenance = provenance.model_vehicle("model vehicle", m, &model)?;
     }
     /// The run on the vehicle's model, the firmware's model of the same.
@@ -304,7 +310,7 @@ pub fn command(a: &MarginArgs) -> Result<()> {
                 Err(model) => bail!(
                     "--model-vehicle `{}` is a {} vehicle, --vehicle `{}` a {}: the firmware's \
                      model is of the vehicle's model",
-                    a.model_vehicle.as_deref().unwrap_or_default(),
+                    a.model_vehicle.given().unwrap_or_default(),
                     model.model_name(),
                     a.vehicle.spec,
                     registry::name_of::<M, N>()
@@ -343,7 +349,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
         pipeline.update = shimmy_core::estimator::model_update::ModelUpdateConfig::ON;
     }
     let provenance = provenance.seed("road noise", sc.seed);
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let bar = progress::bar(0, "1 ms steps");
     let run = run_with_progress(&sc, pipeline, 10, &mut |done, total| {
         bar.set_length(total as u64);
@@ -353,7 +359,7 @@ fn run_on<M: SimModel<N>, const N: usize>(
     println!(
         "open loop, damper off (no damper force), vehicle `{}`, model vehicle `{}`, noise {} N m, imbalance {} N m (x {:.4} on this model), seed {}",
         a.vehicle.spec,
-        a.model_vehicle.as_deref().unwrap_or(&a.vehicle.spec),
+        a.model_vehicle.or(&a.vehicle.spec),
         sc.noise_nm,
         sc.imbalance_nm,
         p.yaw_torque_scale(),
@@ -416,11 +422,11 @@ fn run_on<M: SimModel<N>, const N: usize>(
             None => println!("diagnosis: every updated parameter within its plausible band"),
         }
     }
-    let csv = a.out.join("margin.csv");
+    let csv = a.out_dir().join("margin.csv");
     write_csv(&csv, &run.rows)?;
-    let png = a.out.join("margin.png");
+    let png = a.out_dir().join("margin.png");
     plot(&png, &run, &a.vehicle.spec)?;
-    let json = a.out.join("summary.json");
+    let json = a.out_dir().join("summary.json");
     let mut summary = summary_json(&sc, &run);
     summary["provenance"] = provenance.json();
     crate::sim::input::files::write_file(&json, serde_json::to_string_pretty(&summary)? + "\n")?;

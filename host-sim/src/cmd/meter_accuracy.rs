@@ -88,9 +88,16 @@ pub struct MeterAccuracyArgs {
     /// the model's factor was chosen by.
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=8))]
     pub meter_time_scale: Option<u16>,
-    /// Output directory (meter_accuracy.md, meter_accuracy.csv).
-    #[arg(long, default_value = "out/meter-accuracy")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/meter-accuracy, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl MeterAccuracyArgs {
+    /// The output folder: `--out`, else out/meter-accuracy.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/meter-accuracy")
+    }
 }
 
 /// One cell of the study: a damper setting and a speed.
@@ -410,7 +417,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             speed_kmh: v,
         }))
         .collect();
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let wall = std::time::Instant::now();
     let scale = a
         .meter_time_scale
@@ -431,7 +438,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
-    crate::sim::input::files::write_file(&a.out.join("meter_accuracy.md"), &md)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("meter_accuracy.md"), &md)?;
     let mut f = Vec::new();
     writeln!(f, "current_a,speed_kmh,zeta_true,freq_true_hz,freq_est_hz,b,bias_b,spread_b,sigma_b,coverage_pct,n,valid_pct,passes")?;
     for r in &rows {
@@ -453,7 +460,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             r.passes()
         )?;
     }
-    crate::sim::input::files::write_file(&a.out.join("meter_accuracy.csv"), &f)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("meter_accuracy.csv"), &f)?;
     let missed = rows.iter().filter(|r| !r.passes()).count();
     if missed > 0 {
         bail!(

@@ -60,13 +60,23 @@ pub const DRIVE_FRACTION: f64 = 0.7;
 /// least this fraction of it (the meter's warm-up is ~2 % of a 10-minute drive).
 pub const DUE_WARNED_MIN: f64 = 0.9;
 
+/// The vehicle the firmware believes without `--vehicle`.
+pub const DEFAULT_VEHICLE: &str = "nominal";
+
 /// Arguments of `shimmy-sim mismatch`.
+// The plants are varied from the vehicle the firmware believes, so this command names that
+// vehicle `--vehicle` (with `--model-vehicle` as an alias), nominal by default.
 #[derive(Args, Debug, Clone)]
+#[command(mut_arg("model_vehicle", |a| a
+    .long("vehicle")
+    .value_name("VEHICLE")
+    .visible_alias("model-vehicle")
+    .default_value(DEFAULT_VEHICLE)))]
 pub struct MismatchArgs {
-    /// The vehicle the firmware believes (the pipeline's model and thresholds), and the base
-    /// the plants are varied from: a named set or a vehicle file (docs/vehicle-file.md).
-    #[arg(long, visible_alias = "model-vehicle", default_value = "nominal")]
-    pub vehicle: String,
+    /// The vehicle the firmware believes, and the base the plants are varied from
+    /// (`--vehicle`, alias `--model-vehicle`; default [`DEFAULT_VEHICLE`]).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
     /// Ramp rates, km/h per s, each 0.1 to 10 (the first one is also used by the data-only arm).
     #[arg(long, value_delimiter = ',', default_value = "1,2,4", value_parser = arg_range::f64_in(RATE))]
     pub rates_kmh_per_s: Vec<f64>,
@@ -95,9 +105,16 @@ pub struct MismatchArgs {
     /// and triples of the parameters at 10 % and 20 % in both sign patterns.
     #[arg(long)]
     pub combined: bool,
-    /// Output directory (mismatch.md, mismatch.csv, summary.json).
-    #[arg(long, default_value = "out/mismatch")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/mismatch, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl MismatchArgs {
+    /// The output folder: `--out`, else out/mismatch.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/mismatch")
+    }
 }
 
 /// Most seeds one run takes.
@@ -713,9 +730,10 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
         Some(text) => parse_seeds(text)?,
         None => vec![a.seed],
     };
-    let vehicle = vehicle_file::load_model(&a.vehicle)?;
+    let spec = a.model_vehicle.or(DEFAULT_VEHICLE);
+    let vehicle = vehicle_file::load_model(spec)?;
     let mut provenance =
-        Provenance::of_this_process().model_vehicle("model vehicle", &a.vehicle, &vehicle)?;
+        Provenance::of_this_process().model_vehicle("model vehicle", spec, &vehicle)?;
     for &seed in &seeds {
         provenance = provenance.seed("road noise", seed);
     }
@@ -732,7 +750,7 @@ pub fn command(a: &MismatchArgs) -> Result<()> {
             "`mismatch` runs the {} models, not the {} (vehicle `{}`)",
             image_models(),
             other.model_name(),
-            a.vehicle
+            spec
         ),
     }
 }
@@ -757,7 +775,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
         let names: Vec<&str> = all.iter().map(|c| c.name.as_str()).collect();
         bail!("--only matches no case; cases: {}", names.join(", "));
     }
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let wall = std::time::Instant::now();
     let mut pp = vehicle.pipeline_params();
     if a.model_update {
@@ -794,18 +812,18 @@ fn command_on<M: StudyModel<N>, const N: usize>(
     }
     println!(
         "plant vs model mismatch (model `{}`{}; open loop, damper off, 5 N m road noise ({seed_text}), 2 N m imbalance; drive {:.0} s at 70 % of the true onset), {:.0} s wall",
-        a.vehicle,
+        a.model_vehicle.or(DEFAULT_VEHICLE),
         if a.model_update { ", updated online" } else { "" },
         a.drive_s,
         wall.elapsed().as_secs_f64()
     );
     print!("{md}");
     crate::sim::input::files::write_file(
-        &a.out.join("mismatch.md"),
+        &a.out_dir().join("mismatch.md"),
         format!("{}\n\n{}", md.trim_end(), provenance.markdown()),
     )?;
     crate::sim::input::files::write_file(
-        &a.out.join("summary.json"),
+        &a.out_dir().join("summary.json"),
         serde_json::to_string_pretty(&summary_json(&rows, &provenance))? + "\n",
     )?;
     let mut f = Vec::new();
@@ -838,7 +856,7 @@ fn command_on<M: StudyModel<N>, const N: usize>(
             )?;
         }
     }
-    crate::sim::input::files::write_file(&a.out.join("mismatch.csv"), &f)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("mismatch.csv"), &f)?;
     let mut missed: Vec<String> = rows
         .iter()
         .filter(|r| !r.passes())

@@ -35,9 +35,9 @@ pub struct PilArgs {
     /// target/xtask/shimmy-firmware.pil+model-truck.elf for the truck).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Output folder (overrides the file's `output.dir`; default `out/pil/<name>`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder (`--out`; overrides the file's `output.dir`; default `out/pil/<name>`).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Also run the firmware's application natively (SIL) and fail unless the coil commands,
     /// supervisor outputs, margin reports, warning levels and model margins agree bit for bit.
     #[arg(long)]
@@ -86,6 +86,7 @@ fn run_spec<M: PilModel<N>, const N: usize>(a: &PilArgs, spec: ScenarioSpec<M, N
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     let out = a
         .out
+        .dir
         .clone()
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out/pil").join(sanitize(&spec.name)));

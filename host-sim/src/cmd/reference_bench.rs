@@ -78,9 +78,16 @@ pub struct ReferenceBenchArgs {
     /// Gain of the Python side's current law in the closed-loop row, A per rad/s: 0 to 1000.
     #[arg(long, default_value_t = 4.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(CL_GAIN))]
     pub cl_gain_a_per_radps: f64,
-    /// Output folder (case file, SciPy result, summary).
-    #[arg(long, default_value = "out/reference-bench")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/reference-bench, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl ReferenceBenchArgs {
+    /// The output folder: `--out`, else out/reference-bench.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/reference-bench")
+    }
 }
 
 /// What one comparison measured.
@@ -136,7 +143,7 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
     arg_range::check_current("--damper-current-a", a.current_a, &vehicle)?;
     let (params, damper) = (vehicle.plant, vehicle.damper.spencer);
     let v_mps = kmh_to_mps(a.speed_kmh);
-    let out_dir = OutDir::claim(&a.out)?;
+    let out_dir = OutDir::claim(&a.out_dir())?;
 
     let sample_every = 10; // every 10 ms
     let n_periods = (a.duration_s * 1000.0).round() as usize;
@@ -214,11 +221,11 @@ pub fn compare(a: &ReferenceBenchArgs) -> Result<(ReferenceResult, OutDir)> {
         .fold(0.0f64, |m, x| m.max(x.abs()));
 
     // SciPy: the same case, from a case file.
-    let case = a.out.join("case.toml");
+    let case = a.out_dir().join("case.toml");
     let mut text = case_toml(&params, &damper, a, v_mps, &sample_times, &sweep);
     text.push_str(&ramp_toml(&demo_case, ramp_s, a.cl_gain_a_per_radps)?);
     crate::sim::input::files::write_file(&case, text)?;
-    let result = a.out.join("scipy.json");
+    let result = a.out_dir().join("scipy.json");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("reference/plant_scipy.py");
     let status = Command::new(&a.python)
         .arg(&script)
@@ -497,6 +504,6 @@ pub fn command(a: &ReferenceBenchArgs) -> Result<()> {
         r.max_traj_diff_rad, r.max_psi_rad, r.max_eig_diff
     );
     print!("{t}");
-    crate::sim::input::files::write_file(&a.out.join("summary.txt"), &t)?;
+    crate::sim::input::files::write_file(&a.out_dir().join("summary.txt"), &t)?;
     Ok(())
 }

@@ -24,9 +24,9 @@ pub struct ReportArgs {
     /// Scenario files (TOML), all on one vehicle model; none = every `*.toml` in
     /// host-sim/scenarios/ (with a truck `--vehicle`: in host-sim/scenarios/truck/).
     pub scenarios: Vec<PathBuf>,
-    /// Output folder.
-    #[arg(long, default_value = "out/report")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/report, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Controllers to run on every scenario (comma separated: no-damper, passive-off,
     /// passive-on, smc, asmc, skyhook); default: each file's own `controller.kind`.
     #[arg(long, value_delimiter = ',')]
@@ -39,9 +39,16 @@ pub struct ReportArgs {
     /// included): a named set or a vehicle file (TOML, see docs/vehicle-file.md).
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
-    /// The vehicle the firmware believes, for every scenario (overrides each file's `[model]`).
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
+}
+
+impl ReportArgs {
+    /// The output folder: `--out`, else out/report.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/report")
+    }
 }
 
 /// The shipped standard scenario folder: `host-sim/scenarios` below the working directory if it
@@ -109,7 +116,7 @@ pub fn plan<M: ScenarioModel<N>, const N: usize>(
                 .into_iter()
                 .map(|controller| {
                     let mut s = spec.clone();
-                    s.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+                    s.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.given(), controller)
                         .with_context(|| format!("scenario file {}", f.display()))?;
                     Ok(s)
                 })
@@ -172,7 +179,10 @@ pub fn build<M: ScenarioModel<N>, const N: usize>(
             );
         }
     }
-    for (role, spec) in [("vehicle", &a.vehicle), ("model vehicle", &a.model_vehicle)] {
+    for (role, spec) in [
+        ("vehicle", &a.vehicle),
+        ("model vehicle", &a.model_vehicle.spec),
+    ] {
         if let Some(v) = spec {
             provenance = provenance.model_vehicle(role, v, &vehicle_file::load_model(v)?)?;
         }
@@ -233,7 +243,7 @@ pub fn command(a: &ReportArgs) -> Result<()> {
 /// The command on scenarios of the model `M`.
 fn command_on<M: ScenarioModel<N>, const N: usize>(a: &ReportArgs) -> Result<()> {
     let plan = plan::<M, N>(a)?;
-    let out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let report = build(a, plan)?;
     let w = report::write(&out_dir, &report)?;
     let rows: Vec<(&str, &ReportRun<M, N>)> = report
@@ -279,11 +289,11 @@ mod tests {
         let out = dir.join("out");
         let a = ReportArgs {
             scenarios: vec![f1, f2],
-            out: out.clone(),
+            out: crate::cmd::OutArg::new(&out),
             controllers: vec!["passive-off".into(), "asmc".into()],
             on_current_a: 1.0,
             vehicle: None,
-            model_vehicle: None,
+            model_vehicle: Default::default(),
         };
         command(&a).unwrap();
         let md = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -338,11 +348,11 @@ mod tests {
         let out = dir.join("out");
         let a = ReportArgs {
             scenarios: vec![good, bad],
-            out: out.clone(),
+            out: crate::cmd::OutArg::new(&out),
             controllers: vec![],
             on_current_a: 1.0,
             vehicle: None,
-            model_vehicle: None,
+            model_vehicle: Default::default(),
         };
         let e = format!("{:#}", command(&a).unwrap_err());
         assert!(e.contains("duration_s"), "{e}");
@@ -360,11 +370,11 @@ mod tests {
     fn the_standard_set_is_found_and_valid() {
         let a = ReportArgs {
             scenarios: vec![],
-            out: tmp("std"),
+            out: crate::cmd::OutArg::new(tmp("std")),
             controllers: vec![],
             on_current_a: 1.0,
             vehicle: None,
-            model_vehicle: None,
+            model_vehicle: Default::default(),
         };
         let plan = plan::<
             shimmy_core::vehicles::car::PlantParams,

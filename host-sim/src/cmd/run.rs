@@ -21,9 +21,9 @@ use std::path::PathBuf;
 pub struct RunArgs {
     /// Scenario file (TOML); the standard ones are in host-sim/scenarios/.
     pub scenario: PathBuf,
-    /// Output folder (overrides the file's `output.dir`).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
+    /// Output folder (`--out`; overrides the file's `output.dir`, [`out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// Controller (overrides the file's `controller.kind`; passive-on needs `--on-current-a`).
     #[arg(long)]
     pub controller: Option<String>,
@@ -35,9 +35,9 @@ pub struct RunArgs {
     /// (`shimmy-sim vehicles` lists them) or a vehicle file (TOML, see docs/vehicle-file.md).
     #[arg(long, visible_alias = "params")]
     pub vehicle: Option<String>,
-    /// The vehicle the firmware believes (overrides the file's `[model]`): a set or a file.
-    #[arg(long)]
-    pub model_vehicle: Option<String>,
+    /// The vehicle the firmware believes (`--model-vehicle`).
+    #[command(flatten)]
+    pub model_vehicle: crate::cmd::ModelVehicleArg,
     /// Record every n-th 1 ms period in trace.csv (overrides the file's `output.trace_every`;
     /// 1 makes the trace the mode meter's 1 kHz input log for `shimmy-sim analyze`): 1 to 1000.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1000))]
@@ -48,6 +48,7 @@ pub struct RunArgs {
 /// the name sanitised.
 pub fn out_dir<M: SimModel<N>, const N: usize>(a: &RunArgs, spec: &ScenarioSpec<M, N>) -> PathBuf {
     a.out
+        .dir
         .clone()
         .or_else(|| spec.out_dir.clone())
         .unwrap_or_else(|| PathBuf::from("out").join(sanitize(&spec.name)))
@@ -77,7 +78,7 @@ fn run_spec<M: FileModel<N>, const N: usize>(
         },
         None => None,
     };
-    spec.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.as_deref(), controller)
+    spec.apply_overrides(a.vehicle.as_deref(), a.model_vehicle.given(), controller)
         .with_context(|| format!("scenario file {}", a.scenario.display()))?;
     if let Some(n) = a.trace_every {
         spec.trace_every = n as usize;
@@ -195,11 +196,11 @@ mod tests {
         );
         let args = RunArgs {
             scenario: PathBuf::from("unused"),
-            out: Some(out.clone()),
+            out: crate::cmd::OutArg::new(&out),
             controller: None,
             on_current_a: 1.0,
             vehicle: None,
-            model_vehicle: None,
+            model_vehicle: Default::default(),
             trace_every: None,
         };
         // The command path itself (with a file on disk).

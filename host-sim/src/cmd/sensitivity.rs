@@ -24,9 +24,16 @@ pub struct SensitivityArgs {
     /// Relative change applied down and up in %: above 0, at most 90.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true, value_parser = crate::sim::input::arg_range::f64_in(PERCENT))]
     pub percent: f64,
-    /// Output directory (CSV).
-    #[arg(long, default_value = "out/sensitivity")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/sensitivity, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl SensitivityArgs {
+    /// The output folder: `--out`, else out/sensitivity.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/sensitivity")
+    }
 }
 
 /// The relative change: above 0, at most 90 % (at 100 % a parameter would vanish).
@@ -177,7 +184,7 @@ impl ModelVisitor for Variants {
 pub fn command(args: &SensitivityArgs) -> Result<()> {
     PERCENT.check("--percent", args.percent)?;
     let vehicle = vehicle_file::load_model(&args.vehicle.spec)?;
-    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out_dir())?;
     // one variant per parameter: (name, unit, base value, the window at a factor, or None
     // when the varied vehicle is not valid, e.g. a truck whose struts cannot carry the load)
     let (w0, variants) = registry::with_model(vehicle, Variants)?;
@@ -199,7 +206,7 @@ pub fn command(args: &SensitivityArgs) -> Result<()> {
         "{:<7} | {:>9} {:>9} {:>7} | {:>9} {:>9} {:>7} | {:>8} {:>8}",
         "param", "on -", "off -", "f -", "on +", "off +", "f +", "d on/d%", "d off/d%"
     );
-    let path = args.out.join("sensitivity.csv");
+    let path = args.out_dir().join("sensitivity.csv");
     let mut f = Vec::new();
     writeln!(
         f,

@@ -41,9 +41,16 @@ pub struct StabilityArgs {
     /// Grid step for the sweep and for bracketing crossings, km/h: 0.01 to 50.
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(STEP_KMH))]
     pub step_kmh: f64,
-    /// Output directory (CSV, PNG).
-    #[arg(long, default_value = "out/stability")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/stability, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl StabilityArgs {
+    /// The output folder: `--out`, else out/stability.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/stability")
+    }
 }
 
 /// Describing-function reference amplitude: above 0, at most 20 deg.
@@ -98,7 +105,7 @@ impl ModelVisitor for Stability<'_> {
             if let Some(i) = args.damper_current_a {
                 arg_range::check_current("--damper-current-a", i, parts)?;
             }
-            let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
+            let _out_dir = crate::sim::input::files::OutDir::claim(&args.out_dir())?;
             return with_damper(&M::model_of(&f), parts, args);
         }
         anyhow::ensure!(
@@ -107,7 +114,7 @@ impl ModelVisitor for Stability<'_> {
              (`sway-damping` gives the sway damper it needs)",
             registry::name_of::<M, N>()
         );
-        let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
+        let _out_dir = crate::sim::input::files::OutDir::claim(&args.out_dir())?;
         println!(
             "stability of straight running: vehicle `{}`",
             args.vehicle.spec
@@ -228,11 +235,11 @@ fn report<M: SimModel<N>, const N: usize>(
         .collect();
     print_hopf_types(&crossings, &types);
 
-    let csv = args.out.join("stability.csv");
+    let csv = args.out_dir().join("stability.csv");
     write_sweep_csv(&csv, p, c, &rows)?;
-    let ccsv = args.out.join("crossings.csv");
+    let ccsv = args.out_dir().join("crossings.csv");
     write_crossings_csv(&ccsv, &crossings, &types)?;
-    let png = args.out.join("stability.png");
+    let png = args.out_dir().join("stability.png");
     let shimmy = shimmy_modes(p, c, &rows);
     plot(&png, &rows, &shimmy, &crossings, &args.vehicle.spec, c)?;
     println!(

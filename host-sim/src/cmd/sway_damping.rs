@@ -37,9 +37,16 @@ pub struct SwayDampingArgs {
     /// Speed step, km/h: 0.1 to 50.
     #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = arg_range::f64_in(STEP_KMH))]
     pub step_kmh: f64,
-    /// Output directory (CSV, PNG).
-    #[arg(long, default_value = "out/sway-damping")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/sway-damping, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl SwayDampingArgs {
+    /// The output folder: `--out`, else out/sway-damping.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/sway-damping")
+    }
 }
 
 /// Damping-ratio target: 0.001 to 0.5.
@@ -81,7 +88,7 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
             TrailerParams::NAME
         ),
     };
-    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&args.out_dir())?;
     let crossings = stability::hopf_crossings(
         &t,
         0.0,
@@ -191,11 +198,11 @@ pub fn command(args: &SwayDampingArgs) -> Result<()> {
         );
     }
 
-    let csv = args.out.join("damping.csv");
+    let csv = args.out_dir().join("damping.csv");
     write_speed_csv(&csv, &t, &rows, args.zeta)?;
-    let dcsv = args.out.join("diboll-hagen.csv");
+    let dcsv = args.out_dir().join("diboll-hagen.csv");
     write_dh_csv(&dcsv, &map)?;
-    let png = args.out.join("sway-damping.png");
+    let png = args.out_dir().join("sway-damping.png");
     plot(&png, &t, &rows, &map, &energy, &args.vehicle, args.zeta)?;
     println!(
         "wrote {}, {}, {}",

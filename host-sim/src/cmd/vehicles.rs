@@ -56,9 +56,16 @@ pub struct VehiclesArgs {
     /// Road-noise seed of the lead-time run.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Output directory (`vehicles.md`, `vehicles.csv`).
-    #[arg(long, default_value = "out/vehicles")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/vehicles, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
+}
+
+impl VehiclesArgs {
+    /// The output folder: `--out`, else out/vehicles.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/vehicles")
+    }
 }
 
 /// One row of the table.
@@ -101,16 +108,16 @@ pub fn command(a: &VehiclesArgs) -> Result<()> {
                 .map(|v| (s.clone(), v))
         })
         .collect::<Result<_>>()?;
-    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out)?;
+    let _out_dir = crate::sim::input::files::OutDir::claim(&a.out_dir())?;
     let rows: Vec<VehicleRow> = loaded
         .par_iter()
         .map(|(name, v)| row(name, v, a).with_context(|| format!("vehicle `{name}`")))
         .collect::<Result<_>>()?;
     let (header, cells) = table(&rows, a.rate_kmh_per_s);
     let md = markdown(&header, &cells);
-    let md_path = a.out.join("vehicles.md");
+    let md_path = a.out_dir().join("vehicles.md");
     crate::sim::input::files::write_file(&md_path, &md)?;
-    let csv = a.out.join("vehicles.csv");
+    let csv = a.out_dir().join("vehicles.csv");
     crate::sim::input::files::write_file(&csv, csv_text(&header, &cells))?;
     print!("{md}");
     let md = md_path;
@@ -322,7 +329,7 @@ mod tests {
             vehicles: vec![],
             rate_kmh_per_s: 1.0,
             seed: 1,
-            out: PathBuf::new(),
+            out: crate::cmd::OutArg::new(PathBuf::new()),
         }
     }
 
@@ -359,9 +366,9 @@ mod tests {
     fn a_bad_vehicle_is_named() {
         let mut a = args();
         a.vehicles = vec!["nominal".into(), "no-such-set".into()];
-        a.out = std::env::temp_dir().join("shimmy-vehicles-bad");
+        a.out = crate::cmd::OutArg::new(std::env::temp_dir().join("shimmy-vehicles-bad"));
         let e = format!("{:#}", command(&a).unwrap_err());
         assert!(e.contains("`no-such-set`"), "{e}");
-        assert!(!a.out.exists());
+        assert!(!a.out_dir().exists());
     }
 }

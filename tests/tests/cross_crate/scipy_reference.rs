@@ -29,7 +29,7 @@ fn nonlinear_trajectory_and_eigenvalues_match_the_scipy_implementation() {
         sweep_points: 150,
         scipy_methods: vec!["LSODA".into(), "RK45".into()],
         python: "python3".into(),
-        out: out.clone(),
+        out: shimmy_sim::cmd::OutArg::new(&out),
         cl_ramp_s: 6.0,
         cl_gain_a_per_radps: 4.0,
     };

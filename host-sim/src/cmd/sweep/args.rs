@@ -44,9 +44,9 @@ pub struct SweepArgs {
     /// Wheel-yaw amplitude of the damper's describing function, deg: above 0, at most 20.
     #[arg(long, default_value_t = 0.5, allow_negative_numbers = true, value_parser = arg_range::f64_in(REF_AMPLITUDE_DEG))]
     pub ref_amplitude_deg: f64,
-    /// Output folder.
-    #[arg(long, default_value = "out/sweep")]
-    pub out: PathBuf,
+    /// Output folder (`--out`; default out/sweep, [`Self::out_dir`]).
+    #[command(flatten)]
+    pub out: crate::cmd::OutArg,
     /// No progress bar (for scripts and tests).
     #[arg(long)]
     pub quiet: bool,
@@ -69,6 +69,13 @@ pub struct SweepArgs {
     /// Time-domain sweep: seed of the sensor noise (same seed, same numbers).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+}
+
+impl SweepArgs {
+    /// The output folder: `--out`, else out/sweep.
+    pub fn out_dir(&self) -> PathBuf {
+        self.out.dir_or("out/sweep")
+    }
 }
 
 /// Factor on the parameter's base value: above 0, at most 10.

@@ -168,7 +168,7 @@ fn row<M: LinearModel<N>, const N: usize>(
 pub fn command(a: &SweepArgs) -> Result<()> {
     let mut _out_dir = None;
     let (param, maps) = compute(a, &mut || {
-        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out)?);
+        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out_dir())?);
         Ok(())
     })?;
     for (k, map) in maps.iter().enumerate() {
@@ -177,9 +177,11 @@ pub fn command(a: &SweepArgs) -> Result<()> {
         } else {
             format!("damper{k}")
         };
-        let grid = a.out.join(format!("sweep-{}-{tag}.csv", param.name));
-        let boundary = a.out.join(format!("boundary-{}-{tag}.csv", param.name));
-        let png = a.out.join(format!("sweep-{}-{tag}.png", param.name));
+        let grid = a.out_dir().join(format!("sweep-{}-{tag}.csv", param.name));
+        let boundary = a
+            .out_dir()
+            .join(format!("boundary-{}-{tag}.csv", param.name));
+        let png = a.out_dir().join(format!("sweep-{}-{tag}.png", param.name));
         write_csv(&grid, &boundary, param, map)?;
         plot(&png, param, map, &a.vehicle.spec)?;
         println!(
@@ -349,7 +351,7 @@ mod tests {
             v_steps: Some(47),
             damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
-            out: out.to_path_buf(),
+            out: crate::cmd::OutArg::new(out),
             quiet: true,
             controllers: vec![],
             on_current_a: 1.0,

@@ -341,12 +341,12 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
     let mut _out_dir = None;
     let wall = std::time::Instant::now();
     let (g, maps) = compute(a, &mut || {
-        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out)?);
+        _out_dir = Some(crate::sim::input::files::OutDir::claim(&a.out_dir())?);
         Ok(())
     })?;
     let wall_s = wall.elapsed().as_secs_f64();
     let name = g.param.name;
-    let boundary = a.out.join(format!("td-boundary-{name}.csv"));
+    let boundary = a.out_dir().join(format!("td-boundary-{name}.csv"));
     crate::sim::input::files::write_file(&boundary, boundary_csv(&g))?;
     let mut files = vec![boundary];
     // One colour scale for all controllers (so maps compare), at least 1 deg.
@@ -414,9 +414,9 @@ pub fn command(a: &SweepArgs) -> Result<Vec<PathBuf>> {
             m.points.len() - tot_in,
             amp
         );
-        let c = a.out.join(format!("td-{name}-{}.csv", m.controller));
+        let c = a.out_dir().join(format!("td-{name}-{}.csv", m.controller));
         crate::sim::input::files::write_file(&c, csv(&g, m))?;
-        let png = a.out.join(format!("td-{name}-{}.png", m.controller));
+        let png = a.out_dir().join(format!("td-{name}-{}.png", m.controller));
         plot(&png, &g, m, &a.vehicle.spec, scale_deg)?;
         files.push(c);
         files.push(png);
@@ -443,7 +443,7 @@ mod tests {
             v_steps: Some(3), // 20, 75, 130 km/h
             damper_current_a: vec![],
             ref_amplitude_deg: 0.5,
-            out: out.to_path_buf(),
+            out: crate::cmd::OutArg::new(out),
             quiet: true,
             controllers: vec!["no-damper".into(), "asmc".into()],
             on_current_a: 1.0,
