@@ -91,7 +91,7 @@ impl Patch {
         }
         let c = |i: usize| {
             let end = if i == 0 || i == N { 2.0 } else { 1.0 };
-            if i % 2 == 0 {
+            if i.is_multiple_of(2) {
                 end
             } else {
                 -end
