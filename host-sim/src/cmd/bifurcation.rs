@@ -1719,6 +1719,56 @@ mod tests {
         assert!(scheduled < 0.1, "margin-asmc damps: {scheduled} deg");
     }
 
+    /// The same large start when the firmware's model is wrong in the dangerous direction: its
+    /// tyre 20 % softer in cornering than the plant's, so the model's no-damper onset
+    /// (42.69 km/h) lies above the plant's fold at 0 A and the model margin calls the speeds
+    /// between them safe. Inside that stretch of the plant's bistable window a 3 deg start
+    /// that shimmies with the damper at 0 A still decays under `margin-asmc`.
+    #[test]
+    fn the_margin_scheduled_asmc_damps_the_window_below_a_wrong_models_onset() {
+        use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
+        use crate::model::family::{onset_kmh, FamilyVehicle};
+        use crate::sim::run::closed_loop::{self, Arm, LoopConfig};
+        use shimmy_core::control::ControllerKind;
+        use shimmy_core::units::kmh_to_mps;
+        use shimmy_core::vehicle::Vehicle;
+        let fold =
+            chart(&car_window_at_0a(), &ChartAxis::CurrentA(vec![0.0])).unwrap()[0].folds_kmh[0];
+        let mut believed = Vehicle::nominal();
+        believed.plant.c_a *= 0.8;
+        let model_onset = onset_kmh(&believed.plant).unwrap();
+        println!("plant's fold at 0 A {fold:.2} km/h, the model's onset {model_onset:.2} km/h");
+        assert!(
+            model_onset > fold + 5.0,
+            "fold {fold}, model onset {model_onset}"
+        );
+        let car = FamilyVehicle::car(Vehicle::nominal());
+        for v_kmh in [fold + 1.5, model_onset - 2.5] {
+            let end_peak_deg = |kind: ControllerKind| {
+                let mut cfg =
+                    LoopConfig::for_vehicle(&car, Arm::Mr(kind), 30.0).with_model(&believed);
+                cfg.x0 = initial_yaw(3f64.to_radians());
+                let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(v_kmh)));
+                let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
+                let psi = &r.series.psi_l_rad;
+                psi[psi.len() - 3000..]
+                    .iter()
+                    .fold(0.0_f64, |m, x| m.max(x.abs()))
+                    .to_degrees()
+            };
+            let (passive, scheduled) = (
+                end_peak_deg(ControllerKind::PassiveOff),
+                end_peak_deg(ControllerKind::MarginAsmc),
+            );
+            println!(
+                "{v_kmh:.2} km/h, 3 deg start, peak over the last 3 s: 0 A {passive:.3} deg, \
+                 margin-asmc {scheduled:.4} deg"
+            );
+            assert!(passive > 1.0, "the damper at 0 A shimmies: {passive} deg");
+            assert!(scheduled < 0.1, "margin-asmc damps: {scheduled} deg");
+        }
+    }
+
     /// The chart over a vehicle parameter without damper is the Hopf curve: at each tyre
     /// cornering stiffness the onset and offset agree with the linear model's crossings
     /// (`stability::hopf_crossings` on the eigenvalues of A(V), against the shooting's Hopf
