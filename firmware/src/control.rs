@@ -8,12 +8,15 @@
 //! checks, timing; fault records, Normal / Degraded / FailSafe with recovery hysteresis; the
 //! core controller; the final clamp and slew limit) -> coil current command -> [`drive_coil`]
 //! (closed current loop on the measured current). [`supervised_step`] is that chain up to the
-//! command.
+//! command; [`ControlTask::run`] is the control task's body around it (the same on the board
+//! and in the host's `pil::HostApp`).
 
 use crate::drivers::coil_pwm::CoilDriver;
 use crate::drivers::wheel_speed::SpeedStatus;
+use crate::monitoring::{MeterCadence, MeterSample};
 use crate::sensors::{SampleSet, SensorFault};
 use embedded_hal::pwm::SetDutyCycle;
+use rtic_core::Mutex;
 use shimmy_core::supervisor::frame::{EncoderReading, MarginStatus, RawFrame};
 use shimmy_core::supervisor::policy::Mode;
 use shimmy_core::supervisor::safe_controller::{SafeController, SafeOutput};
@@ -108,6 +111,13 @@ impl Health {
         if wrapped {
             bump(&mut self.overruns);
         }
+    }
+
+    /// Counts one completed control step; `dropped`: its meter sample found the queue full.
+    #[inline(always)]
+    pub fn record_step(&mut self, dropped: bool) {
+        self.meter_dropped += u32::from(dropped);
+        self.steps += 1;
     }
 
     /// Records the supervisor's verdict of one step.
@@ -219,6 +229,84 @@ pub fn supervised_step(
     }
     h.record_verdict(&out);
     out
+}
+
+/// The control task's own state: the supervised controller, the number of the next step and
+/// the meter task's cadence.
+pub struct ControlTask {
+    ctrl: SafeController,
+    step: u32,
+    cadence: MeterCadence,
+}
+
+/// What one control step did, for the task around it.
+#[derive(Clone, Copy, Debug)]
+pub struct ControlStep {
+    /// The step's number.
+    pub step: u32,
+    /// The supervised controller's output.
+    pub out: SafeOutput,
+    /// The step's meter sample found the queue full (count it: [`Health::record_step`]).
+    pub dropped: bool,
+    /// The meter task is due after this step ([`MeterCadence`]).
+    pub meter_due: bool,
+}
+
+impl ControlTask {
+    /// The task around `ctrl`, before its first step.
+    pub fn new(ctrl: SafeController) -> Self {
+        ControlTask {
+            ctrl,
+            step: 0,
+            cadence: MeterCadence::default(),
+        }
+    }
+
+    /// The number of the next step.
+    pub fn step_count(&self) -> u32 {
+        self.step
+    }
+
+    /// The supervised controller (its supervisor's faults).
+    pub fn controller(&self) -> &SafeController {
+        &self.ctrl
+    }
+
+    /// The supervised controller, mutably (fault records and events).
+    pub fn controller_mut(&mut self) -> &mut SafeController {
+        &mut self.ctrl
+    }
+
+    /// One control step on the sensors' `samples`, the one sequence the RTIC app's `control`
+    /// task and the host's `pil::HostApp` both run: [`supervised_step`] (`health` locked for it
+    /// only), `actuate` on the output at once (the coil on the board), the step's
+    /// [`MeterSample`] to the meter task's queue (`enqueue`: false when it is full), the meter
+    /// task's cadence. The caller counts the step ([`Health::record_step`]) with its timing,
+    /// which ends only after the meter task is spawned.
+    #[inline(always)]
+    pub fn run(
+        &mut self,
+        samples: &SampleSet,
+        coil_drive_a: Option<f32>,
+        margin: MarginStatus,
+        health: &mut impl Mutex<T = Health>,
+        actuate: impl FnOnce(&SafeOutput),
+        enqueue: impl FnOnce(MeterSample) -> bool,
+    ) -> ControlStep {
+        let step = self.step;
+        let ctrl = &mut self.ctrl;
+        let out = health.lock(|h| supervised_step(ctrl, samples, coil_drive_a, margin, h));
+        actuate(&out);
+        let dropped = !enqueue(MeterSample::of(step, &out));
+        let meter_due = self.cadence.tick();
+        self.step = step.wrapping_add(1);
+        ControlStep {
+            step,
+            out,
+            dropped,
+            meter_due,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -7,6 +7,11 @@
 //! | `link` | USART1 interrupt (a received byte; pended by `meter` at 10 Hz for the stream) | 1 | the host link (`shimmy_link::device::Device` over `shimmy_firmware::link::BoardLink`: the link's state and the flash store): one reply per request frame, telemetry frames while the stream is on; announces itself with a ready frame on its first run |
 //! | `idle` | background loop | 0 | the core's `ModelMarginTracker`: one f32 eigen-solve per call, each completed cycle published to `meter`; between cycles the online model update's due measurement from `meter` (the tracker then runs on the updated model; the link serves the update's parameters and diagnosis); the flash store (`shimmy_firmware::store`: the event log the meter's recorder fills, erases only at standstill), a host-written vehicle saved at standstill and run after a restart; WFI when no cycle is due; a pass only after a meter run or while a cycle is under way (`shimmy_firmware::background::PassGate`) |
 //!
+//! Each task's shared work is a host-compilable function of the library, which the host's
+//! `pil::HostApp` runs too: `control::ControlTask::run`, `monitoring::DataMargin::run`,
+//! `background::model_pass`; the tasks here add the board's side (timers, coil, watchdog,
+//! fault memory, store, link, logging).
+//!
 //! Nothing else runs at priority 3. The queue (heapless SPSC, lock-free) is why the 1 kHz task
 //! never waits for the meter: see `shimmy_firmware::monitoring` for the instruction budget.
 //!
@@ -26,17 +31,16 @@ mod app {
     use shimmy_core::estimator::model_update::Measurement;
     use shimmy_core::supervisor::faults::{FaultKind, FaultSet};
     use shimmy_core::supervisor::frame::MarginStatus;
-    use shimmy_core::supervisor::safe_controller::SafeController;
     use shimmy_core::vehicle::BoardVehicle;
-    use shimmy_firmware::background::PassGate;
+    use shimmy_firmware::background::{model_pass, PassGate};
     use shimmy_firmware::board::hooks::AppHooks;
     use shimmy_firmware::board::{self, Board, Hooks};
-    use shimmy_firmware::control::{drive_coil, supervised_step, Health};
+    use shimmy_firmware::control::{drive_coil, ControlTask, Health};
     use shimmy_firmware::fault_memory::{persist, BootPolicy, ResetCause, ResetRecord};
     use shimmy_firmware::link::{may_restart, save_vehicle, Batch, BoardLink, LinkState, Saved};
     use shimmy_firmware::monitoring::{
-        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
-        MeterEvent, MeterSample, ModelTask, Published,
+        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterEvent, MeterSample,
+        ModelTask, Published,
     };
     use shimmy_firmware::periph::{LinkPort, PERIOD_TICKS};
     use shimmy_firmware::store::target::{self as store_target, TargetFlash};
@@ -81,10 +85,8 @@ mod app {
     #[local]
     struct Local {
         board: Board,
-        ctrl: SafeController,
-        step: u32,
-        /// Which step spawns the meter task.
-        cadence: MeterCadence,
+        /// The supervised controller, the step count and which step spawns the meter task.
+        control: ControlTask,
         /// The fault memory of this run (written back when it changes).
         record: ResetRecord,
         /// A reset loop was detected at boot: stay in the safe state.
@@ -180,9 +182,7 @@ mod app {
             },
             Local {
                 board,
-                ctrl,
-                step: 0,
-                cadence: MeterCadence::default(),
+                control: ControlTask::new(ctrl),
                 record,
                 hold_safe,
                 tx,
@@ -231,52 +231,53 @@ mod app {
                     persist::restart();
                 }
             });
-            let (t_s, speed_mps) = cx.shared.now.lock(|n| *n);
+            let now = cx.shared.now.lock(|n| *n);
+            let measurement = cx.shared.measurement.lock(Option::take);
             let task = &mut *cx.local.model_task;
-            task.offer(cx.shared.measurement.lock(Option::take));
-            let call = Hooks::model_call_start();
-            let done = task.step(t_s, speed_mps);
-            Hooks::model_call_end(call, done.as_ref());
-            if task.take_applied() {
-                let up = task.updater();
-                cx.shared.link.lock(|l| l.on_model_update(up));
-                // the diagnosis in the log when it names another part (or none any more)
-                let d = up.diagnosis_indexed();
-                let t_ms = (t_s * 1e3) as u32;
-                if let Some(e) = cx.local.diagnosis.on_update(t_ms, d) {
-                    *cx.local.diagnosis_entry = Some(LogEntry::Diagnosis(e));
-                    match d.map(|(_, d)| d) {
-                        Some(d) => {
-                            let (lo, hi) = d.two_sigma();
-                            defmt::warn!(
-                                "model update: {=str} ({=str}) x{=f64}, 2 sigma x{=f64}-x{=f64}, plausible x{=f64}-x{=f64}",
-                                d.what,
-                                d.field,
-                                d.factor,
-                                lo,
-                                hi,
-                                d.band.0,
-                                d.band.1
-                            )
+            let link = &mut cx.shared.link;
+            let (watch, entry) = (&mut *cx.local.diagnosis, &mut *cx.local.diagnosis_entry);
+            let model = &mut cx.shared.model;
+            let done = model_pass::<Hooks, _, _>(
+                task,
+                now,
+                measurement,
+                &mut cx.shared.health,
+                |task| {
+                    let up = task.updater();
+                    link.lock(|l| l.on_model_update(up));
+                    // the diagnosis in the log when it names another part (or none any more)
+                    let d = up.diagnosis_indexed();
+                    let t_ms = (now.0 * 1e3) as u32;
+                    if let Some(e) = watch.on_update(t_ms, d) {
+                        *entry = Some(LogEntry::Diagnosis(e));
+                        match d.map(|(_, d)| d) {
+                            Some(d) => {
+                                let (lo, hi) = d.two_sigma();
+                                defmt::warn!(
+                                    "model update: {=str} ({=str}) x{=f64}, 2 sigma x{=f64}-x{=f64}, plausible x{=f64}-x{=f64}",
+                                    d.what,
+                                    d.field,
+                                    d.factor,
+                                    lo,
+                                    hi,
+                                    d.band.0,
+                                    d.band.1
+                                )
+                            }
+                            None => defmt::info!("model update: every part within its band"),
                         }
-                        None => defmt::info!("model update: every part within its band"),
                     }
-                }
-            }
-            if let Some(pt) = done {
-                let published = task.publish(&pt);
-                let m = published.margin;
-                cx.shared.model.lock(|x| {
-                    *x = Some(published);
-                    Hooks::model_published();
-                });
-                let late = task.tracker().overruns();
-                let cycles = cx.shared.health.lock(|h| {
-                    h.model_cycles = h.model_cycles.saturating_add(1);
-                    h.model_late = late;
-                    h.model_cycles
-                });
+                },
+                |published| {
+                    model.lock(|x| {
+                        *x = Some(published);
+                        Hooks::model_published();
+                    })
+                },
+            );
+            if let Some((pt, cycles)) = done {
                 if cycles % 10 == 1 {
+                    let m = pt.margin();
                     defmt::info!(
                     "model: t {=f64} s, v {=f64} m/s: shimmy zeta {=f64} at {=f64} Hz, dzeta/dV {=f64} per m/s, onset {=f64} m/s; {=u16} eigen-solves in {=u16} calls, {=u16} errors",
                     pt.t_s,
@@ -297,16 +298,17 @@ mod app {
         }
     }
 
-    #[task(binds = TIM2, priority = 3, local = [board, ctrl, step, cadence, tx, record, hold_safe], shared = [health, margin, latched])]
+    #[task(binds = TIM2, priority = 3, local = [board, control, tx, record, hold_safe], shared = [health, margin, latched])]
     fn control(cx: control::Context) {
         let b = cx.local.board;
+        let task = cx.local.control;
         let entry_instructions = Hooks::entry();
         let entry = b.timer.now_ticks();
         b.timer.clear_update();
         if *cx.local.hold_safe {
             // Reset loop: the fixed safe current (coil off if a coil fault is latched), the
             // watchdog fed, nothing else run.
-            let f = cx.local.ctrl.supervisor().faults();
+            let f = task.controller().supervisor().faults();
             let dead = f.contains(FaultKind::CoilOpen) || f.contains(FaultKind::CoilShort);
             let _ = if dead {
                 b.coil.off()
@@ -317,20 +319,26 @@ mod app {
             return;
         }
         let latency = b.timer.entry_latency_ticks(entry);
-        let step = *cx.local.step;
         let mut health = cx.shared.health;
         let mut margin = cx.shared.margin;
         #[cfg(all(feature = "qemu", not(feature = "pil")))]
-        board::WORLD.set_step(step);
+        board::WORLD.set_step(task.step_count());
 
         let samples = b.sensors.sample(PERIOD_TICKS);
         let status = margin.lock(|m| *m);
         let drive = b.coil_drive_a();
-        let out = health.lock(|h| supervised_step(cx.local.ctrl, &samples, drive, status, h));
-        let pwm_ok = drive_coil(&mut b.coil, &out).is_ok();
-
-        let dropped = cx.local.tx.enqueue(MeterSample::of(step, &out)).is_err();
-        let busy = cx.local.cadence.tick() && meter::spawn().is_err();
+        let tx = cx.local.tx;
+        let coil = &mut b.coil;
+        let mut pwm_ok = true;
+        let s = task.run(
+            &samples,
+            drive,
+            status,
+            &mut health,
+            |out| pwm_ok = drive_coil(coil, out).is_ok(),
+            |sample| tx.enqueue(sample).is_ok(),
+        );
+        let busy = s.meter_due && meter::spawn().is_err();
 
         let exit = b.timer.now_ticks();
         let wrapped = b.timer.update_pending();
@@ -338,12 +346,11 @@ mod app {
             h.record_timing(latency, exit.wrapping_sub(entry), wrapped);
             h.pwm_errors += u32::from(!pwm_ok);
             h.estimator_busy += u32::from(busy);
-            h.meter_dropped += u32::from(dropped);
-            h.steps += 1;
+            h.record_step(s.dropped);
         });
         // Fault memory: uptime (whole seconds) and the latched faults survive a reset.
-        let uptime_ms = (step / 1000).wrapping_mul(1000);
-        let latched = cx.local.ctrl.supervisor().latched().bits();
+        let uptime_ms = (s.step / 1000).wrapping_mul(1000);
+        let latched = task.controller().supervisor().latched().bits();
         if cx.local.record.update(uptime_ms, latched) {
             persist::store(cx.local.record);
             let mut shared_latched = cx.shared.latched;
@@ -351,11 +358,10 @@ mod app {
         }
         // Fed only here: a control loop that stops completing steps resets the MCU.
         b.watchdog.feed();
-        *cx.local.step = step.wrapping_add(1);
-        Hooks::report_step(step, &out, entry_instructions);
+        Hooks::report_step(s.step, &s.out, entry_instructions);
 
         #[cfg(all(feature = "qemu", not(feature = "pil")))]
-        if step + 1 == board::QEMU_STEPS {
+        if s.step + 1 == board::QEMU_STEPS {
             qemu_finish(health.lock(|h| *h));
         }
     }

@@ -9,8 +9,10 @@
 //!   in one control period (control, the meter run after every 10th sample, the background
 //!   loop until it has nothing due), on the host. It is the software-in-the-loop side of the
 //!   PIL/SIL comparison (`shimmy-sim pil --check-sil`): the same code as the image, run
-//!   natively; and the simulator's closed loop runs the margin-scheduled controller through it,
-//!   so the simulator's margin report reaches the controller as on the board.
+//!   natively, each task's body the RTIC task's own ([`crate::control::ControlTask::run`],
+//!   [`crate::monitoring::DataMargin::run`], [`crate::background::model_pass`]); and the
+//!   simulator's closed loop runs the margin-scheduled controller through it, so the
+//!   simulator's margin report reaches the controller as on the board.
 
 use crate::drivers::wheel_speed::{SpeedReading, SpeedStatus};
 use crate::sensors::{SampleSet, SensorFault};
@@ -54,12 +56,14 @@ pub use host::HostApp;
 #[cfg(not(target_os = "none"))]
 mod host {
     use super::sample_set;
-    use crate::control::{supervised_step, Health};
+    use crate::background::model_pass;
+    use crate::control::{ControlTask, Health};
     use crate::monitoring::{
-        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterCadence,
-        MeterEvent, MeterSample, ModelTask, Published,
+        board_pipeline, safe_controller_for, BoardCalibration, DataMargin, MeterEvent, MeterSample,
+        ModelTask, Published,
     };
     use heapless::Deque;
+    use rtic_core::Exclusive;
     use shimmy_core::estimator::meter::mode_meter::ConfigError;
     use shimmy_core::estimator::pipeline::PipelineParams;
     use shimmy_core::model::UpdatableModel;
@@ -74,10 +78,8 @@ mod host {
     /// whose linear model is `M` (`N` states): the image is built for one model (cargo feature
     /// `model-truck`), the host build runs any.
     pub struct HostApp<M: UpdatableModel<N>, const N: usize> {
-        ctrl: SafeController,
+        control: ControlTask,
         health: Health,
-        step: u32,
-        cadence: MeterCadence,
         /// The SPSC queue of the app (capacity 31).
         queue: Deque<MeterSample, 31>,
         data: DataMargin,
@@ -114,10 +116,8 @@ mod host {
             model: M,
         ) -> Result<Self, ConfigError> {
             Ok(HostApp {
-                ctrl,
+                control: ControlTask::new(ctrl),
                 health: Health::default(),
-                step: 0,
-                cadence: MeterCadence::default(),
                 queue: Deque::new(),
                 data: DataMargin::with_params(pipeline, radius_m)?,
                 model_task: ModelTask::new(model, pipeline.matched_update()),
@@ -139,7 +139,7 @@ mod host {
 
         /// The control task's supervisor (fault records and events).
         pub fn supervisor_mut(&mut self) -> &mut Supervisor {
-            self.ctrl.supervisor_mut()
+            self.control.controller_mut().supervisor_mut()
         }
 
         /// One control period on `raw`; `emit` gets the frames the image would send, in the
@@ -153,26 +153,24 @@ mod host {
             model_cycles: Option<u32>,
             emit: &mut dyn FnMut(TargetFrame),
         ) -> SafeOutput {
-            // control task
-            let step = self.step;
-            let out = supervised_step(
-                &mut self.ctrl,
+            // control task (the board's coil and timing are the host's)
+            let s = self.control.run(
                 &sample_set(raw),
                 raw.coil_drive_a,
                 self.margin,
-                &mut self.health,
+                &mut Exclusive(&mut self.health),
+                |_| {},
+                |sample| self.queue.push_back(sample).is_ok(),
             );
-            let dropped = self.queue.push_back(MeterSample::of(step, &out)).is_err();
-            self.health.meter_dropped += u32::from(dropped);
-            self.health.steps += 1;
-            self.step = step.wrapping_add(1);
+            self.health.record_step(s.dropped);
+            let (step, out) = (s.step, s.out);
             emit(TargetFrame::Step(StepReport {
                 step,
                 out,
                 instructions: 0,
             }));
             // meter task, spawned after every 10th sample
-            if self.cadence.tick() {
+            if s.meter_due {
                 let seen = model_cycles.map_or(self.published.len(), |n| n as usize);
                 let model = seen
                     .checked_sub(1)
@@ -201,18 +199,21 @@ mod host {
                 });
             }
             // background loop: runs until nothing is due
-            self.model_task.offer(self.data.take_measurement());
+            let mut measurement = self.data.take_measurement();
             loop {
-                let (t_s, speed_mps) = self.now;
-                if let Some(pt) = self.model_task.step(t_s, speed_mps) {
-                    let published = self.model_task.publish(&pt);
-                    let margin = published.margin;
-                    self.published.push(published);
-                    self.health.model_cycles += 1;
-                    self.health.model_late = self.model_task.tracker().overruns();
+                let published = &mut self.published;
+                let done = model_pass::<(), _, _>(
+                    &mut self.model_task,
+                    self.now,
+                    measurement.take(),
+                    &mut Exclusive(&mut self.health),
+                    |_| {},
+                    |p| published.push(p),
+                );
+                if let Some((pt, cycles)) = done {
                     emit(TargetFrame::Model(ModelFrame {
-                        cycle: self.published.len() as u32,
-                        margin,
+                        cycle: cycles,
+                        margin: pt.margin(),
                         instructions: 0,
                     }));
                 }

@@ -4,17 +4,17 @@
 //! (`main.rs`) calls [`AppHooks`] through the build's `board::Hooks`; the board's methods are
 //! empty and inline to nothing.
 
+use crate::background::ModelHooks;
 use shimmy_core::estimator::fusion::MarginReport;
 use shimmy_core::estimator::model_margin::ModelPoint;
 use shimmy_core::estimator::monitor::Level;
 use shimmy_core::supervisor::safe_controller::SafeOutput;
 
-/// The application's hooks.
-pub trait AppHooks {
+/// The application's hooks, beside those of the model task's calls ([`ModelHooks`], which
+/// the shared [`crate::background::model_pass`] calls).
+pub trait AppHooks: ModelHooks {
     /// What a task's entry is measured by (the `pil` build: the instruction counter).
     type Entry: Copy;
-    /// What a model-task call is measured by.
-    type ModelCall;
     /// At a task's entry.
     fn entry() -> Self::Entry;
     /// The background loop has nothing due (`busy`: a model cycle is under way): the board
@@ -30,10 +30,6 @@ pub trait AppHooks {
     fn report_meter_run(step: u32, entry: Self::Entry);
     /// Inside the background loop's lock of the shared model margin, when it publishes one.
     fn model_published();
-    /// Before a call of the model task.
-    fn model_call_start() -> Self::ModelCall;
-    /// After the call; `done`: the cycle it completed.
-    fn model_call_end(call: Self::ModelCall, done: Option<&ModelPoint>);
 }
 
 /// The board's hooks: sleep when idle, report nothing.
@@ -45,7 +41,6 @@ pub struct Unmeasured;
 
 impl AppHooks for BoardHooks {
     type Entry = Unmeasured;
-    type ModelCall = Unmeasured;
     #[inline(always)]
     fn entry() -> Unmeasured {
         Unmeasured
@@ -66,6 +61,10 @@ impl AppHooks for BoardHooks {
     fn report_meter_run(_: u32, _: Unmeasured) {}
     #[inline(always)]
     fn model_published() {}
+}
+
+impl ModelHooks for BoardHooks {
+    type Call = Unmeasured;
     #[inline(always)]
     fn model_call_start() -> Unmeasured {
         Unmeasured

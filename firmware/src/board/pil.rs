@@ -413,7 +413,6 @@ pub struct PilHooks;
 
 impl super::hooks::AppHooks for PilHooks {
     type Entry = u32;
-    type ModelCall = ModelCall;
     fn entry() -> u32 {
         instructions()
     }
@@ -435,6 +434,10 @@ impl super::hooks::AppHooks for PilHooks {
     fn model_published() {
         model_published();
     }
+}
+
+impl crate::background::ModelHooks for PilHooks {
+    type Call = ModelCall;
     fn model_call_start() -> ModelCall {
         ModelCall::start()
     }
