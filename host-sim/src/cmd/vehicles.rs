@@ -28,7 +28,7 @@ use crate::sim::run::open_loop::{run_speed, DamperSetting, Trend};
 
 /// The named sets of the table by default: one or more per model of the family.
 pub const DEFAULT_SETS: &str =
-    "nominal,hard,truck-full,truck-empty,dual-axle,dual-axle-frictionless,trailer";
+    "nominal,hard,truck-full,truck-empty,dual-axle,dual-axle-frictionless,trailer,towed-wheel";
 
 /// Speed range of the crossing scan, km/h.
 const SCAN_KMH: (f64, f64) = (1.0, 150.0);

@@ -5,7 +5,10 @@
 //! particles stick to the road: with the king pin running straight at V,
 //! `q_t = (V cos psi - q psi') q_x + V sin psi + (l - x) psi'`, and at the leading edge
 //! `q(a)' = -(V cos psi - q(a) psi') q(a) / sigma + V sin psi + (l - a) psi'`. The string's
-//! forces and the tyre damping stay linear in the deformation.
+//! forces and the tyre damping stay linear in the deformation. A friction limit bounds large
+//! shimmy: a particle at the sliding deformation
+//! ([`TowedWheelParams::sliding_deformation_m`]) that the rolling would deform further slides
+//! instead, its deformation held; small motions never reach it.
 //!
 //! [`TowedWheelPlant`] is the family's plant (`SimModel`: stability, margin, bifurcation,
 //! sweep, faults, run) with a steering damper at the lever `l_d` about the king pin (none,
@@ -60,6 +63,7 @@ pub struct TowedWheelPlant {
     t: TowedWheelParams,
     damper: Damper,
     d: [[f64; N_PATCH]; N_PATCH],
+    q_slide: f64,
     a0: Matrix<N_STATES>,
     da: Matrix<N_STATES>,
     a: Matrix<N_STATES>,
@@ -90,6 +94,7 @@ impl TowedWheelPlant {
             t: *t,
             damper,
             d: Patch::new(t.a).d,
+            q_slide: t.sliding_deformation_m(),
             a0,
             da: t.dlinearise_dv(),
             a: a0,
@@ -118,6 +123,11 @@ impl TowedWheelPlant {
                 (0..N_PATCH).map(|j| self.d[i][j] * x[Q0 + j]).sum()
             };
             dx[Q0 + i] += transport * slope + lateral;
+            // friction limit: a particle at the sliding deformation that the rolling would
+            // deform further slides instead (its deformation held)
+            if q.abs() >= self.q_slide && dx[Q0 + i] * q > 0.0 {
+                dx[Q0 + i] = 0.0;
+            }
         }
         let (xd, vd) = (self.t.l_d * psi, self.t.l_d * dpsi);
         let f_d = match &self.damper {
@@ -337,8 +347,8 @@ impl super::registry::ModelEntry<N_STATES> for TowedWheelParams {
     const SHARED_SECTIONS: bool = false;
     const DEFAULT_SET: &'static str = TowedWheelSet::Benchmark.name();
     const NO_DRIVER: Option<&'static str> = Some("has no steering for a driver torque");
-    /// The damper lever.
-    const NO_LINEAR_EFFECT: &'static [&'static str] = &["l_d"];
+    /// The damper lever and the friction limit.
+    const NO_LINEAR_EFFECT: &'static [&'static str] = &["l_d", "f_z", "mu"];
 
     fn set_names() -> Vec<&'static str> {
         TowedWheelSet::ALL.iter().map(|s| s.name()).collect()

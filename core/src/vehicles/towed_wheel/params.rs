@@ -32,6 +32,10 @@ pub struct TowedWheelParams {
     pub j_a: f64,
     /// Lever of a steering damper about the king pin l_d, m.
     pub l_d: f64,
+    /// Vertical load on the wheel F_z, N (the simulator's friction limit only).
+    pub f_z: f64,
+    /// Tyre-road friction coefficient mu (the simulator's friction limit only).
+    pub mu: f64,
 }
 
 impl TowedWheelParams {
@@ -64,6 +68,12 @@ impl TowedWheelParams {
         self.natural_frequency_radps() * self.b / (2.0 * self.k)
     }
 
+    /// The deformation at which the patch slides, m: the friction limit `mu F_z` spread over the
+    /// string as a uniform deformation (`k q (2a + 2 sigma)`, the patch and both tails).
+    pub fn sliding_deformation_m(&self) -> f64 {
+        self.mu * self.f_z / (self.k * 2.0 * (self.a + self.sigma))
+    }
+
     /// The yaw inertia that gives the natural frequency `omega_n_radps` at this geometry.
     pub fn inertia_for_frequency(&self, omega_n_radps: f64) -> f64 {
         self.yaw_stiffness_nm_per_rad() / (omega_n_radps * omega_n_radps)
@@ -71,7 +81,7 @@ impl TowedWheelParams {
 }
 
 /// Every field of [`TowedWheelParams`], in the order of `docs/towed-wheel.md`'s table.
-pub const TOWED_WHEEL_FIELDS: [ModelField; 7] = [
+pub const TOWED_WHEEL_FIELDS: [ModelField; 9] = [
     ModelField::new("a", "m", 0.005, 0.5),
     ModelField::new("sigma", "m", 0.005, 2.0),
     ModelField::new("k", "N/m^2", 1.0e3, 1.0e8),
@@ -79,6 +89,8 @@ pub const TOWED_WHEEL_FIELDS: [ModelField; 7] = [
     ModelField::new("l", "m", 0.0, 2.0),
     ModelField::new("j_a", "kg m^2", 1.0e-4, 1.0e3),
     ModelField::new("l_d", "m", 0.005, 1.0),
+    ModelField::new("f_z", "N", 1.0, 1.0e5),
+    ModelField::new("mu", "-", 0.05, 1.5),
 ];
 
 impl FieldTable for TowedWheelParams {
@@ -93,6 +105,8 @@ impl FieldTable for TowedWheelParams {
             "l" => &mut self.l,
             "j_a" => &mut self.j_a,
             "l_d" => &mut self.l_d,
+            "f_z" => &mut self.f_z,
+            "mu" => &mut self.mu,
             _ => return None,
         })
     }
