@@ -1674,6 +1674,30 @@ mod tests {
         }
     }
 
+    /// The nominal car (the plant) with the firmware believing `believed`, started at 3 deg
+    /// at `v_kmh` under `kind`: the peak wheel yaw over the last 3 s of 30 s, deg.
+    fn large_start_end_peak_deg(
+        believed: &shimmy_core::vehicle::Vehicle,
+        kind: shimmy_core::control::ControllerKind,
+        v_kmh: f64,
+    ) -> f64 {
+        use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
+        use crate::model::family::FamilyVehicle;
+        use crate::sim::run::closed_loop::{self, Arm, LoopConfig};
+        use shimmy_core::units::kmh_to_mps;
+        use shimmy_core::vehicle::Vehicle;
+        let car = FamilyVehicle::car(Vehicle::nominal());
+        let mut cfg = LoopConfig::for_vehicle(&car, Arm::Mr(kind), 30.0).with_model(believed);
+        cfg.x0 = initial_yaw(3f64.to_radians());
+        let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(v_kmh)));
+        let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
+        let psi = &r.series.psi_l_rad;
+        psi[psi.len() - 3000..]
+            .iter()
+            .fold(0.0_f64, |m, x| m.max(x.abs()))
+            .to_degrees()
+    }
+
     /// The bistable window of the car at 0 A (between its folds of cycles, where a large
     /// disturbance starts shimmy that a small one does not) lies above the no-damper onset the
     /// board's model tracker watches, so the monitor's margin there is already below zero and
@@ -1682,11 +1706,8 @@ mod tests {
     /// grow into shimmy decays under `margin-asmc`.
     #[test]
     fn the_margin_scheduled_asmc_damps_large_starts_in_the_bistable_window() {
-        use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
-        use crate::model::family::{onset_kmh, FamilyVehicle};
-        use crate::sim::run::closed_loop::{self, Arm, LoopConfig};
+        use crate::model::family::onset_kmh;
         use shimmy_core::control::ControllerKind;
-        use shimmy_core::units::kmh_to_mps;
         use shimmy_core::vehicle::Vehicle;
         let o = car_window_at_0a();
         let rows = chart(&o, &ChartAxis::CurrentA(vec![0.0])).unwrap();
@@ -1695,18 +1716,8 @@ mod tests {
         println!("fold of cycles at 0 A {fold:.2} km/h, no-damper onset {onset:.2} km/h");
         assert!(fold > onset + 1.0, "fold {fold}, onset {onset}");
         let v_kmh = fold + 1.5;
-        let car = FamilyVehicle::car(Vehicle::nominal());
-        let end_peak_deg = |kind: ControllerKind| {
-            let mut cfg = LoopConfig::for_vehicle(&car, Arm::Mr(kind), 30.0);
-            cfg.x0 = initial_yaw(3f64.to_radians());
-            let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(v_kmh)));
-            let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
-            let psi = &r.series.psi_l_rad;
-            psi[psi.len() - 3000..]
-                .iter()
-                .fold(0.0_f64, |m, x| m.max(x.abs()))
-                .to_degrees()
-        };
+        let end_peak_deg =
+            |kind: ControllerKind| large_start_end_peak_deg(&Vehicle::nominal(), kind, v_kmh);
         let (passive, scheduled) = (
             end_peak_deg(ControllerKind::PassiveOff),
             end_peak_deg(ControllerKind::MarginAsmc),
@@ -1726,11 +1737,8 @@ mod tests {
     /// that shimmies with the damper at 0 A still decays under `margin-asmc`.
     #[test]
     fn the_margin_scheduled_asmc_damps_the_window_below_a_wrong_models_onset() {
-        use crate::model::disturbance::{initial_yaw, Scenario, SpeedProfile};
-        use crate::model::family::{onset_kmh, FamilyVehicle};
-        use crate::sim::run::closed_loop::{self, Arm, LoopConfig};
+        use crate::model::family::onset_kmh;
         use shimmy_core::control::ControllerKind;
-        use shimmy_core::units::kmh_to_mps;
         use shimmy_core::vehicle::Vehicle;
         let fold =
             chart(&car_window_at_0a(), &ChartAxis::CurrentA(vec![0.0])).unwrap()[0].folds_kmh[0];
@@ -1742,20 +1750,9 @@ mod tests {
             model_onset > fold + 5.0,
             "fold {fold}, model onset {model_onset}"
         );
-        let car = FamilyVehicle::car(Vehicle::nominal());
         for v_kmh in [fold + 1.5, model_onset - 2.5] {
-            let end_peak_deg = |kind: ControllerKind| {
-                let mut cfg =
-                    LoopConfig::for_vehicle(&car, Arm::Mr(kind), 30.0).with_model(&believed);
-                cfg.x0 = initial_yaw(3f64.to_radians());
-                let mut sc = Scenario::new(SpeedProfile::Constant(kmh_to_mps(v_kmh)));
-                let r = closed_loop::run(&cfg, &mut sc, None).unwrap();
-                let psi = &r.series.psi_l_rad;
-                psi[psi.len() - 3000..]
-                    .iter()
-                    .fold(0.0_f64, |m, x| m.max(x.abs()))
-                    .to_degrees()
-            };
+            let end_peak_deg =
+                |kind: ControllerKind| large_start_end_peak_deg(&believed, kind, v_kmh);
             let (passive, scheduled) = (
                 end_peak_deg(ControllerKind::PassiveOff),
                 end_peak_deg(ControllerKind::MarginAsmc),
